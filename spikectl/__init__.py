@@ -1,0 +1,19 @@
+"""spikectl: closed-loop control of simulated neuronal networks with reinforcement learning.
+
+The public API is re-exported here; importing the package registers the Gymnasium
+environment ids (a cheap dictionary entry) and does no other work.
+"""
+
+from spikectl.contexts import Context, ContextSet, make_context, make_splits
+from spikectl.params import NeuronParams
+from spikectl.simulator import simulate
+
+__all__ = [
+    "Context",
+    "ContextSet",
+    "NeuronParams",
+    "make_context",
+    "make_splits",
+    "simulate",
+]
+__version__ = "0.1.0"
