@@ -150,10 +150,7 @@ class Context:
         n = weights.shape[0]
         if n < 2:
             raise ValueError(f"a context needs at least 2 neurons, got {n}")
-        if isinstance(self.target, bool) or int(self.target) != self.target:
-            raise TypeError(f"target must be an integer neuron index, got {self.target!r}")
-        if not 0 <= int(self.target) < n:
-            raise ValueError(f"target {self.target} is not a neuron index in 0..{n - 1}")
+        _check_target(self.target, n)
         pattern = np.asarray(self.pattern)
         if pattern.ndim != 1:
             raise ValueError(f"pattern must be 1-D [episode_length], got shape {pattern.shape}")
@@ -238,6 +235,7 @@ def make_context(
         if candidates.size == 0:
             raise ValueError("no neuron has an excitatory input, so no target can be controlled")
         target = int(rng.choice(candidates))
+    _check_target(target, weight_matrix.shape[0])
     if pattern is None:
         if witness is not None:
             raise ValueError("a witness without a pattern: pass the pattern it produces")
@@ -519,6 +517,13 @@ def _readonly(array: np.ndarray) -> np.ndarray:
     array = np.array(array)  # a private copy, so the caller's array cannot change us
     array.flags.writeable = False
     return array
+
+
+def _check_target(target: int, n_neurons: int) -> None:
+    if isinstance(target, (bool, np.bool_)) or not isinstance(target, (int, np.integer)):
+        raise TypeError(f"target must be an integer neuron index, got {target!r}")
+    if not 0 <= target < n_neurons:
+        raise ValueError(f"target {target} is not a neuron index in 0..{n_neurons - 1}")
 
 
 def _check_n_neurons(n_neurons: int) -> None:

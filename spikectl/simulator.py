@@ -40,7 +40,7 @@ _SINCE_RELEASE_CAP = 2**30
 
 
 def _advance_kernel(
-    weights,  # [W, n, n] float64, W == 1 (shared) or W == B
+    weights,  # [W, n, n] int8, W == 1 (shared) or W == B
     actions,  # [B, T] int64, -1 = do nothing
     voltage,  # [B, n] float64, state, updated in place
     refractory_left,  # [B, n] int32, state
@@ -167,7 +167,7 @@ def advance(
 ) -> None:
     """Advance ``state`` in place by ``actions.shape[1]`` steps, with no input checks.
 
-    ``weights`` is float64 [B or 1, n, n], ``actions`` int64 [B, T], ``out_voltage``
+    ``weights`` is int8 [B or 1, n, n], ``actions`` int64 [B, T], ``out_voltage``
     float64 and ``out_spikes`` bool [B, T, n], all C-contiguous. This is the hot path
     of the environments; :func:`simulate` is the checked entry point.
     """
@@ -193,7 +193,7 @@ def advance(
 
 
 def as_weight_batch(weights: np.ndarray | list) -> np.ndarray:
-    """Validate a connectivity matrix [n, n] or a batch [B, n, n]; return float64 [B, n, n].
+    """Validate a connectivity matrix [n, n] or a batch [B, n, n]; return int8 [B, n, n].
 
     ``G[i, j]`` is the sign of the connection from presynaptic i to postsynaptic j:
     +1 excitatory, -1 inhibitory, 0 none; the diagonal must be zero.
@@ -213,7 +213,7 @@ def as_weight_batch(weights: np.ndarray | list) -> np.ndarray:
         raise ValueError("weights must contain only -1 (inhibitory), 0 (none) and +1 (excitatory)")
     if np.any(np.diagonal(array, axis1=1, axis2=2) != 0):
         raise ValueError("weights must have a zero diagonal: a neuron has no self-connection")
-    return np.ascontiguousarray(array, dtype=np.float64)
+    return np.ascontiguousarray(array, dtype=np.int8)
 
 
 def simulate(
