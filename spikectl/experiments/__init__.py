@@ -1,0 +1,1 @@
+"""Experiments: figures drawn from saved results (and, later, sweeps and statistics)."""

@@ -1,0 +1,88 @@
+"""Figures, drawn with matplotlib from saved arrays only (never by running anything)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from spikectl.simulator import DO_NOTHING
+
+
+def _pyplot():
+    # Imported here so that importing spikectl never loads matplotlib or picks a GUI backend.
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def save_figure(figure, path: str | os.PathLike) -> Path:
+    """Save atomically: a figure half-written by a crash never replaces a good one."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    temporary = path.with_name(f".{path.name}.tmp{path.suffix}")
+    figure.savefig(temporary, dpi=150, bbox_inches="tight")
+    os.replace(temporary, path)
+    return path
+
+
+def plot_episode_raster(
+    pattern: np.ndarray,
+    actions: np.ndarray,
+    spikes: np.ndarray,
+    target: int,
+    path: str | os.PathLike,
+    title: str = "",
+) -> Path:
+    """Raster of one episode: the target pattern against the target's spikes, the
+    stimulations, and every other neuron's spikes.
+
+    ``pattern`` [N] bool, ``actions`` [N] int, ``spikes`` [N, n] bool.
+    """
+    plt = _pyplot()
+    pattern = np.asarray(pattern, dtype=bool)
+    actions = np.asarray(actions)
+    spikes = np.asarray(spikes, dtype=bool)
+    length, n = spikes.shape
+    others = [j for j in range(n) if j != target]
+    target_spikes = spikes[:, target]
+    steps = np.arange(length)
+    figure, axis = plt.subplots(figsize=(10, 1.2 + 0.28 * (n + 2)))
+    row_labels = ["pattern", f"target n{target}"] + [f"n{j}" for j in others]
+    y = {label: len(row_labels) - 1 - i for i, label in enumerate(row_labels)}
+
+    axis.scatter(steps[pattern], np.full(pattern.sum(), y["pattern"]), marker="|", s=120,
+                 color="black", label="wanted spike")
+    hit = pattern & target_spikes
+    extra = ~pattern & target_spikes
+    missed = pattern & ~target_spikes
+    target_row = y[f"target n{target}"]
+    axis.scatter(steps[hit], np.full(hit.sum(), target_row), marker="|", s=120, color="tab:green",
+                 label="hit")
+    axis.scatter(steps[extra], np.full(extra.sum(), target_row), marker="|", s=120,
+                 color="tab:orange", label="unwanted spike")
+    axis.scatter(steps[missed], np.full(missed.sum(), target_row), marker="o", s=18,
+                 facecolors="none", edgecolors="tab:red", label="missed spike")
+    for j in others:
+        row = y[f"n{j}"]
+        fired = spikes[:, j]
+        axis.scatter(steps[fired], np.full(fired.sum(), row), marker="|", s=120, color="black")
+        stimulated = actions == j
+        axis.scatter(steps[stimulated], np.full(stimulated.sum(), row), marker="s", s=22,
+                     facecolors="none", edgecolors="tab:blue")
+    axis.scatter([], [], marker="s", facecolors="none", edgecolors="tab:blue", label="stimulated")
+    axis.set_yticks(list(y.values()), list(y.keys()))
+    axis.set_xlim(-0.5, length - 0.5)
+    axis.set_ylim(-0.8, len(row_labels) - 0.2)
+    axis.set_xlabel("step (ms)")
+    axis.axhline(target_row - 0.5, color="0.8", linewidth=0.8)
+    stimulations = int((actions != DO_NOTHING).sum())
+    axis.set_title(title or f"{stimulations} stimulations")
+    axis.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8, frameon=False)
+    path = save_figure(figure, path)
+    plt.close(figure)
+    return path
