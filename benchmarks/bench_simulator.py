@@ -23,7 +23,17 @@ import numpy as np
 from spikectl import NeuronParams, simulate
 from spikectl.contexts import generate_topology
 
-CASES = [(1, 8), (64, 8), (4096, 8), (1, 64), (64, 64), (4096, 64), (1, 256), (64, 256), (4096, 256)]
+CASES = [
+    (1, 8),
+    (64, 8),
+    (4096, 8),
+    (1, 64),
+    (64, 64),
+    (4096, 64),
+    (1, 256),
+    (64, 256),
+    (4096, 256),
+]
 
 
 def numpy_baseline(weights: np.ndarray, actions: np.ndarray, params: NeuronParams) -> np.ndarray:
@@ -84,13 +94,16 @@ def main() -> None:
         weights = np.stack([generate_topology(n, rng) for _ in range(batch)])
         actions = rng.integers(-1, n, size=(batch, args.steps))
         neuron_steps = batch * args.steps * n
-        kernel_seconds = median_seconds(lambda: simulate(weights, actions, params), args.repeats)
+        kernel_seconds = median_seconds(
+            lambda w=weights, a=actions: simulate(w, a, params), args.repeats
+        )
         baseline_weights = weights.astype(np.float64)
         np.testing.assert_array_equal(
             simulate(weights, actions, params)[0], numpy_baseline(baseline_weights, actions, params)
         )
         baseline_seconds = median_seconds(
-            lambda: numpy_baseline(baseline_weights, actions, params), max(3, args.repeats // 2)
+            lambda w=baseline_weights, a=actions: numpy_baseline(w, a, params),
+            max(3, args.repeats // 2),
         )
         row = {
             "batch": batch,
@@ -100,9 +113,11 @@ def main() -> None:
             "numpy_neuron_steps_per_s": neuron_steps / baseline_seconds,
         }
         results.append(row)
+        kernel_rate = row["spikectl_neuron_steps_per_s"] / 1e6
+        baseline_rate = row["numpy_neuron_steps_per_s"] / 1e6
         print(
-            f"| {batch} | {n} | {row['spikectl_neuron_steps_per_s'] / 1e6:.1f} | "
-            f"{row['numpy_neuron_steps_per_s'] / 1e6:.1f} | {baseline_seconds / kernel_seconds:.1f}x |",
+            f"| {batch} | {n} | {kernel_rate:.1f} | {baseline_rate:.1f} | "
+            f"{baseline_seconds / kernel_seconds:.1f}x |",
             flush=True,
         )
     if args.json:

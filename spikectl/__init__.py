@@ -5,12 +5,19 @@ environment ids (a cheap dictionary entry) and does no other work.
 """
 
 from spikectl.contexts import Context, ContextSet, make_context, make_splits
+from spikectl.env import NeuronControlEnv
 from spikectl.params import NeuronParams
+from spikectl.registration import register_envs
 from spikectl.simulator import simulate
+from spikectl.vector_env import NeuronControlVectorEnv
+
+register_envs()
 
 __all__ = [
     "Context",
     "ContextSet",
+    "NeuronControlEnv",
+    "NeuronControlVectorEnv",
     "NeuronParams",
     "make_context",
     "make_splits",

@@ -49,9 +49,9 @@ def demo(config: DemoConfig) -> dict[str, dict[str, float]]:
     from spikectl.experiments.figures import plot_episode_raster
     from spikectl.rollout import (
         do_nothing_policy,
+        evaluate_policy,
         make_random_policy,
         make_witness_policy,
-        run_episodes,
     )
 
     train, test = make_splits(
@@ -61,8 +61,10 @@ def demo(config: DemoConfig) -> dict[str, dict[str, float]]:
     train.save(config.out_dir / "train_contexts.npz")
     test.save(config.out_dir / "test_contexts.npz")
     results: dict[str, dict[str, float]] = {}
-    print(f"{len(train)} training and {len(test)} unseen test networks of {config.n_neurons} "
-          f"neurons, episodes of {config.episode_length} steps")
+    print(
+        f"{len(train)} training and {len(test)} unseen test networks of {config.n_neurons} "
+        f"neurons, episodes of {config.episode_length} steps"
+    )
     print(f"{'policy':<12}{'train':>10}{'test':>10}")
     random_episodes = None
     for name in ("do-nothing", "random", "witness"):
@@ -73,7 +75,7 @@ def demo(config: DemoConfig) -> dict[str, dict[str, float]]:
                 "random": make_random_policy(config.seed),
                 "witness": make_witness_policy(contexts),
             }[name]
-            episodes = run_episodes(contexts, policy)
+            episodes = evaluate_policy(contexts, policy)
             row[split] = float(episodes.returns.mean())
             if name == "random" and split == "test":
                 random_episodes = episodes
@@ -88,7 +90,9 @@ def demo(config: DemoConfig) -> dict[str, dict[str, float]]:
         config.out_dir / "raster.png",
         title=f"random policy on unseen test network 0: return {random_episodes.returns[0]:.3f}",
     )
-    write_json_atomic(config.out_dir / "results.json", {"config": asdict(config), "returns": results})
+    write_json_atomic(
+        config.out_dir / "results.json", {"config": asdict(config), "returns": results}
+    )
     print(f"wrote {raster} and {config.out_dir / 'results.json'}")
     return results
 
@@ -124,7 +128,9 @@ def contexts(config: ContextsConfig) -> None:
         spikes = [int(context.pattern.sum()) for context in described]
         print(f"{config.path}: {described!r}")
         print(f"checksum {described.checksum()}")
-        print(f"spikes per pattern: mean {np.mean(spikes):.2f}, min {min(spikes)}, max {max(spikes)}")
+        print(
+            f"spikes per pattern: mean {np.mean(spikes):.2f}, min {min(spikes)}, max {max(spikes)}"
+        )
         print(f"targets: {[context.target for context in described]}")
         return
     train, test = make_splits(

@@ -367,7 +367,9 @@ class ContextSet(Sequence[Context]):
                     pairs.append((first_seen[key], index))
                 first_seen.setdefault(key, index)
             return pairs
-        other_index = {key: index for index, key in reversed(list(enumerate(other.topology_keys())))}
+        other_index = {
+            key: index for index, key in reversed(list(enumerate(other.topology_keys())))
+        }
         return [(index, other_index[key]) for index, key in enumerate(keys) if key in other_index]
 
     def checksum(self) -> str:
@@ -396,10 +398,14 @@ class ContextSet(Sequence[Context]):
             "checksum": self.checksum(),
         }
         path.parent.mkdir(parents=True, exist_ok=True)
-        descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+        descriptor, temporary = tempfile.mkstemp(
+            dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"
+        )
         try:
             with os.fdopen(descriptor, "wb") as handle:
-                np.savez_compressed(handle, metadata=np.array(json.dumps(metadata)), **self.arrays())
+                np.savez_compressed(
+                    handle, metadata=np.array(json.dumps(metadata)), **self.arrays()
+                )
                 handle.flush()
                 os.fsync(handle.fileno())
             os.replace(temporary, path)
@@ -418,7 +424,9 @@ class ContextSet(Sequence[Context]):
             with np.load(path, allow_pickle=False) as data:
                 arrays = {name: data[name] for name in data.files}
         except (zipfile.BadZipFile, OSError, ValueError, EOFError) as error:
-            raise ContextFileError(f"{path} is not a readable spikectl context set: {error}") from error
+            raise ContextFileError(
+                f"{path} is not a readable spikectl context set: {error}"
+            ) from error
         expected = {"metadata", "weights", "targets", "patterns", "witnesses"}
         if set(arrays) != expected:
             raise ContextFileError(
@@ -431,7 +439,10 @@ class ContextSet(Sequence[Context]):
             contexts = [
                 Context(weights, int(target), pattern, None if (witness == -2).all() else witness)
                 for weights, target, pattern, witness in zip(
-                    arrays["weights"], arrays["targets"], arrays["patterns"], arrays["witnesses"],
+                    arrays["weights"],
+                    arrays["targets"],
+                    arrays["patterns"],
+                    arrays["witnesses"],
                     strict=True,
                 )
             ]
@@ -532,7 +543,11 @@ def _check_n_neurons(n_neurons: int) -> None:
 
 
 def _check_episode_length(episode_length: int) -> None:
-    if isinstance(episode_length, bool) or int(episode_length) != episode_length or episode_length < 2:
+    if (
+        isinstance(episode_length, bool)
+        or int(episode_length) != episode_length
+        or episode_length < 2
+    ):
         raise ValueError(f"episode_length must be an integer >= 2, got {episode_length!r}")
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import asdict, dataclass, fields
+from functools import cached_property
 from typing import Any
 
 NEVER_RELEASES = 2**31 - 1
@@ -79,7 +80,7 @@ class NeuronParams:
         """tau_m = R * C."""
         return self.resistance_GOhm * self.capacitance_pF
 
-    @property
+    @cached_property
     def min_release_interval_steps(self) -> int:
         """Smallest number of steps k >= 1 since the last release for which a spike releases.
 
@@ -90,7 +91,10 @@ class NeuronParams:
         if self.release_scale < 0.5:
             return NEVER_RELEASES
         for k in range(1, 100_000):
-            if self.release_scale * (1.0 - math.exp(-k * self.dt_ms / self.vesicle_recovery_ms)) >= 0.5:
+            if (
+                self.release_scale * (1.0 - math.exp(-k * self.dt_ms / self.vesicle_recovery_ms))
+                >= 0.5
+            ):
                 return k
         return NEVER_RELEASES
 

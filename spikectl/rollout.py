@@ -23,14 +23,25 @@ Policy = Callable[[dict[str, np.ndarray], np.ndarray], np.ndarray]
 
 @dataclass(frozen=True)
 class EpisodeBatch:
-    """One episode on each context of a set."""
+    """One episode in each sub-environment of a vector environment."""
 
-    returns: np.ndarray
-    """[S] undiscounted return per context."""
+    voltage: np.ndarray
+    """[S, N + 1, n] float32 observed potentials before each step and after the last."""
     actions: np.ndarray
-    """[S, N] actions taken."""
+    """[S, N] int64 actions taken."""
+    rewards: np.ndarray
+    """[S, N] float64 rewards."""
     spikes: np.ndarray
-    """[S, N, n] spikes of every neuron."""
+    """[S, N, n] bool spikes of every neuron."""
+    action_mask: np.ndarray
+    """[S, n + 1] bool legal actions (constant within an episode)."""
+    context_index: np.ndarray
+    """[S] index of each episode's context in the environment's set."""
+
+    @property
+    def returns(self) -> np.ndarray:
+        """[S] undiscounted return per episode."""
+        return self.rewards.sum(axis=1)
 
 
 def do_nothing_policy(observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
@@ -63,19 +74,40 @@ def make_witness_policy(contexts: ContextSet) -> Policy:
 
 
 def run_episodes(
-    contexts: ContextSet, policy: Policy, params: NeuronParams | None = None
+    env: NeuronControlVectorEnv, context_indices: np.ndarray | list[int], policy: Policy
 ) -> EpisodeBatch:
-    """One episode of ``policy`` on every context of the set, all in one batch."""
-    size, length = len(contexts), contexts.episode_length
-    env = NeuronControlVectorEnv(num_envs=size, contexts=contexts, params=params)
-    observations, infos = env.reset(options={"context": list(range(size))})
-    returns = np.zeros(size)
+    """One episode of ``policy`` in each sub-environment, on the given contexts of its set.
+
+    ``context_indices`` has one index per sub-environment (``env.num_envs`` of them).
+    """
+    size, length, n = env.num_envs, env.episode_length, env.n_neurons
+    observations, infos = env.reset(options={"context": [int(i) for i in context_indices]})
+    voltage = np.zeros((size, length + 1, n), dtype=np.float32)
     actions = np.zeros((size, length), dtype=np.int64)
-    spikes = np.zeros((size, length, contexts.n_neurons), dtype=bool)
+    rewards = np.zeros((size, length))
+    spikes = np.zeros((size, length, n), dtype=bool)
+    action_mask = infos["action_mask"].copy()
+    voltage[:, 0] = observations["voltage"]
     for t in range(length):
         actions[:, t] = policy(observations, infos["action_mask"])
-        observations, rewards, _, _, infos = env.step(actions[:, t])
-        returns += rewards
+        observations, rewards[:, t], _, _, infos = env.step(actions[:, t])
+        voltage[:, t + 1] = observations["voltage"]
         spikes[:, t] = infos["spikes"]
+    return EpisodeBatch(
+        voltage=voltage,
+        actions=actions,
+        rewards=rewards,
+        spikes=spikes,
+        action_mask=action_mask,
+        context_index=np.asarray(context_indices, dtype=np.int64),
+    )
+
+
+def evaluate_policy(
+    contexts: ContextSet, policy: Policy, params: NeuronParams | None = None
+) -> EpisodeBatch:
+    """One episode of ``policy`` on every context of a set, all in one batch."""
+    env = NeuronControlVectorEnv(num_envs=len(contexts), contexts=contexts, params=params)
+    episodes = run_episodes(env, np.arange(len(contexts)), policy)
     env.close()
-    return EpisodeBatch(returns=returns, actions=actions, spikes=spikes)
+    return episodes

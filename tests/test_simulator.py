@@ -160,8 +160,9 @@ def test_threaded_kernel_equals_serial_kernel():
     weights, actions = random_batch(batch, 8, 60, seed=3)
     voltages, spikes = simulate(weights, actions)  # threaded
     half = batch // 2  # below PARALLEL_MIN_BATCH: serial
-    v_serial = np.concatenate([simulate(weights[:half], actions[:half])[0],
-                               simulate(weights[half:], actions[half:])[0]])
+    v_serial = np.concatenate(
+        [simulate(weights[:half], actions[:half])[0], simulate(weights[half:], actions[half:])[0]]
+    )
     np.testing.assert_array_equal(voltages, v_serial)
     assert spikes.any()
 
@@ -183,7 +184,9 @@ def test_stepwise_advance_equals_whole_sequence():
     out_v = np.empty((5, 1, 8))
     out_s = np.empty((5, 1, 8), dtype=bool)
     for t in range(30):
-        advance(state, weight_batch, np.ascontiguousarray(actions[:, t : t + 1]), params, out_v, out_s)
+        advance(
+            state, weight_batch, np.ascontiguousarray(actions[:, t : t + 1]), params, out_v, out_s
+        )
         np.testing.assert_array_equal(out_v[:, 0], voltages[:, t])
         np.testing.assert_array_equal(out_s[:, 0], spikes[:, t])
 
@@ -207,7 +210,9 @@ def test_pure_python_path_matches_jit():
     result = subprocess.run(
         [sys.executable, "-c", code],
         input=json.dumps({"w": weights.tolist(), "a": actions.tolist()}),
-        capture_output=True, text=True, check=True,
+        capture_output=True,
+        text=True,
+        check=True,
         env={**os.environ, "NUMBA_DISABLE_JIT": "1"},
     )
     v_python, s_python = json.loads(result.stdout)

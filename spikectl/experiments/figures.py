@@ -55,25 +55,56 @@ def plot_episode_raster(
     row_labels = ["pattern", f"target n{target}"] + [f"n{j}" for j in others]
     y = {label: len(row_labels) - 1 - i for i, label in enumerate(row_labels)}
 
-    axis.scatter(steps[pattern], np.full(pattern.sum(), y["pattern"]), marker="|", s=120,
-                 color="black", label="wanted spike")
+    axis.scatter(
+        steps[pattern],
+        np.full(pattern.sum(), y["pattern"]),
+        marker="|",
+        s=120,
+        color="black",
+        label="wanted spike",
+    )
     hit = pattern & target_spikes
     extra = ~pattern & target_spikes
     missed = pattern & ~target_spikes
     target_row = y[f"target n{target}"]
-    axis.scatter(steps[hit], np.full(hit.sum(), target_row), marker="|", s=120, color="tab:green",
-                 label="hit")
-    axis.scatter(steps[extra], np.full(extra.sum(), target_row), marker="|", s=120,
-                 color="tab:orange", label="unwanted spike")
-    axis.scatter(steps[missed], np.full(missed.sum(), target_row), marker="o", s=18,
-                 facecolors="none", edgecolors="tab:red", label="missed spike")
+    axis.scatter(
+        steps[hit],
+        np.full(hit.sum(), target_row),
+        marker="|",
+        s=120,
+        color="tab:green",
+        label="hit",
+    )
+    axis.scatter(
+        steps[extra],
+        np.full(extra.sum(), target_row),
+        marker="|",
+        s=120,
+        color="tab:orange",
+        label="unwanted spike",
+    )
+    axis.scatter(
+        steps[missed],
+        np.full(missed.sum(), target_row),
+        marker="o",
+        s=18,
+        facecolors="none",
+        edgecolors="tab:red",
+        label="missed spike",
+    )
     for j in others:
         row = y[f"n{j}"]
         fired = spikes[:, j]
         axis.scatter(steps[fired], np.full(fired.sum(), row), marker="|", s=120, color="black")
         stimulated = actions == j
-        axis.scatter(steps[stimulated], np.full(stimulated.sum(), row), marker="s", s=22,
-                     facecolors="none", edgecolors="tab:blue")
+        axis.scatter(
+            steps[stimulated],
+            np.full(stimulated.sum(), row),
+            marker="s",
+            s=22,
+            facecolors="none",
+            edgecolors="tab:blue",
+        )
     axis.scatter([], [], marker="s", facecolors="none", edgecolors="tab:blue", label="stimulated")
     axis.set_yticks(list(y.values()), list(y.keys()))
     axis.set_xlim(-0.5, length - 0.5)

@@ -1,0 +1,374 @@
+"""The batched twin of :class:`~spikectl.env.NeuronControlEnv`: all networks in one call.
+
+``step`` advances every sub-environment with a single :func:`spikectl.simulator.advance`
+on a [num_envs, n, n] weight batch; rewards, observations, infos and autoresets are
+array operations. It behaves exactly like a ``gymnasium.vector.SyncVectorEnv`` of single
+environments (same seeds, same contexts, same autoreset), only faster.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Sequence
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from gymnasium.error import ResetNeeded
+from gymnasium.utils import seeding
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from spikectl import render as rendering
+from spikectl.contexts import Context, ContextSet
+from spikectl.env import (
+    RENDER_FPS,
+    RENDER_MODES,
+    ContextTables,
+    check_context,
+    check_context_index,
+    is_int,
+    observation_space,
+    resolve_contexts,
+)
+from spikectl.params import NeuronParams
+from spikectl.simulator import DO_NOTHING, SimulatorState, advance
+
+
+class LegalActionBatchSpace(spaces.MultiDiscrete):
+    """The batched action space; its unmasked ``sample()`` draws only legal actions.
+
+    Equal to ``batch_space(Discrete(n + 1, start=-1), num_envs)``. ``legal`` (bool
+    [num_envs, n + 1]) is the environment's current action mask.
+    """
+
+    def __init__(self, num_envs: int, n_neurons: int, seed: int | None = None) -> None:
+        super().__init__(
+            np.full(num_envs, n_neurons + 1), seed=seed, start=np.full(num_envs, DO_NOTHING)
+        )
+        self.legal = np.ones((num_envs, n_neurons + 1), dtype=bool)
+
+    def sample(self, mask: tuple | None = None, probability: tuple | None = None) -> np.ndarray:
+        if mask is not None or probability is not None:
+            return super().sample(mask=mask, probability=probability)
+        counts = self.legal.sum(axis=1)
+        choice = (self.np_random.random(counts.shape) * counts).astype(np.int64)
+        legal_first = np.argsort(~self.legal, axis=1, kind="stable")
+        return (legal_first[np.arange(counts.size), choice] + DO_NOTHING).astype(self.dtype)
+
+
+class NeuronControlVectorEnv(VectorEnv):
+    """``num_envs`` copies of :class:`~spikectl.env.NeuronControlEnv` stepped as one batch.
+
+    Takes ``num_envs`` plus the single environment's arguments; spaces are the single
+    ones batched. Actions: int array [num_envs]. Infos: ``action_mask`` [num_envs, n + 1],
+    ``context_index`` [num_envs] (-1 for a passed ``Context``), ``spikes`` [num_envs, n]
+    and ``target_spiked`` [num_envs], each with Gymnasium's ``_key`` mask of the
+    sub-environments that report it (after an autoreset there are no spikes).
+
+    Autoreset is ``AutoresetMode.NEXT_STEP``: a sub-environment that terminated is reset
+    by the next ``step``, which ignores its action and returns its first observation,
+    reward 0 and ``terminated`` False.
+
+    Seeding matches ``SyncVectorEnv``: each sub-environment has its own generator;
+    ``reset(seed=s)`` seeds sub-environment i with ``s + i`` (a list gives one seed each),
+    and contexts are drawn from it with ``integers(len(contexts))``.
+
+    Reset options: ``{"context": c}`` with c an index or ``Context`` for every
+    sub-environment, or a sequence of num_envs of them (evaluate a whole set in one
+    batch); ``{"reset_mask": bool array [num_envs]}`` resets only the marked ones.
+    """
+
+    metadata = {
+        "render_modes": RENDER_MODES,
+        "render_fps": RENDER_FPS,
+        "autoreset_mode": AutoresetMode.NEXT_STEP,
+    }
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        n_neurons: int | None = None,
+        episode_length: int | None = None,
+        contexts: ContextSet | str | os.PathLike | None = None,
+        split: str = "train",
+        n_train: int = 100,
+        n_test: int = 100,
+        context_seed: int = 0,
+        params: NeuronParams | None = None,
+        allow_target_action: bool = False,
+        render_mode: str | None = None,
+    ) -> None:
+        if not is_int(num_envs) or num_envs < 1:
+            raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
+        if render_mode is not None and render_mode not in RENDER_MODES:
+            raise ValueError(
+                f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}"
+            )
+        if not isinstance(allow_target_action, (bool, np.bool_)):
+            raise TypeError(f"allow_target_action must be a bool, got {allow_target_action!r}")
+        self.contexts, self.params = resolve_contexts(
+            contexts, split, n_train, n_test, context_seed, n_neurons, episode_length, params
+        )
+        self.num_envs = batch = int(num_envs)
+        self.n_neurons = n = self.contexts.n_neurons
+        self.episode_length = length = self.contexts.episode_length
+        self.allow_target_action = bool(allow_target_action)
+        self.render_mode = render_mode
+        self._tables = ContextTables.build(self.contexts, self.allow_target_action)
+
+        self.single_observation_space = observation_space(n, length)
+        self.single_action_space = spaces.Discrete(n + 1, start=DO_NOTHING)
+        self.observation_space = batch_space(self.single_observation_space, batch)
+        self.action_space = LegalActionBatchSpace(batch, n)
+
+        self._rngs: list[np.random.Generator | None] = [None] * batch
+        self._envs = np.arange(batch)
+        self._state = SimulatorState.at_rest(batch, n, self.params)
+        self._weights = np.zeros((batch, n, n), dtype=np.float64)
+        self._targets = np.zeros(batch, dtype=np.int64)
+        self._patterns = np.zeros((batch, length), dtype=np.int8)
+        self._reward_if_spike = np.zeros((batch, length), dtype=np.float64)
+        self._reward_if_silent = np.zeros((batch, length), dtype=np.float64)
+        self._legal = self.action_space.legal  # shared, so sample() follows every reset
+        self._context_index = np.full(batch, -1, dtype=np.int64)
+        self._next_step = np.full(batch, length, dtype=np.int64)
+        self._last_action = np.full(batch, DO_NOTHING, dtype=np.int64)
+        self._voltage = np.full((batch, n), self.params.v_rest_mV, dtype=np.float32)
+        self._needs_reset = np.zeros(batch, dtype=bool)
+        self._any_needs_reset = False
+        self._all_envs = np.ones(batch, dtype=bool)
+        # Offsets of each env's rows in the flattened per-env tables.
+        self._first_cells = self._envs * length
+        self._first_legal = self._envs * (n + 1)
+        self._target_cells = self._envs * n
+        self._actions = np.full((batch, 1), DO_NOTHING, dtype=np.int64)
+        self._out_voltage = np.zeros((batch, 1, n), dtype=np.float64)
+        self._out_spikes = np.zeros((batch, 1, n), dtype=bool)
+        self._action_history = np.full((batch, length), DO_NOTHING, dtype=np.int64)
+        self._spike_history = np.zeros((batch, length, n), dtype=bool)
+        self._ever_reset = np.zeros(batch, dtype=bool)
+        self._all_reset = False
+
+    def reset(
+        self,
+        *,
+        seed: int | Sequence[int | None] | None = None,
+        options: dict[str, Any] | None = None,
+    ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        seeds = self._seed_list(seed)
+        if is_int(seed):
+            super().reset(seed=int(seed))
+        options = dict(options or {})
+        which = _reset_mask(options.pop("reset_mask", None), self.num_envs)
+        choice = options.pop("context", None)
+        if options:
+            raise ValueError(
+                f"unknown reset option(s) {sorted(options)}; "
+                "the options are 'context' and 'reset_mask'"
+            )
+        envs = np.flatnonzero(which)
+        for i in envs:
+            if seeds[i] is not None or self._rngs[i] is None:
+                self._rngs[i] = seeding.np_random(seeds[i])[0]
+        self._reset_envs(envs, self._context_choices(choice, envs))
+        self._needs_reset[which] = False
+        self._any_needs_reset = bool(self._needs_reset.any())
+        self._ever_reset |= which
+        self._all_reset = bool(self._ever_reset.all())
+        infos = {
+            "action_mask": self._legal.copy(),
+            "_action_mask": which.copy(),
+            "context_index": self._context_index.copy(),
+            "_context_index": which.copy(),
+        }
+        return self._observation(self._voltage.copy()), infos
+
+    def step(
+        self, actions: np.ndarray
+    ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        if not self._all_reset:
+            never = np.flatnonzero(~self._ever_reset).tolist()
+            raise ResetNeeded(f"sub-environment(s) {never} were never reset: call reset() first")
+        actions = self._checked_actions(actions)
+        autoreset = self._needs_reset
+        advance(self._state, self._weights, self._actions, self.params, self._out_voltage,
+                self._out_spikes)  # fmt: skip
+        length = self.episode_length
+        # Flat index of each env's current step into its [num_envs * N] tables; an env
+        # about to autoreset points at its last step, which its reset then clears.
+        cells = self._first_cells + np.minimum(self._next_step, length - 1)
+        spikes = self._out_spikes[:, 0]
+        target_spiked = spikes.reshape(-1).take(self._target_cells)
+        rewards = np.where(
+            target_spiked,
+            self._reward_if_spike.reshape(-1).take(cells),
+            self._reward_if_silent.reshape(-1).take(cells),
+        )
+        self._action_history.reshape(-1)[cells] = actions
+        self._spike_history.reshape(-1, self.n_neurons)[cells] = spikes
+        self._next_step += 1
+        self._last_action[:] = actions
+        terminated = self._next_step == length
+        spikes = spikes.copy()
+        self._voltage[:] = self._out_voltage[:, 0]
+        if self._any_needs_reset:
+            # Their networks were stepped with "do nothing" along with the rest; reset now.
+            resetting = np.flatnonzero(autoreset)
+            self._reset_envs(resetting, [None] * resetting.size)
+            rewards[autoreset] = 0.0
+            terminated[autoreset] = False
+            target_spiked[autoreset] = False
+            spikes[autoreset] = False
+        active = ~autoreset
+        self._needs_reset = terminated.copy()
+        self._any_needs_reset = bool(terminated.any())
+        infos = {
+            "action_mask": self._legal.copy(),
+            "_action_mask": self._all_envs.copy(),
+            "context_index": self._context_index.copy(),
+            "_context_index": self._all_envs.copy(),
+            "spikes": spikes,
+            "_spikes": active,
+            "target_spiked": target_spiked,
+            "_target_spiked": active.copy(),
+        }
+        observation = self._observation(self._voltage.copy())
+        return observation, rewards, terminated, np.zeros(self.num_envs, dtype=bool), infos
+
+    def _checked_actions(self, actions: Any) -> np.ndarray:
+        """Copy valid actions into the simulator's input; autoresetting envs do nothing."""
+        array = np.asarray(actions)
+        if array.shape != (self.num_envs,) or array.dtype.kind not in "iu":
+            raise ValueError(
+                f"actions must be integers of shape ({self.num_envs},), got {array.dtype} "
+                f"{array.shape}"
+            )
+        checked = self._actions[:, 0]
+        checked[:] = array
+        if self._any_needs_reset:
+            checked[self._needs_reset] = DO_NOTHING
+        if checked.min() < DO_NOTHING or checked.max() >= self.n_neurons:
+            i = int(np.argmax((checked < DO_NOTHING) | (checked >= self.n_neurons)))
+            raise ValueError(
+                f"env {i}: action {array[i]} is out of range: actions are -1 (do nothing) or "
+                f"a neuron in 0..{self.n_neurons - 1} other than the target {self._targets[i]}"
+            )
+        legal = self._legal.reshape(-1).take(self._first_legal + checked + 1)
+        if not legal.all():
+            i = int(np.argmin(legal))
+            raise ValueError(
+                f"env {i}: action {array[i]} stimulates the target neuron {self._targets[i]}, "
+                f"which is not a legal action (pass allow_target_action=True to allow it)"
+            )
+        return checked
+
+    def _observation(self, voltage: np.ndarray) -> dict[str, np.ndarray]:
+        return {
+            "voltage": voltage,
+            "target": self._targets.copy(),
+            "pattern": self._patterns.copy(),
+            "step": self._next_step.copy(),
+            "last_action": self._last_action.copy(),
+        }
+
+    def _seed_list(self, seed: Any) -> list[int | None]:
+        if seed is None:
+            return [None] * self.num_envs
+        if is_int(seed):
+            return [int(seed) + i for i in range(self.num_envs)]
+        seeds = [None if s is None else int(s) for s in seed]
+        if len(seeds) != self.num_envs:
+            raise ValueError(
+                f"a list of seeds must have num_envs={self.num_envs} entries, got {len(seeds)}"
+            )
+        return seeds
+
+    def _context_choices(self, choice: Any, envs: np.ndarray) -> list[int | Context | None]:
+        """The context option for each env in ``envs``: None (draw), an index or a Context."""
+        if choice is None or isinstance(choice, (Context, int, np.integer)):
+            return [choice] * envs.size
+        if isinstance(choice, (str, bytes)) or not isinstance(choice, (Sequence, np.ndarray)):
+            raise TypeError(
+                f"the context option must be an index, a Context, or a sequence of "
+                f"num_envs={self.num_envs} of them; got {type(choice).__name__}"
+            )
+        if len(choice) != self.num_envs:
+            raise ValueError(
+                f"a sequence of contexts must have num_envs={self.num_envs} entries, "
+                f"got {len(choice)}"
+            )
+        return [choice[i] for i in envs]
+
+    def _reset_envs(self, envs: np.ndarray, choices: Sequence[int | Context | None]) -> None:
+        """Put ``envs`` at rest with a new context each; draws go to each env's own generator."""
+        rows = np.empty(envs.size, dtype=np.int64)
+        passed: list[tuple[int, Context]] = []
+        for k, (i, choice) in enumerate(zip(envs, choices, strict=True)):
+            if choice is None:
+                rows[k] = self._rngs[i].integers(len(self.contexts))
+            elif isinstance(choice, Context):
+                check_context(choice, self.n_neurons, self.episode_length)
+                rows[k] = -1
+                passed.append((i, choice))
+            else:
+                try:
+                    rows[k] = check_context_index(choice, len(self.contexts))
+                except ValueError as error:
+                    raise ValueError(f"env {i}: {error}") from None
+        indexed = rows >= 0
+        self._load(envs[indexed], self._tables, rows[indexed])
+        self._context_index[envs] = rows
+        for i, context in passed:
+            self._load(np.array([i]), ContextTables.build([context], self.allow_target_action), 0)
+        which = np.zeros(self.num_envs, dtype=bool)
+        which[envs] = True
+        self._state.reset(which, self.params)
+        self._next_step[envs] = 0
+        self._last_action[envs] = DO_NOTHING
+        self._voltage[envs] = self.params.v_rest_mV
+        self._action_history[envs] = DO_NOTHING
+        self._spike_history[envs] = False
+
+    def _load(self, envs: np.ndarray, tables: ContextTables, rows: np.ndarray | int) -> None:
+        self._weights[envs] = tables.weights[rows]
+        self._targets[envs] = tables.targets[rows]
+        self._target_cells[envs] = envs * self.n_neurons + tables.targets[rows]
+        self._patterns[envs] = tables.patterns[rows]
+        self._reward_if_spike[envs] = tables.reward_if_spike[rows]
+        self._reward_if_silent[envs] = tables.reward_if_silent[rows]
+        self._legal[envs] = tables.legal[rows]
+
+    def render(self) -> tuple[str, ...] | tuple[np.ndarray, ...] | None:
+        """One frame (or text raster) per sub-environment, as Gymnasium's vector wrappers expect."""
+        if self.render_mode is None:
+            gym.logger.warn(
+                "render() called without a render_mode; pass render_mode='ansi' or "
+                "'rgb_array' to the constructor (or to gymnasium.make_vec)"
+            )
+            return None
+        if not self._all_reset:
+            raise ResetNeeded("call reset() before render()")
+        draw = rendering.render_ansi if self.render_mode == "ansi" else rendering.render_rgb
+        return tuple(
+            draw(
+                self._patterns[i],
+                self._spike_history[i, :, self._targets[i]],
+                self._action_history[i],
+                self._spike_history[i],
+                int(self._targets[i]),
+                int(self._next_step[i]),
+            )
+            for i in range(self.num_envs)
+        )
+
+
+def _reset_mask(mask: Any, num_envs: int) -> np.ndarray:
+    if mask is None:
+        return np.ones(num_envs, dtype=bool)
+    if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.shape != (num_envs,):
+        raise ValueError(f"options['reset_mask'] must be a bool array of shape ({num_envs},)")
+    if not mask.any():
+        raise ValueError("options['reset_mask'] must mark at least one sub-environment")
+    return mask

@@ -1,0 +1,266 @@
+"""NeuronControlVectorEnv: equal to single environments and to SyncVectorEnv, in one batch."""
+
+from __future__ import annotations
+
+import math
+import pickle
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.error import ResetNeeded
+from gymnasium.vector import AutoresetMode, SyncVectorEnv
+from gymnasium.vector.utils import batch_space
+
+import spikectl.vector_env
+from spikectl.contexts import make_splits
+from spikectl.env import NeuronControlEnv
+from spikectl.registration import ENV_ID
+from spikectl.vector_env import NeuronControlVectorEnv
+
+SMALL = {"n_train": 10, "n_test": 10}
+INFO_KEYS = ("action_mask", "context_index", "spikes", "target_spiked")
+
+
+def legal_actions(rng: np.random.Generator, masks: np.ndarray) -> np.ndarray:
+    return np.array([rng.choice(np.flatnonzero(mask)) - 1 for mask in masks])
+
+
+def assert_observations_equal(a: dict, b: dict) -> None:
+    assert a.keys() == b.keys()
+    for key in a:
+        assert a[key].dtype == b[key].dtype, key
+        np.testing.assert_array_equal(a[key], b[key], err_msg=key)
+
+
+def assert_infos_equal(a: dict, b: dict) -> None:
+    """Equal wherever Gymnasium's ``_key`` masks say the value is present."""
+    absent = np.zeros(len(a["_action_mask"]), dtype=bool)
+    for key in INFO_KEYS:
+        present = b.get(f"_{key}", absent)
+        np.testing.assert_array_equal(a.get(f"_{key}", absent), present, err_msg=f"_{key}")
+        if present.any():
+            np.testing.assert_array_equal(a[key][present], b[key][present], err_msg=key)
+
+
+def test_spaces_are_the_single_spaces_batched():
+    envs = NeuronControlVectorEnv(num_envs=3, **SMALL)
+    single = NeuronControlEnv(**SMALL)
+    assert envs.single_observation_space == single.observation_space
+    assert envs.single_action_space == single.action_space
+    assert envs.observation_space == batch_space(single.observation_space, 3)
+    assert envs.action_space == batch_space(single.action_space, 3)
+    assert envs.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP
+    obs, _ = envs.reset(seed=0)
+    assert obs in envs.observation_space
+    assert envs.step(envs.action_space.sample())[0] in envs.observation_space
+
+
+def test_equals_single_envs_step_by_step():
+    contexts = [3, 1, 4, 1, 5]
+    envs = NeuronControlVectorEnv(num_envs=len(contexts), **SMALL)
+    singles = [NeuronControlEnv(**SMALL) for _ in contexts]
+    obs, infos = envs.reset(options={"context": contexts})
+    for i, single in enumerate(singles):
+        single_obs, single_info = single.reset(options={"context": contexts[i]})
+        for key in obs:
+            np.testing.assert_array_equal(obs[key][i], single_obs[key])
+        np.testing.assert_array_equal(infos["action_mask"][i], single_info["action_mask"])
+    rng = np.random.default_rng(0)
+    for _ in range(single.episode_length):
+        actions = legal_actions(rng, infos["action_mask"])
+        obs, rewards, terminated, truncated, infos = envs.step(actions)
+        for i, single in enumerate(singles):
+            single_obs, reward, done, cut, info = single.step(int(actions[i]))
+            for key in obs:
+                np.testing.assert_array_equal(obs[key][i], single_obs[key], err_msg=key)
+            assert (rewards[i], terminated[i], truncated[i]) == (reward, done, cut)
+            for key in INFO_KEYS:
+                np.testing.assert_array_equal(infos[key][i], info[key], err_msg=key)
+    assert terminated.all()
+
+
+def test_equals_sync_vector_env_across_autoresets():
+    num_envs = 4
+    batched = gym.make_vec(ENV_ID, num_envs=num_envs, episode_length=12, **SMALL)
+    sync = gym.make_vec(
+        ENV_ID, num_envs=num_envs, vectorization_mode="sync", episode_length=12, **SMALL
+    )
+    assert isinstance(batched, NeuronControlVectorEnv) and isinstance(sync, SyncVectorEnv)
+    rng = np.random.default_rng(1)
+    obs_a, info_a = batched.reset(seed=11)
+    obs_b, info_b = sync.reset(seed=11)
+    assert_observations_equal(obs_a, obs_b)
+    assert_infos_equal(info_a, info_b)
+    autoresets = 0
+    for _ in range(3 * 13 + 4):  # more than three episodes with their autoreset steps
+        actions = legal_actions(rng, info_a["action_mask"])
+        resetting = np.flatnonzero(obs_a["step"] == 12)
+        # The action of an env being autoreset is ignored, even an illegal one.
+        actions[resetting] = obs_a["target"][resetting]
+        autoresets += resetting.size
+        obs_a, rewards_a, terminated_a, truncated_a, info_a = batched.step(actions)
+        obs_b, rewards_b, terminated_b, truncated_b, info_b = sync.step(actions)
+        assert_observations_equal(obs_a, obs_b)
+        np.testing.assert_array_equal(rewards_a, rewards_b)
+        assert rewards_a.dtype == rewards_b.dtype
+        np.testing.assert_array_equal(terminated_a, terminated_b)
+        np.testing.assert_array_equal(truncated_a, truncated_b)
+        assert_infos_equal(info_a, info_b)
+    assert autoresets == 3 * num_envs
+
+
+def test_reset_mask_resets_only_the_marked_envs():
+    envs = NeuronControlVectorEnv(num_envs=3, **SMALL)
+    sync = gym.make_vec(ENV_ID, num_envs=3, vectorization_mode="sync", **SMALL)
+    for vector_env in (envs, sync):
+        vector_env.reset(seed=2)
+        vector_env.step(np.full(3, -1))
+    mask = np.array([True, False, True])
+    obs_a, info_a = envs.reset(seed=5, options={"reset_mask": mask})
+    obs_b, info_b = sync.reset(seed=5, options={"reset_mask": mask.copy()})
+    assert_observations_equal(obs_a, obs_b)
+    np.testing.assert_array_equal(obs_a["step"], [0, 1, 0])
+    np.testing.assert_array_equal(info_a["_context_index"], mask)
+    np.testing.assert_array_equal(info_a["context_index"][mask], info_b["context_index"][mask])
+    for bad in (np.array([1, 0, 1]), np.zeros(3, dtype=bool), [True, False, True]):
+        with pytest.raises(ValueError, match="reset_mask"):
+            envs.reset(options={"reset_mask": bad})
+
+
+def test_seed_lists():
+    envs = NeuronControlVectorEnv(num_envs=3, **SMALL)
+    drawn = envs.reset(seed=5)[1]["context_index"]
+    np.testing.assert_array_equal(envs.reset(seed=[5, 6, np.int64(7)])[1]["context_index"], drawn)
+    with pytest.raises(ValueError, match="num_envs=3"):
+        envs.reset(seed=[1, 2])
+
+
+def test_make_vec_builds_the_batched_env():
+    for mode in (None, "vector_entry_point"):
+        envs = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode=mode, n_neurons=5, **SMALL)
+        assert isinstance(envs, NeuronControlVectorEnv)
+        assert (envs.num_envs, envs.n_neurons) == (2, 5)
+
+
+def test_one_simulator_call_per_step(monkeypatch):
+    calls = []
+    original = spikectl.vector_env.advance
+
+    def counting_advance(state, weights, actions, *args):
+        calls.append((weights.shape, actions.shape))
+        original(state, weights, actions, *args)
+
+    monkeypatch.setattr(spikectl.vector_env, "advance", counting_advance)
+    envs = NeuronControlVectorEnv(num_envs=6, episode_length=5, **SMALL)
+    envs.reset(seed=0)
+    for _ in range(12):  # two episodes and two autoreset steps
+        envs.step(np.full(6, -1))
+    assert calls == [((6, 8, 8), (6, 1))] * 12
+
+
+def test_batched_evaluation_over_a_whole_set():
+    train, _ = make_splits(12, 1, seed=4)
+    envs = NeuronControlVectorEnv(num_envs=len(train), contexts=train)
+    for actions, expected in ((None, 0.5), ("witness", 1.0)):
+        obs, infos = envs.reset(options={"context": list(range(len(train)))})
+        np.testing.assert_array_equal(infos["context_index"], np.arange(len(train)))
+        np.testing.assert_array_equal(obs["target"], [c.target for c in train])
+        witnesses = np.stack([c.witness for c in train])
+        returns = np.zeros(len(train))
+        for t in range(train.episode_length):
+            step_actions = np.full(len(train), -1) if actions is None else witnesses[:, t]
+            _, rewards, terminated, _, _ = envs.step(step_actions)
+            returns += rewards
+        assert terminated.all()
+        assert all(math.isclose(r, expected, rel_tol=0, abs_tol=1e-12) for r in returns)
+
+
+def test_context_objects_as_reset_options():
+    train, test = make_splits(5, 3, seed=0)
+    envs = NeuronControlVectorEnv(num_envs=3, contexts=train)
+    obs, infos = envs.reset(options={"context": test})  # another set's contexts, one each
+    np.testing.assert_array_equal(obs["target"], [c.target for c in test])
+    obs, infos = envs.reset(options={"context": test[1]})
+    np.testing.assert_array_equal(infos["context_index"], [-1, -1, -1])
+    np.testing.assert_array_equal(obs["target"], [test[1].target] * 3)
+    obs, infos = envs.reset(options={"context": [test[0], 4, np.int64(2)]})
+    np.testing.assert_array_equal(infos["context_index"], [-1, 4, 2])
+    np.testing.assert_array_equal(obs["pattern"][0], test[0].pattern)
+    with pytest.raises(ValueError, match="num_envs=3"):
+        envs.reset(options={"context": [1, 2]})
+    with pytest.raises(ValueError, match=r"env 2: context index"):
+        envs.reset(options={"context": [1, 2, 9]})
+    with pytest.raises(TypeError, match="context option"):
+        envs.reset(options={"context": "train"})
+    small, _ = make_splits(1, 1, n_neurons=4, seed=0)
+    with pytest.raises(ValueError, match="4 neurons"):
+        envs.reset(options={"context": small[0]})
+
+
+def test_illegal_actions_name_the_env():
+    envs = NeuronControlVectorEnv(num_envs=3, **SMALL)
+    obs, _ = envs.reset(seed=0)
+    actions = np.full(3, -1)
+    actions[1] = obs["target"][1]
+    with pytest.raises(ValueError, match=rf"env 1: action {actions[1]} stimulates the target"):
+        envs.step(actions)
+    with pytest.raises(ValueError, match=r"env 2: action 8 is out of range"):
+        envs.step(np.array([-1, -1, 8]))
+    for bad in (np.full(2, -1), np.full(3, -1.0), -1):
+        with pytest.raises(ValueError, match=r"integers of shape \(3,\)"):
+            envs.step(bad)
+    np.testing.assert_array_equal(envs.step([-1, -1, -1])[0]["step"], [1, 1, 1])
+
+
+def test_allow_target_action():
+    envs = NeuronControlVectorEnv(num_envs=2, allow_target_action=True, **SMALL)
+    obs, infos = envs.reset(seed=0)
+    assert infos["action_mask"].all()
+    _, _, _, _, infos = envs.step(obs["target"])
+    assert infos["target_spiked"].all()
+
+
+def test_action_space_samples_only_legal_actions():
+    envs = NeuronControlVectorEnv(num_envs=16, **SMALL)
+    envs.action_space.seed(0)
+    _, infos = envs.reset(seed=0)
+    for _ in range(30):
+        actions = envs.action_space.sample()
+        assert infos["action_mask"][np.arange(16), actions + 1].all()
+        _, _, _, _, infos = envs.step(actions)
+
+
+def test_step_before_reset_raises():
+    envs = NeuronControlVectorEnv(num_envs=2, **SMALL)
+    with pytest.raises(ResetNeeded):
+        envs.step(np.full(2, -1))
+    envs.reset(options={"reset_mask": np.array([True, False])})
+    with pytest.raises(ResetNeeded, match=r"\[1\] were never reset"):
+        envs.step(np.full(2, -1))
+
+
+def test_bad_constructor_arguments():
+    for num_envs in (0, 1.5, True):
+        with pytest.raises(ValueError, match="num_envs"):
+            NeuronControlVectorEnv(num_envs=num_envs, **SMALL)
+    with pytest.raises(ValueError, match="render_mode"):
+        NeuronControlVectorEnv(num_envs=2, render_mode="human", **SMALL)
+    with pytest.raises(ValueError, match="split"):
+        NeuronControlVectorEnv(num_envs=2, split="dev", **SMALL)
+
+
+def test_pickled_vector_env_continues_identically():
+    envs = NeuronControlVectorEnv(num_envs=3, episode_length=10, **SMALL)
+    rng = np.random.default_rng(0)
+    _, infos = envs.reset(seed=1)
+    for _ in range(7):
+        _, _, _, _, infos = envs.step(legal_actions(rng, infos["action_mask"]))
+    clone = pickle.loads(pickle.dumps(envs))
+    for _ in range(15):  # across an autoreset
+        actions = legal_actions(rng, infos["action_mask"])
+        obs, rewards, terminated, _, infos = envs.step(actions)
+        clone_obs, clone_rewards, clone_terminated, _, _ = clone.step(actions)
+        assert_observations_equal(obs, clone_obs)
+        np.testing.assert_array_equal(rewards, clone_rewards)
+        np.testing.assert_array_equal(terminated, clone_terminated)
