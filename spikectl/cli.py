@@ -14,6 +14,8 @@ import numpy as np
 import tyro
 
 from spikectl.contexts import ContextFileError, ContextSet, make_splits
+from spikectl.training.checkpoint import RunDirError
+from spikectl.training.config import PRESETS, TrainConfig
 
 
 def write_json_atomic(path: Path, payload: object) -> None:
@@ -141,23 +143,103 @@ def contexts(config: ContextsConfig) -> None:
         print(f"wrote {path}: {contexts_set!r}")
 
 
+@dataclass(frozen=True)
+class TrainCommand:
+    """Train an agent (``--preset`` picks the defaults every other flag overrides)."""
+
+    config: Annotated[TrainConfig, tyro.conf.arg(name="")]
+    preset: Literal["paper", "quick", "smoke"] = "quick"
+    """paper: Table 2 exactly; quick: ~15 minutes on 2 CPU cores; smoke: seconds."""
+    run_dir: Path | None = None
+    """Run directory (default runs/ARCH-PRESET-seedSEED); must be new unless resuming."""
+    resume: Path | None = None
+    """Continue the interrupted run in this directory (its saved config is used)."""
+
+
+def train(command: TrainCommand) -> None:
+    """Train (or resume), then print train/test returns against the baselines."""
+    from spikectl.experiments.figures import plot_learning_curve
+    from spikectl.training.checkpoint import read_config
+    from spikectl.training.dqn import train as run_training
+
+    if command.resume is not None:
+        run_dir = command.resume
+        config = read_config(run_dir)
+    else:
+        config = command.config
+        run_dir = command.run_dir or Path(f"runs/{config.arch}-{command.preset}-seed{config.seed}")
+    print(f"run directory: {run_dir}")
+    metrics = run_training(config, run_dir, resume=command.resume is not None)
+    baselines = json.loads((run_dir / "baselines.json").read_text())
+    final = metrics[-1]
+    curve = plot_learning_curve(
+        metrics, baselines, run_dir / "learning_curve.png",
+        title=f"{config.arch.upper()}, {final['env_steps']:,} steps",
+    )  # fmt: skip
+    print(f"{'':<14}{'train':>8}{'test':>8}")
+    print(f"{config.arch:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}")
+    for name in ("do_nothing", "random"):
+        row = baselines[name]
+        print(f"{name.replace('_', '-'):<14}{row['train']:>8.3f}{row['test']:>8.3f}")
+    print(f"wrote {run_dir / 'model.pt'}, {run_dir / 'metrics.csv'} and {curve}")
+
+
+@dataclass(frozen=True)
+class EvaluateCommand:
+    """Evaluate a trained agent greedily on its own sets or on any context set."""
+
+    run_dir: Annotated[Path, tyro.conf.Positional]
+    """The run directory of a trained agent."""
+    contexts: Path | None = None
+    """A saved ContextSet (.npz) to evaluate on instead of the run's train/test sets."""
+
+
+def evaluate(command: EvaluateCommand) -> None:
+    """Print the agent's mean greedy return per split, with its standard error."""
+    from spikectl.training.evaluate import evaluate_run
+
+    for result in evaluate_run(command.run_dir, command.contexts):
+        print(
+            f"{result.name:<24}{result.mean:.3f} +- {result.standard_error:.3f} "
+            f"over {result.returns.size} contexts (do nothing {result.do_nothing:.3f})"
+        )
+
+
 COMMANDS = {
+    "train": (train, TrainCommand),
+    "evaluate": (evaluate, EvaluateCommand),
     "demo": (demo, DemoConfig),
     "contexts": (contexts, ContextsConfig),
 }
 
 
+def _parse_train(argv: list[str]) -> TrainCommand:
+    """Two passes: the preset sets the defaults, then every flag overrides them."""
+    import argparse
+
+    peek = argparse.ArgumentParser(add_help=False)
+    peek.add_argument("--preset", choices=sorted(PRESETS), default="quick")
+    known, _ = peek.parse_known_args(argv)
+    default = TrainCommand(config=PRESETS[known.preset], preset=known.preset)
+    return tyro.cli(TrainCommand, args=argv, default=default, prog="spikectl train",
+                    description=TrainCommand.__doc__)  # fmt: skip
+
+
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``spikectl`` console script."""
-    choices = tuple(
-        Annotated[config_type, tyro.conf.subcommand(name, description=run.__doc__)]
-        for name, (run, config_type) in COMMANDS.items()
-    )
-    config = tyro.cli(Union[choices], args=argv, prog="spikectl")  # noqa: UP007
-    run = next(run for run, config_type in COMMANDS.values() if isinstance(config, config_type))
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv and argv[0] == "train":
+        command = _parse_train(argv[1:])
+    else:
+        choices = tuple(
+            Annotated[config_type, tyro.conf.subcommand(name, description=run.__doc__)]
+            for name, (run, config_type) in COMMANDS.items()
+        )
+        command = tyro.cli(Union[choices], args=argv, prog="spikectl")  # noqa: UP007
+    run = next(run for run, config_type in COMMANDS.values() if isinstance(command, config_type))
     try:
-        run(config)
-    except (ValueError, TypeError, FileNotFoundError, ContextFileError) as error:
+        run(command)
+    except (ValueError, TypeError, FileNotFoundError, ContextFileError, RunDirError) as error:
         print(f"spikectl: error: {error}", file=sys.stderr)
         raise SystemExit(2) from error
 

@@ -117,3 +117,32 @@ def plot_episode_raster(
     path = save_figure(figure, path)
     plt.close(figure)
     return path
+
+
+def plot_learning_curve(
+    metrics: list[dict[str, float]],
+    baselines: dict[str, dict[str, float]],
+    path: str | os.PathLike,
+    title: str = "",
+) -> Path:
+    """Greedy return on the training and the unseen test contexts against environment
+    steps (one run's ``metrics.csv`` rows), with the do-nothing and random levels."""
+    plt = _pyplot()
+    steps = np.array([row["env_steps"] for row in metrics])
+    figure, axis = plt.subplots(figsize=(6.4, 4.0))
+    axis.plot(steps, [row["train_return"] for row in metrics], label="train contexts", marker=".")
+    axis.plot(steps, [row["test_return"] for row in metrics], label="unseen test contexts",
+              marker=".")  # fmt: skip
+    styles = {"do_nothing": ("do nothing", ":"), "random": ("random", "--")}
+    for name, (label, style) in styles.items():
+        if name in baselines:
+            level = np.mean(list(baselines[name].values()))
+            axis.axhline(level, color="0.4", linestyle=style, linewidth=1, label=label)
+    axis.set_xlabel("environment steps")
+    axis.set_ylabel("greedy return")
+    axis.set_title(title)
+    axis.grid(alpha=0.3)
+    axis.legend(fontsize=8)
+    path = save_figure(figure, path)
+    plt.close(figure)
+    return path

@@ -1,0 +1,98 @@
+"""Batched greedy evaluation of a trained agent on context sets (its own or any other)."""
+
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from spikectl.agents import make_agent
+from spikectl.contexts import ContextSet
+from spikectl.rollout import EpisodeBatch, do_nothing_policy, evaluate_policy
+from spikectl.training.checkpoint import CHECKPOINT_FILE, MODEL_FILE, RunDirError, read_config
+from spikectl.training.contexts import TEST_FILE, TRAIN_FILE
+from spikectl.training.dqn import EpsilonGreedyPolicy
+
+
+@dataclass(frozen=True)
+class SplitResult:
+    """Greedy returns of an agent on one context set."""
+
+    name: str
+    returns: np.ndarray
+    """[S] return per context."""
+    do_nothing: float
+    """Mean return of doing nothing on the same set (0.5 by construction)."""
+
+    @property
+    def mean(self) -> float:
+        return float(self.returns.mean())
+
+    @property
+    def standard_error(self) -> float:
+        """Standard error of the mean over contexts (the evaluation noise)."""
+        if self.returns.size < 2:
+            return float("nan")
+        return float(self.returns.std(ddof=1) / np.sqrt(self.returns.size))
+
+
+def load_agent(run_dir: str | os.PathLike, n_neurons: int | None = None) -> torch.nn.Module:
+    """The trained online network of a run (model.pt, else the last checkpoint), on CPU.
+
+    ``n_neurons`` builds the network for another network size (per-neuron architectures
+    only; DRQN and DMDRQN refuse it when they run).
+    """
+    run_dir = Path(run_dir)
+    config = read_config(run_dir)
+    network = make_agent(config.arch, config.n_neurons, config.episode_length, config.sizes)
+    if (run_dir / MODEL_FILE).exists():
+        weights = torch.load(run_dir / MODEL_FILE, map_location="cpu", weights_only=True)
+    elif (run_dir / CHECKPOINT_FILE).exists():
+        checkpoint = torch.load(run_dir / CHECKPOINT_FILE, map_location="cpu", weights_only=False)
+        weights = checkpoint["online"]
+    else:
+        raise RunDirError(f"{run_dir} holds no trained weights ({MODEL_FILE} or {CHECKPOINT_FILE})")
+    try:
+        network.load_state_dict(weights)
+    except RuntimeError as error:
+        raise RunDirError(
+            f"the weights in {run_dir} do not fit a {config.arch} of the saved config: {error}"
+        ) from error
+    network.eval()
+    return network
+
+
+def greedy_episodes(network: torch.nn.Module, contexts: ContextSet) -> EpisodeBatch:
+    """One greedy episode on every context of the set, in one batch."""
+    policy = EpsilonGreedyPolicy(network, 0.0, np.random.default_rng(0), "cpu")
+    return evaluate_policy(contexts, policy)
+
+
+def evaluate_run(
+    run_dir: str | os.PathLike, contexts: str | os.PathLike | None = None
+) -> list[SplitResult]:
+    """Greedy returns of a run's agent on its training and test sets, or on ``contexts``."""
+    run_dir = Path(run_dir)
+    config = read_config(run_dir)
+    if contexts is not None:
+        sets = {Path(contexts).name: ContextSet.load(contexts)}
+    else:
+        sets = {
+            "train": ContextSet.load(run_dir / TRAIN_FILE),
+            "test": ContextSet.load(run_dir / TEST_FILE),
+        }
+    network = load_agent(run_dir)
+    results = []
+    for name, context_set in sets.items():
+        if context_set.episode_length != config.episode_length:
+            raise ValueError(
+                f"{name}: episodes of {context_set.episode_length} steps; the agent was "
+                f"trained on {config.episode_length} (its pattern encoder has that width)"
+            )
+        episodes = greedy_episodes(network, context_set)
+        baseline = float(evaluate_policy(context_set, do_nothing_policy).returns.mean())
+        results.append(SplitResult(name, episodes.returns, baseline))
+    return results

@@ -1,0 +1,311 @@
+"""The trainer: double-Q target, schedules, replay, determinism, errors, learnability."""
+
+from __future__ import annotations
+
+import dataclasses
+import errno
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from spikectl import ContextSet, make_context
+from spikectl.training.checkpoint import RunDirError, atomic_write_bytes, read_metrics
+from spikectl.training.config import PRESETS, SMOKE, TrainConfig
+from spikectl.training.dqn import td_loss, train
+from spikectl.training.replay import EpisodeBatchArrays, EpisodeReplay
+
+
+class TableQ(torch.nn.Module):
+    """A stand-in network whose Q-values are a fixed table indexed by the step."""
+
+    def __init__(self, table: list[list[float]]) -> None:
+        super().__init__()
+        self.table = torch.nn.Parameter(torch.tensor(table, dtype=torch.float32))  # [N+1, A]
+
+    def forward(self, obs_seq, state=None):
+        q_values = self.table[obs_seq["step"]]  # [B, T, A]
+        return q_values, state
+
+
+def test_double_q_target_on_a_hand_computed_two_step_episode():
+    # n = 2 neurons, target 1, so the legal actions are -1 and 0 (indices 0, 1); index 2
+    # (stimulate the target) is illegal. N = 2 steps; observations 0, 1, 2.
+    online = TableQ([[0.1, 0.4, 0.0], [0.2, 0.3, 9.0], [0.0, 0.0, 0.0]])
+    target = TableQ([[0.0, 0.0, 0.0], [0.7, 0.5, 5.0], [1.0, 1.0, 1.0]])
+    batch = EpisodeBatchArrays(
+        voltage=np.full((1, 3, 2), -70.0, dtype=np.float32),
+        actions=np.array([[0, -1]]),
+        rewards=np.array([[0.25, 0.5]], dtype=np.float32),
+        targets=np.array([1]),
+        patterns=np.array([[0, 1]], dtype=np.int8),
+        action_masks=np.array([[True, True, False]]),
+    )
+    config = dataclasses.replace(SMOKE, gamma=0.9, n_neurons=2, episode_length=2)
+    loss = td_loss(online, target, batch, config)
+    # Step 0 took action 0 (index 1): Q = 0.4. The online net's best legal action at
+    # observation 1 is index 1 (0.3 > 0.2; the illegal 9.0 is masked), which the target
+    # net values at 0.5 (not its own max, 0.7): y0 = 0.25 + 0.9 * 0.5 = 0.7.
+    # Step 1 took do-nothing (index 0): Q = 0.2, terminal: y1 = 0.5.
+    expected = ((0.4 - 0.7) ** 2 + (0.2 - 0.5) ** 2) / 2
+    assert loss.item() == pytest.approx(expected, rel=1e-6)
+    huber = td_loss(online, target, batch, dataclasses.replace(config, loss="huber"))
+    assert huber.item() == pytest.approx(0.5 * ((0.3) ** 2 + (0.3) ** 2) / 2, rel=1e-6)
+    loss.backward()  # gradients reach the online table only through the taken actions
+    assert online.table.grad[1, 2] == 0 and online.table.grad[0, 1] != 0
+    assert target.table.grad is None
+
+
+def test_epsilon_schedule():
+    config = dataclasses.replace(SMOKE, epsilon_start=1.0, epsilon_end=0.1)
+    anneal = 0.25 * config.total_episodes
+    assert config.epsilon(0) == 1.0
+    assert config.epsilon(anneal / 2) == pytest.approx(0.55)
+    assert config.epsilon(anneal) == pytest.approx(0.1)
+    assert config.epsilon(config.total_episodes) == pytest.approx(0.1)
+    assert dataclasses.replace(config, epsilon_anneal_fraction=0.0).epsilon(0) == 0.1
+
+
+def make_episodes(count: int, marker_start: int, n: int = 3, length: int = 4):
+    voltage = np.zeros((count, length + 1, n), dtype=np.float32)
+    voltage[:, 0, 0] = np.arange(marker_start, marker_start + count)  # identifies the episode
+    return (
+        voltage,
+        np.zeros((count, length), dtype=np.int64),
+        np.zeros((count, length), dtype=np.float32),
+        np.zeros(count, dtype=np.int64),
+        np.zeros((count, length), dtype=np.int8),
+        np.ones((count, n + 1), dtype=bool),
+    )
+
+
+def test_replay_samples_whole_episodes_uniformly():
+    replay = EpisodeReplay(capacity=10, n_neurons=3, episode_length=4)
+    replay.add(*make_episodes(10, 0))
+    draws = 20_000
+    sample = replay.sample(draws, np.random.default_rng(0))
+    counts = np.bincount(sample.voltage[:, 0, 0].astype(int), minlength=10)
+    expected = draws / 10
+    assert np.all(np.abs(counts - expected) < 4 * np.sqrt(expected * 0.9))
+    chi_square = ((counts - expected) ** 2 / expected).sum()
+    assert chi_square < 27.9  # p = 0.001 for 9 degrees of freedom
+
+
+def test_replay_is_a_ring_and_round_trips():
+    replay = EpisodeReplay(capacity=4, n_neurons=3, episode_length=4)
+    replay.add(*make_episodes(3, 0))
+    replay.add(*make_episodes(3, 100))  # overwrites the two oldest
+    assert len(replay) == 4
+    assert sorted(replay.voltage[:, 0, 0].tolist()) == [2, 100, 101, 102]
+    restored = EpisodeReplay(capacity=4, n_neurons=3, episode_length=4)
+    restored.load_state_dict(replay.state_dict())
+    rng_a, rng_b = np.random.default_rng(1), np.random.default_rng(1)
+    np.testing.assert_array_equal(
+        replay.sample(8, rng_a).voltage, restored.sample(8, rng_b).voltage
+    )
+    restored.add(*make_episodes(1, 200))
+    replay.add(*make_episodes(1, 200))
+    np.testing.assert_array_equal(replay.voltage, restored.voltage)
+    with pytest.raises(ValueError, match="empty"):
+        EpisodeReplay(2, 3, 4).sample(1, rng_a)
+
+
+def comparable(rows):
+    """Metrics rows without the wall time, which no two runs share (NaN made comparable)."""
+    return [
+        {k: None if v != v else v for k, v in row.items() if k != "wall_time_s"} for row in rows
+    ]
+
+
+def assert_same_weights(path_a, path_b):
+    a = torch.load(path_a, weights_only=True)
+    b = torch.load(path_b, weights_only=True)
+    assert a.keys() == b.keys()
+    for key in a:
+        assert torch.equal(a[key], b[key]), key
+
+
+def test_two_runs_with_one_seed_are_bit_identical(tmp_path):
+    first = train(SMOKE, tmp_path / "a")
+    second = train(SMOKE, tmp_path / "b")
+    assert comparable(first) == comparable(second)
+    assert_same_weights(tmp_path / "a" / "model.pt", tmp_path / "b" / "model.pt")
+    other = train(dataclasses.replace(SMOKE, seed=1), tmp_path / "c")
+    assert comparable(other) != comparable(first)
+    rows = read_metrics(tmp_path / "a")
+    assert [row["episode"] for row in rows] == [0, 80, 160, 240, 320]
+    assert rows[-1]["env_steps"] == SMOKE.total_episodes * SMOKE.episode_length
+    assert math.isnan(rows[0]["loss"]) and rows[-1]["loss"] > 0
+    for name in ("config.json", "baselines.json", "checkpoint.pt", "train_contexts.npz",
+                 "test_contexts.npz", "tensorboard"):  # fmt: skip
+        assert (tmp_path / "a" / name).exists(), name
+    baselines = json.loads((tmp_path / "a" / "baselines.json").read_text())
+    assert baselines["do_nothing"]["train"] == pytest.approx(0.5, abs=1e-12)
+
+
+def test_a_run_dir_holding_another_run_is_refused(tmp_path):
+    train(dataclasses.replace(SMOKE, total_env_steps=8 * 20), tmp_path / "run")
+    with pytest.raises(RunDirError, match="already holds a run"):
+        train(SMOKE, tmp_path / "run")
+    with pytest.raises(RunDirError, match="does not match"):
+        train(dataclasses.replace(SMOKE, seed=5), tmp_path / "run", resume=True)
+    (tmp_path / "other").mkdir()
+    (tmp_path / "other" / "notes.txt").write_text("mine")
+    with pytest.raises(RunDirError, match="not empty"):
+        train(SMOKE, tmp_path / "other")
+    with pytest.raises(RunDirError, match="no run to resume"):
+        train(SMOKE, tmp_path / "nothing", resume=True)
+
+
+def test_incompatible_checkpoint_is_refused(tmp_path):
+    run = tmp_path / "run"
+    train(dataclasses.replace(SMOKE, total_env_steps=8 * 20), run)
+    checkpoint = torch.load(run / "checkpoint.pt", weights_only=False)
+    checkpoint["format_version"] = 99
+    torch.save(checkpoint, run / "checkpoint.pt")
+    config = dataclasses.replace(SMOKE, total_env_steps=8 * 20)
+    with pytest.raises(RunDirError, match="format 99"):
+        train(config, run, resume=True)
+    (run / "checkpoint.pt").write_bytes(b"garbage")
+    with pytest.raises(RunDirError, match="not a readable checkpoint"):
+        train(config, run, resume=True)
+
+
+def test_full_disk_is_a_clear_error_and_keeps_the_old_file(tmp_path, monkeypatch):
+    path = tmp_path / "file.bin"
+    atomic_write_bytes(path, b"old")
+
+    def no_space(*args, **kwargs):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr("os.replace", no_space)
+    with pytest.raises(RunDirError, match="no space left"):
+        atomic_write_bytes(path, b"new")
+    assert path.read_bytes() == b"old"
+    assert [p.name for p in tmp_path.iterdir()] == ["file.bin"]
+
+
+@pytest.mark.parametrize(
+    ("field", "value", "message"),
+    [
+        ("total_env_steps", 0, "total_env_steps"),
+        ("gamma", 1.5, "gamma"),
+        ("tau", 0.0, "tau"),
+        ("learning_rate", -1.0, "learning_rate"),
+        ("epsilon_end", 2.0, "epsilon_end"),
+        ("loss", "l1", "loss"),
+        ("arch", "lstm", "arch"),
+        ("batch_size", 10**6, "batch_size"),
+        ("num_envs", 0, "num_envs"),
+    ],
+)
+def test_bad_config_values(field, value, message):
+    with pytest.raises(ValueError, match=message):
+        dataclasses.replace(SMOKE, **{field: value})
+
+
+def test_config_round_trips_through_json():
+    for preset in PRESETS.values():
+        assert TrainConfig.from_dict(json.loads(json.dumps(preset.to_dict()))) == preset
+    with pytest.raises(ValueError, match="unknown TrainConfig field"):
+        TrainConfig.from_dict({"learning_rat": 1e-3})
+
+
+def test_paper_preset_is_table_2():
+    paper = PRESETS["paper"]
+    assert (paper.total_env_steps, paper.episode_length, paper.buffer_size) == (
+        1_000_000,
+        60,
+        16_667,
+    )
+    assert (paper.batch_size, paper.updates_per_round, paper.gamma, paper.tau) == (5, 10, 0.99, 0.1)
+    assert (paper.epsilon_start, paper.epsilon_end, paper.epsilon_anneal_fraction) == (
+        1.0,
+        0.05,
+        0.25,
+    )
+    assert paper.learning_rate == 5e-4 and paper.sizes.lstm_hidden == 128
+    assert paper.total_episodes == 16_665  # whole rounds of 5 episodes
+
+
+def test_learnability_on_one_easy_network(tmp_path):
+    """One network, short episodes: a smoke-sized run clearly beats doing nothing."""
+    weights = np.zeros((3, 3), dtype=np.int8)
+    weights[0, 2] = 1  # stimulating neuron 0 fires the target one step later
+    witness = np.full(12, -1)
+    witness[[2, 8]] = 0
+    easy = make_context(weights, target=2, pattern=np.eye(12)[3] + np.eye(12)[9], witness=witness)
+    other = make_context(np.array([[0, 1, 0], [0, 0, 1], [0, 1, 0]]), target=2, seed=0,
+                         episode_length=12)  # fmt: skip
+    ContextSet([easy]).save(tmp_path / "train.npz")
+    ContextSet([other]).save(tmp_path / "test.npz")
+    config = dataclasses.replace(
+        SMOKE, arch="drqn", n_neurons=3, episode_length=12, total_env_steps=12 * 8 * 50,
+        train_contexts=tmp_path / "train.npz", test_contexts=tmp_path / "test.npz",
+        updates_per_round=16, learning_rate=3e-3, eval_every_episodes=160,
+        checkpoint_every_episodes=400, epsilon_anneal_fraction=0.3, gamma=0.9,
+    )  # fmt: skip
+    metrics = train(config, tmp_path / "run")
+    assert metrics[0]["train_return"] < 0.75
+    assert metrics[-1]["train_return"] > 0.9
+
+
+def run_cli(*args, check=True):
+    import subprocess
+    import sys
+
+    return subprocess.run(
+        [sys.executable, "-m", "spikectl.cli", *args], capture_output=True, text=True, check=check
+    )
+
+
+def test_resume_after_sigkill_is_exact(tmp_path):
+    """Kill a run with SIGKILL after a checkpoint, resume it: the same metrics.csv rows and
+    bit-identical final weights as an uninterrupted run."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    reference = tmp_path / "reference"
+    run_cli("train", "--preset", "smoke", "--run-dir", str(reference))
+    killed = tmp_path / "killed"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "spikectl.cli", "train", "--preset", "smoke",
+         "--run-dir", str(killed)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+    )  # fmt: skip
+    deadline = time.monotonic() + 120
+    while not (killed / "checkpoint.pt").exists():
+        assert process.poll() is None, "the run ended before its first checkpoint"
+        assert time.monotonic() < deadline
+        time.sleep(0.02)
+    time.sleep(0.15)
+    os.kill(process.pid, signal.SIGKILL)
+    process.wait()
+    assert not (killed / "model.pt").exists(), "killed too late to test anything"
+    resumed = run_cli("train", "--resume", str(killed))
+    assert "train" in resumed.stdout
+    assert comparable(read_metrics(killed)) == comparable(read_metrics(reference))
+    assert_same_weights(killed / "model.pt", reference / "model.pt")
+
+
+def test_cli_train_then_evaluate(tmp_path):
+    run = tmp_path / "run"
+    out = run_cli("train", "--preset", "smoke", "--arch", "ddrqn", "--total-env-steps", "1600",
+                  "--run-dir", str(run))  # fmt: skip
+    assert "do-nothing" in out.stdout and (run / "learning_curve.png").exists()
+    evaluated = run_cli("evaluate", str(run)).stdout
+    assert "train" in evaluated and "test" in evaluated and "do nothing 0.500" in evaluated
+    # Evaluate on a set the user brings: a per-neuron agent runs on 7-neuron networks.
+    other = ContextSet.generate(4, n_neurons=7, episode_length=20, seed=3)
+    other.save(tmp_path / "mine.npz")
+    assert (
+        "over 4 contexts"
+        in run_cli("evaluate", str(run), "--contexts", str(tmp_path / "mine.npz")).stdout
+    )
+    again = run_cli("train", "--preset", "smoke", "--run-dir", str(run), check=False)
+    assert again.returncode == 2 and "already holds a run" in again.stderr
