@@ -6,6 +6,7 @@ environment ids (a cheap dictionary entry) and does no other work.
 
 from spikectl.contexts import Context, ContextSet, make_context, make_splits
 from spikectl.env import NeuronControlEnv
+from spikectl.extensions import Extensions
 from spikectl.params import NeuronParams
 from spikectl.registration import register_envs
 from spikectl.simulator import simulate
@@ -16,6 +17,7 @@ register_envs()
 __all__ = [
     "Context",
     "ContextSet",
+    "Extensions",
     "NeuronControlEnv",
     "NeuronControlVectorEnv",
     "NeuronParams",

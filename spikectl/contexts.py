@@ -2,27 +2,28 @@
 
 A context is the hidden connectivity of one network, the neuron to control and the
 spike pattern it must produce, plus the *witness*: an action sequence that produces
-that pattern from rest, which proves the maximum return is reachable.
+that pattern from rest, which proves the maximum return is reachable. With the
+context-level extensions (``spikectl.extensions``) a context also fixes which neurons
+are hidden and the per-neuron parameters of heterogeneous neurons.
 
 Generation is a set of pure module-level functions of a ``numpy.random.Generator``;
-:class:`ContextSet` holds a sequence of contexts with the parameters they were made
-with, and saves to / loads from one ``.npz`` file with a format version and a checksum.
+:class:`ContextSet` and :func:`make_splits` (in ``spikectl.context_set``, importable
+from here) hold sequences of contexts and save them to ``.npz`` files.
 """
 
 from __future__ import annotations
 
-import hashlib
-import json
-import os
-import tempfile
-import zipfile
-from collections.abc import Iterator, Sequence
+from collections.abc import Mapping
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any, overload
+from typing import Any
 
 import numpy as np
 
+# The file format moved to spikectl.context_files; these names stay importable here.
+from spikectl.context_files import FORMAT_NAME as FORMAT_NAME
+from spikectl.context_files import FORMAT_VERSION as FORMAT_VERSION
+from spikectl.context_files import ContextFileError as ContextFileError
+from spikectl.extensions import Extensions, Heterogeneity, draw_heterogeneity, draw_hidden
 from spikectl.params import NeuronParams
 from spikectl.simulator import DO_NOTHING, as_weight_batch, simulate
 
@@ -35,13 +36,9 @@ LONG_RANGE_CONNECTION_PROBABILITY = 0.01
 
 MAX_PATTERN_ATTEMPTS = 10_000
 MAX_TOPOLOGY_ATTEMPTS = 10_000
-
-FORMAT_NAME = "spikectl.ContextSet"
-FORMAT_VERSION = 1
-
-
-class ContextFileError(ValueError):
-    """A context-set file that is unreadable, damaged, foreign or of another version."""
+EXTENDED_PATTERN_ATTEMPTS = 1_000
+"""With hidden or heterogeneous neurons a target may be unreachable from the observable
+neurons: after this many action sequences without a spike a new topology is drawn."""
 
 
 def connection_probability(distance: np.ndarray) -> np.ndarray:
@@ -75,12 +72,40 @@ def target_candidates(weights: np.ndarray) -> np.ndarray:
     return np.flatnonzero((np.asarray(weights) > 0).any(axis=0))
 
 
-def legal_actions(n_neurons: int, target: int, allow_target_action: bool = False) -> np.ndarray:
-    """The agent's action set: do nothing (-1) and every neuron but the target."""
+def excitatory_path_exists(weights: np.ndarray, target: int, hidden: np.ndarray) -> bool:
+    """True when a path of excitatory edges leads from a stimulable neuron to the target.
+
+    Necessary for the target to spike at all when some neurons are hidden (a breadth-
+    first search over G > 0, O(n^2)).
+    """
+    excitatory = np.asarray(weights) > 0
+    reached = np.ones(excitatory.shape[0], dtype=bool)
+    reached[hidden] = False
+    reached[target] = False
+    frontier = reached.copy()
+    while frontier.any():
+        frontier = excitatory[frontier].any(axis=0) & ~reached
+        reached |= frontier
+    return bool(reached[target])
+
+
+def legal_actions(
+    n_neurons: int,
+    target: int,
+    allow_target_action: bool = False,
+    hidden: np.ndarray | None = None,
+) -> np.ndarray:
+    """The agent's action set: do nothing (-1) and every observable neuron but the target.
+
+    Neuron indices (simulator actions); ``hidden`` neurons are never actions.
+    """
     actions = np.arange(DO_NOTHING, n_neurons)
-    if allow_target_action:
-        return actions
-    return actions[actions != target]
+    keep = np.ones(actions.shape, dtype=bool)
+    if not allow_target_action:
+        keep &= actions != target
+    if hidden is not None:
+        keep &= ~np.isin(actions, hidden)
+    return actions[keep]
 
 
 def generate_pattern(
@@ -89,23 +114,27 @@ def generate_pattern(
     episode_length: int,
     rng: np.random.Generator,
     params: NeuronParams | None = None,
+    *,
+    hidden: np.ndarray | None = None,
+    heterogeneity: Heterogeneity | None = None,
+    max_attempts: int = MAX_PATTERN_ATTEMPTS,
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Target pattern [N] bool and its witness actions [N] int16.
+    """Target pattern [N] bool and its witness actions [N] int16 (neuron indices).
 
-    From rest, uniformly random legal actions are simulated and the target's spikes
-    recorded; the actions are redrawn until the pattern has at least one spike.
+    From rest, uniformly random legal actions (never a ``hidden`` neuron) are
+    simulated, with the ``heterogeneity`` of the network if any, and the target's
+    spikes recorded; the actions are redrawn until the pattern has at least one spike.
     """
     weights = np.asarray(weights)
-    actions = legal_actions(weights.shape[0], target)
-    for _ in range(MAX_PATTERN_ATTEMPTS):
+    actions = legal_actions(weights.shape[0], target, hidden=hidden)
+    extra = {} if heterogeneity is None else heterogeneity.simulate_kwargs()
+    for _ in range(max_attempts):
         witness = rng.choice(actions, size=episode_length)
-        _, spikes = simulate(weights, witness, params)  # [N, n]
+        _, spikes = simulate(weights, witness, params, **extra)  # [N, n]
         pattern = spikes[:, target]
         if pattern.any():
             return pattern.copy(), witness.astype(np.int16)
-    raise RuntimeError(
-        f"no action sequence made neuron {target} spike in {MAX_PATTERN_ATTEMPTS} attempts"
-    )
+    raise RuntimeError(f"no action sequence made neuron {target} spike in {max_attempts} attempts")
 
 
 def generate_context(
@@ -113,19 +142,45 @@ def generate_context(
     n_neurons: int = 8,
     episode_length: int = 60,
     params: NeuronParams | None = None,
+    extensions: Extensions | Mapping[str, Any] | None = None,
 ) -> Context:
-    """Draw one context: a topology with a valid target, the target, a pattern, a witness."""
+    """Draw one context: a topology with a valid target, the target, a pattern, a witness.
+
+    With context-level ``extensions`` the hidden neurons and then the heterogeneous
+    parameters are drawn after the target and before the pattern; without them no
+    extra random number is drawn, so the paper's contexts are unchanged.
+    """
     _check_episode_length(episode_length)
+    extensions = Extensions.coerce(extensions)
+    hidden_count = extensions.hidden_count(n_neurons)
+    extended = hidden_count > 0 or extensions.heterogeneous
     for _ in range(MAX_TOPOLOGY_ATTEMPTS):
-        weights = generate_topology(n_neurons, rng)
-        candidates = target_candidates(weights)
-        if candidates.size:
-            break
-    else:
-        raise RuntimeError(f"no topology with an excitatory edge in {MAX_TOPOLOGY_ATTEMPTS} draws")
-    target = int(rng.choice(candidates))
-    pattern, witness = generate_pattern(weights, target, episode_length, rng, params)
-    return Context(weights=weights, target=target, pattern=pattern, witness=witness)
+        for _ in range(MAX_TOPOLOGY_ATTEMPTS):
+            weights = generate_topology(n_neurons, rng)
+            candidates = target_candidates(weights)
+            if candidates.size:
+                break
+        else:
+            raise RuntimeError(
+                f"no topology with an excitatory edge in {MAX_TOPOLOGY_ATTEMPTS} draws"
+            )
+        target = int(rng.choice(candidates))
+        hidden = draw_hidden(rng, n_neurons, target, hidden_count)
+        heterogeneity = draw_heterogeneity(rng, weights, params or NeuronParams(), extensions)
+        if hidden is not None and not excitatory_path_exists(weights, target, hidden):
+            continue  # no observable neuron can drive the target: draw a new network
+        try:
+            pattern, witness = generate_pattern(
+                weights, target, episode_length, rng, params, hidden=hidden,
+                heterogeneity=heterogeneity,
+                max_attempts=EXTENDED_PATTERN_ATTEMPTS if extended else MAX_PATTERN_ATTEMPTS,
+            )  # fmt: skip
+        except RuntimeError:
+            if not extended:
+                raise
+            continue  # unreachable from the observable neurons: draw a new network
+        return Context(weights, target, pattern, witness, hidden, heterogeneity)
+    raise RuntimeError(f"no reachable target pattern in {MAX_TOPOLOGY_ATTEMPTS} networks")
 
 
 @dataclass(frozen=True, eq=False)
@@ -134,16 +189,22 @@ class Context:
 
     Attributes:
         weights: [n, n] int8 signed connectivity, row = presynaptic (never observable).
-        target: the neuron to control.
+        target: the neuron to control (a neuron index).
         pattern: [N] bool, the steps at which the target must spike.
-        witness: [N] int16 actions that produce ``pattern`` from rest, or None for a
-            user-supplied pattern whose reachability is unknown.
+        witness: [N] int16 actions (neuron indices) that produce ``pattern`` from rest,
+            or None for a user-supplied pattern whose reachability is unknown.
+        hidden: sorted int64 indices of the neurons that are simulated but neither
+            observed nor stimulable (an extension), or None. Never the target.
+        heterogeneity: per-neuron and per-synapse parameters (an extension), or None
+            for the paper's identical neurons.
     """
 
     weights: np.ndarray
     target: int
     pattern: np.ndarray
     witness: np.ndarray | None = None
+    hidden: np.ndarray | None = None
+    heterogeneity: Heterogeneity | None = None
 
     def __post_init__(self) -> None:
         weights = as_weight_batch(self.weights)[0].astype(np.int8)
@@ -166,6 +227,7 @@ class Context:
         object.__setattr__(self, "weights", _readonly(weights))
         object.__setattr__(self, "target", int(self.target))
         object.__setattr__(self, "pattern", _readonly(pattern))
+        self._check_extensions(n)
         if self.witness is not None:
             witness = np.asarray(self.witness)
             if witness.shape != pattern.shape or not np.issubdtype(witness.dtype, np.integer):
@@ -175,7 +237,34 @@ class Context:
                 )
             if witness.min() < DO_NOTHING or witness.max() >= n:
                 raise ValueError(f"witness actions must lie in -1..{n - 1}")
+            if self.hidden is not None and np.isin(witness, self.hidden).any():
+                raise ValueError("witness actions must not stimulate hidden neurons")
             object.__setattr__(self, "witness", _readonly(witness.astype(np.int16)))
+
+    def _check_extensions(self, n: int) -> None:
+        if self.hidden is not None:
+            hidden = np.asarray(self.hidden)
+            if hidden.ndim != 1 or (hidden.size and not np.issubdtype(hidden.dtype, np.integer)):
+                raise ValueError(f"hidden must be a 1-D array of neuron indices, got {hidden!r}")
+            hidden = np.unique(hidden.astype(np.int64))
+            if hidden.size != np.asarray(self.hidden).size:
+                raise ValueError("hidden neurons must be distinct")
+            if hidden.size and (hidden.min() < 0 or hidden.max() >= n):
+                raise ValueError(f"hidden neurons must be neuron indices in 0..{n - 1}")
+            if self.target in hidden:
+                raise ValueError(f"the target neuron {self.target} cannot be hidden")
+            if n - hidden.size < 2:
+                raise ValueError("at least 2 neurons must be observable (the target and one more)")
+            object.__setattr__(self, "hidden", _readonly(hidden) if hidden.size else None)
+        if self.heterogeneity is not None:
+            if not isinstance(self.heterogeneity, Heterogeneity):
+                raise TypeError(
+                    f"heterogeneity must be a Heterogeneity or None, got {self.heterogeneity!r}"
+                )
+            if self.heterogeneity.n_neurons != n:
+                raise ValueError(
+                    f"heterogeneity is for {self.heterogeneity.n_neurons} neurons, not {n}"
+                )
 
     @property
     def n_neurons(self) -> int:
@@ -185,19 +274,44 @@ class Context:
     def episode_length(self) -> int:
         return self.pattern.shape[0]
 
+    @property
+    def observable(self) -> np.ndarray:
+        """[k] increasing indices of the observable neurons (all n without hidden ones)."""
+        everyone = np.arange(self.n_neurons)
+        return everyone if self.hidden is None else np.setdiff1d(everyone, self.hidden)
+
+    @property
+    def n_observed(self) -> int:
+        """k, the number of observable neurons."""
+        return self.n_neurons - (0 if self.hidden is None else self.hidden.size)
+
+    @property
+    def observed_target(self) -> int:
+        """The target's index among the observable neurons (what the agent sees)."""
+        return int(np.searchsorted(self.observable, self.target))
+
+    @property
+    def agent_witness(self) -> np.ndarray | None:
+        """The witness as environment actions (indices among the observable neurons)."""
+        if self.witness is None or self.hidden is None:
+            return self.witness
+        observed = np.searchsorted(self.observable, self.witness)
+        return np.where(self.witness >= 0, observed, DO_NOTHING).astype(np.int16)
+
+    def simulate_kwargs(self) -> dict[str, np.ndarray]:
+        """Keyword arguments of :func:`spikectl.simulate` for this network's neurons."""
+        return {} if self.heterogeneity is None else self.heterogeneity.simulate_kwargs()
+
     def __eq__(self, other: object) -> bool:
         if not isinstance(other, Context):
             return NotImplemented
-        witnesses_equal = (self.witness is None and other.witness is None) or (
-            self.witness is not None
-            and other.witness is not None
-            and np.array_equal(self.witness, other.witness)
-        )
         return (
             self.target == other.target
             and np.array_equal(self.weights, other.weights)
             and np.array_equal(self.pattern, other.pattern)
-            and witnesses_equal
+            and _optional_equal(self.witness, other.witness)
+            and _optional_equal(self.hidden, other.hidden)
+            and self.heterogeneity == other.heterogeneity
         )
 
     __hash__ = None  # mutable-looking arrays inside; compare with ==
@@ -206,8 +320,15 @@ class Context:
         """True when replaying the witness from rest reproduces the pattern exactly."""
         if self.witness is None:
             return False
-        _, spikes = simulate(self.weights, self.witness.astype(np.int64), params)
+        witness = self.witness.astype(np.int64)
+        _, spikes = simulate(self.weights, witness, params, **self.simulate_kwargs())
         return bool(np.array_equal(spikes[:, self.target], self.pattern))
+
+
+def _optional_equal(a: np.ndarray | None, b: np.ndarray | None) -> bool:
+    if a is None or b is None:
+        return a is None and b is None
+    return bool(np.array_equal(a, b))
 
 
 def make_context(
@@ -219,14 +340,17 @@ def make_context(
     episode_length: int = 60,
     seed: int | None = 0,
     params: NeuronParams | None = None,
+    hidden: np.ndarray | None = None,
+    heterogeneity: Heterogeneity | None = None,
 ) -> Context:
     """Bring your own connectome: build a validated context from a connectivity matrix.
 
     Whatever is not given is generated as in SPEC 2 from ``seed``: the target
     (uniform among neurons with an excitatory input) and the pattern with its
-    witness (random legal actions from rest). A given witness must reproduce the
-    given pattern under ``params``; a given pattern without a witness is accepted
-    as is (its reachability is then unknown and ``witness`` is None).
+    witness (random legal actions from rest, never a ``hidden`` neuron). A given
+    witness must reproduce the given pattern under ``params`` and ``heterogeneity``;
+    a given pattern without a witness is accepted as is (its reachability is then
+    unknown and ``witness`` is None).
     """
     weight_matrix = as_weight_batch(weights)[0].astype(np.int8)
     rng = np.random.default_rng(seed)
@@ -240,288 +364,16 @@ def make_context(
         if witness is not None:
             raise ValueError("a witness without a pattern: pass the pattern it produces")
         _check_episode_length(episode_length)
-        pattern, witness = generate_pattern(weight_matrix, target, episode_length, rng, params)
-    context = Context(weight_matrix, target, pattern, witness)
+        if hidden is not None and target in np.asarray(hidden):
+            raise ValueError(f"the target neuron {target} cannot be hidden")
+        pattern, witness = generate_pattern(
+            weight_matrix, target, episode_length, rng, params, hidden=hidden,
+            heterogeneity=heterogeneity,
+        )  # fmt: skip
+    context = Context(weight_matrix, target, pattern, witness, hidden, heterogeneity)
     if witness is not None and not context.verify_witness(params):
         raise ValueError("the witness does not reproduce the pattern in the target neuron")
     return context
-
-
-class ContextSet(Sequence[Context]):
-    """An immutable sequence of contexts of one size and episode length.
-
-    Build one with :meth:`generate` (or :func:`make_splits`), from your own
-    contexts, or with :meth:`load`. ``params`` are the model parameters the
-    witnesses were made with; ``seed`` is the generation seed when there is one.
-    """
-
-    def __init__(
-        self,
-        contexts: Sequence[Context],
-        params: NeuronParams | None = None,
-        seed: int | None = None,
-    ) -> None:
-        self._contexts = tuple(contexts)
-        if not self._contexts:
-            raise ValueError("a ContextSet needs at least one context")
-        for index, context in enumerate(self._contexts):
-            if not isinstance(context, Context):
-                raise TypeError(f"item {index} is a {type(context).__name__}, not a Context")
-        first = self._contexts[0]
-        for index, context in enumerate(self._contexts):
-            if (context.n_neurons, context.episode_length) != (
-                first.n_neurons,
-                first.episode_length,
-            ):
-                raise ValueError(
-                    f"context {index} has {context.n_neurons} neurons and episode length "
-                    f"{context.episode_length}; context 0 has {first.n_neurons} and "
-                    f"{first.episode_length}: a set holds one shape"
-                )
-        self.params = NeuronParams() if params is None else params
-        self.seed = seed
-
-    @classmethod
-    def generate(
-        cls,
-        size: int,
-        n_neurons: int = 8,
-        episode_length: int = 60,
-        seed: int = 0,
-        params: NeuronParams | None = None,
-    ) -> ContextSet:
-        """``size`` contexts with pairwise distinct topologies, reproducible from ``seed``.
-
-        Sets are prefix-stable: ``generate(10, seed=s)`` is the first 10 contexts of
-        ``generate(100, seed=s)``.
-        """
-        _check_size(size)
-        contexts = _generate_unique(size, n_neurons, episode_length, seed, params)
-        return cls(contexts, params, seed)
-
-    def __len__(self) -> int:
-        return len(self._contexts)
-
-    @overload
-    def __getitem__(self, index: int) -> Context: ...
-
-    @overload
-    def __getitem__(self, index: slice) -> ContextSet: ...
-
-    def __getitem__(self, index: int | slice) -> Context | ContextSet:
-        if isinstance(index, slice):
-            return ContextSet(self._contexts[index], self.params, self.seed)
-        return self._contexts[index]
-
-    def __iter__(self) -> Iterator[Context]:
-        return iter(self._contexts)
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, ContextSet):
-            return NotImplemented
-        return self.params == other.params and self._contexts == other._contexts
-
-    __hash__ = None
-
-    def __repr__(self) -> str:
-        return (
-            f"ContextSet(size={len(self)}, n_neurons={self.n_neurons}, "
-            f"episode_length={self.episode_length}, seed={self.seed})"
-        )
-
-    @property
-    def n_neurons(self) -> int:
-        return self._contexts[0].n_neurons
-
-    @property
-    def episode_length(self) -> int:
-        return self._contexts[0].episode_length
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        """The set as stacked arrays: weights [S, n, n], targets [S], patterns [S, N],
-        witnesses [S, N] (-2 where a context has no witness)."""
-        return {
-            "weights": np.stack([c.weights for c in self]).astype(np.int8),
-            "targets": np.array([c.target for c in self], dtype=np.int64),
-            "patterns": np.stack([c.pattern for c in self]).astype(bool),
-            "witnesses": np.stack(
-                [
-                    c.witness if c.witness is not None else np.full(c.episode_length, -2)
-                    for c in self
-                ]
-            ).astype(np.int16),
-        }
-
-    def topology_keys(self) -> list[bytes]:
-        """One hashable key per context identifying its signed connectivity."""
-        return [c.weights.astype(np.int8).tobytes() for c in self]
-
-    def duplicate_topologies(self, other: ContextSet | None = None) -> list[tuple[int, int]]:
-        """Index pairs sharing a topology: within this set, or between it and ``other``."""
-        keys = self.topology_keys()
-        if other is None:
-            first_seen: dict[bytes, int] = {}
-            pairs = []
-            for index, key in enumerate(keys):
-                if key in first_seen:
-                    pairs.append((first_seen[key], index))
-                first_seen.setdefault(key, index)
-            return pairs
-        other_index = {
-            key: index for index, key in reversed(list(enumerate(other.topology_keys())))
-        }
-        return [(index, other_index[key]) for index, key in enumerate(keys) if key in other_index]
-
-    def checksum(self) -> str:
-        """SHA-256 over the arrays and parameters; equal sets have equal checksums."""
-        digest = hashlib.sha256()
-        for name, array in sorted(self.arrays().items()):
-            digest.update(name.encode())
-            digest.update(str(array.shape).encode())
-            digest.update(np.ascontiguousarray(array).tobytes())
-        digest.update(json.dumps(self.params.to_dict(), sort_keys=True).encode())
-        return digest.hexdigest()
-
-    def save(self, path: str | os.PathLike) -> Path:
-        """Write the set to one ``.npz`` file, atomically (a crash never leaves half a file)."""
-        path = Path(path)
-        if path.suffix != ".npz":
-            path = path.with_suffix(path.suffix + ".npz")
-        metadata = {
-            "format": FORMAT_NAME,
-            "format_version": FORMAT_VERSION,
-            "size": len(self),
-            "n_neurons": self.n_neurons,
-            "episode_length": self.episode_length,
-            "seed": self.seed,
-            "params": self.params.to_dict(),
-            "checksum": self.checksum(),
-        }
-        path.parent.mkdir(parents=True, exist_ok=True)
-        descriptor, temporary = tempfile.mkstemp(
-            dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"
-        )
-        try:
-            with os.fdopen(descriptor, "wb") as handle:
-                np.savez_compressed(
-                    handle, metadata=np.array(json.dumps(metadata)), **self.arrays()
-                )
-                handle.flush()
-                os.fsync(handle.fileno())
-            os.replace(temporary, path)
-        except BaseException:
-            Path(temporary).unlink(missing_ok=True)
-            raise
-        return path
-
-    @classmethod
-    def load(cls, path: str | os.PathLike) -> ContextSet:
-        """Read a set written by :meth:`save`; a damaged or foreign file raises ContextFileError."""
-        path = Path(path)
-        if not path.exists():
-            raise FileNotFoundError(f"context set file not found: {path}")
-        try:
-            with np.load(path, allow_pickle=False) as data:
-                arrays = {name: data[name] for name in data.files}
-        except (zipfile.BadZipFile, OSError, ValueError, EOFError) as error:
-            raise ContextFileError(
-                f"{path} is not a readable spikectl context set: {error}"
-            ) from error
-        expected = {"metadata", "weights", "targets", "patterns", "witnesses"}
-        if set(arrays) != expected:
-            raise ContextFileError(
-                f"{path} is not a spikectl context set (arrays {sorted(arrays)}, "
-                f"expected {sorted(expected)})"
-            )
-        metadata = _parse_metadata(path, arrays.pop("metadata"))
-        try:
-            params = NeuronParams.from_dict(metadata["params"])
-            contexts = [
-                Context(weights, int(target), pattern, None if (witness == -2).all() else witness)
-                for weights, target, pattern, witness in zip(
-                    arrays["weights"],
-                    arrays["targets"],
-                    arrays["patterns"],
-                    arrays["witnesses"],
-                    strict=True,
-                )
-            ]
-            loaded = cls(contexts, params, metadata.get("seed"))
-        except (TypeError, ValueError) as error:
-            raise ContextFileError(f"{path} holds an invalid context set: {error}") from error
-        if loaded.checksum() != metadata.get("checksum"):
-            raise ContextFileError(f"{path} is damaged: its checksum does not match its contents")
-        if (len(loaded), loaded.n_neurons, loaded.episode_length) != (
-            metadata.get("size"),
-            metadata.get("n_neurons"),
-            metadata.get("episode_length"),
-        ):
-            raise ContextFileError(f"{path} is inconsistent: its header does not match its arrays")
-        return loaded
-
-
-def make_splits(
-    n_train: int = 100,
-    n_test: int = 100,
-    n_neurons: int = 8,
-    episode_length: int = 60,
-    seed: int = 0,
-    params: NeuronParams | None = None,
-) -> tuple[ContextSet, ContextSet]:
-    """A training and a test set with no topology shared within or across them.
-
-    The test set is drawn first and the training set continues the same stream, so
-    for one seed the test set does not depend on ``n_train`` and smaller training
-    sets are prefixes of larger ones (the paper's Figure 5 compares sizes on one
-    test set).
-    """
-    _check_size(n_train, "n_train")
-    _check_size(n_test, "n_test")
-    contexts = _generate_unique(n_test + n_train, n_neurons, episode_length, seed, params)
-    test = ContextSet(contexts[:n_test], params, seed)
-    train = ContextSet(contexts[n_test:], params, seed)
-    return train, test
-
-
-def _generate_unique(
-    size: int, n_neurons: int, episode_length: int, seed: int, params: NeuronParams | None
-) -> list[Context]:
-    _check_n_neurons(n_neurons)
-    _check_episode_length(episode_length)
-    rng = np.random.default_rng(seed)
-    contexts: list[Context] = []
-    seen: set[bytes] = set()
-    rejected_in_a_row = 0
-    while len(contexts) < size:
-        context = generate_context(rng, n_neurons, episode_length, params)
-        key = context.weights.tobytes()
-        if key in seen:
-            rejected_in_a_row += 1
-            if rejected_in_a_row > MAX_TOPOLOGY_ATTEMPTS:
-                raise RuntimeError(
-                    f"could not find {size} distinct topologies of {n_neurons} neurons"
-                )
-            continue
-        rejected_in_a_row = 0
-        seen.add(key)
-        contexts.append(context)
-    return contexts
-
-
-def _parse_metadata(path: Path, raw: np.ndarray) -> dict[str, Any]:
-    try:
-        metadata = json.loads(str(raw))
-    except (json.JSONDecodeError, TypeError) as error:
-        raise ContextFileError(f"{path} has an unreadable header: {error}") from error
-    if not isinstance(metadata, dict) or metadata.get("format") != FORMAT_NAME:
-        raise ContextFileError(f"{path} is not a spikectl context set (no {FORMAT_NAME} header)")
-    version = metadata.get("format_version")
-    if version != FORMAT_VERSION:
-        raise ContextFileError(
-            f"{path} has context-set format version {version}; this spikectl reads version "
-            f"{FORMAT_VERSION}"
-        )
-    return metadata
 
 
 def _readonly(array: np.ndarray) -> np.ndarray:
@@ -554,3 +406,13 @@ def _check_episode_length(episode_length: int) -> None:
 def _check_size(size: int, name: str = "size") -> None:
     if isinstance(size, bool) or int(size) != size or size < 1:
         raise ValueError(f"{name} must be a positive integer, got {size!r}")
+
+
+def __getattr__(name: str) -> Any:
+    # ContextSet and make_splits live in spikectl.context_set (which imports this
+    # module); they stay importable from here, where they have always been.
+    if name in ("ContextSet", "make_splits"):
+        from spikectl import context_set
+
+        return getattr(context_set, name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,212 +1,63 @@
 """The Gymnasium environment of SPEC section 3: make one neuron spike a target pattern.
 
-Besides :class:`NeuronControlEnv` this module holds what the vector environment
-shares with it: resolving the ``contexts`` argument to a :class:`ContextSet`,
-the per-context lookup tables (:class:`ContextTables`), the reward formula
-(:func:`step_rewards`) and the action checks.
+What the vector environment shares with :class:`NeuronControlEnv` (the context
+tables, the reward formula, the spaces and the argument checks) lives in
+``spikectl.env_support`` and is importable from here too.
 """
 
 from __future__ import annotations
 
-import functools
-import operator
 import os
-from collections.abc import Sequence
-from dataclasses import dataclass
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium as gym
 import numpy as np
-from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
 from spikectl import render as rendering
-from spikectl.contexts import Context, ContextSet, make_splits
+from spikectl.contexts import Context, ContextSet
+from spikectl.env_support import (
+    DEFAULT_EPISODE_LENGTH,
+    DEFAULT_N_NEURONS,
+    MAX_REWARD,
+    RENDER_FPS,
+    RENDER_MODES,
+    SPLITS,
+    ContextTables,
+    LegalActionSpace,
+    as_action,
+    check_context,
+    check_context_index,
+    is_int,
+    observation_space,
+    resolve_contexts,
+    resolve_extensions,
+    step_rewards,
+)
+from spikectl.extensions import EnvironmentEffects, Extensions
 from spikectl.params import NeuronParams
 from spikectl.simulator import DO_NOTHING, SimulatorState, advance
 
-MAX_REWARD = 0.5
-"""R_max: the return of an episode's correct spikes, and separately of its correct silences."""
-DEFAULT_N_NEURONS = 8
-DEFAULT_EPISODE_LENGTH = 60
-SPLITS = ("train", "test")
-RENDER_MODES = ["ansi", "rgb_array"]
-RENDER_FPS = 10
-"""Frames per second of recorded videos: a 60 ms episode plays for 6 s."""
-
-
-def step_rewards(patterns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Reward of each step [..., N] if the target spikes, and if it stays silent.
-
-    With m spikes in a pattern of N steps: R_max / m for a wanted spike,
-    R_max / (N - m) for a wanted silence, 0 otherwise (SPEC 3).
-    """
-    wanted = np.asarray(patterns).astype(bool)
-    episode_length = wanted.shape[-1]
-    m = wanted.sum(axis=-1, keepdims=True)
-    if np.any(m == 0) or np.any(m == episode_length):
-        raise ValueError("a pattern needs at least one spike and one silent step")
-    reward_if_spike = np.where(wanted, MAX_REWARD / m, 0.0)
-    reward_if_silent = np.where(wanted, 0.0, MAX_REWARD / (episode_length - m))
-    return reward_if_spike, reward_if_silent
-
-
-@dataclass(frozen=True, eq=False)
-class ContextTables:
-    """What the environments read about contexts, stacked over S contexts."""
-
-    weights: np.ndarray
-    """[S, n, n] float64 signed connectivity, as the simulator takes it."""
-    targets: np.ndarray
-    """[S] int64."""
-    patterns: np.ndarray
-    """[S, N] int8, as observed."""
-    reward_if_spike: np.ndarray
-    """[S, N] float64."""
-    reward_if_silent: np.ndarray
-    """[S, N] float64."""
-    legal: np.ndarray
-    """[S, n + 1] bool action masks, index a + 1 for action a."""
-
-    @classmethod
-    def build(cls, contexts: Sequence[Context], allow_target_action: bool) -> ContextTables:
-        targets = np.array([c.target for c in contexts], dtype=np.int64)
-        patterns = np.stack([c.pattern for c in contexts]).astype(np.int8)
-        n = contexts[0].n_neurons
-        legal = np.ones((len(contexts), n + 1), dtype=bool)
-        if not allow_target_action:
-            legal[np.arange(len(contexts)), targets + 1] = False
-        return cls(
-            np.ascontiguousarray(np.stack([c.weights for c in contexts]), dtype=np.float64),
-            targets,
-            patterns,
-            *step_rewards(patterns),
-            legal,
-        )
-
-
-@functools.lru_cache(maxsize=16)
-def _cached_splits(
-    n_train: int, n_test: int, n_neurons: int, episode_length: int, seed: int, params: NeuronParams
-) -> tuple[ContextSet, ContextSet]:
-    # Every environment of a SyncVectorEnv asks for the same sets; context sets are immutable.
-    return make_splits(n_train, n_test, n_neurons, episode_length, seed, params)
-
-
-def resolve_contexts(
-    contexts: ContextSet | str | os.PathLike | None,
-    split: str,
-    n_train: int,
-    n_test: int,
-    context_seed: int,
-    n_neurons: int | None,
-    episode_length: int | None,
-    params: NeuronParams | None,
-) -> tuple[ContextSet, NeuronParams]:
-    """The environment's context set and model parameters, from its constructor arguments."""
-    if split not in SPLITS:
-        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
-    if params is not None and not isinstance(params, NeuronParams):
-        raise TypeError(f"params must be a NeuronParams or None, got {type(params).__name__}")
-    if contexts is None:
-        for name, value in (("n_train", n_train), ("n_test", n_test)):
-            if not is_int(value) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if not is_int(context_seed) or context_seed < 0:
-            raise ValueError(f"context_seed must be a non-negative integer, got {context_seed!r}")
-        n = DEFAULT_N_NEURONS if n_neurons is None else n_neurons
-        length = DEFAULT_EPISODE_LENGTH if episode_length is None else episode_length
-        if not is_int(n) or n < 2:
-            raise ValueError(f"n_neurons must be an integer >= 2, got {n!r}")
-        if not is_int(length) or length < 2:
-            raise ValueError(f"episode_length must be an integer >= 2, got {length!r}")
-        splits = _cached_splits(
-            int(n_train), int(n_test), int(n), int(length), int(context_seed),
-            NeuronParams() if params is None else params,
-        )  # fmt: skip
-        context_set = splits[SPLITS.index(split)]
-    elif isinstance(contexts, ContextSet):
-        context_set = contexts
-    elif isinstance(contexts, (str, os.PathLike)):
-        context_set = ContextSet.load(contexts)
-    else:
-        raise TypeError(
-            f"contexts must be a ContextSet, a path to a saved one, or None; "
-            f"got {type(contexts).__name__}"
-        )
-    for name, given, actual in (
-        ("n_neurons", n_neurons, context_set.n_neurons),
-        ("episode_length", episode_length, context_set.episode_length),
-    ):
-        if given is not None and given != actual:
-            raise ValueError(f"{name}={given!r} conflicts with the context set's {name} {actual}")
-    return context_set, context_set.params if params is None else params
-
-
-def check_context(context: Context, n_neurons: int, episode_length: int) -> None:
-    """Raise unless ``context`` is a Context of this environment's size and episode length."""
-    if not isinstance(context, Context):
-        raise TypeError(f"expected a Context, got {type(context).__name__}")
-    if (context.n_neurons, context.episode_length) != (n_neurons, episode_length):
-        raise ValueError(
-            f"the context has {context.n_neurons} neurons and episode length "
-            f"{context.episode_length}; this environment has {n_neurons} and {episode_length}"
-        )
-
-
-def check_context_index(index: Any, size: int) -> int:
-    """``index`` as an int, or a ValueError unless it indexes a set of ``size`` contexts."""
-    if not is_int(index) or not 0 <= index < size:
-        raise ValueError(f"context index must be an integer in 0..{size - 1}, got {index!r}")
-    return int(index)
-
-
-def as_action(action: Any) -> int:
-    """An action as a Python int: ints, NumPy integer scalars and 0-d integer arrays."""
-    if isinstance(action, (bool, np.bool_)):
-        raise ValueError(f"action must be an integer, got the boolean {action!r}")
-    try:
-        return operator.index(action)
-    except TypeError:
-        raise ValueError(f"action must be an integer, got {action!r}") from None
-
-
-def observation_space(n_neurons: int, episode_length: int) -> spaces.Dict:
-    """The observation space of one environment (SPEC 3); the connectivity is not in it."""
-    return spaces.Dict(
-        {
-            "voltage": spaces.Box(-np.inf, np.inf, (n_neurons,), np.float32),
-            "target": spaces.Discrete(n_neurons),
-            "pattern": spaces.MultiBinary(episode_length),
-            "step": spaces.Discrete(episode_length + 1),
-            "last_action": spaces.Discrete(n_neurons + 1, start=DO_NOTHING),
-        }
-    )
-
-
-def is_int(value: Any) -> bool:
-    """True for Python and NumPy integers, False for booleans (which Python calls ints)."""
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
-
-
-class LegalActionSpace(spaces.Discrete):
-    """``Discrete(n + 1, start=-1)`` whose unmasked ``sample()`` draws only legal actions.
-
-    ``contains`` is the whole range -1..n-1; ``legal_mask`` (int8 [n + 1], set by the
-    environment at every reset) restricts what ``sample()`` draws when no mask is given,
-    so that random agents and Gymnasium's ``check_env`` never pick the target neuron.
-    """
-
-    def __init__(self, n_neurons: int, seed: int | None = None) -> None:
-        super().__init__(n_neurons + 1, seed=seed, start=DO_NOTHING)
-        self.legal_mask = np.ones(n_neurons + 1, dtype=np.int8)
-
-    def sample(
-        self, mask: np.ndarray | None = None, probability: np.ndarray | None = None
-    ) -> np.int64:
-        if mask is None and probability is None:
-            mask = self.legal_mask
-        return super().sample(mask=mask, probability=probability)
+__all__ = [
+    "DEFAULT_EPISODE_LENGTH",
+    "DEFAULT_N_NEURONS",
+    "MAX_REWARD",
+    "RENDER_FPS",
+    "RENDER_MODES",
+    "SPLITS",
+    "ContextTables",
+    "LegalActionSpace",
+    "NeuronControlEnv",
+    "as_action",
+    "check_context",
+    "check_context_index",
+    "is_int",
+    "observation_space",
+    "resolve_contexts",
+    "resolve_extensions",
+    "step_rewards",
+]
 
 
 class NeuronControlEnv(gym.Env[dict[str, Any], int]):
@@ -226,7 +77,9 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     step (+40 mV; a refractory neuron ignores it). The target neuron is illegal unless
     `allow_target_action=True`; an illegal, out-of-range or non-integer action raises
     `ValueError`. `info["action_mask"]` marks the legal actions; `action_space.sample()`
-    draws only legal ones.
+    draws only legal ones. With hidden neurons (an extension) the agent sees k < n
+    neurons: every n below is then k, and index i means the i-th observable neuron
+    (increasing neuron order, `Context.observable`).
 
     ## Observation Space
 
@@ -241,7 +94,8 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     | `last_action` | `Discrete(n + 1, start=-1)`     | the previous action, -1 after reset   |
 
     Potentials are observed after integration and before reset, so a spike shows as
-    >= -50 mV; after reset all are at rest (-70 mV).
+    >= -50 mV; after reset all are at rest (-70 mV). Measurement noise and
+    photobleaching (extensions) change what is observed, never the dynamics.
 
     ## Rewards
 
@@ -272,6 +126,12 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     | `params`              | `None`    | `NeuronParams`; None: the context set's          |
     | `allow_target_action` | `False`   | make stimulating the target legal (SPEC 6)       |
     | `render_mode`         | `None`    | `"ansi"` or `"rgb_array"`                        |
+    | `extensions`          | `None`    | `Extensions` or a dict of its fields (SPEC 6)    |
+
+    `extensions` (docs/extensions.md) switches on measurement noise, photobleaching,
+    stochastic release, background activity and the target as an action; its
+    context-level fields (hidden and heterogeneous neurons) are drawn with generated
+    sets and otherwise come from the context set. All off is exactly the paper.
 
     With `contexts=None` the sets are generated by `make_splits(n_train, n_test, n_neurons,
     episode_length, context_seed, params)` (cached, so many environments share them);
@@ -293,7 +153,7 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     ```
 
     ## Version History
-    * v0: Initial version (SPEC sections 1-3).
+    * v0: Initial version (SPEC sections 1-3); extensions (SPEC 6) off by default.
     """
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}
@@ -310,24 +170,31 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         params: NeuronParams | None = None,
         allow_target_action: bool = False,
         render_mode: str | None = None,
+        extensions: Extensions | Mapping[str, Any] | None = None,
     ) -> None:
         if render_mode is not None and render_mode not in RENDER_MODES:
             raise ValueError(
                 f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}"
             )
-        if not isinstance(allow_target_action, (bool, np.bool_)):
-            raise TypeError(f"allow_target_action must be a bool, got {allow_target_action!r}")
+        requested = Extensions.coerce(extensions)
         self.contexts, self.params = resolve_contexts(
-            contexts, split, n_train, n_test, context_seed, n_neurons, episode_length, params
-        )
+            contexts, split, n_train, n_test, context_seed, n_neurons, episode_length, params,
+            requested,
+        )  # fmt: skip
+        self.extensions = resolve_extensions(requested, allow_target_action, self.contexts)
         self.n_neurons = n = self.contexts.n_neurons
+        self.n_observed = k = self.contexts.n_observed
         self.episode_length = length = self.contexts.episode_length
-        self.allow_target_action = bool(allow_target_action)
+        self.allow_target_action = self.extensions.allow_target_action
         self.render_mode = render_mode
-        self._tables = ContextTables.build(self.contexts, self.allow_target_action)
+        self._tables = ContextTables.build(self.contexts, self.allow_target_action, self.params)
+        self._effects = EnvironmentEffects(self.extensions, self.params, length)
+        self._release_uniforms, self._input_mV = self._effects.input_buffers(1, n)
+        self._plain = self._effects.plain  # observations are the potentials
+        self._random_dynamics = self._effects.random_dynamics
 
-        self.action_space = LegalActionSpace(n)
-        self.observation_space = observation_space(n, length)
+        self.action_space = LegalActionSpace(k)
+        self.observation_space = observation_space(k, length)
         # Episode history, written by the simulator in place through per-step views.
         self._action_history = np.full((1, length), DO_NOTHING, dtype=np.int64)
         self._voltage_history = np.zeros((length, n), dtype=np.float64)
@@ -353,8 +220,8 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         super().reset(seed=seed)
         context = None if options is None else _context_option(options)
         if isinstance(context, Context):
-            check_context(context, self.n_neurons, self.episode_length)
-            tables = ContextTables.build([context], self.allow_target_action)
+            check_context(context, self.n_neurons, self.episode_length, self.n_observed)
+            tables = ContextTables.build([context], self.allow_target_action, self.params)
             row, self._context_index = 0, None
         else:
             if context is None:
@@ -362,7 +229,10 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
             row = self._context_index = check_context_index(context, len(self.contexts))
             tables = self._tables
         self._weights = tables.weights[row : row + 1]
-        self._target = int(tables.targets[row])
+        self._target = int(tables.targets[row])  # a neuron index
+        self._observed_target = int(tables.observed_targets[row])  # the agent's index
+        self._observable = None if tables.observable is None else tables.observable[row]
+        self._neurons = None if tables.neurons is None else tables.neurons[row : row + 1]
         self._pattern = tables.patterns[row]
         self._reward_if_spike = tables.reward_if_spike[row].tolist()
         self._reward_if_silent = tables.reward_if_silent[row].tolist()
@@ -373,9 +243,12 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         self._action_history.fill(DO_NOTHING)
         self._spike_history.fill(False)
         self._next_step = 0
+        voltage = np.full(self.n_observed, self.params.v_rest_mV, dtype=np.float32)
+        if not self._plain:
+            voltage = self._observe(voltage, 0)
         observation = {
-            "voltage": np.full(self.n_neurons, self.params.v_rest_mV, dtype=np.float32),
-            "target": self._target,
+            "voltage": voltage,
+            "target": self._observed_target,
             "pattern": self._pattern.copy(),
             "step": 0,
             "last_action": DO_NOTHING,
@@ -393,18 +266,25 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
             )
         if type(action) is not int:
             action = as_action(action)
-        if action < DO_NOTHING or action >= self.n_neurons or not self._legal_list[action + 1]:
+        if action < DO_NOTHING or action >= self.n_observed or not self._legal_list[action + 1]:
             raise ValueError(self._illegal_action_message(action))
         actions, voltage, spikes = self._step_views[t]
-        actions[0, 0] = action
-        advance(self._state, self._weights, actions, self.params, voltage, spikes)
+        observable = self._observable
+        actions[0, 0] = action if observable is None or action < 0 else observable[action]
+        if self._random_dynamics:
+            self._effects.draw_inputs(self.np_random, self._release_uniforms, self._input_mV)
+        advance(self._state, self._weights, actions, self.params, voltage, spikes,
+                self._neurons, self._release_uniforms, self._input_mV)  # fmt: skip
         spikes = self._spike_history[t]
         target_spiked = bool(spikes[self._target])
         reward = self._reward_if_spike[t] if target_spiked else self._reward_if_silent[t]
         self._next_step = t + 1
+        voltage = self._voltage_history[t]
+        if observable is not None:
+            voltage, spikes = voltage[observable], spikes[observable]
         observation = {
-            "voltage": self._voltage_history[t].astype(np.float32),
-            "target": self._target,
+            "voltage": voltage.astype(np.float32) if self._plain else self._observe(voltage, t + 1),
+            "target": self._observed_target,
             "pattern": self._pattern.copy(),
             "step": t + 1,
             "last_action": action,
@@ -417,15 +297,20 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         }
         return observation, reward, t + 1 == self.episode_length, False, info
 
+    def _observe(self, voltage: np.ndarray, step: int) -> np.ndarray:
+        """Observed potentials with measurement noise / photobleaching (extensions)."""
+        noise = self._effects.draw_noise(self.np_random, self.n_observed)
+        return self._effects.observe(voltage, step, noise)
+
     def _illegal_action_message(self, action: int) -> str:
-        if DO_NOTHING <= action < self.n_neurons:
+        if DO_NOTHING <= action < self.n_observed:
             return (
-                f"action {action} stimulates the target neuron {self._target}, which is not a "
-                f"legal action (pass allow_target_action=True to allow it)"
+                f"action {action} stimulates the target neuron {self._observed_target}, which "
+                f"is not a legal action (pass allow_target_action=True to allow it)"
             )
         return (
             f"action {action} is out of range: actions are -1 (do nothing) or a neuron in "
-            f"0..{self.n_neurons - 1} other than the target {self._target}"
+            f"0..{self.n_observed - 1} other than the target {self._observed_target}"
         )
 
     def render(self) -> str | np.ndarray | None:
@@ -438,12 +323,18 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         if self._state is None:
             raise ResetNeeded("call reset() before render()")
         draw = rendering.render_ansi if self.render_mode == "ansi" else rendering.render_rgb
+        actions, spikes = self._action_history[0], self._spike_history
+        if self._observable is not None:  # what the agent sees: the observable neurons
+            actions, spikes = (
+                _observed_actions(actions, self._observable),
+                spikes[:, self._observable],
+            )
         return draw(
             self._pattern,
             self._spike_history[:, self._target],
-            self._action_history[0],
-            self._spike_history,
-            self._target,
+            actions,
+            spikes,
+            self._observed_target,
             self._next_step,
         )
 
@@ -456,6 +347,11 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     def __setstate__(self, state: dict[str, Any]) -> None:
         self.__dict__.update(state)
         self._make_step_views()
+
+
+def _observed_actions(actions: np.ndarray, observable: np.ndarray) -> np.ndarray:
+    """Simulator actions (neuron indices) as the agent's (indices among ``observable``)."""
+    return np.where(actions >= 0, np.searchsorted(observable, actions), DO_NOTHING)
 
 
 def _context_option(options: dict[str, Any]) -> Any:

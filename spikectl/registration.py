@@ -2,25 +2,54 @@
 
 from __future__ import annotations
 
+from typing import Any
+
 import gymnasium
 
 ENV_ID = "spikectl/NeuronControl-v0"
 
+VARIANTS: dict[str, dict[str, Any]] = {
+    # Measurement noise on the observed potentials (docs/extensions.md).
+    "spikectl/NeuronControlNoisy-v0": {"extensions": {"observation_noise_mV": 2.0}},
+    # A quarter of the neurons (2 of 8) hidden: neither observed nor stimulable.
+    "spikectl/NeuronControlPartial-v0": {"extensions": {"hidden_fraction": 0.25}},
+    # A larger network: 32 neurons, the same topology rule.
+    "spikectl/NeuronControl32-v0": {"n_neurons": 32},
+    # Every extension at once, at moderate strength.
+    "spikectl/NeuronControlRealistic-v0": {
+        "extensions": {
+            "hidden_fraction": 0.25,
+            "threshold_spread": 0.1,
+            "time_constant_spread": 0.1,
+            "synaptic_spread": 0.1,
+            "observation_noise_mV": 2.0,
+            "bleaching_time_constant_steps": 300.0,
+            "stochastic_release": True,
+            "background_rate": 0.005,
+        }
+    },
+}
+"""Registered variants: id -> keyword arguments (JSON-ready, so specs serialise)."""
+
 
 def register_envs() -> None:
-    """Register ``spikectl/NeuronControl-v0`` (single and vector entry points); idempotent.
+    """Register ``spikectl/NeuronControl-v0`` and its :data:`VARIANTS`; idempotent.
 
     ``gymnasium.make(ENV_ID, **kwargs)`` builds :class:`spikectl.env.NeuronControlEnv`;
     ``gymnasium.make_vec(ENV_ID, num_envs=...)`` builds the batched
     :class:`spikectl.vector_env.NeuronControlVectorEnv` by default (Gymnasium prefers a
     registered vector entry point when ``vectorization_mode`` is None), and a
-    ``SyncVectorEnv`` of single environments with ``vectorization_mode="sync"``.
+    ``SyncVectorEnv`` of single environments with ``vectorization_mode="sync"``. The
+    variants are the same classes with the keyword arguments of :data:`VARIANTS`
+    (arguments given to ``make`` override them).
     """
-    # Registering an id twice makes Gymnasium warn, and the package may be re-imported.
-    if ENV_ID in gymnasium.registry:
-        return
-    gymnasium.register(
-        id=ENV_ID,
-        entry_point="spikectl.env:NeuronControlEnv",
-        vector_entry_point="spikectl.vector_env:NeuronControlVectorEnv",
-    )
+    for env_id, kwargs in {ENV_ID: {}, **VARIANTS}.items():
+        # Registering an id twice makes Gymnasium warn, and the package may be re-imported.
+        if env_id in gymnasium.registry:
+            continue
+        gymnasium.register(
+            id=env_id,
+            entry_point="spikectl.env:NeuronControlEnv",
+            vector_entry_point="spikectl.vector_env:NeuronControlVectorEnv",
+            kwargs=kwargs,
+        )

@@ -1,10 +1,11 @@
 """The batched simulator of SPEC section 1: LIF neurons with short-term depression.
 
-There is one implementation of the dynamics, the Numba kernel ``_advance``. It moves
-a batch of independent networks forward by any number of 1 ms steps and writes what
-an observer sees. ``simulate`` runs whole action sequences through it; ``advance``
-runs one step (or a few) of a :class:`SimulatorState` and is what the environments
-call. With ``NUMBA_DISABLE_JIT=1`` the same code runs as plain Python.
+There is one implementation of the dynamics, the Numba kernel ``_advance_kernel`` in
+``spikectl.kernel``. It moves a batch of independent networks forward by any number of
+1 ms steps and writes what an observer sees. ``simulate`` runs whole action sequences
+through it; ``advance`` runs one step (or a few) of a :class:`SimulatorState` and is
+what the environments call. With ``NUMBA_DISABLE_JIT=1`` the same code runs as plain
+Python.
 
 Order inside step t, given action a_t (SPEC 1):
 
@@ -22,98 +23,30 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numba
 import numpy as np
 
+from spikectl.kernel import (
+    _SINCE_RELEASE_CAP,
+    PARALLEL_MIN_BATCH,
+    _advance_parallel,
+    _advance_serial,
+    kernel_constants,
+)
 from spikectl.params import NeuronParams
+
+__all__ = [
+    "DO_NOTHING",
+    "PARALLEL_MIN_BATCH",
+    "SimulatorState",
+    "advance",
+    "as_weight_batch",
+    "neuron_parameters",
+    "simulate",
+    "uniform_neuron_parameters",
+]
 
 DO_NOTHING = -1
 """The action that stimulates no neuron."""
-
-# Batches at least this large are split over threads; below it the thread start-up
-# costs more than it saves (measured in benchmarks/bench_simulator.py).
-PARALLEL_MIN_BATCH = 256
-
-# steps_since_release saturates here, far beyond any release interval but below
-# NEVER_RELEASES, so "no release yet" (t_r = -inf) stays ready to release.
-_SINCE_RELEASE_CAP = 2**30
-
-
-def _advance_kernel(
-    weights,  # [W, n, n] int8, W == 1 (shared) or W == B
-    actions,  # [B, T] int64, -1 = do nothing
-    voltage,  # [B, n] float64, state, updated in place
-    refractory_left,  # [B, n] int32, state
-    steps_since_release,  # [B, n] int32, state
-    released,  # [B, n] bool, state: released at the previous step
-    v_rest,
-    v_spike,  # threshold minus tolerance
-    leak_per_step,  # dt / (R C)
-    stimulus_step_mV,  # dt * w_e / C
-    synaptic_step_mV,  # dt * w_in / C
-    refractory_steps,
-    min_release_interval,
-    out_voltage,  # [B, T, n] float64
-    out_spikes,  # [B, T, n] bool
-):
-    batch, horizon = actions.shape
-    n = voltage.shape[1]
-    shared_weights = weights.shape[0] == 1
-    for b in numba.prange(batch):
-        w = weights[0] if shared_weights else weights[b]
-        # Thread-private copies of this network's state: rows of neighbouring networks
-        # share cache lines, and writing them from two threads halves the throughput.
-        v_b = voltage[b].copy()
-        refractory_b = refractory_left[b].copy()
-        since_b = steps_since_release[b].copy()
-        released_b = released[b].copy()
-        synaptic_input = np.empty(n)
-        for t in range(horizon):
-            synaptic_input[:] = 0.0
-            for i in range(n):
-                if released_b[i]:
-                    for j in range(n):
-                        synaptic_input[j] += w[i, j]
-            action = actions[b, t]
-            for j in range(n):
-                since = since_b[j]
-                if since < _SINCE_RELEASE_CAP:
-                    since += 1
-                spiked = False
-                if refractory_b[j] > 0:
-                    refractory_b[j] -= 1
-                    v = v_rest
-                else:
-                    v = v_b[j]
-                    drive = synaptic_step_mV * synaptic_input[j]
-                    if action == j:
-                        drive += stimulus_step_mV
-                    v = v + (-(v - v_rest) * leak_per_step + drive)
-                    spiked = v >= v_spike
-                out_voltage[b, t, j] = v
-                out_spikes[b, t, j] = spiked
-                release = False
-                if spiked:
-                    v = v_rest
-                    refractory_b[j] = refractory_steps
-                    if since >= min_release_interval:
-                        release = True
-                        since = 0
-                v_b[j] = v
-                since_b[j] = since
-                released_b[j] = release
-        voltage[b] = v_b
-        refractory_left[b] = refractory_b
-        steps_since_release[b] = since_b
-        released[b] = released_b
-
-
-# One kernel, compiled twice: serially for small batches (the single environment)
-# and with threads over the batch for large ones. Both give identical results.
-# The parallel build is not cached: loaded from Numba's cache it ran at half speed
-# (numba 0.68, measured with benchmarks/bench_simulator.py).
-_advance_serial = numba.njit(cache=True, nogil=True)(_advance_kernel)
-_advance_parallel = numba.njit(nogil=True, parallel=True)(_advance_kernel)
 
 
 @dataclass
@@ -157,6 +90,34 @@ class SimulatorState:
         )
 
 
+def neuron_parameters(
+    params: NeuronParams, thresholds_mV: np.ndarray, time_constants_ms: np.ndarray
+) -> np.ndarray:
+    """Per-neuron kernel parameters [P, 2, n] from thresholds V_th and time constants R C.
+
+    ``thresholds_mV`` and ``time_constants_ms`` are [P, n] (heterogeneous neurons, an
+    extension); row 0 is V_th minus the tolerance, row 1 is dt / tau_m. P == 1 is
+    shared by the batch, P == B gives each network its own.
+    """
+    thresholds, time_constants = np.broadcast_arrays(
+        np.asarray(thresholds_mV, dtype=np.float64), np.asarray(time_constants_ms, dtype=np.float64)
+    )
+    return np.ascontiguousarray(
+        np.stack(
+            [thresholds - params.threshold_tolerance_mV, params.dt_ms / time_constants], axis=-2
+        )
+    )
+
+
+def uniform_neuron_parameters(params: NeuronParams, batch: int, n_neurons: int) -> np.ndarray:
+    """[batch, 2, n] kernel parameters of the paper's identical neurons."""
+    return neuron_parameters(
+        params,
+        np.full((batch, n_neurons), params.v_threshold_mV),
+        np.full((batch, n_neurons), params.membrane_time_constant_ms),
+    )
+
+
 def advance(
     state: SimulatorState,
     weights: np.ndarray,
@@ -164,14 +125,22 @@ def advance(
     params: NeuronParams,
     out_voltage: np.ndarray,
     out_spikes: np.ndarray,
+    neurons: np.ndarray | None = None,
+    release_uniforms: np.ndarray | None = None,
+    input_mV: np.ndarray | None = None,
 ) -> None:
     """Advance ``state`` in place by ``actions.shape[1]`` steps, with no input checks.
 
-    ``weights`` is int8 [B or 1, n, n], ``actions`` int64 [B, T], ``out_voltage``
-    float64 and ``out_spikes`` bool [B, T, n], all C-contiguous. This is the hot path
-    of the environments; :func:`simulate` is the checked entry point.
+    ``weights`` is int8 or float64 [B or 1, n, n], ``actions`` int64 [B, T],
+    ``out_voltage`` float64 and ``out_spikes`` bool [B, T, n], all C-contiguous. This
+    is the hot path of the environments; :func:`simulate` is the checked entry point.
+
+    The optional inputs are the extensions (None: the paper's model): ``neurons``
+    per-neuron parameters [1 or B, 2, n] from :func:`neuron_parameters`;
+    ``release_uniforms`` float64 [B, T, n] in [0, 1) makes release stochastic (a spike
+    releases iff u < p_r (1 - exp(-(t - t_r) / tau_R))); ``input_mV`` float64 [B, T, n]
+    is extra input added to the drive of non-refractory neurons.
     """
-    tau_m = params.membrane_time_constant_ms
     kernel = _advance_parallel if actions.shape[0] >= PARALLEL_MIN_BATCH else _advance_serial
     kernel(
         weights,
@@ -180,15 +149,12 @@ def advance(
         state.refractory_left,
         state.steps_since_release,
         state.released,
-        params.v_rest_mV,
-        params.v_threshold_mV - params.threshold_tolerance_mV,
-        params.dt_ms / tau_m,
-        params.dt_ms * params.stimulus_current_pA / params.capacitance_pF,
-        params.dt_ms * params.synaptic_current_pA / params.capacitance_pF,
-        int(params.refractory_steps),
-        params.min_release_interval_steps,
+        kernel_constants(params),
         out_voltage,
         out_spikes,
+        neurons,
+        release_uniforms,
+        input_mV,
     )
 
 
@@ -220,6 +186,12 @@ def simulate(
     weights: np.ndarray,
     actions: np.ndarray,
     params: NeuronParams | None = None,
+    *,
+    thresholds_mV: np.ndarray | None = None,
+    membrane_time_constants_ms: np.ndarray | None = None,
+    synaptic_scale: np.ndarray | None = None,
+    release_uniforms: np.ndarray | None = None,
+    input_mV: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Simulate batches of networks from rest under given action sequences.
 
@@ -229,6 +201,15 @@ def simulate(
         actions: [T] or [B, T] integers in -1..n-1; -1 stimulates nobody, j
             stimulates neuron j for one step.
         params: model parameters; the paper's (Table 1) when None.
+
+    Keyword-only extensions (docs/extensions.md), all None in the paper's model:
+        thresholds_mV, membrane_time_constants_ms: per-neuron V_th and R C, [n] or
+            [B, n] (heterogeneous neurons; the other one defaults to ``params``).
+        synaptic_scale: [n, n] or [B, n, n] factors >= 0 on w_in per synapse.
+        release_uniforms: [T, n] or [B, T, n] uniforms in [0, 1]: stochastic
+            release, a spike releases iff u < p_r (1 - exp(-(t - t_r) / tau_R)).
+        input_mV: [T, n] or [B, T, n] extra input (e.g. background activity) added
+            to the drive of non-refractory neurons, in mV.
 
     Returns:
         ``(voltages, spikes)``: membrane potentials in mV [B, T, n] as observed
@@ -257,10 +238,70 @@ def simulate(
         )
     horizon = action_array.shape[1]
     action_array = np.ascontiguousarray(action_array, dtype=np.int64)
+    neurons = None
+    if thresholds_mV is not None or membrane_time_constants_ms is not None:
+        thresholds = _per_network(thresholds_mV, (n,), batch, "thresholds_mV",
+                                  params.v_threshold_mV)  # fmt: skip
+        time_constants = _per_network(membrane_time_constants_ms, (n,), batch,
+                                      "membrane_time_constants_ms",
+                                      params.membrane_time_constant_ms)  # fmt: skip
+        if (thresholds <= params.v_rest_mV).any():
+            raise ValueError("thresholds_mV must lie above v_rest_mV")
+        if (time_constants < params.dt_ms).any():
+            raise ValueError("membrane_time_constants_ms must be >= dt_ms")
+        neurons = neuron_parameters(params, thresholds, time_constants)
+    if synaptic_scale is not None:
+        scale = _per_network(synaptic_scale, (n, n), batch, "synaptic_scale")
+        if (scale < 0).any():
+            raise ValueError("synaptic_scale must be >= 0")
+        weight_batch = np.ascontiguousarray(weight_batch * scale, dtype=np.float64)
+        if weight_batch.shape[0] not in (1, batch):
+            raise ValueError("synaptic_scale batch does not match the weights / actions batch")
+    if release_uniforms is not None:
+        release_uniforms = _per_step(release_uniforms, batch, horizon, n, "release_uniforms")
+        if ((release_uniforms < 0) | (release_uniforms > 1)).any():
+            raise ValueError("release_uniforms must lie in [0, 1]")
+    if input_mV is not None:
+        input_mV = _per_step(input_mV, batch, horizon, n, "input_mV")
     voltages = np.empty((batch, horizon, n), dtype=np.float64)
     spikes = np.empty((batch, horizon, n), dtype=np.bool_)
     state = SimulatorState.at_rest(batch, n, params)
-    advance(state, weight_batch, action_array, params, voltages, spikes)
+    advance(state, weight_batch, action_array, params, voltages, spikes, neurons,
+            release_uniforms, input_mV)  # fmt: skip
     if single:
         return voltages[0], spikes[0]
     return voltages, spikes
+
+
+def _per_network(
+    values: np.ndarray | None, shape: tuple[int, ...], batch: int, name: str, default=None
+) -> np.ndarray:
+    """``values`` of one network ``shape`` or of a batch [B, *shape] as float64 [1 or B, ...]."""
+    if values is None:
+        return np.full((1, *shape), default, dtype=np.float64)
+    array = np.asarray(values, dtype=np.float64)
+    if array.shape == shape:
+        array = array[None]
+    if array.shape[1:] != shape or array.shape[0] not in (1, batch):
+        raise ValueError(
+            f"{name} must have shape {list(shape)} or [{batch}, {', '.join(map(str, shape))}], "
+            f"got {list(np.shape(values))}"
+        )
+    if not np.isfinite(array).all():
+        raise ValueError(f"{name} must be finite")
+    return np.ascontiguousarray(array)
+
+
+def _per_step(values: np.ndarray, batch: int, horizon: int, n: int, name: str) -> np.ndarray:
+    """Per-step inputs [T, n] (shared) or [B, T, n] as float64 [B, T, n]."""
+    array = np.asarray(values, dtype=np.float64)
+    if array.shape == (horizon, n):
+        array = np.broadcast_to(array, (batch, horizon, n))
+    if array.shape != (batch, horizon, n):
+        raise ValueError(
+            f"{name} must have shape [{horizon}, {n}] or [{batch}, {horizon}, {n}], "
+            f"got {list(np.shape(values))}"
+        )
+    if not np.isfinite(array).all():
+        raise ValueError(f"{name} must be finite")
+    return np.ascontiguousarray(array)

@@ -9,7 +9,7 @@ environments (same seeds, same contexts, same autoreset), only faster.
 from __future__ import annotations
 
 import os
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import gymnasium as gym
@@ -22,7 +22,7 @@ from gymnasium.vector.utils import batch_space
 
 from spikectl import render as rendering
 from spikectl.contexts import Context, ContextSet
-from spikectl.env import (
+from spikectl.env_support import (
     RENDER_FPS,
     RENDER_MODES,
     ContextTables,
@@ -31,9 +31,11 @@ from spikectl.env import (
     is_int,
     observation_space,
     resolve_contexts,
+    resolve_extensions,
 )
+from spikectl.extensions import EnvironmentEffects, Extensions
 from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING, SimulatorState, advance
+from spikectl.simulator import DO_NOTHING, SimulatorState, advance, uniform_neuron_parameters
 
 
 class LegalActionBatchSpace(spaces.MultiDiscrete):
@@ -78,6 +80,10 @@ class NeuronControlVectorEnv(VectorEnv):
     Reset options: ``{"context": c}`` with c an index or ``Context`` for every
     sub-environment, or a sequence of num_envs of them (evaluate a whole set in one
     batch); ``{"reset_mask": bool array [num_envs]}`` resets only the marked ones.
+
+    Extensions (``extensions=``, docs/extensions.md) behave as in the single
+    environment; their random numbers come from each sub-environment's generator in
+    the single environment's order, so the batch still equals ``SyncVectorEnv``.
     """
 
     metadata = {
@@ -99,6 +105,7 @@ class NeuronControlVectorEnv(VectorEnv):
         params: NeuronParams | None = None,
         allow_target_action: bool = False,
         render_mode: str | None = None,
+        extensions: Extensions | Mapping[str, Any] | None = None,
     ) -> None:
         if not is_int(num_envs) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
@@ -106,28 +113,39 @@ class NeuronControlVectorEnv(VectorEnv):
             raise ValueError(
                 f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}"
             )
-        if not isinstance(allow_target_action, (bool, np.bool_)):
-            raise TypeError(f"allow_target_action must be a bool, got {allow_target_action!r}")
+        requested = Extensions.coerce(extensions)
         self.contexts, self.params = resolve_contexts(
-            contexts, split, n_train, n_test, context_seed, n_neurons, episode_length, params
-        )
+            contexts, split, n_train, n_test, context_seed, n_neurons, episode_length, params,
+            requested,
+        )  # fmt: skip
+        self.extensions = resolve_extensions(requested, allow_target_action, self.contexts)
         self.num_envs = batch = int(num_envs)
         self.n_neurons = n = self.contexts.n_neurons
+        self.n_observed = k = self.contexts.n_observed
         self.episode_length = length = self.contexts.episode_length
-        self.allow_target_action = bool(allow_target_action)
+        self.allow_target_action = self.extensions.allow_target_action
         self.render_mode = render_mode
-        self._tables = ContextTables.build(self.contexts, self.allow_target_action)
+        self._tables = ContextTables.build(self.contexts, self.allow_target_action, self.params)
+        self._effects = EnvironmentEffects(self.extensions, self.params, length)
+        self._release_uniforms, self._input_mV = self._effects.input_buffers(batch, n)
 
-        self.single_observation_space = observation_space(n, length)
-        self.single_action_space = spaces.Discrete(n + 1, start=DO_NOTHING)
+        self.single_observation_space = observation_space(k, length)
+        self.single_action_space = spaces.Discrete(k + 1, start=DO_NOTHING)
         self.observation_space = batch_space(self.single_observation_space, batch)
-        self.action_space = LegalActionBatchSpace(batch, n)
+        self.action_space = LegalActionBatchSpace(batch, k)
 
         self._rngs: list[np.random.Generator | None] = [None] * batch
         self._envs = np.arange(batch)
         self._state = SimulatorState.at_rest(batch, n, self.params)
         self._weights = np.zeros((batch, n, n), dtype=np.float64)
-        self._targets = np.zeros(batch, dtype=np.int64)
+        self._neurons: np.ndarray | None = None  # [num_envs, 2, n] for heterogeneous neurons
+        if self._tables.neurons is not None:
+            self._neurons = uniform_neuron_parameters(self.params, batch, n)
+        self._observable = (
+            None if self._tables.observable is None else np.zeros((batch, k), dtype=np.int64)
+        )
+        self._targets = np.zeros(batch, dtype=np.int64)  # neuron indices
+        self._observed_targets = np.zeros(batch, dtype=np.int64)  # the agent's indices
         self._patterns = np.zeros((batch, length), dtype=np.int8)
         self._reward_if_spike = np.zeros((batch, length), dtype=np.float64)
         self._reward_if_silent = np.zeros((batch, length), dtype=np.float64)
@@ -135,19 +153,21 @@ class NeuronControlVectorEnv(VectorEnv):
         self._context_index = np.full(batch, -1, dtype=np.int64)
         self._next_step = np.full(batch, length, dtype=np.int64)
         self._last_action = np.full(batch, DO_NOTHING, dtype=np.int64)
-        self._voltage = np.full((batch, n), self.params.v_rest_mV, dtype=np.float32)
+        self._voltage = np.full((batch, k), self.params.v_rest_mV, dtype=np.float32)
         self._needs_reset = np.zeros(batch, dtype=bool)
         self._any_needs_reset = False
         self._all_envs = np.ones(batch, dtype=bool)
         # Offsets of each env's rows in the flattened per-env tables.
         self._first_cells = self._envs * length
-        self._first_legal = self._envs * (n + 1)
+        self._first_legal = self._envs * (k + 1)
         self._target_cells = self._envs * n
-        self._actions = np.full((batch, 1), DO_NOTHING, dtype=np.int64)
+        self._actions = np.full((batch, 1), DO_NOTHING, dtype=np.int64)  # neuron indices
+        self._agent_actions = np.zeros(batch, dtype=np.int64)  # with hidden neurons
         self._out_voltage = np.zeros((batch, 1, n), dtype=np.float64)
         self._out_spikes = np.zeros((batch, 1, n), dtype=bool)
+        # The episode as the agent sees it: its actions and the observable neurons' spikes.
         self._action_history = np.full((batch, length), DO_NOTHING, dtype=np.int64)
-        self._spike_history = np.zeros((batch, length, n), dtype=bool)
+        self._spike_history = np.zeros((batch, length, k), dtype=bool)
         self._ever_reset = np.zeros(batch, dtype=bool)
         self._all_reset = False
 
@@ -193,8 +213,16 @@ class NeuronControlVectorEnv(VectorEnv):
             raise ResetNeeded(f"sub-environment(s) {never} were never reset: call reset() first")
         actions = self._checked_actions(actions)
         autoreset = self._needs_reset
+        effects = self._effects
+        if self._observable is not None:  # the agent's indices -> neuron indices
+            self._actions[:, 0] = np.where(
+                actions >= 0, self._observable[self._envs, np.maximum(actions, 0)], DO_NOTHING
+            )
+        if effects.random_dynamics:
+            self._draw_inputs(np.flatnonzero(~autoreset))
         advance(self._state, self._weights, self._actions, self.params, self._out_voltage,
-                self._out_spikes)  # fmt: skip
+                self._out_spikes, self._neurons, self._release_uniforms,
+                self._input_mV)  # fmt: skip
         length = self.episode_length
         # Flat index of each env's current step into its [num_envs * N] tables; an env
         # about to autoreset points at its last step, which its reset then clears.
@@ -206,13 +234,21 @@ class NeuronControlVectorEnv(VectorEnv):
             self._reward_if_spike.reshape(-1).take(cells),
             self._reward_if_silent.reshape(-1).take(cells),
         )
+        voltage = self._out_voltage[:, 0]
+        if self._observable is not None:
+            spikes = np.take_along_axis(spikes, self._observable, axis=1)
+            voltage = np.take_along_axis(voltage, self._observable, axis=1)
         self._action_history.reshape(-1)[cells] = actions
-        self._spike_history.reshape(-1, self.n_neurons)[cells] = spikes
+        self._spike_history.reshape(-1, self.n_observed)[cells] = spikes
         self._next_step += 1
         self._last_action[:] = actions
         terminated = self._next_step == length
         spikes = spikes.copy()
-        self._voltage[:] = self._out_voltage[:, 0]
+        if effects.plain:
+            self._voltage[:] = voltage
+        else:
+            steps = np.minimum(self._next_step, length)
+            self._voltage[:] = effects.observe(voltage, steps, self._noise(~autoreset))
         if self._any_needs_reset:
             # Their networks were stepped with "do nothing" along with the rest; reset now.
             resetting = np.flatnonzero(autoreset)
@@ -245,29 +281,52 @@ class NeuronControlVectorEnv(VectorEnv):
                 f"actions must be integers of shape ({self.num_envs},), got {array.dtype} "
                 f"{array.shape}"
             )
-        checked = self._actions[:, 0]
+        # The agent's actions: without hidden neurons the simulator's input itself.
+        checked = self._actions[:, 0] if self._observable is None else self._agent_actions
         checked[:] = array
         if self._any_needs_reset:
             checked[self._needs_reset] = DO_NOTHING
-        if checked.min() < DO_NOTHING or checked.max() >= self.n_neurons:
-            i = int(np.argmax((checked < DO_NOTHING) | (checked >= self.n_neurons)))
+        k = self.n_observed
+        if checked.min() < DO_NOTHING or checked.max() >= k:
+            i = int(np.argmax((checked < DO_NOTHING) | (checked >= k)))
             raise ValueError(
                 f"env {i}: action {array[i]} is out of range: actions are -1 (do nothing) or "
-                f"a neuron in 0..{self.n_neurons - 1} other than the target {self._targets[i]}"
+                f"a neuron in 0..{k - 1} other than the target {self._observed_targets[i]}"
             )
         legal = self._legal.reshape(-1).take(self._first_legal + checked + 1)
         if not legal.all():
             i = int(np.argmin(legal))
             raise ValueError(
-                f"env {i}: action {array[i]} stimulates the target neuron {self._targets[i]}, "
-                f"which is not a legal action (pass allow_target_action=True to allow it)"
+                f"env {i}: action {array[i]} stimulates the target neuron "
+                f"{self._observed_targets[i]}, which is not a legal action (pass "
+                "allow_target_action=True to allow it)"
             )
         return checked
+
+    def _draw_inputs(self, envs: np.ndarray) -> None:
+        """Release uniforms and background input of ``envs`` for one step, each from its
+        own generator in the single environment's order."""
+        release, background = self._release_uniforms, self._input_mV
+        for i in envs:
+            self._effects.draw_inputs(
+                self._rngs[i],
+                None if release is None else release[i, 0],
+                None if background is None else background[i, 0],
+            )
+
+    def _noise(self, which: np.ndarray) -> np.ndarray | None:
+        """Standard normal measurement noise [num_envs, k] for the marked envs (0 elsewhere)."""
+        if self._effects.noise_mV == 0:
+            return None
+        noise = np.zeros((self.num_envs, self.n_observed))
+        for i in np.flatnonzero(which):
+            noise[i] = self._rngs[i].standard_normal(self.n_observed)
+        return noise
 
     def _observation(self, voltage: np.ndarray) -> dict[str, np.ndarray]:
         return {
             "voltage": voltage,
-            "target": self._targets.copy(),
+            "target": self._observed_targets.copy(),
             "pattern": self._patterns.copy(),
             "step": self._next_step.copy(),
             "last_action": self._last_action.copy(),
@@ -309,7 +368,7 @@ class NeuronControlVectorEnv(VectorEnv):
             if choice is None:
                 rows[k] = self._rngs[i].integers(len(self.contexts))
             elif isinstance(choice, Context):
-                check_context(choice, self.n_neurons, self.episode_length)
+                check_context(choice, self.n_neurons, self.episode_length, self.n_observed)
                 rows[k] = -1
                 passed.append((i, choice))
             else:
@@ -321,24 +380,41 @@ class NeuronControlVectorEnv(VectorEnv):
         self._load(envs[indexed], self._tables, rows[indexed])
         self._context_index[envs] = rows
         for i, context in passed:
-            self._load(np.array([i]), ContextTables.build([context], self.allow_target_action), 0)
+            tables = ContextTables.build([context], self.allow_target_action, self.params)
+            self._load(np.array([i]), tables, 0)
         which = np.zeros(self.num_envs, dtype=bool)
         which[envs] = True
         self._state.reset(which, self.params)
         self._next_step[envs] = 0
         self._last_action[envs] = DO_NOTHING
         self._voltage[envs] = self.params.v_rest_mV
+        if not self._effects.plain:
+            noise = self._noise(which)
+            self._voltage[envs] = self._effects.observe(
+                self._voltage[envs], 0, None if noise is None else noise[envs]
+            )
         self._action_history[envs] = DO_NOTHING
         self._spike_history[envs] = False
 
     def _load(self, envs: np.ndarray, tables: ContextTables, rows: np.ndarray | int) -> None:
         self._weights[envs] = tables.weights[rows]
         self._targets[envs] = tables.targets[rows]
+        self._observed_targets[envs] = tables.observed_targets[rows]
         self._target_cells[envs] = envs * self.n_neurons + tables.targets[rows]
         self._patterns[envs] = tables.patterns[rows]
         self._reward_if_spike[envs] = tables.reward_if_spike[rows]
         self._reward_if_silent[envs] = tables.reward_if_silent[rows]
         self._legal[envs] = tables.legal[rows]
+        if self._observable is not None:
+            self._observable[envs] = tables.observable[rows]
+        if tables.neurons is not None and self._neurons is None:  # a passed Context
+            self._neurons = uniform_neuron_parameters(self.params, self.num_envs, self.n_neurons)
+        if self._neurons is not None:
+            self._neurons[envs] = (
+                uniform_neuron_parameters(self.params, 1, self.n_neurons)
+                if tables.neurons is None
+                else tables.neurons[rows]
+            )
 
     def render(self) -> tuple[str, ...] | tuple[np.ndarray, ...] | None:
         """One frame (or text raster) per sub-environment, as Gymnasium's vector wrappers expect."""
@@ -354,10 +430,10 @@ class NeuronControlVectorEnv(VectorEnv):
         return tuple(
             draw(
                 self._patterns[i],
-                self._spike_history[i, :, self._targets[i]],
+                self._spike_history[i, :, self._observed_targets[i]],
                 self._action_history[i],
                 self._spike_history[i],
-                int(self._targets[i]),
+                int(self._observed_targets[i]),
                 int(self._next_step[i]),
             )
             for i in range(self.num_envs)

@@ -177,9 +177,9 @@ class TrainConfig:
 PAPER = TrainConfig()
 
 QUICK = TrainConfig(
-    total_env_steps=250_000,
+    total_env_steps=1_000_000,
     num_envs=16,
-    updates_per_round=8,
+    updates_per_round=10,
     batch_size=8,
     buffer_size=40_000,
     learning_starts=16,
@@ -193,8 +193,8 @@ QUICK = TrainConfig(
         ff_hidden=256,
         head_hidden=(256, 128, 64),
     ),
-    eval_every_episodes=400,
-    checkpoint_every_episodes=400,
+    eval_every_episodes=1000,
+    checkpoint_every_episodes=1000,
     torch_threads=2,
 )
 

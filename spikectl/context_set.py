@@ -1,0 +1,319 @@
+"""Context sets (SPEC 2): sequences of contexts, their splits, files and checksums.
+
+:class:`ContextSet` holds contexts of one shape with the parameters (and context-level
+extensions) they were made with, and saves to / loads from one ``.npz`` file
+(``spikectl.context_files``). :func:`make_splits` draws the paper's training and test
+sets with no topology shared within or across them. Both are also importable from
+``spikectl.contexts`` and from ``spikectl``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from collections.abc import Iterator, Mapping, Sequence
+from pathlib import Path
+from typing import Any, overload
+
+import numpy as np
+
+from spikectl.context_files import ContextFileError, read_npz, write_npz
+from spikectl.contexts import (
+    MAX_TOPOLOGY_ATTEMPTS,
+    Context,
+    _check_episode_length,
+    _check_n_neurons,
+    _check_size,
+    generate_context,
+)
+from spikectl.extensions import Extensions, Heterogeneity
+from spikectl.params import NeuronParams
+
+
+class ContextSet(Sequence[Context]):
+    """An immutable sequence of contexts of one size and episode length.
+
+    Build one with :meth:`generate` (or :func:`make_splits`), from your own
+    contexts, or with :meth:`load`. ``params`` are the model parameters the
+    witnesses were made with; ``seed`` is the generation seed when there is one;
+    ``extensions`` records the context-level extensions the set was generated with
+    (hidden neurons, heterogeneous neurons; only those fields are kept). All
+    contexts have the same n, episode length and number of hidden neurons, and
+    either all or none have heterogeneous neurons.
+    """
+
+    def __init__(
+        self,
+        contexts: Sequence[Context],
+        params: NeuronParams | None = None,
+        seed: int | None = None,
+        extensions: Extensions | Mapping[str, Any] | None = None,
+    ) -> None:
+        self._contexts = tuple(contexts)
+        if not self._contexts:
+            raise ValueError("a ContextSet needs at least one context")
+        for index, context in enumerate(self._contexts):
+            if not isinstance(context, Context):
+                raise TypeError(f"item {index} is a {type(context).__name__}, not a Context")
+        first = self._contexts[0]
+        for index, context in enumerate(self._contexts):
+            if _shape(context) != _shape(first):
+                raise ValueError(
+                    f"context {index} has (n_neurons, episode_length, observed neurons, "
+                    f"heterogeneous) = {_shape(context)}; context 0 has {_shape(first)}: a set "
+                    "holds one shape"
+                )
+        self.params = NeuronParams() if params is None else params
+        self.seed = seed
+        self.extensions = Extensions.coerce(extensions).context_part()
+
+    @classmethod
+    def generate(
+        cls,
+        size: int,
+        n_neurons: int = 8,
+        episode_length: int = 60,
+        seed: int = 0,
+        params: NeuronParams | None = None,
+        extensions: Extensions | Mapping[str, Any] | None = None,
+    ) -> ContextSet:
+        """``size`` contexts with pairwise distinct topologies, reproducible from ``seed``.
+
+        Sets are prefix-stable: ``generate(10, seed=s)`` is the first 10 contexts of
+        ``generate(100, seed=s)``. Context-level ``extensions`` (hidden neurons,
+        heterogeneous neurons) are drawn with each context.
+        """
+        _check_size(size)
+        extensions = Extensions.coerce(extensions).context_part()
+        contexts = _generate_unique(size, n_neurons, episode_length, seed, params, extensions)
+        return cls(contexts, params, seed, extensions)
+
+    def __len__(self) -> int:
+        return len(self._contexts)
+
+    @overload
+    def __getitem__(self, index: int) -> Context: ...
+
+    @overload
+    def __getitem__(self, index: slice) -> ContextSet: ...
+
+    def __getitem__(self, index: int | slice) -> Context | ContextSet:
+        if isinstance(index, slice):
+            return ContextSet(self._contexts[index], self.params, self.seed, self.extensions)
+        return self._contexts[index]
+
+    def __iter__(self) -> Iterator[Context]:
+        return iter(self._contexts)
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, ContextSet):
+            return NotImplemented
+        return (
+            self.params == other.params
+            and self.extensions == other.extensions
+            and self._contexts == other._contexts
+        )
+
+    __hash__ = None
+
+    def __repr__(self) -> str:
+        extensions = self.extensions.to_dict(only_changed=True)
+        return (
+            f"ContextSet(size={len(self)}, n_neurons={self.n_neurons}, "
+            f"episode_length={self.episode_length}, seed={self.seed}"
+            + (f", extensions={extensions}" if extensions else "")
+            + ")"
+        )
+
+    @property
+    def n_neurons(self) -> int:
+        return self._contexts[0].n_neurons
+
+    @property
+    def episode_length(self) -> int:
+        return self._contexts[0].episode_length
+
+    @property
+    def n_observed(self) -> int:
+        """k, the number of observable neurons of every context."""
+        return self._contexts[0].n_observed
+
+    def arrays(self) -> dict[str, np.ndarray]:
+        """The set as stacked arrays: weights [S, n, n], targets [S], patterns [S, N],
+        witnesses [S, N] (-2 where a context has no witness); with hidden neurons also
+        hidden [S, h], with heterogeneous neurons thresholds_mV [S, n],
+        time_constants_ms [S, n] and synaptic_scale [S, n, n]."""
+        arrays = {
+            "weights": np.stack([c.weights for c in self]).astype(np.int8),
+            "targets": np.array([c.target for c in self], dtype=np.int64),
+            "patterns": np.stack([c.pattern for c in self]).astype(bool),
+            "witnesses": np.stack(
+                [
+                    c.witness if c.witness is not None else np.full(c.episode_length, -2)
+                    for c in self
+                ]
+            ).astype(np.int16),
+        }
+        if self._contexts[0].hidden is not None:
+            arrays["hidden"] = np.stack([c.hidden for c in self]).astype(np.int64)
+        if self._contexts[0].heterogeneity is not None:
+            for name in ("thresholds_mV", "time_constants_ms", "synaptic_scale"):
+                arrays[name] = np.stack([getattr(c.heterogeneity, name) for c in self])
+        return arrays
+
+    def topology_keys(self) -> list[bytes]:
+        """One hashable key per context identifying its signed connectivity."""
+        return [c.weights.astype(np.int8).tobytes() for c in self]
+
+    def duplicate_topologies(self, other: ContextSet | None = None) -> list[tuple[int, int]]:
+        """Index pairs sharing a topology: within this set, or between it and ``other``."""
+        keys = self.topology_keys()
+        if other is None:
+            first_seen: dict[bytes, int] = {}
+            pairs = []
+            for index, key in enumerate(keys):
+                if key in first_seen:
+                    pairs.append((first_seen[key], index))
+                first_seen.setdefault(key, index)
+            return pairs
+        other_index = {
+            key: index for index, key in reversed(list(enumerate(other.topology_keys())))
+        }
+        return [(index, other_index[key]) for index, key in enumerate(keys) if key in other_index]
+
+    def checksum(self) -> str:
+        """SHA-256 over the arrays, parameters and extensions; equal sets, equal checksums."""
+        digest = hashlib.sha256()
+        for name, array in sorted(self.arrays().items()):
+            digest.update(name.encode())
+            digest.update(str(array.shape).encode())
+            digest.update(np.ascontiguousarray(array).tobytes())
+        digest.update(json.dumps(self.params.to_dict(), sort_keys=True).encode())
+        extensions = self.extensions.to_dict(only_changed=True)
+        if extensions:  # absent for the paper's sets, whose checksums stay as they were
+            digest.update(json.dumps(extensions, sort_keys=True).encode())
+        return digest.hexdigest()
+
+    def save(self, path: str | os.PathLike) -> Path:
+        """Write the set to one ``.npz`` file, atomically (a crash never leaves half a file).
+
+        Sets without extensions are written as format version 1, as before; sets with
+        context-level extensions as version 2 (``spikectl.context_files``).
+        """
+        path = Path(path)
+        if path.suffix != ".npz":
+            path = path.with_suffix(path.suffix + ".npz")
+        metadata = {
+            "size": len(self),
+            "n_neurons": self.n_neurons,
+            "episode_length": self.episode_length,
+            "seed": self.seed,
+            "params": self.params.to_dict(),
+            "checksum": self.checksum(),
+            "extensions": self.extensions.to_dict(only_changed=True),
+        }
+        return write_npz(path, self.arrays(), metadata)
+
+    @classmethod
+    def load(cls, path: str | os.PathLike) -> ContextSet:
+        """Read a set written by :meth:`save`; a damaged or foreign file raises ContextFileError."""
+        path = Path(path)
+        arrays, metadata = read_npz(path)
+        size = len(arrays["targets"])
+        try:
+            params = NeuronParams.from_dict(metadata["params"])
+            hidden = arrays.get("hidden", [None] * size)
+            heterogeneity = [None] * size
+            if "thresholds_mV" in arrays:
+                heterogeneity = [
+                    Heterogeneity(*values)
+                    for values in zip(arrays["thresholds_mV"], arrays["time_constants_ms"],
+                                      arrays["synaptic_scale"], strict=True)
+                ]  # fmt: skip
+            contexts = [
+                Context(weights, int(target), pattern, None if (witness == -2).all() else witness,
+                        hidden_neurons, neurons)
+                for weights, target, pattern, witness, hidden_neurons, neurons in zip(
+                    arrays["weights"], arrays["targets"], arrays["patterns"],
+                    arrays["witnesses"], hidden, heterogeneity, strict=True,
+                )
+            ]  # fmt: skip
+            loaded = cls(contexts, params, metadata.get("seed"), metadata.get("extensions"))
+        except (TypeError, ValueError) as error:
+            raise ContextFileError(f"{path} holds an invalid context set: {error}") from error
+        if loaded.checksum() != metadata.get("checksum"):
+            raise ContextFileError(f"{path} is damaged: its checksum does not match its contents")
+        if (len(loaded), loaded.n_neurons, loaded.episode_length) != (
+            metadata.get("size"),
+            metadata.get("n_neurons"),
+            metadata.get("episode_length"),
+        ):
+            raise ContextFileError(f"{path} is inconsistent: its header does not match its arrays")
+        return loaded
+
+
+def make_splits(
+    n_train: int = 100,
+    n_test: int = 100,
+    n_neurons: int = 8,
+    episode_length: int = 60,
+    seed: int = 0,
+    params: NeuronParams | None = None,
+    extensions: Extensions | Mapping[str, Any] | None = None,
+) -> tuple[ContextSet, ContextSet]:
+    """A training and a test set with no topology shared within or across them.
+
+    The test set is drawn first and the training set continues the same stream, so
+    for one seed the test set does not depend on ``n_train`` and smaller training
+    sets are prefixes of larger ones (the paper's Figure 5 compares sizes on one
+    test set). Context-level ``extensions`` are drawn with each context.
+    """
+    _check_size(n_train, "n_train")
+    _check_size(n_test, "n_test")
+    extensions = Extensions.coerce(extensions).context_part()
+    contexts = _generate_unique(
+        n_test + n_train, n_neurons, episode_length, seed, params, extensions
+    )
+    test = ContextSet(contexts[:n_test], params, seed, extensions)
+    train = ContextSet(contexts[n_test:], params, seed, extensions)
+    return train, test
+
+
+def _generate_unique(
+    size: int,
+    n_neurons: int,
+    episode_length: int,
+    seed: int,
+    params: NeuronParams | None,
+    extensions: Extensions | None = None,
+) -> list[Context]:
+    _check_n_neurons(n_neurons)
+    _check_episode_length(episode_length)
+    rng = np.random.default_rng(seed)
+    contexts: list[Context] = []
+    seen: set[bytes] = set()
+    rejected_in_a_row = 0
+    while len(contexts) < size:
+        context = generate_context(rng, n_neurons, episode_length, params, extensions)
+        key = context.weights.tobytes()
+        if key in seen:
+            rejected_in_a_row += 1
+            if rejected_in_a_row > MAX_TOPOLOGY_ATTEMPTS:
+                raise RuntimeError(
+                    f"could not find {size} distinct topologies of {n_neurons} neurons"
+                )
+            continue
+        rejected_in_a_row = 0
+        seen.add(key)
+        contexts.append(context)
+    return contexts
+
+
+def _shape(context: Context) -> tuple[int, int, int, bool]:
+    return (
+        context.n_neurons,
+        context.episode_length,
+        context.n_observed,
+        context.heterogeneity is not None,
+    )

@@ -1,0 +1,283 @@
+"""What the single and the vector environment share (SPEC 3).
+
+Resolving the ``contexts`` / ``extensions`` arguments to a :class:`ContextSet` and the
+effective :class:`~spikectl.extensions.Extensions`, the per-context lookup tables
+(:class:`ContextTables`), the reward formula (:func:`step_rewards`), the spaces and the
+action checks. Everything here is importable from ``spikectl.env`` as well.
+"""
+
+from __future__ import annotations
+
+import functools
+import operator
+import os
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, replace
+from typing import Any
+
+import numpy as np
+from gymnasium import spaces
+
+from spikectl.contexts import Context, ContextSet, make_splits
+from spikectl.extensions import CONTEXT_FIELDS, Extensions
+from spikectl.params import NeuronParams
+from spikectl.simulator import DO_NOTHING, neuron_parameters
+
+MAX_REWARD = 0.5
+"""R_max: the return of an episode's correct spikes, and separately of its correct silences."""
+DEFAULT_N_NEURONS = 8
+DEFAULT_EPISODE_LENGTH = 60
+SPLITS = ("train", "test")
+RENDER_MODES = ["ansi", "rgb_array"]
+RENDER_FPS = 10
+"""Frames per second of recorded videos: a 60 ms episode plays for 6 s."""
+
+
+def step_rewards(patterns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Reward of each step [..., N] if the target spikes, and if it stays silent.
+
+    With m spikes in a pattern of N steps: R_max / m for a wanted spike,
+    R_max / (N - m) for a wanted silence, 0 otherwise (SPEC 3).
+    """
+    wanted = np.asarray(patterns).astype(bool)
+    episode_length = wanted.shape[-1]
+    m = wanted.sum(axis=-1, keepdims=True)
+    if np.any(m == 0) or np.any(m == episode_length):
+        raise ValueError("a pattern needs at least one spike and one silent step")
+    reward_if_spike = np.where(wanted, MAX_REWARD / m, 0.0)
+    reward_if_silent = np.where(wanted, 0.0, MAX_REWARD / (episode_length - m))
+    return reward_if_spike, reward_if_silent
+
+
+@dataclass(frozen=True, eq=False)
+class ContextTables:
+    """What the environments read about contexts, stacked over S contexts.
+
+    With hidden neurons the agent sees k < n neurons: ``observable`` maps its indices
+    (observations and actions) to neuron indices; ``targets`` are neuron indices,
+    ``observed_targets`` the agent's.
+    """
+
+    weights: np.ndarray
+    """[S, n, n] float64 signed connectivity (times the synaptic scales of
+    heterogeneous neurons), as the simulator takes it."""
+    targets: np.ndarray
+    """[S] int64 neuron index of the target."""
+    patterns: np.ndarray
+    """[S, N] int8, as observed."""
+    reward_if_spike: np.ndarray
+    """[S, N] float64."""
+    reward_if_silent: np.ndarray
+    """[S, N] float64."""
+    legal: np.ndarray
+    """[S, k + 1] bool action masks, index a + 1 for action a."""
+    observed_targets: np.ndarray | None = None
+    """[S] int64 index of the target among the observable neurons."""
+    observable: np.ndarray | None = None
+    """[S, k] int64 neuron index of each observed neuron; None: all n, in order."""
+    neurons: np.ndarray | None = None
+    """[S, 2, n] per-neuron kernel parameters (``neuron_parameters``) of heterogeneous
+    neurons; None: the identical neurons of the parameters."""
+
+    @classmethod
+    def build(
+        cls,
+        contexts: Sequence[Context],
+        allow_target_action: bool,
+        params: NeuronParams | None = None,
+    ) -> ContextTables:
+        params = NeuronParams() if params is None else params
+        targets = np.array([c.target for c in contexts], dtype=np.int64)
+        observed_targets = np.array([c.observed_target for c in contexts], dtype=np.int64)
+        patterns = np.stack([c.pattern for c in contexts]).astype(np.int8)
+        k = contexts[0].n_observed
+        legal = np.ones((len(contexts), k + 1), dtype=bool)
+        if not allow_target_action:
+            legal[np.arange(len(contexts)), observed_targets + 1] = False
+        weights = np.ascontiguousarray(np.stack([c.weights for c in contexts]), dtype=np.float64)
+        observable = neurons = None
+        if contexts[0].hidden is not None:
+            observable = np.stack([c.observable for c in contexts]).astype(np.int64)
+        if contexts[0].heterogeneity is not None:
+            weights *= np.stack([c.heterogeneity.synaptic_scale for c in contexts])
+            neurons = neuron_parameters(
+                params,
+                np.stack([c.heterogeneity.thresholds_mV for c in contexts]),
+                np.stack([c.heterogeneity.time_constants_ms for c in contexts]),
+            )
+        return cls(
+            weights,
+            targets,
+            patterns,
+            *step_rewards(patterns),
+            legal,
+            observed_targets,
+            observable,
+            neurons,
+        )
+
+
+@functools.lru_cache(maxsize=16)
+def _cached_splits(
+    n_train: int,
+    n_test: int,
+    n_neurons: int,
+    episode_length: int,
+    seed: int,
+    params: NeuronParams,
+    extensions: Extensions,
+) -> tuple[ContextSet, ContextSet]:
+    # Every environment of a SyncVectorEnv asks for the same sets; context sets are immutable.
+    return make_splits(n_train, n_test, n_neurons, episode_length, seed, params, extensions)
+
+
+def resolve_contexts(
+    contexts: ContextSet | str | os.PathLike | None,
+    split: str,
+    n_train: int,
+    n_test: int,
+    context_seed: int,
+    n_neurons: int | None,
+    episode_length: int | None,
+    params: NeuronParams | None,
+    extensions: Extensions | None = None,
+) -> tuple[ContextSet, NeuronParams]:
+    """The environment's context set and model parameters, from its constructor arguments.
+
+    Generated sets are drawn with the context-level part of ``extensions``.
+    """
+    extensions = Extensions() if extensions is None else extensions
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
+    if params is not None and not isinstance(params, NeuronParams):
+        raise TypeError(f"params must be a NeuronParams or None, got {type(params).__name__}")
+    if contexts is None:
+        for name, value in (("n_train", n_train), ("n_test", n_test)):
+            if not is_int(value) or value < 1:
+                raise ValueError(f"{name} must be a positive integer, got {value!r}")
+        if not is_int(context_seed) or context_seed < 0:
+            raise ValueError(f"context_seed must be a non-negative integer, got {context_seed!r}")
+        n = DEFAULT_N_NEURONS if n_neurons is None else n_neurons
+        length = DEFAULT_EPISODE_LENGTH if episode_length is None else episode_length
+        if not is_int(n) or n < 2:
+            raise ValueError(f"n_neurons must be an integer >= 2, got {n!r}")
+        if not is_int(length) or length < 2:
+            raise ValueError(f"episode_length must be an integer >= 2, got {length!r}")
+        splits = _cached_splits(
+            int(n_train), int(n_test), int(n), int(length), int(context_seed),
+            NeuronParams() if params is None else params, extensions.context_part(),
+        )  # fmt: skip
+        context_set = splits[SPLITS.index(split)]
+    elif isinstance(contexts, ContextSet):
+        context_set = contexts
+    elif isinstance(contexts, (str, os.PathLike)):
+        context_set = ContextSet.load(contexts)
+    else:
+        raise TypeError(
+            f"contexts must be a ContextSet, a path to a saved one, or None; "
+            f"got {type(contexts).__name__}"
+        )
+    for name, given, actual in (
+        ("n_neurons", n_neurons, context_set.n_neurons),
+        ("episode_length", episode_length, context_set.episode_length),
+    ):
+        if given is not None and given != actual:
+            raise ValueError(f"{name}={given!r} conflicts with the context set's {name} {actual}")
+    return context_set, context_set.params if params is None else params
+
+
+def resolve_extensions(
+    extensions: Extensions | Mapping[str, Any] | None,
+    allow_target_action: bool,
+    context_set: ContextSet,
+) -> Extensions:
+    """The environment's effective extensions: its own environment-level fields, the
+    context set's context-level fields, and ``allow_target_action`` from either place."""
+    if not isinstance(allow_target_action, (bool, np.bool_)):
+        raise TypeError(f"allow_target_action must be a bool, got {allow_target_action!r}")
+    extensions = Extensions.coerce(extensions)
+    own = extensions.context_part()
+    if own != Extensions() and own != context_set.extensions:
+        raise ValueError(
+            f"context-level extensions {own.to_dict(only_changed=True)} differ from those of "
+            f"the context set ({context_set.extensions.to_dict(only_changed=True)}): hidden and "
+            "heterogeneous neurons belong to the contexts; generate the set with them "
+            "(ContextSet.generate(..., extensions=...)) or leave them out here"
+        )
+    return replace(
+        extensions,
+        allow_target_action=bool(allow_target_action) or extensions.allow_target_action,
+        **{name: getattr(context_set.extensions, name) for name in CONTEXT_FIELDS},
+    )
+
+
+def check_context(context: Context, n_neurons: int, episode_length: int, n_observed=None) -> None:
+    """Raise unless ``context`` is a Context of this environment's size and episode length
+    (and number of observable neurons, when given)."""
+    if not isinstance(context, Context):
+        raise TypeError(f"expected a Context, got {type(context).__name__}")
+    if (context.n_neurons, context.episode_length) != (n_neurons, episode_length):
+        raise ValueError(
+            f"the context has {context.n_neurons} neurons and episode length "
+            f"{context.episode_length}; this environment has {n_neurons} and {episode_length}"
+        )
+    if n_observed is not None and context.n_observed != n_observed:
+        raise ValueError(
+            f"the context has {context.n_observed} observable neurons; this environment "
+            f"observes {n_observed}"
+        )
+
+
+def check_context_index(index: Any, size: int) -> int:
+    """``index`` as an int, or a ValueError unless it indexes a set of ``size`` contexts."""
+    if not is_int(index) or not 0 <= index < size:
+        raise ValueError(f"context index must be an integer in 0..{size - 1}, got {index!r}")
+    return int(index)
+
+
+def as_action(action: Any) -> int:
+    """An action as a Python int: ints, NumPy integer scalars and 0-d integer arrays."""
+    if isinstance(action, (bool, np.bool_)):
+        raise ValueError(f"action must be an integer, got the boolean {action!r}")
+    try:
+        return operator.index(action)
+    except TypeError:
+        raise ValueError(f"action must be an integer, got {action!r}") from None
+
+
+def observation_space(n_neurons: int, episode_length: int) -> spaces.Dict:
+    """The observation space of one environment (SPEC 3); the connectivity is not in it."""
+    return spaces.Dict(
+        {
+            "voltage": spaces.Box(-np.inf, np.inf, (n_neurons,), np.float32),
+            "target": spaces.Discrete(n_neurons),
+            "pattern": spaces.MultiBinary(episode_length),
+            "step": spaces.Discrete(episode_length + 1),
+            "last_action": spaces.Discrete(n_neurons + 1, start=DO_NOTHING),
+        }
+    )
+
+
+def is_int(value: Any) -> bool:
+    """True for Python and NumPy integers, False for booleans (which Python calls ints)."""
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+class LegalActionSpace(spaces.Discrete):
+    """``Discrete(n + 1, start=-1)`` whose unmasked ``sample()`` draws only legal actions.
+
+    ``contains`` is the whole range -1..n-1; ``legal_mask`` (int8 [n + 1], set by the
+    environment at every reset) restricts what ``sample()`` draws when no mask is given,
+    so that random agents and Gymnasium's ``check_env`` never pick the target neuron.
+    """
+
+    def __init__(self, n_neurons: int, seed: int | None = None) -> None:
+        super().__init__(n_neurons + 1, seed=seed, start=DO_NOTHING)
+        self.legal_mask = np.ones(n_neurons + 1, dtype=np.int8)
+
+    def sample(
+        self, mask: np.ndarray | None = None, probability: np.ndarray | None = None
+    ) -> np.int64:
+        if mask is None and probability is None:
+            mask = self.legal_mask
+        return super().sample(mask=mask, probability=probability)

@@ -1,0 +1,347 @@
+"""Extensions of the paper's environment (SPEC 6; paper Section 5.1 and the Discussion).
+
+The paper's environment leaves out "non-observable neurons, neurons with different
+dynamics, background noise, photobleaching effects, and stochastic activity
+propagation" and excludes the target from the actions. :class:`Extensions` switches
+each of them on; every field's default is off, and with all defaults the environment
+is exactly the paper's, bit for bit.
+
+Two kinds of field:
+
+- **context level** (hidden neurons, heterogeneous neurons): drawn once per context by
+  :meth:`spikectl.ContextSet.generate` / :func:`spikectl.make_splits` and saved with
+  the set (:class:`Heterogeneity` and ``Context.hidden``);
+- **environment level** (measurement noise, photobleaching, stochastic release,
+  background activity, the target as an action): applied by the environments, drawn
+  from their own seeded generators, and saved in their Gymnasium spec.
+
+This module holds the settings, the per-context data and the pure functions that draw
+and apply them; ``docs/extensions.md`` is the reference table.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from dataclasses import asdict, dataclass, fields, replace
+from typing import Any, ClassVar
+
+import numpy as np
+
+from spikectl.params import NeuronParams
+
+CONTEXT_FIELDS = (
+    "hidden_neurons",
+    "hidden_fraction",
+    "threshold_spread",
+    "time_constant_spread",
+    "synaptic_spread",
+)
+"""Fields drawn with the contexts and saved in the context set."""
+
+
+@dataclass(frozen=True)
+class Extensions:
+    """Frozen, validated switches for the extensions; the defaults are the paper's model."""
+
+    hidden_neurons: int = 0
+    """Context level: neurons per network that are simulated but neither observed nor
+    stimulable (never the target). Exclusive with ``hidden_fraction``."""
+    hidden_fraction: float = 0.0
+    """Context level: the same as a fraction of n, rounded to the nearest count (halves up)."""
+    threshold_spread: float = 0.0
+    """Context level: each neuron's threshold distance V_th - V_r is the default times a
+    factor drawn uniformly from [1 - s, 1 + s]."""
+    time_constant_spread: float = 0.0
+    """Context level: each neuron's membrane time constant R C, likewise."""
+    synaptic_spread: float = 0.0
+    """Context level: each synapse's strength w_in, likewise (sign kept)."""
+    observation_noise_mV: float = 0.0
+    """Environment level: sigma of Gaussian measurement noise on observed potentials."""
+    bleaching_time_constant_steps: float | None = None
+    """Environment level: the observed amplitude V - V_r decays as exp(-step / tau);
+    None is no photobleaching."""
+    stochastic_release: bool = False
+    """Environment level: a spike releases with probability p_r (1 - exp(-(t - t_r) /
+    tau_R)) instead of when that expression is >= 0.5 (one draw per neuron)."""
+    background_rate: float = 0.0
+    """Environment level: expected spontaneous inputs per neuron per step (Poisson)."""
+    background_current_pA: float = 600.0
+    """Environment level: current of one spontaneous input for one step (600 pA: +20 mV,
+    like one excitatory synapse; negative is inhibitory)."""
+    allow_target_action: bool = False
+    """Environment level: stimulating the target neuron is a legal action."""
+
+    CONTEXT_FIELDS: ClassVar[tuple[str, ...]] = CONTEXT_FIELDS
+
+    def __post_init__(self) -> None:
+        for name in ("stochastic_release", "allow_target_action"):
+            if not isinstance(getattr(self, name), (bool, np.bool_)):
+                raise TypeError(f"Extensions.{name} must be a bool, got {getattr(self, name)!r}")
+            object.__setattr__(self, name, bool(getattr(self, name)))
+        hidden = self.hidden_neurons
+        if isinstance(hidden, (bool, np.bool_)) or not isinstance(hidden, (int, np.integer)):
+            raise TypeError(f"Extensions.hidden_neurons must be an integer, got {hidden!r}")
+        if hidden < 0:
+            raise ValueError(f"Extensions.hidden_neurons must be >= 0, got {hidden}")
+        object.__setattr__(self, "hidden_neurons", int(hidden))
+        for field in fields(self):
+            value = getattr(self, field.name)
+            if field.name in ("stochastic_release", "allow_target_action", "hidden_neurons"):
+                continue
+            if value is None and field.name == "bleaching_time_constant_steps":
+                continue
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float)):
+                raise TypeError(f"Extensions.{field.name} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ValueError(f"Extensions.{field.name} must be finite, got {value!r}")
+            object.__setattr__(self, field.name, float(value))
+        for name in ("hidden_fraction", "threshold_spread", "time_constant_spread",
+                     "synaptic_spread"):  # fmt: skip
+            if not 0.0 <= getattr(self, name) < 1.0:
+                raise ValueError(f"Extensions.{name} must lie in [0, 1), got {getattr(self, name)}")
+        if self.hidden_neurons and self.hidden_fraction:
+            raise ValueError("give hidden_neurons or hidden_fraction, not both")
+        for name in ("observation_noise_mV", "background_rate"):
+            if getattr(self, name) < 0:
+                raise ValueError(f"Extensions.{name} must be >= 0, got {getattr(self, name)}")
+        bleaching = self.bleaching_time_constant_steps
+        if bleaching is not None and bleaching <= 0:
+            raise ValueError(
+                f"Extensions.bleaching_time_constant_steps must be > 0 or None, got {bleaching}"
+            )
+
+    # -- which parts are on
+
+    @property
+    def heterogeneous(self) -> bool:
+        """True when neurons differ (any spread > 0)."""
+        return bool(self.threshold_spread or self.time_constant_spread or self.synaptic_spread)
+
+    @property
+    def random_dynamics(self) -> bool:
+        """True when the dynamics draw random numbers (stochastic release, background)."""
+        return self.stochastic_release or self.background_rate > 0
+
+    @property
+    def transforms_observation(self) -> bool:
+        """True when what is observed differs from the potentials (noise, bleaching)."""
+        return self.observation_noise_mV > 0 or self.bleaching_time_constant_steps is not None
+
+    def hidden_count(self, n_neurons: int) -> int:
+        """Number of hidden neurons in a network of ``n_neurons``."""
+        count = self.hidden_neurons or math.floor(self.hidden_fraction * n_neurons + 0.5)
+        if count > n_neurons - 2:
+            raise ValueError(
+                f"{count} hidden neurons of {n_neurons} leave fewer than 2 observable ones "
+                "(the target and one neuron to stimulate)"
+            )
+        return count
+
+    def context_part(self) -> Extensions:
+        """Only the context-level fields (the rest at their defaults)."""
+        return Extensions(**{name: getattr(self, name) for name in CONTEXT_FIELDS})
+
+    def environment_part(self) -> Extensions:
+        """Only the environment-level fields (the rest at their defaults)."""
+        default = Extensions()
+        return replace(self, **{name: getattr(default, name) for name in CONTEXT_FIELDS})
+
+    def to_dict(self, *, only_changed: bool = False) -> dict[str, Any]:
+        """Plain (JSON-ready) dict of the fields; ``only_changed`` drops defaults."""
+        values = asdict(self)
+        if only_changed:
+            default = asdict(Extensions())
+            values = {key: value for key, value in values.items() if value != default[key]}
+        return values
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> Extensions:
+        """Inverse of :meth:`to_dict`; unknown keys are an error, not silently dropped."""
+        known = {field.name for field in fields(cls)}
+        unknown = sorted(set(values) - known)
+        if unknown:
+            raise ValueError(
+                f"unknown Extensions field(s): {', '.join(unknown)}; "
+                f"known: {', '.join(sorted(known))}"
+            )
+        return cls(**values)
+
+    @classmethod
+    def coerce(cls, value: Extensions | Mapping[str, Any] | None) -> Extensions:
+        """An ``Extensions`` from itself, a dict of fields (e.g. from a JSON spec) or None."""
+        if value is None:
+            return cls()
+        if isinstance(value, Extensions):
+            return value
+        if isinstance(value, Mapping):
+            return cls.from_dict(value)
+        raise TypeError(f"extensions must be an Extensions, a dict or None, got {value!r}")
+
+
+@dataclass(frozen=True, eq=False)
+class Heterogeneity:
+    """Per-neuron and per-synapse parameters of one network (heterogeneous neurons)."""
+
+    thresholds_mV: np.ndarray
+    """[n] float64 spike threshold V_th of each neuron."""
+    time_constants_ms: np.ndarray
+    """[n] float64 membrane time constant R C of each neuron."""
+    synaptic_scale: np.ndarray
+    """[n, n] float64 factor on w_in of each synapse i -> j (1 where there is none)."""
+
+    def __post_init__(self) -> None:
+        thresholds = np.array(self.thresholds_mV, dtype=np.float64)
+        time_constants = np.array(self.time_constants_ms, dtype=np.float64)
+        scale = np.array(self.synaptic_scale, dtype=np.float64)
+        n = thresholds.shape[0] if thresholds.ndim == 1 else -1
+        if thresholds.ndim != 1 or time_constants.shape != (n,) or scale.shape != (n, n):
+            raise ValueError(
+                "heterogeneity needs thresholds_mV [n], time_constants_ms [n] and "
+                f"synaptic_scale [n, n]; got {thresholds.shape}, {time_constants.shape}, "
+                f"{scale.shape}"
+            )
+        for name, array in (("thresholds_mV", thresholds), ("time_constants_ms", time_constants),
+                            ("synaptic_scale", scale)):  # fmt: skip
+            if not np.isfinite(array).all():
+                raise ValueError(f"heterogeneity {name} must be finite")
+            array.flags.writeable = False
+            object.__setattr__(self, name, array)
+        if (time_constants <= 0).any() or (scale < 0).any():
+            raise ValueError("heterogeneity time constants must be > 0 and synaptic scales >= 0")
+
+    @property
+    def n_neurons(self) -> int:
+        return self.thresholds_mV.shape[0]
+
+    def simulate_kwargs(self) -> dict[str, np.ndarray]:
+        """The keyword arguments of :func:`spikectl.simulate` for these neurons."""
+        return {
+            "thresholds_mV": self.thresholds_mV,
+            "membrane_time_constants_ms": self.time_constants_ms,
+            "synaptic_scale": self.synaptic_scale,
+        }
+
+    def __eq__(self, other: object) -> bool:
+        if not isinstance(other, Heterogeneity):
+            return NotImplemented
+        return all(
+            np.array_equal(getattr(self, name), getattr(other, name))
+            for name in ("thresholds_mV", "time_constants_ms", "synaptic_scale")
+        )
+
+    __hash__ = None
+
+
+def draw_hidden(
+    rng: np.random.Generator, n_neurons: int, target: int, count: int
+) -> np.ndarray | None:
+    """``count`` hidden neurons drawn uniformly among the non-targets, sorted; None for 0."""
+    if count == 0:
+        return None
+    candidates = np.delete(np.arange(n_neurons), target)
+    return np.sort(rng.choice(candidates, size=count, replace=False)).astype(np.int64)
+
+
+def draw_heterogeneity(
+    rng: np.random.Generator,
+    weights: np.ndarray,
+    params: NeuronParams,
+    extensions: Extensions,
+) -> Heterogeneity | None:
+    """Per-neuron thresholds and time constants and per-synapse strengths; None if off.
+
+    Each is the default times 1 + s (2u - 1), u uniform in [0, 1): uniform on
+    [1 - s, 1 + s] around the default. The threshold factor applies to the distance
+    V_th - V_r. All three are drawn whenever any spread is on (a spread of 0 gives
+    exactly the default), so their draws do not depend on which are on.
+    """
+    if not extensions.heterogeneous:
+        return None
+    n = weights.shape[0]
+
+    def factors(spread: float, shape: tuple[int, ...]) -> np.ndarray:
+        return 1.0 + spread * (2.0 * rng.random(shape) - 1.0)
+
+    distance = params.v_threshold_mV - params.v_rest_mV
+    thresholds = params.v_rest_mV + distance * factors(extensions.threshold_spread, (n,))
+    time_constants = params.membrane_time_constant_ms * factors(
+        extensions.time_constant_spread, (n,)
+    )
+    if time_constants.min() < params.dt_ms:
+        raise ValueError(
+            f"time_constant_spread {extensions.time_constant_spread} gives a membrane time "
+            f"constant below dt ({params.dt_ms} ms): the Euler step would overshoot rest"
+        )
+    scale = factors(extensions.synaptic_spread, (n, n))
+    scale[np.asarray(weights) == 0] = 1.0
+    return Heterogeneity(thresholds, time_constants, scale)
+
+
+class EnvironmentEffects:
+    """The environment-level extensions at run time: what an environment draws and observes.
+
+    Every random number comes from the generator passed in (the environment's
+    ``np_random``), in a fixed order per step: release uniforms [n], then background
+    input counts [n], then (after the step is simulated) measurement noise [k].
+    """
+
+    def __init__(self, extensions: Extensions, params: NeuronParams, episode_length: int):
+        self.extensions = extensions
+        self.v_rest_mV = params.v_rest_mV
+        self.noise_mV = extensions.observation_noise_mV
+        self.stochastic_release = extensions.stochastic_release
+        self.background_rate = extensions.background_rate
+        self.background_step_mV = (
+            params.dt_ms * extensions.background_current_pA / params.capacitance_pF
+        )
+        tau = extensions.bleaching_time_constant_steps
+        self.bleaching = (
+            None if tau is None else np.exp(-np.arange(episode_length + 1, dtype=np.float64) / tau)
+        )
+        self.plain = not extensions.transforms_observation
+        self.random_dynamics = extensions.random_dynamics
+
+    def draw_inputs(
+        self,
+        rng: np.random.Generator,
+        release_uniforms: np.ndarray | None,
+        input_mV: np.ndarray | None,
+    ) -> None:
+        """Fill one network's release uniforms [n] and background input [n] for one step.
+
+        Each is None when its extension is off (and then nothing is drawn for it).
+        """
+        if release_uniforms is not None:
+            release_uniforms[:] = rng.random(release_uniforms.shape[-1])
+        if input_mV is not None:
+            counts = rng.poisson(self.background_rate, input_mV.shape[-1])
+            input_mV[:] = counts * self.background_step_mV
+
+    def input_buffers(self, batch: int, n_neurons: int) -> tuple[np.ndarray | None, ...]:
+        """Zeroed kernel inputs [batch, 1, n] for one step: (release uniforms, input_mV);
+        None for an extension that is off."""
+        release = np.zeros((batch, 1, n_neurons)) if self.stochastic_release else None
+        background = np.zeros((batch, 1, n_neurons)) if self.background_rate > 0 else None
+        return release, background
+
+    def observe(self, voltage: np.ndarray, steps: np.ndarray | int, noise: np.ndarray | None):
+        """Observed potentials (float32) from true ones [..., k] at observation ``steps``.
+
+        Photobleaching scales V - V_r by exp(-step / tau) (``steps`` is the
+        observation's ``step`` index: 0 after reset, t + 1 after step t); then
+        ``noise`` (standard normal, same shape) times sigma is added.
+        """
+        observed = np.asarray(voltage, dtype=np.float64)
+        if self.bleaching is not None:
+            factor = self.bleaching[steps]
+            if np.ndim(factor):
+                factor = factor[:, None]
+            observed = self.v_rest_mV + (observed - self.v_rest_mV) * factor
+        if noise is not None:
+            observed = observed + self.noise_mV * noise
+        return observed.astype(np.float32)
+
+    def draw_noise(self, rng: np.random.Generator, k: int) -> np.ndarray | None:
+        """Standard normal noise [k] for one observation, or None without noise."""
+        return rng.standard_normal(k) if self.noise_mV > 0 else None

@@ -1,0 +1,168 @@
+"""The one implementation of the step (SPEC 1): a Numba kernel over a batch of networks.
+
+``_advance_kernel`` moves a batch of independent networks forward by any number of
+1 ms steps and writes what an observer sees; it is compiled twice from the same source
+(serially and with threads over the batch). The extensions (heterogeneous neurons,
+stochastic release, extra input) are optional arguments of the same kernel: None
+prunes their branches at compile time, so the paper's model does the paper's
+arithmetic and nothing more. ``spikectl.simulator`` is the interface (``advance``, ``simulate``);
+with ``NUMBA_DISABLE_JIT=1`` the same code runs as plain Python.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+
+from spikectl.params import NeuronParams
+
+# Batches at least this large are split over threads; below it the thread start-up
+# costs more than it saves (measured in benchmarks/bench_simulator.py).
+PARALLEL_MIN_BATCH = 256
+
+# steps_since_release saturates here, far beyond any release interval but below
+# NEVER_RELEASES, so "no release yet" (t_r = -inf) stays ready to release.
+_SINCE_RELEASE_CAP = 2**30
+
+
+def _advance_kernel(
+    weights,  # [W, n, n] int8, or float64 with scaled synapses; W == 1 (shared) or W == B
+    actions,  # [B, T] int64, -1 = do nothing
+    voltage,  # [B, n] float64, state, updated in place
+    refractory_left,  # [B, n] int32, state
+    steps_since_release,  # [B, n] int32, state
+    released,  # [B, n] bool, state: released at the previous step
+    constants,  # [9] float64, see kernel_constants
+    out_voltage,  # [B, T, n] float64
+    out_spikes,  # [B, T, n] bool
+    # The extensions, each None in the paper's model. Numba compiles one
+    # specialisation per combination of present inputs and prunes the branches of the
+    # absent ones, so the paper's path does the paper's arithmetic and nothing more.
+    neurons,  # [P, 2, n] per-neuron (v_spike, leak_per_step), P == 1 (shared) or P == B
+    release_uniforms,  # [B, T, n] uniforms in [0, 1): stochastic release
+    input_mV,  # [B, T, n] extra input (background activity) in mV
+):
+    v_rest = constants[0]
+    v_spike = constants[1]  # threshold minus tolerance
+    leak_per_step = constants[2]  # dt / (R C)
+    stimulus_step_mV = constants[3]  # dt * w_e / C
+    synaptic_step_mV = constants[4]  # dt * w_in / C
+    refractory_steps = int(constants[5])
+    min_release_interval = int(constants[6])
+    release_scale = constants[7]  # p_r
+    recovery_per_step = constants[8]  # dt / tau_R
+    batch, horizon = actions.shape
+    n = voltage.shape[1]
+    shared_weights = weights.shape[0] == 1
+    for b in numba.prange(batch):
+        w = weights[0] if shared_weights else weights[b]
+        # Thread-private copies of this network's state: rows of neighbouring networks
+        # share cache lines, and writing them from two threads halves the throughput.
+        v_b = voltage[b].copy()
+        refractory_b = refractory_left[b].copy()
+        since_b = steps_since_release[b].copy()
+        released_b = released[b].copy()
+        synaptic_input = np.empty(n)
+        if neurons is not None:
+            if neurons.shape[0] == 1:
+                threshold_b = neurons[0, 0].copy()
+                leak_b = neurons[0, 1].copy()
+            else:
+                threshold_b = neurons[b, 0].copy()
+                leak_b = neurons[b, 1].copy()
+        if release_uniforms is not None:
+            may_release = np.empty(n, dtype=np.bool_)
+        for t in range(horizon):
+            synaptic_input[:] = 0.0
+            for i in range(n):
+                if released_b[i]:
+                    for j in range(n):
+                        synaptic_input[j] += w[i, j]
+            if release_uniforms is not None:
+                # A spike at t releases with probability p_r * (1 - exp(-(t - t_r) / tau_R))
+                # (t_r = -inf: p_r), decided before the loop below so that it stays free
+                # of calls.
+                for j in range(n):
+                    since = min(since_b[j] + 1, _SINCE_RELEASE_CAP)
+                    probability = release_scale * (1.0 - np.exp(-since * recovery_per_step))
+                    may_release[j] = release_uniforms[b, t, j] < probability
+            action = actions[b, t]
+            for j in range(n):
+                since = since_b[j]
+                if since < _SINCE_RELEASE_CAP:
+                    since += 1
+                spiked = False
+                if refractory_b[j] > 0:
+                    refractory_b[j] -= 1
+                    v = v_rest
+                else:
+                    v = v_b[j]
+                    drive = synaptic_step_mV * synaptic_input[j]
+                    if action == j:
+                        drive += stimulus_step_mV
+                    if input_mV is not None:
+                        drive += input_mV[b, t, j]
+                    if neurons is None:
+                        v = v + (-(v - v_rest) * leak_per_step + drive)
+                        spiked = v >= v_spike
+                    else:
+                        v = v + (-(v - v_rest) * leak_b[j] + drive)
+                        spiked = v >= threshold_b[j]
+                out_voltage[b, t, j] = v
+                out_spikes[b, t, j] = spiked
+                release = False
+                if spiked:
+                    v = v_rest
+                    refractory_b[j] = refractory_steps
+                    if release_uniforms is None:
+                        if since >= min_release_interval:
+                            release = True
+                            since = 0
+                    elif may_release[j]:
+                        release = True
+                        since = 0
+                v_b[j] = v
+                since_b[j] = since
+                released_b[j] = release
+        voltage[b] = v_b
+        refractory_left[b] = refractory_b
+        steps_since_release[b] = since_b
+        released[b] = released_b
+
+
+# One kernel, compiled twice: serially for small batches (the single environment)
+# and with threads over the batch for large ones. Both give identical results.
+# The parallel build is not cached: loaded from Numba's cache it ran at half speed
+# (numba 0.68, measured with benchmarks/bench_simulator.py).
+_advance_serial = numba.njit(cache=True, nogil=True)(_advance_kernel)
+_advance_parallel = numba.njit(nogil=True, parallel=True)(_advance_kernel)
+
+
+# The constants of the kernel, per NeuronParams object: computing them costs more than
+# a whole single-network step, so they are kept (with a reference to their params, so
+# that an id is never reused while its entry exists).
+_CONSTANTS: dict[int, tuple[NeuronParams, np.ndarray]] = {}
+
+
+def kernel_constants(params: NeuronParams) -> np.ndarray:
+    """The kernel's ``constants`` [9] for ``params`` (computed once per params object)."""
+    entry = _CONSTANTS.get(id(params))
+    if entry is None or entry[0] is not params:
+        constants = np.array(
+            [
+                params.v_rest_mV,
+                params.v_threshold_mV - params.threshold_tolerance_mV,
+                params.dt_ms / params.membrane_time_constant_ms,
+                params.dt_ms * params.stimulus_current_pA / params.capacitance_pF,
+                params.dt_ms * params.synaptic_current_pA / params.capacitance_pF,
+                params.refractory_steps,
+                params.min_release_interval_steps,
+                params.release_scale,
+                params.dt_ms / params.vesicle_recovery_ms,
+            ],
+            dtype=np.float64,
+        )
+        if len(_CONSTANTS) >= 1024:
+            _CONSTANTS.clear()
+        entry = _CONSTANTS[id(params)] = (params, constants)
+    return entry[1]
