@@ -62,10 +62,12 @@ def make_random_policy(seed: int) -> Policy:
 
 
 def make_witness_policy(contexts: ContextSet) -> Policy:
-    """Replay each context's witness (context i in sub-environment i): return 1.0."""
+    """Replay each context's witness (context i in sub-environment i): return 1.0 where
+    the dynamics are deterministic. Actions are in the agent's indexing (observable
+    neurons only, when some are hidden)."""
     if any(context.witness is None for context in contexts):
         raise ValueError("some contexts have no witness to replay")
-    witnesses = np.stack([context.witness for context in contexts]).astype(np.int64)  # [S, N]
+    witnesses = np.stack([context.agent_witness for context in contexts]).astype(np.int64)
 
     def witness_policy(observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
         return witnesses[np.arange(witnesses.shape[0]), observations["step"]]

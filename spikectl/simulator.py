@@ -28,6 +28,7 @@ import numpy as np
 from spikectl.kernel import (
     _SINCE_RELEASE_CAP,
     PARALLEL_MIN_BATCH,
+    PARALLEL_MIN_WORK,
     _advance_parallel,
     _advance_serial,
     kernel_constants,
@@ -37,6 +38,7 @@ from spikectl.params import NeuronParams
 __all__ = [
     "DO_NOTHING",
     "PARALLEL_MIN_BATCH",
+    "PARALLEL_MIN_WORK",
     "SimulatorState",
     "advance",
     "as_weight_batch",
@@ -141,7 +143,9 @@ def advance(
     releases iff u < p_r (1 - exp(-(t - t_r) / tau_R))); ``input_mV`` float64 [B, T, n]
     is extra input added to the drive of non-refractory neurons.
     """
-    kernel = _advance_parallel if actions.shape[0] >= PARALLEL_MIN_BATCH else _advance_serial
+    batch, steps = actions.shape
+    threaded = batch >= PARALLEL_MIN_BATCH and batch * steps * weights.shape[-1] >= PARALLEL_MIN_WORK
+    kernel = _advance_parallel if threaded else _advance_serial
     kernel(
         weights,
         actions,

@@ -26,7 +26,7 @@ from spikectl.env import NeuronControlEnv
 from spikectl.extensions import EnvironmentEffects, Extensions, Heterogeneity
 from spikectl.params import NeuronParams
 from spikectl.registration import VARIANTS
-from spikectl.simulator import PARALLEL_MIN_BATCH
+from spikectl.simulator import PARALLEL_MIN_BATCH, PARALLEL_MIN_WORK
 from spikectl.vector_env import NeuronControlVectorEnv
 
 SMALL = {"n_train": 10, "n_test": 10}
@@ -449,7 +449,7 @@ def test_vector_env_equals_sync_vector_env(extensions):
 
 
 def test_threaded_kernel_equals_serial_kernel_with_extensions():
-    batch = PARALLEL_MIN_BATCH + 4
+    batch = max(PARALLEL_MIN_BATCH, PARALLEL_MIN_WORK // (20 * 6)) + 4  # threaded
     rng = np.random.default_rng(14)
     train, _ = make_splits(batch, 1, n_neurons=6, episode_length=20, seed=1,
                            extensions=HETEROGENEOUS)  # fmt: skip

@@ -12,7 +12,13 @@ import pytest
 
 from spikectl import NeuronParams, simulate
 from spikectl.contexts import generate_topology
-from spikectl.simulator import PARALLEL_MIN_BATCH, SimulatorState, advance, as_weight_batch
+from spikectl.simulator import (
+    PARALLEL_MIN_BATCH,
+    PARALLEL_MIN_WORK,
+    SimulatorState,
+    advance,
+    as_weight_batch,
+)
 
 V_REST = -70.0
 NOTHING = -1
@@ -156,10 +162,11 @@ def test_batched_equals_one_network_at_a_time():
 
 
 def test_threaded_kernel_equals_serial_kernel():
-    batch = PARALLEL_MIN_BATCH + 44
+    batch = max(PARALLEL_MIN_BATCH, PARALLEL_MIN_WORK // (60 * 8)) + 44
+    assert batch // 2 * 60 * 8 < PARALLEL_MIN_WORK or batch // 2 < PARALLEL_MIN_BATCH
     weights, actions = random_batch(batch, 8, 60, seed=3)
     voltages, spikes = simulate(weights, actions)  # threaded
-    half = batch // 2  # below PARALLEL_MIN_BATCH: serial
+    half = batch // 2  # too little work per call: serial
     v_serial = np.concatenate(
         [simulate(weights[:half], actions[:half])[0], simulate(weights[half:], actions[half:])[0]]
     )

@@ -260,13 +260,16 @@ class _Logger:
         self.writer = SummaryWriter(str(run_dir / "tensorboard"), purge_step=state.episodes)
         self.bar = tqdm(
             total=config.total_episodes, initial=state.episodes, unit="ep",
-            disable=not config.progress, dynamic_ncols=True, desc=config.arch,
+            disable=not config.progress, dynamic_ncols=True, desc=config.arch, mininterval=1.0,
         )  # fmt: skip
         self.last = {}
 
     def progress(self, episodes: int, epsilon: float, collect_return: float) -> None:
         self.bar.update(episodes)
-        self.bar.set_postfix(eps=f"{epsilon:.2f}", collect=f"{collect_return:.3f}", **self.last)
+        # refresh=False: the bar redraws at most every mininterval, not on every round.
+        self.bar.set_postfix(
+            eps=f"{epsilon:.2f}", collect=f"{collect_return:.3f}", **self.last, refresh=False
+        )
 
     def log(self, row: dict) -> None:
         for key in ("train_return", "test_return", "loss", "epsilon"):
