@@ -144,7 +144,8 @@ def advance(
     is extra input added to the drive of non-refractory neurons.
     """
     batch, steps = actions.shape
-    threaded = batch >= PARALLEL_MIN_BATCH and batch * steps * weights.shape[-1] >= PARALLEL_MIN_WORK
+    work = batch * steps * weights.shape[-1]
+    threaded = batch >= PARALLEL_MIN_BATCH and work >= PARALLEL_MIN_WORK
     kernel = _advance_parallel if threaded else _advance_serial
     kernel(
         weights,
