@@ -23,6 +23,7 @@ import time
 
 import numba
 import numpy as np
+from bench_simulator import median_seconds  # a sibling script in benchmarks/
 
 from spikectl.contexts import ContextSet, generate_topology
 from spikectl.env import NeuronControlEnv
@@ -32,16 +33,6 @@ from spikectl.vector_env import NeuronControlVectorEnv
 
 SIZES = (8, 16, 32, 64, 128, 256)
 STEPS = 60
-
-
-def median_seconds(function, repeats: int) -> float:
-    function()  # warm-up: JIT compilation, page faults
-    times = []
-    for _ in range(repeats):
-        start = time.perf_counter()
-        function()
-        times.append(time.perf_counter() - start)
-    return float(np.median(times))
 
 
 def kernel_seconds(n: int, batch: int, repeats: int, rng: np.random.Generator) -> float:

@@ -26,7 +26,7 @@ import torch.nn.functional as F
 
 from spikectl.contexts import make_splits
 from spikectl.rollout import run_episodes
-from spikectl.training.config import PAPER
+from spikectl.training.config import PAPER, PRESETS
 from spikectl.training.dqn import (
     EpsilonGreedyPolicy,
     build_networks,
@@ -114,18 +114,21 @@ def main() -> None:
     parser.add_argument("--updates", type=int, default=30)
     parser.add_argument("--episodes", type=int, default=5, help="collection repeats")
     parser.add_argument("--threads", type=int, default=2)
+    parser.add_argument(
+        "--sizes", choices=sorted(PRESETS), default="paper", help="whose network sizes to time"
+    )
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     rng = np.random.default_rng(0)
     train_set, _ = make_splits(100, 1)
-    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, paper sizes (Table 2)")
+    print(f"torch {torch.__version__}, {torch.get_num_threads()} threads, {args.sizes} sizes")
     print(
         "| agent | trainer update (ms) | bare loop (ms) | ratio | collection, 64 envs "
         "(steps/s) | one paper run (h) |"
     )
     print("|---|---:|---:|---:|---:|---:|")
     for arch in args.archs:
-        config = dataclasses.replace(PAPER, arch=arch)
+        config = dataclasses.replace(PAPER, arch=arch, sizes=PRESETS[args.sizes].sizes)
         replay = filled_replay(config, train_set, rng)
         trainer_s, bare_s = time_updates(config, replay, args.updates, rng)
         rate = collection_rate(config, train_set, 64, args.episodes, rng)
