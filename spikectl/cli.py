@@ -205,9 +205,50 @@ def evaluate(command: EvaluateCommand) -> None:
         )
 
 
+@dataclass(frozen=True)
+class SweepCommand:
+    """Run a grid of training trials; finished trials are skipped, interrupted ones resumed."""
+
+    sweep_dir: Path = Path("runs/sweep")
+    """Where the trials' run directories and sweep.json go."""
+    preset: Literal["fig4", "fig5"] | None = None
+    """The paper's experiments: fig4 (4 architectures x 10 seeds), fig5 (TDRQN x sizes)."""
+    config: Path | None = None
+    """A JSON sweep file instead: {"base": PRESET, "overrides": {...}, "grid": {...}}."""
+    base: Literal["paper", "quick", "smoke"] | None = None
+    """Replace the sweep's base preset (e.g. quick for a laptop-sized reproduction)."""
+    seeds: tuple[int, ...] | None = None
+    """Replace the grid's seeds."""
+    total_env_steps: int | None = None
+    """Override the environment steps of every trial."""
+    workers: int = 0
+    """Trials run at once; 0 means one per CPU core."""
+
+
+def sweep(command: SweepCommand) -> None:
+    """Run the sweep and print each trial's final train and test return."""
+    from spikectl.experiments.sweep import PAPER_SWEEPS, Sweep, load_sweep_file, run_sweep
+
+    if (command.preset is None) == (command.config is None):
+        raise ValueError("give exactly one of --preset (fig4, fig5) or --config FILE")
+    if command.config is not None:
+        description = load_sweep_file(command.config).to_dict()
+    else:
+        description = dict(PAPER_SWEEPS[command.preset])
+    description = {**description, "grid": dict(description["grid"])}
+    if command.base is not None:
+        description["base"] = command.base
+    if command.seeds is not None:
+        description["grid"]["seed"] = list(command.seeds)
+    if command.total_env_steps is not None:
+        description["overrides"] = {"total_env_steps": command.total_env_steps}
+    run_sweep(Sweep.from_dict(description), command.sweep_dir, command.workers or None)
+
+
 COMMANDS = {
     "train": (train, TrainCommand),
     "evaluate": (evaluate, EvaluateCommand),
+    "sweep": (sweep, SweepCommand),
     "demo": (demo, DemoConfig),
     "contexts": (contexts, ContextsConfig),
 }

@@ -1,0 +1,181 @@
+"""Grids of independent, resumable training trials under one sweep directory.
+
+A sweep is a base ``TrainConfig`` and a grid: every combination of the listed values
+of some config fields (architecture, seed, training-set size, any other field) is one
+trial, trained in ``SWEEP_DIR/trials/NAME``. Running a sweep again skips finished
+trials (``model.pt`` present) and resumes interrupted ones exactly (the trainer's
+checkpoints), so a sweep can be stopped and restarted at any moment.
+
+Trials run in a local process pool (one worker per core by default); each trial uses
+one Torch thread so that workers do not fight over cores and so that a trial's result
+does not depend on how many ran beside it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import json
+import os
+import shutil
+from collections.abc import Mapping, Sequence
+from concurrent.futures import ProcessPoolExecutor, as_completed
+from dataclasses import dataclass
+from multiprocessing import get_context
+from pathlib import Path
+from typing import Any
+
+from spikectl.training.checkpoint import (
+    CHECKPOINT_FILE,
+    CONFIG_FILE,
+    MODEL_FILE,
+    atomic_write_text,
+)
+from spikectl.training.config import PRESETS, TrainConfig
+
+SWEEP_FILE = "sweep.json"
+TRIALS_DIR = "trials"
+
+PAPER_SWEEPS: dict[str, dict[str, Any]] = {
+    "fig4": {"base": "paper", "grid": {"arch": ["drqn", "ddrqn", "dmdrqn", "tdrqn"],
+                                       "seed": list(range(10))}},
+    "fig5": {"base": "paper", "grid": {"arch": ["tdrqn"], "n_train": [10, 20, 40, 100],
+                                       "seed": list(range(10))}},
+}  # fmt: skip
+"""The paper's two experiments: Figure 4 (architectures) and Figure 5 (training-set size)."""
+
+
+@dataclass(frozen=True)
+class Sweep:
+    """A base config and a grid of field values; each combination is one trial."""
+
+    base: TrainConfig
+    grid: Mapping[str, Sequence[Any]]
+
+    def __post_init__(self) -> None:
+        known = {field.name for field in dataclasses.fields(TrainConfig)}
+        unknown = sorted(set(self.grid) - known)
+        if unknown:
+            raise ValueError(f"sweep grid names unknown TrainConfig field(s): {unknown}")
+        for name, values in self.grid.items():
+            if isinstance(values, (str, bytes)) or not isinstance(values, Sequence) or not values:
+                raise ValueError(f"sweep grid field {name!r} needs a non-empty list of values")
+
+    def trials(self) -> list[tuple[str, TrainConfig]]:
+        """(name, config) of every trial, in grid order; names are unique and stable."""
+        names = list(self.grid)
+        trials = []
+        for values in itertools.product(*(self.grid[name] for name in names)):
+            changes = dict(zip(names, values, strict=True))
+            config = dataclasses.replace(self.base, progress=False, **changes)
+            label = "-".join(f"{name}={value}" for name, value in changes.items()) or "base"
+            trials.append((label, config))
+        return trials
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"base": self.base.to_dict(), "grid": {k: list(v) for k, v in self.grid.items()}}
+
+    @classmethod
+    def from_dict(cls, values: Mapping[str, Any]) -> Sweep:
+        """From a sweep file: ``base`` is a preset name or a config dict, plus optional
+        ``overrides`` (fields of the base changed for every trial) and the ``grid``."""
+        base = values.get("base", "quick")
+        if isinstance(base, str):
+            if base not in PRESETS:
+                raise ValueError(f"unknown base preset {base!r}; choose one of {sorted(PRESETS)}")
+            base_config = PRESETS[base]
+        else:
+            base_config = TrainConfig.from_dict(base)
+        overrides = dict(values.get("overrides", {}))
+        if overrides:
+            base_config = TrainConfig.from_dict({**base_config.to_dict(), **overrides})
+        unknown = sorted(set(values) - {"base", "overrides", "grid"})
+        if unknown:
+            raise ValueError(f"unknown sweep file key(s) {unknown}: use base, overrides, grid")
+        return cls(base=base_config, grid=dict(values.get("grid", {})))
+
+
+def load_sweep_file(path: str | os.PathLike) -> Sweep:
+    """Read a sweep description from a JSON file."""
+    path = Path(path)
+    try:
+        return Sweep.from_dict(json.loads(path.read_text()))
+    except FileNotFoundError:
+        raise FileNotFoundError(f"sweep file not found: {path}") from None
+    except json.JSONDecodeError as error:
+        raise ValueError(f"{path} is not valid JSON: {error}") from error
+
+
+def trial_status(run_dir: Path) -> str:
+    """'done' (final weights written), 'interrupted' (has a checkpoint) or 'new'."""
+    if (run_dir / MODEL_FILE).exists():
+        return "done"
+    if (run_dir / CHECKPOINT_FILE).exists():
+        return "interrupted"
+    return "new"
+
+
+def run_trial(config: TrainConfig, run_dir: str | os.PathLike) -> dict[str, Any]:
+    """Train one trial to the end: skip it if done, resume it if interrupted."""
+    import torch
+
+    from spikectl.training.dqn import train
+
+    run_dir = Path(run_dir)
+    status = trial_status(run_dir)
+    if status == "done":
+        return {"run_dir": str(run_dir), "status": "skipped (done)"}
+    if status == "new" and run_dir.exists():
+        # Stopped before its first checkpoint: nothing in it can be resumed.
+        shutil.rmtree(run_dir)
+    torch.set_num_threads(config.torch_threads or 1)
+    metrics = train(config, run_dir, resume=status == "interrupted")
+    final = metrics[-1]
+    return {
+        "run_dir": str(run_dir),
+        "status": "resumed" if status == "interrupted" else "trained",
+        "train_return": final["train_return"],
+        "test_return": final["test_return"],
+    }
+
+
+def run_sweep(
+    sweep: Sweep, sweep_dir: str | os.PathLike, workers: int | None = None, echo=print
+) -> list[dict[str, Any]]:
+    """Run every trial of ``sweep`` under ``sweep_dir`` in a local process pool."""
+    sweep_dir = Path(sweep_dir)
+    saved = sweep_dir / SWEEP_FILE
+    description = json.loads(json.dumps(sweep.to_dict()))  # tuples as JSON reads them back
+    if saved.exists() and json.loads(saved.read_text()) != description:
+        raise ValueError(
+            f"{sweep_dir} holds another sweep ({SWEEP_FILE} differs): choose another directory"
+        )
+    sweep_dir.mkdir(parents=True, exist_ok=True)
+    atomic_write_text(saved, json.dumps(sweep.to_dict(), indent=2) + "\n")
+    trials = sweep.trials()
+    workers = max(1, min(workers or os.cpu_count() or 1, len(trials)))
+    echo(f"{len(trials)} trials in {sweep_dir / TRIALS_DIR}, {workers} worker(s)")
+    results = []
+    # torch_threads=1: one core per trial, and results independent of the pool size.
+    jobs = [
+        (dataclasses.replace(config, torch_threads=1), sweep_dir / TRIALS_DIR / name)
+        for name, config in trials
+    ]
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        futures = {pool.submit(run_trial, config, run_dir): run_dir for config, run_dir in jobs}
+        for future in as_completed(futures):
+            result = future.result()
+            results.append(result)
+            scores = (
+                f": train {result['train_return']:.3f}, test {result['test_return']:.3f}"
+                if "test_return" in result
+                else ""
+            )
+            echo(f"{Path(result['run_dir']).name}: {result['status']}{scores}")
+    return sorted(results, key=lambda result: result["run_dir"])
+
+
+def trial_dirs(sweep_dir: str | os.PathLike) -> list[Path]:
+    """Run directories of a sweep's trials (those with a saved config)."""
+    root = Path(sweep_dir) / TRIALS_DIR
+    return sorted(path for path in root.glob("*") if (path / CONFIG_FILE).exists())

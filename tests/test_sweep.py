@@ -1,0 +1,93 @@
+"""Sweeps: grid expansion, skipping finished trials, resuming, pool == in-process."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+
+import pytest
+
+from spikectl.experiments.sweep import (
+    PAPER_SWEEPS,
+    Sweep,
+    load_sweep_file,
+    run_sweep,
+    trial_dirs,
+)
+from spikectl.training.checkpoint import read_metrics
+from spikectl.training.config import SMOKE
+from spikectl.training.dqn import train
+
+TINY = dataclasses.replace(SMOKE, total_env_steps=8 * 20 * 4, eval_every_episodes=16,
+                           checkpoint_every_episodes=16)  # fmt: skip
+
+
+def test_grid_expands_to_every_combination():
+    sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "seed": [0, 1, 2]})
+    trials = sweep.trials()
+    assert [name for name, _ in trials][:2] == ["arch=drqn-seed=0", "arch=drqn-seed=1"]
+    assert len(trials) == 6 and len({name for name, _ in trials}) == 6
+    assert {(c.arch, c.seed) for _, c in trials} == {
+        (a, s) for a in ("drqn", "tdrqn") for s in (0, 1, 2)
+    }
+    fig5 = Sweep.from_dict(PAPER_SWEEPS["fig5"])
+    assert len(fig5.trials()) == 40 and {c.n_train for _, c in fig5.trials()} == {10, 20, 40, 100}
+    assert len(Sweep.from_dict(PAPER_SWEEPS["fig4"]).trials()) == 40
+
+
+def test_bad_sweeps_are_clear_errors(tmp_path):
+    with pytest.raises(ValueError, match="unknown TrainConfig field"):
+        Sweep(TINY, {"learning_rat": [1e-3]})
+    with pytest.raises(ValueError, match="non-empty list"):
+        Sweep(TINY, {"seed": []})
+    with pytest.raises(ValueError, match="unknown base preset"):
+        Sweep.from_dict({"base": "huge"})
+    path = tmp_path / "sweep.json"
+    path.write_text("{not json")
+    with pytest.raises(ValueError, match="not valid JSON"):
+        load_sweep_file(path)
+    path.write_text(
+        json.dumps({"base": "smoke", "grid": {"seed": [0, 1]}, "overrides": {"n_train": 4}})
+    )
+    sweep = load_sweep_file(path)
+    assert sweep.base.n_train == 4 and len(sweep.trials()) == 2
+
+
+def test_sweep_runs_skips_and_resumes(tmp_path):
+    sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "seed": [0, 1]})
+    results = run_sweep(sweep, tmp_path, workers=2, echo=lambda line: None)
+    assert [r["status"] for r in results] == ["trained"] * 4
+    dirs = trial_dirs(tmp_path)
+    assert len(dirs) == 4
+    # The pool's result equals training the same config in this process.
+    name, config = sweep.trials()[3]
+    direct = train(dataclasses.replace(config, torch_threads=1), tmp_path / "direct")
+    pooled = read_metrics(tmp_path / "trials" / name)
+    assert [r["test_return"] for r in pooled] == [r["test_return"] for r in direct]
+    # Again: everything is done, nothing runs.
+    again = run_sweep(sweep, tmp_path, workers=2, echo=lambda line: None)
+    assert [r["status"] for r in again] == ["skipped (done)"] * 4
+    # An interrupted trial (final weights missing, checkpoint present) resumes.
+    (dirs[0] / "model.pt").unlink()
+    resumed = run_sweep(sweep, tmp_path, workers=1, echo=lambda line: None)
+    assert sorted(r["status"] for r in resumed) == ["resumed"] + ["skipped (done)"] * 3
+    with pytest.raises(ValueError, match="another sweep"):
+        run_sweep(Sweep(TINY, {"seed": [5]}), tmp_path, echo=lambda line: None)
+
+
+def test_sweep_command_line(tmp_path, capsys):
+    from spikectl.cli import main
+
+    path = tmp_path / "sweep.json"
+    description = {
+        "base": "smoke",
+        "overrides": {"total_env_steps": 8 * 20 * 2},
+        "grid": {"seed": [3]},
+    }
+    path.write_text(json.dumps(description))
+    main(["sweep", "--config", str(path), "--sweep-dir", str(tmp_path / "s"), "--workers", "1"])
+    out = capsys.readouterr().out
+    assert "1 trials" in out and "seed=3: trained" in out
+    with pytest.raises(SystemExit):
+        main(["sweep", "--sweep-dir", str(tmp_path / "t")])
+    assert "exactly one of --preset" in capsys.readouterr().err
