@@ -146,3 +146,65 @@ def plot_learning_curve(
     path = save_figure(figure, path)
     plt.close(figure)
     return path
+
+
+TARGET_COLOUR = "tab:green"
+EXCITATORY_COLOUR = "black"
+INHIBITORY_COLOUR = "tab:red"
+
+
+def draw_network(context, axis, label: str = "") -> dict[str, list[tuple[int, int]]]:
+    """Draw one context's network on ``axis`` (Figure 3 of the paper): neurons in a
+    circular layout, the target green, excitatory edges black and inhibitory edges
+    red, as arrows from the presynaptic neuron. Returns the drawn edges by kind."""
+    import networkx as nx
+
+    weights = np.asarray(context.weights)
+    n = weights.shape[0]
+    graph = nx.DiGraph()
+    graph.add_nodes_from(range(n))
+    edges = {"excitatory": [], "inhibitory": []}
+    for source, destination in zip(*np.nonzero(weights), strict=True):
+        kind = "excitatory" if weights[source, destination] > 0 else "inhibitory"
+        edges[kind].append((int(source), int(destination)))
+        graph.add_edge(int(source), int(destination))
+    position = nx.circular_layout(graph)
+    colours = [TARGET_COLOUR if node == context.target else "white" for node in graph.nodes]
+    nx.draw_networkx_nodes(graph, position, ax=axis, node_color=colours, edgecolors="black",
+                           node_size=420)  # fmt: skip
+    nx.draw_networkx_labels(graph, position, ax=axis, font_size=9)
+    for kind, colour in (("excitatory", EXCITATORY_COLOUR), ("inhibitory", INHIBITORY_COLOUR)):
+        nx.draw_networkx_edges(
+            graph, position, ax=axis, edgelist=edges[kind], edge_color=colour, arrows=True,
+            arrowstyle="-|>", arrowsize=12, node_size=420, connectionstyle="arc3,rad=0.1",
+        )  # fmt: skip
+    axis.set_title(label, loc="left")
+    axis.set_xlim(-1.25, 1.25)  # circular_layout puts the nodes on the unit circle
+    axis.set_ylim(-1.25, 1.25)
+    axis.set_axis_off()
+    axis.set_aspect("equal")
+    return edges
+
+
+def plot_networks(contexts, path: str | os.PathLike, n_networks: int = 3) -> Path:
+    """Figure 3: the first ``n_networks`` generated networks side by side, panels (a),
+    (b), (c), ..., in a circular layout (target green, excitatory edges black arrows,
+    inhibitory edges red)."""
+    contexts = list(contexts)[:n_networks]
+    if not contexts:
+        raise ValueError("plot_networks needs at least one context")
+    plt = _pyplot()
+    figure, axes = plt.subplots(1, len(contexts), figsize=(3.4 * len(contexts), 3.6),
+                                squeeze=False)  # fmt: skip
+    for index, (context, axis) in enumerate(zip(contexts, axes[0], strict=True)):
+        draw_network(context, axis, f"({chr(ord('a') + index)})")
+    handles = [
+        plt.Line2D([], [], color=EXCITATORY_COLOUR, label="excitatory"),
+        plt.Line2D([], [], color=INHIBITORY_COLOUR, label="inhibitory"),
+        plt.Line2D([], [], marker="o", linestyle="", markerfacecolor=TARGET_COLOUR,
+                   markeredgecolor="black", label="target neuron"),
+    ]  # fmt: skip
+    figure.legend(handles=handles, loc="lower center", ncol=3, frameon=False, fontsize=8)
+    path = save_figure(figure, path)
+    plt.close(figure)
+    return path

@@ -1,0 +1,192 @@
+"""Figures 3-5 and the results table, drawn from fake saved run directories."""
+
+from __future__ import annotations
+
+import csv
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from spikectl.contexts import ContextSet
+from spikectl.experiments.figures import draw_network, plot_networks
+from spikectl.experiments.report import (
+    DO_NOTHING_RETURN,
+    draw_training_curves,
+    group_runs,
+    load_runs,
+    mean_curve,
+    plot_test_curves_by_size,
+    plot_training_curves,
+    results_table,
+    write_results_table,
+)
+from spikectl.experiments.stats import bootstrap_ci
+from spikectl.training.checkpoint import write_metrics
+from spikectl.training.config import SMOKE
+from spikectl.training.dqn import METRIC_FIELDS
+
+PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
+STEPS = (800, 1600, 2400)
+# Per (arch, seed): train and test returns at STEPS.
+RETURNS = {
+    ("tdrqn", 0): ([0.6, 0.7, 0.8], [0.55, 0.6, 0.7]),
+    ("tdrqn", 1): ([0.6, 0.8, 0.9], [0.55, 0.7, 0.8]),
+    ("tdrqn", 2): ([0.5, 0.6, 0.7], [0.5, 0.5, 0.6]),
+    ("tdrqn", 3): ([0.6, 0.7, 1.0], [0.5, 0.6, 0.9]),
+    ("drqn", 0): ([0.5, 0.55, 0.6], [0.5, 0.5, 0.5]),
+    ("drqn", 1): ([0.5, 0.65, 0.7], [0.5, 0.5, 0.6]),
+}
+
+
+def make_run(root, arch, seed, train, test, steps=STEPS, n_train=6):
+    config = dataclasses.replace(SMOKE, arch=arch, seed=seed, n_train=n_train)
+    run_dir = root / f"{arch}-n{n_train}-s{seed}"
+    run_dir.mkdir(parents=True)
+    (run_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
+    rows = [
+        {"episode": 40 * (k + 1), "env_steps": step, "updates": 10 * (k + 1), "epsilon": 0.1,
+         "train_return": train[k], "test_return": test[k], "loss": float("nan"),
+         "wall_time_s": 1.0 + k}
+        for k, step in enumerate(steps)
+    ]  # fmt: skip
+    write_metrics(run_dir, rows, METRIC_FIELDS)
+    return run_dir
+
+
+@pytest.fixture
+def runs(tmp_path):
+    dirs = [make_run(tmp_path, arch, seed, *values) for (arch, seed), values in RETURNS.items()]
+    return load_runs(dirs)
+
+
+def assert_png(path):
+    assert path.exists() and path.stat().st_size > 1000
+    assert path.read_bytes()[:8] == PNG_MAGIC
+
+
+def test_load_and_group_runs(runs):
+    assert len(runs) == 6
+    config, metrics = runs[0]
+    assert config["arch"] == "tdrqn" and config["seed"] == 0
+    assert [row["env_steps"] for row in metrics] == list(STEPS)
+    groups = group_runs(runs, "arch")
+    assert list(groups) == ["drqn", "tdrqn"]
+    assert [len(group) for group in groups.values()] == [2, 4]
+
+
+def test_results_table_numbers(runs, tmp_path):
+    markdown, rows = results_table(group_runs(runs), n_resamples=500, seed=1)
+    by_group = {row["group"]: row for row in rows}
+    tdrqn = by_group["tdrqn"]
+    train = np.array([0.8, 0.9, 0.7, 1.0])
+    test = np.array([0.7, 0.8, 0.6, 0.9])
+    assert tdrqn["n_seeds"] == 4 and tdrqn["env_steps"] == 2400
+    assert tdrqn["train_mean"] == pytest.approx(0.85)
+    assert tdrqn["train_std"] == pytest.approx(np.sqrt(np.mean((train - 0.85) ** 2)))
+    assert tdrqn["test_mean"] == pytest.approx(0.75)
+    assert tdrqn["test_std"] == pytest.approx(np.std(test))
+    assert tdrqn["gap_mean"] == pytest.approx(0.1)
+    assert tdrqn["gap_std"] == pytest.approx(0.0, abs=1e-12)
+    # IQM of 4 seeds: drop the lowest and the highest, average the middle two.
+    assert tdrqn["train_iqm"] == pytest.approx((0.8 + 0.9) / 2)
+    assert tdrqn["test_iqm"] == pytest.approx((0.7 + 0.8) / 2)
+    low, high = bootstrap_ci(test, n_resamples=500, rng=1)[1:]
+    assert (tdrqn["test_iqm_low"], tdrqn["test_iqm_high"]) == pytest.approx((low, high))
+    assert tdrqn["test_iqm_low"] <= tdrqn["test_iqm"] <= tdrqn["test_iqm_high"]
+    drqn = by_group["drqn"]
+    assert drqn["train_mean"] == pytest.approx(0.65)
+    assert drqn["test_mean"] == pytest.approx(0.55)
+    assert drqn["gap_mean"] == pytest.approx(0.1)
+    assert drqn["test_iqm"] == pytest.approx(0.55)  # 2 seeds: nothing trimmed
+    assert "| tdrqn | 4 | 2400 | 0.850 ± 0.112 | 0.750 ± 0.112 | 0.100 ± 0.000 |" in markdown
+
+    markdown_path, csv_path = write_results_table(group_runs(runs), tmp_path / "out",
+                                                  n_resamples=500, seed=1)  # fmt: skip
+    assert markdown_path.read_text() == markdown
+    with open(csv_path, newline="") as handle:
+        saved = list(csv.DictReader(handle))
+    assert [row["group"] for row in saved] == ["drqn", "tdrqn"]
+    assert float(saved[1]["test_iqm"]) == pytest.approx(0.75)
+
+
+def test_mean_curve_equal_and_interpolated_grids(runs, tmp_path):
+    tdrqn = group_runs(runs)["tdrqn"]
+    curve = mean_curve(tdrqn, "test_return")
+    values = np.array([RETURNS[("tdrqn", s)][1] for s in range(4)])
+    np.testing.assert_allclose(curve.steps, STEPS)
+    np.testing.assert_allclose(curve.mean, values.mean(axis=0))
+    np.testing.assert_allclose(curve.std, values.std(axis=0))
+    assert curve.n_runs == 4
+    # A run evaluated on another grid is interpolated onto the common range.
+    other = load_runs([make_run(tmp_path / "x", "tdrqn", 9, [0.5, 0.9], [0.5, 0.9],
+                                steps=(800, 2400))])  # fmt: skip
+    mixed = mean_curve([tdrqn[0], *other], "train_return")
+    np.testing.assert_allclose(mixed.steps, STEPS)
+    np.testing.assert_allclose(mixed.mean, [(0.6 + 0.5) / 2, (0.7 + 0.7) / 2, (0.8 + 0.9) / 2])
+
+
+def test_training_curves_figure(runs, tmp_path):
+    figure, curves = draw_training_curves(group_runs(runs))
+    left, right = figure.axes
+    assert left.get_title() == "training contexts" and right.get_title() == "unseen test contexts"
+    for axis, panel in ((left, "train"), (right, "test")):
+        levels = [line.get_ydata()[0] for line in axis.lines if line.get_linestyle() == ":"]
+        assert levels == [DO_NOTHING_RETURN]
+        plotted = {line.get_label(): line.get_ydata() for line in axis.lines}
+        for label in ("tdrqn", "drqn"):
+            np.testing.assert_allclose(plotted[label], curves[panel][label].mean)
+        assert len(axis.collections) == 2  # one shaded band per group
+    np.testing.assert_allclose(curves["train"]["drqn"].mean, [0.5, 0.6, 0.65])
+    result = plot_training_curves(group_runs(runs), tmp_path / "fig" / "figure4.png")
+    assert_png(result.path)
+    np.testing.assert_allclose(result.curves["test"]["drqn"].mean, [0.5, 0.5, 0.55])
+
+
+def test_training_curves_accept_run_directories(tmp_path):
+    dirs = [make_run(tmp_path, "tdrqn", seed, *RETURNS[("tdrqn", seed)]) for seed in range(2)]
+    result = plot_training_curves({"TDRQN": dirs}, tmp_path / "figure4.png")
+    assert_png(result.path)
+    np.testing.assert_allclose(result.curves["train"]["TDRQN"].mean, [0.6, 0.75, 0.85])
+
+
+def test_test_curves_by_size(tmp_path):
+    dirs = [
+        make_run(tmp_path, "tdrqn", seed, [0.6] * 3, [0.5 + 0.1 * seed + 0.001 * n] * 3, n_train=n)
+        for n in (10, 100)
+        for seed in range(2)
+    ]
+    groups = group_runs(load_runs(dirs), "n_train")
+    assert list(groups) == [10, 100]
+    result = plot_test_curves_by_size(groups, tmp_path / "figure5.png")
+    assert_png(result.path)
+    np.testing.assert_allclose(result.curves["test"][100].mean, [0.65] * 3)
+    np.testing.assert_allclose(result.curves["test"][10].mean, [0.56] * 3)
+    np.testing.assert_allclose(result.curves["test"][10].std, [0.05] * 3)
+
+
+def test_empty_groups_are_errors(tmp_path):
+    with pytest.raises(ValueError, match="no groups"):
+        results_table({})
+    with pytest.raises(ValueError, match="no runs"):
+        plot_training_curves({"tdrqn": []}, tmp_path / "x.png")
+
+
+def test_networks_figure(tmp_path):
+    contexts = ContextSet.generate(3, seed=0)
+    path = plot_networks(contexts, tmp_path / "figure3.png")
+    assert_png(path)
+
+
+def test_network_edges_by_sign():
+    from spikectl.experiments.figures import _pyplot
+
+    context = ContextSet.generate(1, seed=0)[0]
+    plt = _pyplot()
+    figure, axis = plt.subplots()
+    edges = draw_network(context, axis, "(a)")
+    plt.close(figure)
+    weights = np.asarray(context.weights)
+    assert sorted(edges["excitatory"]) == sorted(map(tuple, np.argwhere(weights > 0).tolist()))
+    assert sorted(edges["inhibitory"]) == sorted(map(tuple, np.argwhere(weights < 0).tolist()))
