@@ -245,10 +245,29 @@ def sweep(command: SweepCommand) -> None:
     run_sweep(Sweep.from_dict(description), command.sweep_dir, command.workers or None)
 
 
+@dataclass(frozen=True)
+class PlotCommand:
+    """Draw Figures 3-5, the results tables and an episode raster of a sweep."""
+
+    sweep_dir: Annotated[Path, tyro.conf.Positional]
+    """The sweep directory (as given to spikectl sweep)."""
+    out_dir: Path | None = None
+    """Where to write them (default SWEEP_DIR/figures)."""
+
+
+def plot(command: PlotCommand) -> None:
+    """Write the figures and tables of a sweep from its saved runs."""
+    from spikectl.experiments.plot import plot_sweep
+
+    for path in plot_sweep(command.sweep_dir, command.out_dir):
+        print(f"wrote {path}")
+
+
 COMMANDS = {
     "train": (train, TrainCommand),
     "evaluate": (evaluate, EvaluateCommand),
     "sweep": (sweep, SweepCommand),
+    "plot": (plot, PlotCommand),
     "demo": (demo, DemoConfig),
     "contexts": (contexts, ContextsConfig),
 }

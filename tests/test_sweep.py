@@ -91,3 +91,17 @@ def test_sweep_command_line(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["sweep", "--sweep-dir", str(tmp_path / "t")])
     assert "exactly one of --preset" in capsys.readouterr().err
+
+
+def test_plot_a_sweep(tmp_path, capsys):
+    from spikectl.cli import main
+
+    sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "n_train": [3, 6], "seed": [0]})
+    run_sweep(sweep, tmp_path, workers=2, echo=lambda line: None)
+    main(["plot", str(tmp_path)])
+    out = capsys.readouterr().out
+    for name in ("figure3.png", "figure4.png", "figure5.png", "results.md", "raster.png"):
+        assert name in out
+        assert next((tmp_path / "figures").rglob(name)).stat().st_size > 0
+    table = (tmp_path / "figures" / "results.md").read_text()
+    assert "drqn" in table and "tdrqn" in table

@@ -1,0 +1,62 @@
+"""``spikectl plot SWEEP_DIR``: every figure and table of a sweep, from its saved runs.
+
+Figures 3-5 and the results tables read only the trials' saved files. The episode
+raster replays a saved agent greedily on one unseen network (evaluation, no training).
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+from spikectl.contexts import ContextSet
+from spikectl.experiments.figures import plot_episode_raster, plot_networks
+from spikectl.experiments.report import (
+    group_runs,
+    load_runs,
+    plot_test_curves_by_size,
+    plot_training_curves,
+    write_results_table,
+)
+from spikectl.experiments.sweep import trial_dirs
+from spikectl.training.contexts import TEST_FILE, TRAIN_FILE
+
+
+def plot_sweep(
+    sweep_dir: str | os.PathLike, out_dir: str | os.PathLike | None = None
+) -> list[Path]:
+    """Write figure3/4/5 PNGs, results tables and an episode raster; returns their paths."""
+    from spikectl.training.evaluate import greedy_episodes, load_agent
+
+    sweep_dir = Path(sweep_dir)
+    out_dir = Path(out_dir) if out_dir is not None else sweep_dir / "figures"
+    dirs = trial_dirs(sweep_dir)
+    if not dirs:
+        raise ValueError(f"{sweep_dir} holds no trials (no trials/*/config.json)")
+    runs = load_runs(dirs)
+    written = [plot_networks(ContextSet.load(dirs[0] / TRAIN_FILE), out_dir / "figure3.png")]
+    by_arch = group_runs(runs, "arch")
+    written.append(plot_training_curves(by_arch, out_dir / "figure4.png").path)
+    written += write_results_table(by_arch, out_dir)
+    tdrqn = [run for run in runs if run.config["arch"] == "tdrqn"]
+    if len({run.config["n_train"] for run in tdrqn}) > 1:
+        by_size = group_runs(tdrqn, "n_train")
+        written.append(plot_test_curves_by_size(by_size, out_dir / "figure5.png").path)
+        written += write_results_table(by_size, out_dir / "by_training_set_size")
+    # The raster: a trained agent (TDRQN when there is one) on its first unseen network.
+    chosen = next((d for d, run in zip(dirs, runs, strict=True) if run.config["arch"] == "tdrqn"),
+                  dirs[0])  # fmt: skip
+    if (chosen / "model.pt").exists():
+        test = ContextSet.load(chosen / TEST_FILE)
+        episodes = greedy_episodes(load_agent(chosen), test[:1])
+        written.append(
+            plot_episode_raster(
+                test[0].pattern,
+                episodes.actions[0],
+                episodes.spikes[0],
+                test[0].target,
+                out_dir / "raster.png",
+                title=f"{chosen.name} on unseen test network 0: return {episodes.returns[0]:.3f}",
+            )  # fmt: skip
+        )
+    return written
