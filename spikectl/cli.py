@@ -223,6 +223,10 @@ class SweepCommand:
     """Override the environment steps of every trial."""
     workers: int = 0
     """Trials run at once; 0 means one per CPU core."""
+    backend: Literal["local", "ray"] = "local"
+    """local: a process pool on this machine; ray: Ray tasks (pip install 'spikectl[ray]')."""
+    address: str | None = None
+    """Ray cluster address (ray backend); a local Ray instance when not given."""
 
 
 def sweep(command: SweepCommand) -> None:
@@ -242,7 +246,10 @@ def sweep(command: SweepCommand) -> None:
         description["grid"]["seed"] = list(command.seeds)
     if command.total_env_steps is not None:
         description["overrides"] = {"total_env_steps": command.total_env_steps}
-    run_sweep(Sweep.from_dict(description), command.sweep_dir, command.workers or None)
+    run_sweep(
+        Sweep.from_dict(description), command.sweep_dir, command.workers or None,
+        backend=command.backend, address=command.address,
+    )  # fmt: skip
 
 
 @dataclass(frozen=True)
@@ -299,7 +306,9 @@ def main(argv: list[str] | None = None) -> None:
     run = next(run for run, config_type in COMMANDS.values() if isinstance(command, config_type))
     try:
         run(command)
-    except (ValueError, TypeError, FileNotFoundError, ContextFileError, RunDirError) as error:
+    except (
+        ValueError, TypeError, FileNotFoundError, ContextFileError, RunDirError, RuntimeError,
+    ) as error:  # fmt: skip
         print(f"spikectl: error: {error}", file=sys.stderr)
         raise SystemExit(2) from error
 

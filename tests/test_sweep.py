@@ -105,3 +105,29 @@ def test_plot_a_sweep(tmp_path, capsys):
         assert next((tmp_path / "figures").rglob(name)).stat().st_size > 0
     table = (tmp_path / "figures" / "results.md").read_text()
     assert "drqn" in table and "tdrqn" in table
+
+
+def same_trials(dir_a, dir_b):
+    from test_training import assert_same_weights, comparable
+
+    names = sorted(path.name for path in trial_dirs(dir_a))
+    assert names == sorted(path.name for path in trial_dirs(dir_b)) and names
+    for name in names:
+        a, b = dir_a / "trials" / name, dir_b / "trials" / name
+        assert comparable(read_metrics(a)) == comparable(read_metrics(b))
+        assert_same_weights(a / "model.pt", b / "model.pt")
+
+
+@pytest.mark.slow
+def test_ray_backend_gives_the_same_results_as_the_local_pool(tmp_path):
+    pytest.importorskip("ray")
+    sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "seed": [0]})
+    run_sweep(sweep, tmp_path / "local", workers=2, echo=lambda line: None)
+    results = run_sweep(sweep, tmp_path / "ray", workers=2, backend="ray", echo=lambda line: None)
+    assert [r["status"] for r in results] == ["trained", "trained"]
+    same_trials(tmp_path / "local", tmp_path / "ray")
+
+
+def test_unknown_backend():
+    with pytest.raises(ValueError, match="backend"):
+        run_sweep(Sweep(TINY, {"seed": [0]}), "unused", backend="slurm")

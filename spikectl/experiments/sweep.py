@@ -140,10 +140,23 @@ def run_trial(config: TrainConfig, run_dir: str | os.PathLike) -> dict[str, Any]
 
 
 def run_sweep(
-    sweep: Sweep, sweep_dir: str | os.PathLike, workers: int | None = None, echo=print
+    sweep: Sweep,
+    sweep_dir: str | os.PathLike,
+    workers: int | None = None,
+    echo=print,
+    backend: str = "local",
+    address: str | None = None,
 ) -> list[dict[str, Any]]:
-    """Run every trial of ``sweep`` under ``sweep_dir`` in a local process pool."""
-    sweep_dir = Path(sweep_dir)
+    """Run every trial of ``sweep`` under ``sweep_dir``.
+
+    ``backend="local"``: a process pool of ``workers`` (default: one per core).
+    ``backend="ray"``: Ray tasks of one CPU each on the cluster at ``address`` (a local
+    Ray instance when None); ``sweep_dir`` must then be on storage every node sees.
+    Each trial's result is the same whichever backend ran it.
+    """
+    if backend not in ("local", "ray"):
+        raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")
+    sweep_dir = Path(sweep_dir).resolve()
     saved = sweep_dir / SWEEP_FILE
     description = json.loads(json.dumps(sweep.to_dict()))  # tuples as JSON reads them back
     if saved.exists() and json.loads(saved.read_text()) != description:
@@ -161,18 +174,45 @@ def run_sweep(
         (dataclasses.replace(config, torch_threads=1), sweep_dir / TRIALS_DIR / name)
         for name, config in trials
     ]
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        futures = {pool.submit(run_trial, config, run_dir): run_dir for config, run_dir in jobs}
-        for future in as_completed(futures):
-            result = future.result()
-            results.append(result)
-            scores = (
-                f": train {result['train_return']:.3f}, test {result['test_return']:.3f}"
-                if "test_return" in result
-                else ""
-            )
-            echo(f"{Path(result['run_dir']).name}: {result['status']}{scores}")
+    for result in (_run_with_ray(jobs, address, workers) if backend == "ray"
+                   else _run_locally(jobs, workers)):  # fmt: skip
+        results.append(result)
+        scores = (
+            f": train {result['train_return']:.3f}, test {result['test_return']:.3f}"
+            if "test_return" in result
+            else ""
+        )
+        echo(f"{Path(result['run_dir']).name}: {result['status']}{scores}")
     return sorted(results, key=lambda result: result["run_dir"])
+
+
+def _run_locally(jobs: list[tuple[TrainConfig, Path]], workers: int):
+    """Yield trial results as a local process pool finishes them."""
+    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
+        futures = [pool.submit(run_trial, config, run_dir) for config, run_dir in jobs]
+        for future in as_completed(futures):
+            yield future.result()
+
+
+def _run_with_ray(jobs: list[tuple[TrainConfig, Path]], address: str | None, workers: int):
+    """Yield trial results as Ray tasks (one CPU each) finish them."""
+    try:
+        import ray
+    except ImportError:
+        raise RuntimeError("the Ray backend needs Ray: pip install 'spikectl[ray]'") from None
+    started_here = not ray.is_initialized()
+    if started_here:
+        local = {"num_cpus": workers, "include_dashboard": False} if address is None else {}
+        ray.init(address=address, log_to_driver=False, **local)
+    try:
+        remote_trial = ray.remote(num_cpus=1)(run_trial)
+        pending = [remote_trial.remote(config, str(run_dir)) for config, run_dir in jobs]
+        while pending:
+            done, pending = ray.wait(pending, num_returns=1)
+            yield ray.get(done[0])
+    finally:
+        if started_here:
+            ray.shutdown()
 
 
 def trial_dirs(sweep_dir: str | os.PathLike) -> list[Path]:
