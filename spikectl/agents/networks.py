@@ -183,6 +183,33 @@ def _per_neuron_state(
 # the four networks
 
 
+def _per_neuron_forward(
+    network: nn.Module, mix: nn.Module, obs_seq: Observation, state: State | None, where: str
+) -> tuple[torch.Tensor, State]:
+    """The sequence forward DDRQN and TDRQN share; they differ only in ``mix``, which
+    maps the per-neuron LSTM outputs [B, T, n, H] to embeddings [B, T, n, M]: a
+    per-neuron FF layer (DDRQN) or a transformer across neurons (TDRQN)."""
+    (B, T), n = check_observation(
+        obs_seq, leading_dims=2, episode_length=network.episode_length, n_neurons=None,
+        where=where,
+    )  # fmt: skip
+    obs_seq = long_indices(obs_seq)
+    state = _per_neuron_state(network, network.lstm, obs_seq, state, B, n)
+    s = network.sizes
+    x = per_neuron_features(
+        obs_seq,
+        v_rest_mV=s.v_rest_mV,
+        v_threshold_mV=s.v_threshold_mV,
+        with_target=s.target_in_input,
+        dtype=_param_dtype(network),
+    )  # [B, T, n, F]
+    y, state = network.lstm(x, state)  # [B, T, n, H]
+    z = mix(y)  # [B, T, n, M]
+    u = torch.cat([z, network.context(obs_seq, n)], dim=-1)  # [B, T, n, M+C]
+    q = network.head(u, obs_seq["target"])  # [B, T, n+1]
+    return q, state
+
+
 class DRQN(nn.Module):
     """Baseline: one LSTM over the whole system (fixed n).
 
@@ -280,28 +307,7 @@ class DDRQN(nn.Module):
     def forward(
         self, obs_seq: Observation, state: State | None = None
     ) -> tuple[torch.Tensor, State]:
-        (B, T), n = check_observation(
-            obs_seq,
-            leading_dims=2,
-            episode_length=self.episode_length,
-            n_neurons=None,
-            where="DDRQN.forward",
-        )
-        obs_seq = long_indices(obs_seq)
-        state = _per_neuron_state(self, self.lstm, obs_seq, state, B, n)
-        s = self.sizes
-        x = per_neuron_features(
-            obs_seq,
-            v_rest_mV=s.v_rest_mV,
-            v_threshold_mV=s.v_threshold_mV,
-            with_target=s.target_in_input,
-            dtype=_param_dtype(self),
-        )  # [B, T, n, F]
-        y, state = self.lstm(x, state)  # [B, T, n, H]
-        z = self.ff(y)  # [B, T, n, ff_hidden]
-        u = torch.cat([z, self.context(obs_seq, n)], dim=-1)  # [B, T, n, U]
-        q = self.head(u, obs_seq["target"])  # [B, T, n+1]
-        return q, state
+        return _per_neuron_forward(self, self.ff, obs_seq, state, "DDRQN.forward")
 
     def step(self, obs: Observation, state: State | None) -> tuple[torch.Tensor, State]:
         return _step_via_forward(self, obs, state, None)
@@ -407,28 +413,7 @@ class TDRQN(nn.Module):
     def forward(
         self, obs_seq: Observation, state: State | None = None
     ) -> tuple[torch.Tensor, State]:
-        (B, T), n = check_observation(
-            obs_seq,
-            leading_dims=2,
-            episode_length=self.episode_length,
-            n_neurons=None,
-            where="TDRQN.forward",
-        )
-        obs_seq = long_indices(obs_seq)
-        state = _per_neuron_state(self, self.lstm, obs_seq, state, B, n)
-        s = self.sizes
-        x = per_neuron_features(
-            obs_seq,
-            v_rest_mV=s.v_rest_mV,
-            v_threshold_mV=s.v_threshold_mV,
-            with_target=s.target_in_input,
-            dtype=_param_dtype(self),
-        )  # [B, T, n, F]
-        y, state = self.lstm(x, state)  # [B, T, n, H]
-        z = self.mixer(y)  # [B, T, n, W]
-        u = torch.cat([z, self.context(obs_seq, n)], dim=-1)  # [B, T, n, W+C]
-        q = self.head(u, obs_seq["target"])  # [B, T, n+1]
-        return q, state
+        return _per_neuron_forward(self, self.mixer, obs_seq, state, "TDRQN.forward")
 
     def step(self, obs: Observation, state: State | None) -> tuple[torch.Tensor, State]:
         return _step_via_forward(self, obs, state, None)
