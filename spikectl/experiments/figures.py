@@ -55,56 +55,24 @@ def plot_episode_raster(
     row_labels = ["pattern", f"target n{target}"] + [f"n{j}" for j in others]
     y = {label: len(row_labels) - 1 - i for i, label in enumerate(row_labels)}
 
-    axis.scatter(
-        steps[pattern],
-        np.full(pattern.sum(), y["pattern"]),
-        marker="|",
-        s=120,
-        color="black",
-        label="wanted spike",
-    )
-    hit = pattern & target_spikes
-    extra = ~pattern & target_spikes
-    missed = pattern & ~target_spikes
+    spike_mark = {"marker": "|", "s": 120}
+    stimulus_mark = {"marker": "s", "s": 22, "facecolors": "none", "edgecolors": "tab:blue"}
     target_row = y[f"target n{target}"]
-    axis.scatter(
-        steps[hit],
-        np.full(hit.sum(), target_row),
-        marker="|",
-        s=120,
-        color="tab:green",
-        label="hit",
-    )
-    axis.scatter(
-        steps[extra],
-        np.full(extra.sum(), target_row),
-        marker="|",
-        s=120,
-        color="tab:orange",
-        label="unwanted spike",
-    )
-    axis.scatter(
-        steps[missed],
-        np.full(missed.sum(), target_row),
-        marker="o",
-        s=18,
-        facecolors="none",
-        edgecolors="tab:red",
-        label="missed spike",
-    )
+    # (row, steps marked, style): the pattern, then the target's steps classified as in
+    # spikectl.render (hit, unwanted spike, missed spike), then every other neuron.
+    marks = [
+        (y["pattern"], pattern, {**spike_mark, "color": "black", "label": "wanted spike"}),
+        (target_row, pattern & target_spikes, {**spike_mark, "color": "tab:green", "label": "hit"}),
+        (target_row, ~pattern & target_spikes,
+         {**spike_mark, "color": "tab:orange", "label": "unwanted spike"}),
+        (target_row, pattern & ~target_spikes, {"marker": "o", "s": 18, "facecolors": "none",
+                                                "edgecolors": "tab:red", "label": "missed spike"}),
+    ]  # fmt: skip
     for j in others:
-        row = y[f"n{j}"]
-        fired = spikes[:, j]
-        axis.scatter(steps[fired], np.full(fired.sum(), row), marker="|", s=120, color="black")
-        stimulated = actions == j
-        axis.scatter(
-            steps[stimulated],
-            np.full(stimulated.sum(), row),
-            marker="s",
-            s=22,
-            facecolors="none",
-            edgecolors="tab:blue",
-        )
+        marks.append((y[f"n{j}"], spikes[:, j], {**spike_mark, "color": "black"}))
+        marks.append((y[f"n{j}"], actions == j, stimulus_mark))
+    for row, marked, style in marks:
+        axis.scatter(steps[marked], np.full(marked.sum(), row), **style)
     axis.scatter([], [], marker="s", facecolors="none", edgecolors="tab:blue", label="stimulated")
     axis.set_yticks(list(y.values()), list(y.keys()))
     axis.set_xlim(-0.5, length - 0.5)
