@@ -95,6 +95,10 @@ def test_results_table_numbers(runs, tmp_path):
     low, high = bootstrap_ci(test, n_resamples=500, rng=1)[1:]
     assert (tdrqn["test_iqm_low"], tdrqn["test_iqm_high"]) == pytest.approx((low, high))
     assert tdrqn["test_iqm_low"] <= tdrqn["test_iqm"] <= tdrqn["test_iqm_high"]
+    # Every seed's gap is 0.1, so every resample's IQM is too.
+    assert (tdrqn["gap_iqm"], tdrqn["gap_iqm_low"], tdrqn["gap_iqm_high"]) == pytest.approx(
+        (0.1, 0.1, 0.1)
+    )
     drqn = by_group["drqn"]
     assert drqn["train_mean"] == pytest.approx(0.65)
     assert drqn["test_mean"] == pytest.approx(0.55)
@@ -109,6 +113,7 @@ def test_results_table_numbers(runs, tmp_path):
         saved = list(csv.DictReader(handle))
     assert [row["group"] for row in saved] == ["drqn", "tdrqn"]
     assert float(saved[1]["test_iqm"]) == pytest.approx(0.75)
+    assert float(saved[1]["gap_iqm"]) == pytest.approx(0.1)
 
 
 def test_mean_curve_equal_and_interpolated_grids(runs, tmp_path):

@@ -107,6 +107,20 @@ def test_plot_a_sweep(tmp_path, capsys):
     assert "drqn" in table and "tdrqn" in table
 
 
+def test_figure3_contexts_are_regenerated_when_a_trial_kept_only_its_metrics(tmp_path):
+    from spikectl.contexts import ContextSet
+    from spikectl.experiments.plot import _training_contexts
+    from spikectl.training.checkpoint import read_config
+    from spikectl.training.contexts import TRAIN_FILE
+
+    run_dir = tmp_path / "run"
+    config = dataclasses.replace(TINY, n_train=5, context_seed=3)
+    train(config, run_dir)
+    saved = ContextSet.load(run_dir / TRAIN_FILE)
+    (run_dir / TRAIN_FILE).unlink()  # as in docs/results/: config and metrics only
+    assert _training_contexts(run_dir, read_config(run_dir).to_dict()) == saved
+
+
 def same_trials(dir_a, dir_b):
     from test_training import assert_same_weights, comparable
 

@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from spikectl.contexts import ContextSet
+from spikectl.contexts import ContextSet, make_splits
 from spikectl.experiments.figures import plot_episode_raster, plot_networks
 from spikectl.experiments.report import (
     group_runs,
@@ -34,7 +34,7 @@ def plot_sweep(
     if not dirs:
         raise ValueError(f"{sweep_dir} holds no trials (no trials/*/config.json)")
     runs = load_runs(dirs)
-    written = [plot_networks(ContextSet.load(dirs[0] / TRAIN_FILE), out_dir / "figure3.png")]
+    written = [plot_networks(_training_contexts(dirs[0], runs[0].config), out_dir / "figure3.png")]
     by_arch = group_runs(runs, "arch")
     written.append(plot_training_curves(by_arch, out_dir / "figure4.png").path)
     written += write_results_table(by_arch, out_dir)
@@ -60,3 +60,15 @@ def plot_sweep(
             )  # fmt: skip
         )
     return written
+
+
+def _training_contexts(run_dir: Path, config: dict) -> ContextSet:
+    """A trial's training set: its saved file, or (for results kept without it, such as
+    docs/results/) regenerated from the config's seeds exactly as training made it."""
+    if (run_dir / TRAIN_FILE).exists() or config.get("train_contexts") is not None:
+        return ContextSet.load(run_dir / TRAIN_FILE)
+    train, _ = make_splits(
+        config["n_train"], config["n_test"], config["n_neurons"], config["episode_length"],
+        config["context_seed"],
+    )  # fmt: skip
+    return train

@@ -193,6 +193,7 @@ TABLE_FIELDS = (
     "group", "n_seeds", "env_steps",
     "train_mean", "train_std", "test_mean", "test_std", "gap_mean", "gap_std",
     "train_iqm", "train_iqm_low", "train_iqm_high", "test_iqm", "test_iqm_low", "test_iqm_high",
+    "gap_iqm", "gap_iqm_low", "gap_iqm_high",
 )  # fmt: skip
 
 
@@ -207,7 +208,9 @@ def results_table(
     Per group: mean ± standard deviation over seeds (``ddof=0``), the generalisation
     gap train − test (mean and std of the per-seed gaps), and the IQM with its
     stratified-bootstrap percentile interval (``confidence``, ``n_resamples``, from
-    ``seed``) for the final train and test returns. Returns ``(markdown, rows)``.
+    ``seed``) for the final train and test returns and the gap; a gap interval above 0
+    says the group does better on its training contexts than on unseen ones at that
+    confidence. Returns ``(markdown, rows)``.
     """
     rows = []
     for label, runs in _resolve(groups).items():
@@ -223,7 +226,7 @@ def results_table(
             "test_mean": float(test.mean()), "test_std": float(test.std()),
             "gap_mean": float(gap.mean()), "gap_std": float(gap.std()),
         }  # fmt: skip
-        for name, values in (("train", train), ("test", test)):
+        for name, values in (("train", train), ("test", test), ("gap", gap)):
             interval = bootstrap_ci(values, iqm, n_resamples, confidence, seed)
             row[f"{name}_iqm"] = interval.estimate
             row[f"{name}_iqm_low"] = interval.low
@@ -232,8 +235,8 @@ def results_table(
     percent = f"{100 * confidence:g}%"
     lines = [
         f"| group | seeds | env steps | train return | test return | gap (train − test) "
-        f"| train IQM [{percent} CI] | test IQM [{percent} CI] |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        f"| train IQM [{percent} CI] | test IQM [{percent} CI] | gap IQM [{percent} CI] |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for row in rows:
         lines.append(
@@ -242,7 +245,8 @@ def results_table(
             f"| {row['test_mean']:.3f} ± {row['test_std']:.3f} "
             f"| {row['gap_mean']:.3f} ± {row['gap_std']:.3f} "
             f"| {row['train_iqm']:.3f} [{row['train_iqm_low']:.3f}, {row['train_iqm_high']:.3f}] "
-            f"| {row['test_iqm']:.3f} [{row['test_iqm_low']:.3f}, {row['test_iqm_high']:.3f}] |"
+            f"| {row['test_iqm']:.3f} [{row['test_iqm_low']:.3f}, {row['test_iqm_high']:.3f}] "
+            f"| {row['gap_iqm']:.3f} [{row['gap_iqm_low']:.3f}, {row['gap_iqm_high']:.3f}] |"
         )
     return "\n".join(lines) + "\n", rows
 
