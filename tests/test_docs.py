@@ -17,3 +17,24 @@ def test_readme_example_runs():
     assert blocks, "the README has no Python example"
     for block in blocks:
         exec(compile(block, "README.md", "exec"), {})
+
+
+def test_every_relative_link_in_the_docs_exists():
+    for page in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+        for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", page.read_text()):
+            if "://" in target or target.startswith("mailto:"):
+                continue
+            assert (page.parent / target).exists(), f"{page.name} links to missing {target}"
+
+
+def test_committed_results_table_is_what_its_trials_say():
+    """docs/results/*/results.md is redrawn from the committed metrics, not edited by hand."""
+    from spikectl.experiments.report import group_runs, load_runs, results_table
+    from spikectl.experiments.sweep import trial_dirs
+
+    sweeps = sorted(path.parent for path in (ROOT / "docs" / "results").glob("*/sweep.json"))
+    assert sweeps, "no committed sweep results under docs/results/"
+    for sweep_dir in sweeps:
+        runs = load_runs(trial_dirs(sweep_dir))
+        markdown, _ = results_table(group_runs(runs, "arch"))
+        assert (sweep_dir / "results.md").read_text() == markdown, sweep_dir.name
