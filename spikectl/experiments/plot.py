@@ -9,7 +9,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
-from spikectl.contexts import ContextSet, make_splits
+from spikectl.contexts import ContextSet
 from spikectl.experiments.figures import plot_episode_raster, plot_networks
 from spikectl.experiments.report import (
     group_runs,
@@ -19,7 +19,8 @@ from spikectl.experiments.report import (
     write_results_table,
 )
 from spikectl.experiments.sweep import trial_dirs
-from spikectl.training.contexts import TEST_FILE, TRAIN_FILE
+from spikectl.training.config import TrainConfig
+from spikectl.training.contexts import TEST_FILE, TRAIN_FILE, generated_contexts
 
 
 def plot_sweep(
@@ -67,8 +68,4 @@ def _training_contexts(run_dir: Path, config: dict) -> ContextSet:
     docs/results/) regenerated from the config's seeds exactly as training made it."""
     if (run_dir / TRAIN_FILE).exists() or config.get("train_contexts") is not None:
         return ContextSet.load(run_dir / TRAIN_FILE)
-    train, _ = make_splits(
-        config["n_train"], config["n_test"], config["n_neurons"], config["episode_length"],
-        config["context_seed"],
-    )  # fmt: skip
-    return train
+    return generated_contexts(TrainConfig.from_dict(config))[0]

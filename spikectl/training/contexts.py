@@ -11,16 +11,21 @@ TRAIN_FILE = "train_contexts.npz"
 TEST_FILE = "test_contexts.npz"
 
 
+def generated_contexts(config: TrainConfig) -> tuple[ContextSet, ContextSet]:
+    """The (train, test) sets the config's sizes and ``context_seed`` generate."""
+    return make_splits(
+        config.n_train, config.n_test, config.n_neurons, config.episode_length,
+        config.context_seed,
+    )  # fmt: skip
+
+
 def load_or_make_contexts(config: TrainConfig, run_dir: Path) -> tuple[ContextSet, ContextSet]:
     """The run's (train, test) sets: from the run directory when it has them (a resumed
     run), else from the config's files or generated, then saved into the run directory."""
     if (run_dir / TRAIN_FILE).exists() and (run_dir / TEST_FILE).exists():
         train, test = ContextSet.load(run_dir / TRAIN_FILE), ContextSet.load(run_dir / TEST_FILE)
     else:
-        train, test = make_splits(
-            config.n_train, config.n_test, config.n_neurons, config.episode_length,
-            config.context_seed,
-        )  # fmt: skip
+        train, test = generated_contexts(config)
         if config.train_contexts is not None:
             train = ContextSet.load(config.train_contexts)
         if config.test_contexts is not None:
