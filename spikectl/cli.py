@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 import os
 import sys
 import tempfile
@@ -156,6 +157,12 @@ class TrainCommand:
     """Continue the interrupted run in this directory (its saved config is used)."""
 
 
+def torch_threads() -> int:
+    import torch
+
+    return torch.get_num_threads()
+
+
 def train(command: TrainCommand) -> None:
     """Train (or resume), then print train/test returns against the baselines."""
     from spikectl.experiments.figures import plot_learning_curve
@@ -176,11 +183,17 @@ def train(command: TrainCommand) -> None:
         metrics, baselines, run_dir / "learning_curve.png",
         title=f"{config.arch.upper()}, {final['env_steps']:,} steps",
     )  # fmt: skip
+    validation = "" if math.isnan(final.get("val_return", math.nan)) else (
+        f"  (validation {final['val_return']:.3f})"
+    )
     print(f"{'':<14}{'train':>8}{'test':>8}")
-    print(f"{config.arch:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}")
+    print(f"{config.arch:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}{validation}")
     for name in ("do_nothing", "random"):
         row = baselines[name]
         print(f"{name.replace('_', '-'):<14}{row['train']:>8.3f}{row['test']:>8.3f}")
+    minutes = final["wall_time_s"] / 60
+    print(f"{final['env_steps']:,} environment steps, {final['updates']:,} updates, "
+          f"{minutes:.1f} wall minutes on {config.torch_threads or torch_threads()} thread(s)")
     print(f"wrote {run_dir / 'model.pt'}, {run_dir / 'metrics.csv'} and {curve}")
 
 

@@ -261,38 +261,79 @@ def make_splits(
     seed: int = 0,
     params: NeuronParams | None = None,
     extensions: Extensions | Mapping[str, Any] | None = None,
-) -> tuple[ContextSet, ContextSet]:
-    """A training and a test set with no topology shared within or across them.
+    n_val: int = 0,
+) -> tuple[ContextSet, ContextSet] | tuple[ContextSet, ContextSet, ContextSet]:
+    """A training and a test set (and, with ``n_val > 0``, a validation set) with no
+    topology shared within or across them.
 
     The test set is drawn first and the training set continues the same stream, so
     for one seed the test set does not depend on ``n_train`` and smaller training
     sets are prefixes of larger ones (the paper's Figure 5 compares sizes on one
     test set). Context-level ``extensions`` are drawn with each context.
+
+    ``n_val > 0`` returns ``(train, test, validation)``: the validation set, for
+    choosing settings without looking at the test set, comes from a stream of its
+    own (``VALIDATION_STREAM``), so adding it changes neither of the other two and
+    it does not depend on ``n_train`` (beyond skipping, with vanishing probability,
+    a topology the training set already holds).
     """
     _check_size(n_train, "n_train")
     _check_size(n_test, "n_test")
+    if isinstance(n_val, bool) or not isinstance(n_val, int | np.integer) or n_val < 0:
+        raise ValueError(f"n_val must be a non-negative integer, got {n_val!r}")
     extensions = Extensions.coerce(extensions).context_part()
     contexts = _generate_unique(
         n_test + n_train, n_neurons, episode_length, seed, params, extensions
     )
     test = ContextSet(contexts[:n_test], params, seed, extensions)
     train = ContextSet(contexts[n_test:], params, seed, extensions)
-    return train, test
+    if not n_val:
+        return train, test
+    validation = make_validation_set(
+        int(n_val), (train, test), n_neurons, episode_length, seed, params, extensions
+    )
+    return train, test, validation
+
+
+VALIDATION_STREAM = 1
+"""The validation set is drawn from ``numpy.random.default_rng([seed, VALIDATION_STREAM])``."""
+
+
+def make_validation_set(
+    n_val: int,
+    exclude: Sequence[ContextSet],
+    n_neurons: int = 8,
+    episode_length: int = 60,
+    seed: int = 0,
+    params: NeuronParams | None = None,
+    extensions: Extensions | Mapping[str, Any] | None = None,
+) -> ContextSet:
+    """A validation set with no topology shared with itself or with any set in ``exclude``
+    (the training and test sets), from a generator stream of its own (``VALIDATION_STREAM``)."""
+    _check_size(n_val, "n_val")
+    extensions = Extensions.coerce(extensions).context_part()
+    taken = {context.weights.tobytes() for contexts in exclude for context in contexts}
+    validation = _generate_unique(
+        n_val, n_neurons, episode_length, [seed, VALIDATION_STREAM], params, extensions,
+        exclude=taken,
+    )  # fmt: skip
+    return ContextSet(validation, params, seed, extensions)
 
 
 def _generate_unique(
     size: int,
     n_neurons: int,
     episode_length: int,
-    seed: int,
+    seed: int | list[int],
     params: NeuronParams | None,
     extensions: Extensions | None = None,
+    exclude: set[bytes] = frozenset(),
 ) -> list[Context]:
     _check_n_neurons(n_neurons)
     _check_episode_length(episode_length)
     rng = np.random.default_rng(seed)
     contexts: list[Context] = []
-    seen: set[bytes] = set()
+    seen: set[bytes] = set(exclude)
     rejected_in_a_row = 0
     while len(contexts) < size:
         context = generate_context(rng, n_neurons, episode_length, params, extensions)

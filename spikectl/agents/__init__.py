@@ -21,6 +21,7 @@ from spikectl.agents.networks import (
     RecurrentQNetwork,
     count_parameters,
     make_agent,
+    make_voltage_predictor,
     parameter_counts,
     reset_state,
 )
@@ -37,6 +38,7 @@ __all__ = [
     "count_parameters",
     "greedy_action",
     "make_agent",
+    "make_voltage_predictor",
     "masked_q",
     "observation_batch",
     "parameter_counts",

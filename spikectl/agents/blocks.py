@@ -388,6 +388,39 @@ class PerNeuronQHead(nn.Module):
         return torch.cat([v, a], dim=-1)  # [B, T, n+1]
 
 
+class NextVoltagePredictor(nn.Module):
+    """Auxiliary head: every neuron's next normalised voltage from the features at t and
+    the action taken at t (not in the paper; the trainer's ``aux_voltage_weight``).
+
+    In the noise-free model a neuron's next voltage is its leaky step plus ±20 mV per
+    released presynaptic spike plus 40 mV if stimulated, so predicting it asks the
+    encoder to learn the hidden connectivity the Q-values need.
+
+    ``n_neurons=None`` (per-neuron features [B, T, n, M], DDRQN and TDRQN): one shared
+    MLP per neuron on [features, stimulated at t] → [B, T, n]. ``n_neurons=n`` (system
+    features [B, T, D], DRQN and DMDRQN): MLP on [features, one-hot action] → [B, T, n].
+    """
+
+    def __init__(self, feature_width: int, n_neurons: int | None, hidden: int = 64) -> None:
+        super().__init__()
+        self.n_neurons = n_neurons
+        if n_neurons is None:
+            self.mlp = MLP(feature_width + 1, [hidden], 1)
+        else:
+            self.mlp = MLP(feature_width + n_neurons + 1, [hidden], n_neurons)
+
+    def forward(self, features: torch.Tensor, actions: torch.Tensor) -> torch.Tensor:
+        """features [B, T, (n,) D], actions [B, T] (-1..n-1) → predictions [B, T, n]."""
+        dtype = features.dtype
+        if self.n_neurons is None:
+            n = features.shape[-2]
+            stimulated = neuron_indicator(actions, n, dtype).unsqueeze(-1)  # [B, T, n, 1]
+            x = torch.cat([features, stimulated], dim=-1)  # [B, T, n, D+1]
+            return self.mlp(x).squeeze(-1)  # [B, T, n]
+        x = torch.cat([features, action_one_hot(actions, self.n_neurons, dtype)], dim=-1)
+        return self.mlp(x)  # [B, T, n]
+
+
 # ----------------------------------------------------------------------------
 # acting helpers
 

@@ -30,6 +30,7 @@ from spikectl.agents.blocks import (
     OBS_KEYS,
     ContextEncoder,
     NeuronMixer,
+    NextVoltagePredictor,
     PerNeuronLSTM,
     PerNeuronQHead,
     check_observation,
@@ -183,10 +184,10 @@ def _per_neuron_state(
 # the four networks
 
 
-def _per_neuron_forward(
+def _per_neuron_encode(
     network: nn.Module, mix: nn.Module, obs_seq: Observation, state: State | None, where: str
 ) -> tuple[torch.Tensor, State]:
-    """The sequence forward DDRQN and TDRQN share; they differ only in ``mix``, which
+    """The sequence encoder DDRQN and TDRQN share; they differ only in ``mix``, which
     maps the per-neuron LSTM outputs [B, T, n, H] to embeddings [B, T, n, M]: a
     per-neuron FF layer (DDRQN) or a transformer across neurons (TDRQN)."""
     (B, T), n = check_observation(
@@ -204,10 +205,14 @@ def _per_neuron_forward(
         dtype=_param_dtype(network),
     )  # [B, T, n, F]
     y, state = network.lstm(x, state)  # [B, T, n, H]
-    z = mix(y)  # [B, T, n, M]
-    u = torch.cat([z, network.context(obs_seq, n)], dim=-1)  # [B, T, n, M+C]
-    q = network.head(u, obs_seq["target"])  # [B, T, n+1]
-    return q, state
+    return mix(y), state  # [B, T, n, M]
+
+
+def _per_neuron_q(network: nn.Module, z: torch.Tensor, obs_seq: Observation) -> torch.Tensor:
+    """Per-neuron embeddings z [B, T, n, M] with their context → Q-values [B, T, n+1]."""
+    obs_seq = long_indices(obs_seq)
+    u = torch.cat([z, network.context(obs_seq, z.shape[-2])], dim=-1)  # [B, T, n, M+C]
+    return network.head(u, obs_seq["target"])  # [B, T, n+1]
 
 
 class DRQN(nn.Module):
@@ -232,6 +237,8 @@ class DRQN(nn.Module):
         self.head = MLP(
             sizes.lstm_hidden + self.context.out_features, sizes.head_hidden, n_neurons + 1
         )
+        self.feature_width = sizes.lstm_hidden
+        """Width of :meth:`encode`'s output."""
 
     def initial_state(
         self, batch_size: int, n_neurons: int, device: torch.device | str | None = None
@@ -243,6 +250,13 @@ class DRQN(nn.Module):
     def forward(
         self, obs_seq: Observation, state: State | None = None
     ) -> tuple[torch.Tensor, State]:
+        features, state = self.encode(obs_seq, state)
+        return self.q_values(features, obs_seq), state
+
+    def encode(
+        self, obs_seq: Observation, state: State | None = None
+    ) -> tuple[torch.Tensor, State]:
+        """The LSTM's outputs [B, T, H] (what the head and the auxiliary predictor read)."""
         (B, T), n = check_observation(
             obs_seq,
             leading_dims=2,
@@ -265,9 +279,14 @@ class DRQN(nn.Module):
         h0 = state[0].unsqueeze(0).contiguous()  # [1, B, H]
         c0 = state[1].unsqueeze(0).contiguous()  # [1, B, H]
         y, (h, c) = self.lstm(x, (h0, c0))  # y: [B, T, H]
-        z = torch.cat([y, self.context(obs_seq, n)], dim=-1)  # [B, T, H+C]
-        q = self.head(z)  # [B, T, n+1]
-        return q, (h.squeeze(0), c.squeeze(0))  # [B, H] each
+        return y, (h.squeeze(0), c.squeeze(0))  # [B, H] each
+
+    def q_values(self, features: torch.Tensor, obs_seq: Observation) -> torch.Tensor:
+        """Features [B, T, H] from :meth:`encode` → Q-values [B, T, n+1]."""
+        obs_seq = long_indices(obs_seq)
+        n = obs_seq["voltage"].shape[-1]
+        z = torch.cat([features, self.context(obs_seq, n)], dim=-1)  # [B, T, H+C]
+        return self.head(z)  # [B, T, n+1]
 
     def step(self, obs: Observation, state: State | None) -> tuple[torch.Tensor, State]:
         return _step_via_forward(self, obs, state, self.n_neurons)
@@ -298,6 +317,8 @@ class DDRQN(nn.Module):
             sizes.value_hidden,
             sizes.do_nothing_head,
         )
+        self.feature_width = self.ff.out_features
+        """Width of :meth:`encode`'s per-neuron output."""
 
     def initial_state(
         self, batch_size: int, n_neurons: int, device: torch.device | str | None = None
@@ -307,7 +328,18 @@ class DDRQN(nn.Module):
     def forward(
         self, obs_seq: Observation, state: State | None = None
     ) -> tuple[torch.Tensor, State]:
-        return _per_neuron_forward(self, self.ff, obs_seq, state, "DDRQN.forward")
+        features, state = self.encode(obs_seq, state)
+        return self.q_values(features, obs_seq), state
+
+    def encode(
+        self, obs_seq: Observation, state: State | None = None
+    ) -> tuple[torch.Tensor, State]:
+        """Per-neuron embeddings [B, T, n, M] before the context and the head."""
+        return _per_neuron_encode(self, self.ff, obs_seq, state, "DDRQN.forward")
+
+    def q_values(self, features: torch.Tensor, obs_seq: Observation) -> torch.Tensor:
+        """Features [B, T, n, M] from :meth:`encode` → Q-values [B, T, n+1]."""
+        return _per_neuron_q(self, features, obs_seq)
 
     def step(self, obs: Observation, state: State | None) -> tuple[torch.Tensor, State]:
         return _step_via_forward(self, obs, state, None)
@@ -337,6 +369,8 @@ class DMDRQN(nn.Module):
         self.head = MLP(
             self.mix.out_features + self.context.out_features, sizes.head_hidden, n_neurons + 1
         )
+        self.feature_width = self.mix.out_features
+        """Width of :meth:`encode`'s output."""
 
     def initial_state(
         self, batch_size: int, n_neurons: int, device: torch.device | str | None = None
@@ -347,6 +381,13 @@ class DMDRQN(nn.Module):
     def forward(
         self, obs_seq: Observation, state: State | None = None
     ) -> tuple[torch.Tensor, State]:
+        features, state = self.encode(obs_seq, state)
+        return self.q_values(features, obs_seq), state
+
+    def encode(
+        self, obs_seq: Observation, state: State | None = None
+    ) -> tuple[torch.Tensor, State]:
+        """The mixed system embedding [B, T, ff_hidden] before the context and the head."""
         (B, T), n = check_observation(
             obs_seq,
             leading_dims=2,
@@ -366,10 +407,14 @@ class DMDRQN(nn.Module):
         )  # [B, T, n, F]
         y, state = self.lstm(x, state)  # [B, T, n, H]
         y = y.reshape(B, T, n * s.lstm_hidden)  # [B, T, n*H]
-        z = self.mix(y)  # [B, T, ff_hidden]
-        z = torch.cat([z, self.context(obs_seq, n)], dim=-1)  # [B, T, ff_hidden+C]
-        q = self.head(z)  # [B, T, n+1]
-        return q, state
+        return self.mix(y), state  # [B, T, ff_hidden]
+
+    def q_values(self, features: torch.Tensor, obs_seq: Observation) -> torch.Tensor:
+        """Features [B, T, ff_hidden] from :meth:`encode` → Q-values [B, T, n+1]."""
+        obs_seq = long_indices(obs_seq)
+        n = obs_seq["voltage"].shape[-1]
+        z = torch.cat([features, self.context(obs_seq, n)], dim=-1)  # [B, T, ff_hidden+C]
+        return self.head(z)  # [B, T, n+1]
 
     def step(self, obs: Observation, state: State | None) -> tuple[torch.Tensor, State]:
         return _step_via_forward(self, obs, state, self.n_neurons)
@@ -404,6 +449,8 @@ class TDRQN(nn.Module):
             sizes.value_hidden,
             sizes.do_nothing_head,
         )
+        self.feature_width = self.mixer.out_features
+        """Width of :meth:`encode`'s per-neuron output."""
 
     def initial_state(
         self, batch_size: int, n_neurons: int, device: torch.device | str | None = None
@@ -413,7 +460,18 @@ class TDRQN(nn.Module):
     def forward(
         self, obs_seq: Observation, state: State | None = None
     ) -> tuple[torch.Tensor, State]:
-        return _per_neuron_forward(self, self.mixer, obs_seq, state, "TDRQN.forward")
+        features, state = self.encode(obs_seq, state)
+        return self.q_values(features, obs_seq), state
+
+    def encode(
+        self, obs_seq: Observation, state: State | None = None
+    ) -> tuple[torch.Tensor, State]:
+        """Per-neuron embeddings [B, T, n, M] before the context and the head."""
+        return _per_neuron_encode(self, self.mixer, obs_seq, state, "TDRQN.forward")
+
+    def q_values(self, features: torch.Tensor, obs_seq: Observation) -> torch.Tensor:
+        """Features [B, T, n, M] from :meth:`encode` → Q-values [B, T, n+1]."""
+        return _per_neuron_q(self, features, obs_seq)
 
     def step(self, obs: Observation, state: State | None) -> tuple[torch.Tensor, State]:
         return _step_via_forward(self, obs, state, None)
@@ -453,6 +511,12 @@ def make_agent(
         raise TypeError(f"make_agent: unknown size fields {unknown}; valid fields: {sorted(valid)}")
     sizes = replace(sizes or AgentSizes(), **overrides)
     return AGENTS[key](n_neurons, episode_length, sizes)
+
+
+def make_voltage_predictor(network: nn.Module) -> NextVoltagePredictor:
+    """The auxiliary next-voltage head that reads ``network.encode``'s features."""
+    n_fixed = None if network.equivariant else network.n_neurons
+    return NextVoltagePredictor(network.feature_width, n_fixed)
 
 
 def count_parameters(module: nn.Module) -> int:

@@ -28,7 +28,7 @@ from spikectl.training.config import TrainConfig
 from spikectl.training.replay import EpisodeReplay
 
 CHECKPOINT_FORMAT = "spikectl.checkpoint"
-CHECKPOINT_VERSION = 1
+CHECKPOINT_VERSION = 2
 CONFIG_FILE = "config.json"
 CHECKPOINT_FILE = "checkpoint.pt"
 MODEL_FILE = "model.pt"
@@ -49,6 +49,7 @@ class TrainingState:
     episodes: int = 0
     updates: int = 0
     loss_sum: float = 0.0
+    aux_loss_sum: float = 0.0
     loss_count: int = 0
     wall_time_s: float = 0.0
     metrics: list[dict] = field(default_factory=list)
@@ -147,6 +148,7 @@ def save_checkpoint(
     target: torch.nn.Module,
     optimizer: torch.optim.Optimizer,
     replay: EpisodeReplay,
+    predictor: torch.nn.Module | None = None,
 ) -> None:
     """Write checkpoint.pt atomically with everything ``load_checkpoint`` restores."""
     from spikectl import __version__
@@ -159,12 +161,14 @@ def save_checkpoint(
         "config": config.to_dict(),
         "online": online.state_dict(),
         "target": target.state_dict(),
+        "predictor": None if predictor is None else predictor.state_dict(),
         "optimizer": optimizer.state_dict(),
         "replay": replay.state_dict(),
         "rng": state.rng.bit_generator.state,
         "episodes": state.episodes,
         "updates": state.updates,
         "loss_sum": state.loss_sum,
+        "aux_loss_sum": state.aux_loss_sum,
         "loss_count": state.loss_count,
         "wall_time_s": state.wall_time_s,
         "metrics": state.metrics,
@@ -181,6 +185,7 @@ def load_checkpoint(
     target: torch.nn.Module,
     optimizer: torch.optim.Optimizer,
     replay: EpisodeReplay,
+    predictor: torch.nn.Module | None = None,
 ) -> TrainingState:
     """Restore a run saved by ``save_checkpoint``; refuse one of another version or config."""
     path = run_dir / CHECKPOINT_FILE
@@ -207,6 +212,8 @@ def load_checkpoint(
         )
     online.load_state_dict(payload["online"])
     target.load_state_dict(payload["target"])
+    if predictor is not None:
+        predictor.load_state_dict(payload["predictor"])
     optimizer.load_state_dict(payload["optimizer"])
     replay.load_state_dict(payload["replay"])
     rng = np.random.default_rng()
@@ -216,6 +223,7 @@ def load_checkpoint(
         episodes=payload["episodes"],
         updates=payload["updates"],
         loss_sum=payload["loss_sum"],
+        aux_loss_sum=payload["aux_loss_sum"],
         loss_count=payload["loss_count"],
         wall_time_s=payload["wall_time_s"],
         metrics=payload["metrics"],

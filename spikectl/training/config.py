@@ -17,6 +17,7 @@ the buffer. The paper preset collects 5 episodes per round and makes 10 updates
 from __future__ import annotations
 
 import dataclasses
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
@@ -45,6 +46,8 @@ class TrainConfig:
     """Training contexts (generated when train_contexts is not given)."""
     n_test: int = 100
     """Unseen test contexts (generated when test_contexts is not given)."""
+    n_val: int = 100
+    """Validation contexts, disjoint from both sets, for choosing settings (0 = none)."""
     context_seed: int = 0
     """Seed of the context generation (make_splits)."""
     train_contexts: Path | None = None
@@ -76,6 +79,10 @@ class TrainConfig:
     """Fraction of all episodes over which epsilon decays linearly."""
     loss: Literal["mse", "huber"] = "mse"
     """TD loss: mean squared error or Huber (smooth L1, delta 1)."""
+    n_step: int = 1
+    """Steps of observed reward before bootstrapping (1 = the paper's one-step target)."""
+    aux_voltage_weight: float = 0.0
+    """Weight of the auxiliary loss predicting every neuron's next voltage (0 = off, paper)."""
     max_grad_norm: float = 10.0
     """Gradient-norm clip; 0 turns it off."""
     sizes: AgentSizes = field(default_factory=AgentSizes)
@@ -101,7 +108,18 @@ class TrainConfig:
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 1:
                 raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        for name in ("updates_per_round", "learning_starts", "torch_threads"):
+        if isinstance(self.n_step, bool) or not isinstance(self.n_step, int) or not (
+            1 <= self.n_step <= self.episode_length
+        ):
+            raise ValueError(
+                f"n_step must be an integer in [1, episode_length = {self.episode_length}], "
+                f"got {self.n_step!r}"
+            )
+        if not 0 <= self.aux_voltage_weight < math.inf:
+            raise ValueError(
+                f"aux_voltage_weight must be a finite number >= 0, got {self.aux_voltage_weight}"
+            )
+        for name in ("updates_per_round", "learning_starts", "torch_threads", "n_val"):
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, int) or value < 0:
                 raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
@@ -156,6 +174,8 @@ class TrainConfig:
     def from_dict(cls, values: dict[str, Any]) -> TrainConfig:
         """Inverse of :meth:`to_dict`; unknown fields are an error."""
         values = dict(values)
+        # Runs saved before the validation split existed had none.
+        values.setdefault("n_val", 0)
         known = {f.name for f in dataclasses.fields(cls)}
         unknown = sorted(set(values) - known)
         if unknown:
@@ -204,6 +224,7 @@ SMOKE = TrainConfig(
     n_neurons=5,
     n_train=6,
     n_test=6,
+    n_val=6,
     num_envs=8,
     updates_per_round=2,
     batch_size=4,

@@ -1,14 +1,16 @@
-"""The training and test context sets of a run, kept inside its run directory."""
+"""The context sets of a run (training, test and validation), kept in its run directory."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+from spikectl.context_set import make_validation_set
 from spikectl.contexts import ContextSet, make_splits
 from spikectl.training.config import TrainConfig
 
 TRAIN_FILE = "train_contexts.npz"
 TEST_FILE = "test_contexts.npz"
+VAL_FILE = "val_contexts.npz"
 
 
 def generated_contexts(config: TrainConfig) -> tuple[ContextSet, ContextSet]:
@@ -19,21 +21,36 @@ def generated_contexts(config: TrainConfig) -> tuple[ContextSet, ContextSet]:
     )  # fmt: skip
 
 
-def load_or_make_contexts(config: TrainConfig, run_dir: Path) -> tuple[ContextSet, ContextSet]:
-    """The run's (train, test) sets: from the run directory when it has them (a resumed
-    run), else from the config's files or generated, then saved into the run directory."""
-    if (run_dir / TRAIN_FILE).exists() and (run_dir / TEST_FILE).exists():
-        train, test = ContextSet.load(run_dir / TRAIN_FILE), ContextSet.load(run_dir / TEST_FILE)
+def load_or_make_contexts(
+    config: TrainConfig, run_dir: Path
+) -> tuple[ContextSet, ContextSet, ContextSet | None]:
+    """The run's (train, test, validation) sets: from the run directory when it has them
+    (a resumed run), else from the config's files or generated, then saved into the run
+    directory. The validation set (None when ``n_val`` is 0) is generated to share no
+    topology with the training and test sets actually used."""
+    paths = [run_dir / TRAIN_FILE, run_dir / TEST_FILE]
+    if config.n_val:
+        paths.append(run_dir / VAL_FILE)
+    if all(path.exists() for path in paths):
+        train, test = ContextSet.load(paths[0]), ContextSet.load(paths[1])
+        validation = ContextSet.load(paths[2]) if config.n_val else None
     else:
         train, test = generated_contexts(config)
         if config.train_contexts is not None:
             train = ContextSet.load(config.train_contexts)
         if config.test_contexts is not None:
             test = ContextSet.load(config.test_contexts)
-        train.save(run_dir / TRAIN_FILE)
-        test.save(run_dir / TEST_FILE)
-    for name, contexts in (("training", train), ("test", test)):
-        if (contexts.n_neurons, contexts.episode_length) != (
+        validation = None
+        if config.n_val:
+            validation = make_validation_set(
+                config.n_val, (train, test), config.n_neurons, config.episode_length,
+                config.context_seed,
+            )  # fmt: skip
+        for path, contexts in zip(paths, (train, test, validation), strict=False):
+            contexts.save(path)
+    sets = {"training": train, "test": test, "validation": validation}
+    for name, contexts in sets.items():
+        if contexts is not None and (contexts.n_neurons, contexts.episode_length) != (
             config.n_neurons,
             config.episode_length,
         ):
@@ -42,10 +59,14 @@ def load_or_make_contexts(config: TrainConfig, run_dir: Path) -> tuple[ContextSe
                 f"{contexts.episode_length} steps; the config says {config.n_neurons} and "
                 f"{config.episode_length}"
             )
-    shared = train.duplicate_topologies(test)
-    if shared:
-        raise ValueError(
-            f"{len(shared)} test context(s) share a topology with the training set "
-            f"(first: train {shared[0][0]}, test {shared[0][1]}): the test set must be unseen"
-        )
-    return train, test
+    for first, second in (("training", "test"), ("training", "validation"), ("test", "validation")):
+        if sets[first] is None or sets[second] is None:
+            continue
+        shared = sets[first].duplicate_topologies(sets[second])
+        if shared:
+            raise ValueError(
+                f"{len(shared)} {second} context(s) share a topology with the {first} set "
+                f"(first: {first} {shared[0][0]}, {second} {shared[0][1]}): the sets must be "
+                "disjoint"
+            )
+    return train, test, validation

@@ -21,8 +21,8 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from spikectl.agents import make_agent, masked_q
-from spikectl.agents.blocks import observation_batch
+from spikectl.agents import make_agent, make_voltage_predictor, masked_q
+from spikectl.agents.blocks import normalised_voltage, observation_batch
 from spikectl.rollout import (
     EpisodeBatch,
     do_nothing_policy,
@@ -44,7 +44,7 @@ from spikectl.vector_env import NeuronControlVectorEnv
 
 METRIC_FIELDS = (
     "episode", "env_steps", "updates", "epsilon", "train_return", "test_return", "loss",
-    "wall_time_s",
+    "wall_time_s", "val_return", "aux_loss",
 )  # fmt: skip
 
 
@@ -96,6 +96,71 @@ def sequence_observations(batch: EpisodeBatchArrays, device: str) -> dict[str, t
     }
 
 
+def n_step_targets(
+    rewards: torch.Tensor, bootstrap: torch.Tensor, gamma: float, n_step: int
+) -> torch.Tensor:
+    """n-step TD targets of every step of whole episodes.
+
+    ``rewards`` [B, N] are r_0 … r_{N-1}; ``bootstrap`` [B, N + 1] is the value of
+    observation j (the one before step j), 0 at j = N because the episode terminates
+    after step N - 1. For step t:
+
+        td_target_t = Σ_{k<n, t+k<N} γ^k r_{t+k}  +  γ^n · bootstrap[t + n]
+
+    with bootstrap beyond N read as 0. With n = 1 this is r_t + γ · bootstrap[t + 1].
+    """
+    steps = rewards.shape[1]
+    discounts = gamma ** torch.arange(n_step, dtype=rewards.dtype, device=rewards.device)  # [n]
+    windows = F.pad(rewards, (0, n_step - 1)).unfold(1, n_step, 1)  # [B, N, n]
+    reward_sums = (windows * discounts).sum(dim=2)  # [B, N]
+    future = F.pad(bootstrap, (0, n_step - 1))[:, n_step : n_step + steps]  # [B, N]
+    return reward_sums + gamma**n_step * future
+
+
+def training_losses(
+    online: torch.nn.Module,
+    target: torch.nn.Module,
+    batch: EpisodeBatchArrays,
+    config: TrainConfig,
+    predictor: torch.nn.Module | None = None,
+) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """The double-Q TD loss over every step of the sampled episodes and, with a
+    ``predictor``, the auxiliary next-voltage loss (None without one)."""
+    device = config.device
+    obs_seq = sequence_observations(batch, device)
+    actions = torch.as_tensor(batch.actions, device=device)  # [B, N]
+    rewards = torch.as_tensor(batch.rewards, device=device)  # [B, N]
+    legal = torch.as_tensor(batch.action_masks, device=device)[:, None]  # [B, 1, n+1]
+    # One online forward serves the taken-action values, the double-Q argmax and the
+    # auxiliary prediction (which reads the encoder's features).
+    if predictor is None:
+        q_values, _ = online(obs_seq)  # [B, N+1, n+1]
+    else:
+        features, _ = online.encode(obs_seq)  # [B, N+1, (n,) D]
+        q_values = online.q_values(features, obs_seq)  # [B, N+1, n+1]
+    q_taken = q_values[:, :-1].gather(2, (actions + 1)[..., None]).squeeze(2)  # [B, N]
+    with torch.no_grad():
+        # Double Q-learning: the online network picks the action at every observation,
+        # the target network evaluates it; illegal actions are masked in the choice.
+        best_actions = masked_q(q_values.detach(), legal).argmax(dim=2)  # [B, N+1]
+        target_q_values, _ = target(obs_seq)  # [B, N+1, n+1]
+        bootstrap = target_q_values.gather(2, best_actions[..., None]).squeeze(2)  # [B, N+1]
+        bootstrap[:, -1] = 0.0  # observation N follows the terminal step
+        td_target = n_step_targets(rewards, bootstrap, config.gamma, config.n_step)  # [B, N]
+    if config.loss == "huber":
+        td = F.smooth_l1_loss(q_taken, td_target)
+    else:
+        td = F.mse_loss(q_taken, td_target)
+    if predictor is None:
+        return td, None
+    sizes = online.sizes
+    next_voltage = normalised_voltage(
+        obs_seq["voltage"][:, 1:], sizes.v_rest_mV, sizes.v_threshold_mV
+    )  # [B, N, n]
+    predicted = predictor(features[:, :-1], actions)  # [B, N, n]
+    return td, F.mse_loss(predicted, next_voltage)
+
+
 def td_loss(
     online: torch.nn.Module,
     target: torch.nn.Module,
@@ -103,26 +168,7 @@ def td_loss(
     config: TrainConfig,
 ) -> torch.Tensor:
     """Double-Q TD loss over every step of the sampled episodes."""
-    device = config.device
-    obs_seq = sequence_observations(batch, device)
-    actions = torch.as_tensor(batch.actions, device=device)  # [B, N]
-    rewards = torch.as_tensor(batch.rewards, device=device)  # [B, N]
-    legal = torch.as_tensor(batch.action_masks, device=device)[:, None]  # [B, 1, n+1]
-    # One online forward serves both the taken-action values and the double-Q argmax.
-    q_values, _ = online(obs_seq)  # [B, N+1, n+1]
-    q_taken = q_values[:, :-1].gather(2, (actions + 1)[..., None]).squeeze(2)  # [B, N]
-    with torch.no_grad():
-        # Double Q-learning: the online network picks the next action, the target
-        # network evaluates it; illegal actions are masked in the choice.
-        next_actions = masked_q(q_values[:, 1:].detach(), legal).argmax(dim=2)  # [B, N]
-        target_q_values, _ = target(obs_seq)  # [B, N+1, n+1]
-        next_q = target_q_values[:, 1:].gather(2, next_actions[..., None]).squeeze(2)  # [B, N]
-        not_done = torch.ones_like(rewards)
-        not_done[:, -1] = 0.0  # the episode terminates after step N-1
-        td_target = rewards + config.gamma * not_done * next_q
-    if config.loss == "huber":
-        return F.smooth_l1_loss(q_taken, td_target)
-    return F.mse_loss(q_taken, td_target)
+    return training_losses(online, target, batch, config)[0]
 
 
 @torch.no_grad()
@@ -153,6 +199,17 @@ def build_networks(config: TrainConfig) -> tuple[torch.nn.Module, torch.nn.Modul
     return online, target
 
 
+def build_predictor(config: TrainConfig, online: torch.nn.Module) -> torch.nn.Module | None:
+    """The auxiliary next-voltage head when ``aux_voltage_weight > 0``, seeded from
+    ``config.seed`` on a stream of its own (the Q-network's initialisation is unchanged)."""
+    if config.aux_voltage_weight <= 0:
+        return None
+    with torch.random.fork_rng(devices=[]):
+        torch.manual_seed(np.random.SeedSequence([config.seed, 1]).generate_state(1)[0])
+        predictor = make_voltage_predictor(online)
+    return predictor.to(config.device)
+
+
 def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> list[dict]:
     """Train an agent; returns the metrics rows (also in ``run_dir/metrics.csv``).
 
@@ -162,13 +219,15 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
     prepare_run_dir(config, run_dir, resume)
     if config.torch_threads:
         torch.set_num_threads(config.torch_threads)
-    train_set, test_set = load_or_make_contexts(config, run_dir)
+    train_set, test_set, val_set = load_or_make_contexts(config, run_dir)
     online, target = build_networks(config)
-    optimizer = torch.optim.Adam(online.parameters(), lr=config.learning_rate)
+    predictor = build_predictor(config, online)
+    trained = list(online.parameters()) + (list(predictor.parameters()) if predictor else [])
+    optimizer = torch.optim.Adam(trained, lr=config.learning_rate)
     replay = EpisodeReplay(config.buffer_size, config.n_neurons, config.episode_length)
     state = TrainingState(rng=np.random.default_rng(np.random.SeedSequence(config.seed)))
     if resume:
-        state = load_checkpoint(run_dir, config, online, target, optimizer, replay)
+        state = load_checkpoint(run_dir, config, online, target, optimizer, replay, predictor)
     else:
         state.baselines = {
             name: {
@@ -183,8 +242,9 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
 
     collect_env = NeuronControlVectorEnv(config.num_envs, contexts=train_set)
     eval_envs = {
-        "train": NeuronControlVectorEnv(len(train_set), contexts=train_set),
-        "test": NeuronControlVectorEnv(len(test_set), contexts=test_set),
+        split: NeuronControlVectorEnv(len(contexts), contexts=contexts)
+        for split, contexts in (("train", train_set), ("test", test_set), ("val", val_set))
+        if contexts is not None
     }
     targets = np.array([c.target for c in train_set], dtype=np.int64)
     patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
@@ -202,8 +262,18 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
             "test_return": greedy_returns(online, eval_envs["test"], config.device),
             "loss": state.loss_sum / state.loss_count if state.loss_count else math.nan,
             "wall_time_s": state.wall_time_s,
+            "val_return": (
+                greedy_returns(online, eval_envs["val"], config.device)
+                if "val" in eval_envs
+                else math.nan
+            ),
+            "aux_loss": (
+                state.aux_loss_sum / state.loss_count
+                if state.loss_count and predictor is not None
+                else math.nan
+            ),
         }
-        state.loss_sum, state.loss_count = 0.0, 0
+        state.loss_sum, state.aux_loss_sum, state.loss_count = 0.0, 0.0, 0
         state.metrics.append(row)
         write_metrics(run_dir, state.metrics, METRIC_FIELDS)
         logger.log(row)
@@ -224,22 +294,25 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
         logger.progress(config.num_envs, epsilon, float(episodes.returns.mean()))
         if len(replay) >= max(config.learning_starts, 1):
             for _ in range(config.updates_per_round):
-                loss = td_loss(online, target, replay.sample(config.batch_size, state.rng), config)
+                batch = replay.sample(config.batch_size, state.rng)
+                td, aux = training_losses(online, target, batch, config, predictor)
+                loss = td if aux is None else td + config.aux_voltage_weight * aux
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 if config.max_grad_norm > 0:
-                    torch.nn.utils.clip_grad_norm_(online.parameters(), config.max_grad_norm)
+                    torch.nn.utils.clip_grad_norm_(trained, config.max_grad_norm)
                 optimizer.step()
                 soft_update(target, online, config.tau)
                 state.updates += 1
-                state.loss_sum += loss.item()
+                state.loss_sum += td.item()
+                state.aux_loss_sum += 0.0 if aux is None else aux.item()
                 state.loss_count += 1
         finished = state.episodes >= config.total_episodes
         if finished or _crossed(before, state.episodes, config.eval_every_episodes):
             evaluate()
         if finished or _crossed(before, state.episodes, config.checkpoint_every_episodes):
             state.wall_time_s = time.perf_counter() - started
-            save_checkpoint(run_dir, config, state, online, target, optimizer, replay)
+            save_checkpoint(run_dir, config, state, online, target, optimizer, replay, predictor)
     logger.finish(online, state)
     return state.metrics
 

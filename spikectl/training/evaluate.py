@@ -13,7 +13,7 @@ from spikectl.agents import make_agent
 from spikectl.contexts import ContextSet
 from spikectl.rollout import EpisodeBatch, do_nothing_policy, evaluate_policy
 from spikectl.training.checkpoint import CHECKPOINT_FILE, MODEL_FILE, RunDirError, read_config
-from spikectl.training.contexts import TEST_FILE, TRAIN_FILE
+from spikectl.training.contexts import TEST_FILE, TRAIN_FILE, VAL_FILE
 from spikectl.training.dqn import EpsilonGreedyPolicy
 
 
@@ -74,7 +74,8 @@ def greedy_episodes(network: torch.nn.Module, contexts: ContextSet) -> EpisodeBa
 def evaluate_run(
     run_dir: str | os.PathLike, contexts: str | os.PathLike | None = None
 ) -> list[SplitResult]:
-    """Greedy returns of a run's agent on its training and test sets, or on ``contexts``."""
+    """Greedy returns of a run's agent on its training, test (and validation) sets, or on
+    ``contexts``."""
     run_dir = Path(run_dir)
     config = read_config(run_dir)
     if contexts is not None:
@@ -84,6 +85,8 @@ def evaluate_run(
             "train": ContextSet.load(run_dir / TRAIN_FILE),
             "test": ContextSet.load(run_dir / TEST_FILE),
         }
+        if (run_dir / VAL_FILE).exists():
+            sets["validation"] = ContextSet.load(run_dir / VAL_FILE)
     network = load_agent(run_dir)
     results = []
     for name, context_set in sets.items():

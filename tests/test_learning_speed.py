@@ -1,0 +1,159 @@
+"""Issue 10's mechanisms: n-step targets, the auxiliary next-voltage loss, the validation
+split, and the quick preset's settings."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+import torch
+
+from spikectl import ContextSet, make_splits
+from spikectl.agents import make_agent, make_voltage_predictor
+from spikectl.training.checkpoint import read_metrics
+from spikectl.training.config import PRESETS, SMOKE, TrainConfig
+from spikectl.training.dqn import n_step_targets, td_loss, train, training_losses
+from spikectl.training.replay import EpisodeBatchArrays
+
+
+def test_n_step_targets_by_hand():
+    rewards = torch.tensor([[1.0, 2.0, 3.0, 4.0]])  # N = 4
+    bootstrap = torch.tensor([[10.0, 20.0, 30.0, 40.0, 0.0]])  # value of observations 0..4
+    g = 0.5
+    three = n_step_targets(rewards, bootstrap, g, 3)
+    expected = [
+        1 + g * 2 + g**2 * 3 + g**3 * 40,  # t = 0 bootstraps from observation 3
+        2 + g * 3 + g**2 * 4 + g**3 * 0,  # t = 1 would bootstrap from 4: terminal
+        3 + g * 4,  # t = 2: only two rewards are left
+        4.0,
+    ]
+    assert three[0].tolist() == pytest.approx(expected)
+    one = n_step_targets(rewards, bootstrap, g, 1)
+    assert one[0].tolist() == pytest.approx([1 + g * 20, 2 + g * 30, 3 + g * 40, 4.0])
+    whole = n_step_targets(rewards, bootstrap, g, 4)  # Monte Carlo returns
+    assert whole[0, 0].item() == pytest.approx(1 + g * 2 + g**2 * 3 + g**3 * 4)
+
+
+def test_one_step_targets_are_the_papers_bit_for_bit():
+    generator = torch.Generator().manual_seed(0)
+    rewards = torch.rand(5, 60, generator=generator)
+    next_q = torch.randn(5, 60, generator=generator)  # values of observations 1..N
+    not_done = torch.ones_like(rewards)
+    not_done[:, -1] = 0.0
+    paper = rewards + 0.99 * not_done * next_q
+    bootstrap = torch.cat([torch.zeros(5, 1), next_q], dim=1)
+    bootstrap[:, -1] = 0.0
+    assert torch.equal(n_step_targets(rewards, bootstrap, 0.99, 1), paper)
+
+
+def episode_batch(n: int, length: int, seed: int) -> EpisodeBatchArrays:
+    rng = np.random.default_rng(seed)
+    return EpisodeBatchArrays(
+        voltage=rng.uniform(-75, -40, (3, length + 1, n)).astype(np.float32),
+        actions=rng.integers(-1, n - 1, (3, length)),
+        rewards=rng.random((3, length)).astype(np.float32),
+        targets=np.full(3, n - 1),
+        patterns=rng.integers(0, 2, (3, length)).astype(np.int8),
+        action_masks=np.concatenate([np.ones((3, n), bool), np.zeros((3, 1), bool)], axis=1),
+    )
+
+
+@pytest.mark.parametrize("arch", ["drqn", "ddrqn", "dmdrqn", "tdrqn"])
+def test_auxiliary_loss_reads_the_encoder_and_leaves_the_td_loss_unchanged(arch):
+    config = dataclasses.replace(SMOKE, arch=arch, aux_voltage_weight=1.0)
+    torch.manual_seed(0)
+    online = make_agent(arch, 5, 20, config.sizes)
+    target = make_agent(arch, 5, 20, config.sizes)
+    predictor = make_voltage_predictor(online)
+    batch = episode_batch(5, 20, seed=1)
+    td, aux = training_losses(online, target, batch, config, predictor)
+    assert torch.equal(td, td_loss(online, target, batch, config))
+    # The auxiliary loss is the MSE of the prediction against the next normalised voltage.
+    features, _ = online.encode(_seq(batch))
+    predicted = predictor(features[:, :-1], torch.as_tensor(batch.actions))
+    next_voltage = (torch.as_tensor(batch.voltage[:, 1:]) + 70.0) / 20.0
+    assert aux.item() == pytest.approx(((predicted - next_voltage) ** 2).mean().item(), rel=1e-6)
+    aux.backward()
+    assert any(p.grad is not None and p.grad.abs().sum() > 0 for p in online.parameters())
+
+
+def _seq(batch):
+    from spikectl.training.dqn import sequence_observations
+
+    return sequence_observations(batch, "cpu")
+
+
+def test_auxiliary_predictor_learns_a_hidden_synapse():
+    """A TDRQN encoder with the auxiliary head fits the next voltage of a 2-neuron chain
+    (0 excites 1): the prediction error falls well below that of predicting no change."""
+    from spikectl import simulate
+
+    weights = np.array([[0, 1], [0, 0]], dtype=np.int8)
+    generator = np.random.default_rng(0)
+    actions = np.where(generator.random((64, 20)) < 0.3, 0, -1)  # stimulate 0 at random
+    voltage = np.stack([simulate(weights, a)[0] for a in actions])  # [E, N, n]
+    rest = np.full((64, 1, 2), -70.0, dtype=np.float32)
+    batch = EpisodeBatchArrays(
+        voltage=np.concatenate([rest, voltage], axis=1).astype(np.float32),
+        actions=actions,
+        rewards=np.zeros((64, 20), np.float32),
+        targets=np.ones(64, np.int64),
+        patterns=np.zeros((64, 20), np.int8),
+        action_masks=np.tile([True, True, False], (64, 1)),
+    )
+    config = dataclasses.replace(SMOKE, n_neurons=2, aux_voltage_weight=1.0)
+    torch.manual_seed(0)
+    online = make_agent("tdrqn", 2, 20, config.sizes)
+    predictor = make_voltage_predictor(online)
+    optimizer = torch.optim.Adam([*online.parameters(), *predictor.parameters()], lr=3e-3)
+    for _ in range(300):
+        _, aux = training_losses(online, online, batch, config, predictor)
+        optimizer.zero_grad()
+        aux.backward()
+        optimizer.step()
+    normalised = (batch.voltage + 70.0) / 20.0
+    no_change = float(((normalised[:, 1:] - normalised[:, :-1]) ** 2).mean())
+    assert aux.item() < 0.1 * no_change
+
+
+def test_validation_split_is_disjoint_and_leaves_train_and_test_unchanged():
+    train, test = make_splits(30, 20, n_neurons=6, episode_length=20, seed=4)
+    train3, test3, validation = make_splits(30, 20, n_neurons=6, episode_length=20, seed=4,
+                                            n_val=25)  # fmt: skip
+    assert train3 == train and test3 == test and len(validation) == 25
+    assert not validation.duplicate_topologies(train) and not validation.duplicate_topologies(test)
+    assert len({context.weights.tobytes() for context in validation}) == len(validation)
+    # The validation set does not depend on the training set's size.
+    assert make_splits(10, 20, n_neurons=6, episode_length=20, seed=4, n_val=25)[2] == validation
+    with pytest.raises(ValueError, match="n_val"):
+        make_splits(3, 3, n_val=-1)
+
+
+def test_trainer_evaluates_on_the_validation_set(tmp_path):
+    config = dataclasses.replace(SMOKE, n_step=3, aux_voltage_weight=0.5)
+    metrics = train(config, tmp_path / "run")
+    validation = ContextSet.load(tmp_path / "run" / "val_contexts.npz")
+    assert len(validation) == config.n_val
+    rows = read_metrics(tmp_path / "run")
+    assert all(0.0 <= row["val_return"] <= 1.0 for row in rows)
+    assert np.isnan(rows[0]["aux_loss"]) and rows[-1]["aux_loss"] > 0
+    assert [row["val_return"] for row in metrics] == [row["val_return"] for row in rows]
+    no_val = train(dataclasses.replace(SMOKE, n_val=0), tmp_path / "no-val")
+    assert np.isnan(no_val[-1]["val_return"])
+    assert not (tmp_path / "no-val" / "val_contexts.npz").exists()
+
+
+def test_new_mechanisms_are_off_in_the_paper_preset_and_validated():
+    paper = PRESETS["paper"]
+    assert paper.n_step == 1 and paper.aux_voltage_weight == 0.0
+    with pytest.raises(ValueError, match="n_step"):
+        TrainConfig(n_step=0)
+    with pytest.raises(ValueError, match="n_step"):
+        TrainConfig(n_step=61)
+    with pytest.raises(ValueError, match="aux_voltage_weight"):
+        TrainConfig(aux_voltage_weight=float("inf"))
+    # Runs saved before the validation split existed load with none.
+    saved = paper.to_dict()
+    del saved["n_val"]
+    assert TrainConfig.from_dict(saved).n_val == 0
