@@ -209,19 +209,23 @@ def per_neuron_features(
     v_threshold_mV: float,
     with_target: bool,
     dtype: torch.dtype,
+    with_target_voltage: bool = False,
 ) -> torch.Tensor:
-    """Per-neuron LSTM input [..., n, F]: normalised V, stimulated at t-1, (is target).
+    """Per-neuron LSTM input [..., n, F]: normalised V, stimulated at t-1, (is target),
+    (the target's normalised V).
 
-    F = 3 with the target indicator, else 2 (SPEC 4).
+    F = 2 + with_target + with_target_voltage (SPEC 4). The target's voltage, the same
+    for every neuron, keeps the input permutation equivariant and lets each neuron's
+    memory relate its own spikes to the target's response.
     """
-    voltage = obs["voltage"].to(dtype)  # [..., n]
+    voltage = normalised_voltage(obs["voltage"].to(dtype), v_rest_mV, v_threshold_mV)  # [..., n]
     n = voltage.shape[-1]
-    columns = [
-        normalised_voltage(voltage, v_rest_mV, v_threshold_mV),  # [..., n]
-        neuron_indicator(obs["last_action"], n, dtype),  # [..., n]
-    ]
+    columns = [voltage, neuron_indicator(obs["last_action"], n, dtype)]  # [..., n] each
     if with_target:
         columns.append(neuron_indicator(obs["target"], n, dtype))  # [..., n]
+    if with_target_voltage:
+        target_voltage = torch.gather(voltage, -1, obs["target"].unsqueeze(-1))  # [..., 1]
+        columns.append(target_voltage.expand_as(voltage))  # [..., n]
     return torch.stack(columns, dim=-1)  # [..., n, F]
 
 

@@ -77,6 +77,8 @@ class AgentSizes:
     """DDRQN/TDRQN do-nothing Q: 'dueling' (Q_i = V + A_i) or 'pooled' (Q_i = A_i); not in paper."""
     target_in_input: bool = True
     """Target indicator also in each neuron's LSTM input; False = paper-literal (only after)."""
+    target_voltage_in_input: bool = False
+    """The target's normalised voltage also in each neuron's LSTM input (not in the paper)."""
     v_rest_mV: float = -70.0
     """Resting potential V_r used to normalise the voltage input to (V - V_r) / (V_th - V_r)."""
     v_threshold_mV: float = -50.0
@@ -105,8 +107,9 @@ class AgentSizes:
                 f"do_nothing_head must be one of {PerNeuronQHead.MODES}, got "
                 f"{self.do_nothing_head!r}"
             )
-        if not isinstance(self.target_in_input, bool):
-            raise ValueError(f"target_in_input must be a bool, got {self.target_in_input!r}")
+        for name in ("target_in_input", "target_voltage_in_input"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
         if not self.v_threshold_mV > self.v_rest_mV:
             raise ValueError(
                 f"v_threshold_mV ({self.v_threshold_mV}) must be above v_rest_mV ({self.v_rest_mV})"
@@ -143,6 +146,11 @@ def _check_dims(n_neurons: int, episode_length: int, name: str) -> None:
     for label, value in (("n_neurons", n_neurons), ("episode_length", episode_length)):
         if isinstance(value, bool) or not isinstance(value, int) or value < 1:
             raise ValueError(f"{name}: {label} must be an int >= 1, got {value!r}")
+
+
+def per_neuron_width(sizes: AgentSizes) -> int:
+    """Features per neuron of the per-neuron LSTM input (see ``per_neuron_features``)."""
+    return 2 + sizes.target_in_input + sizes.target_voltage_in_input
 
 
 def _param_dtype(module: nn.Module) -> torch.dtype:
@@ -202,6 +210,7 @@ def _per_neuron_encode(
         v_rest_mV=s.v_rest_mV,
         v_threshold_mV=s.v_threshold_mV,
         with_target=s.target_in_input,
+        with_target_voltage=s.target_voltage_in_input,
         dtype=_param_dtype(network),
     )  # [B, T, n, F]
     y, state = network.lstm(x, state)  # [B, T, n, H]
@@ -308,7 +317,7 @@ class DDRQN(nn.Module):
         self.sizes = sizes = sizes or AgentSizes()
         self.n_neurons = n_neurons  # the n it was built for; it runs on any n
         self.episode_length = episode_length
-        self.lstm = PerNeuronLSTM(3 if sizes.target_in_input else 2, sizes.lstm_hidden)
+        self.lstm = PerNeuronLSTM(per_neuron_width(sizes), sizes.lstm_hidden)
         self.ff = MLP(sizes.lstm_hidden, [sizes.ff_hidden], None)
         self.context = ContextEncoder(episode_length, sizes.target_embed, sizes.pattern_embed, None)
         self.head = PerNeuronQHead(
@@ -361,7 +370,7 @@ class DMDRQN(nn.Module):
         self.sizes = sizes = sizes or AgentSizes()
         self.n_neurons = n_neurons
         self.episode_length = episode_length
-        self.lstm = PerNeuronLSTM(3 if sizes.target_in_input else 2, sizes.lstm_hidden)
+        self.lstm = PerNeuronLSTM(per_neuron_width(sizes), sizes.lstm_hidden)
         self.mix = MLP(n_neurons * sizes.lstm_hidden, [sizes.ff_hidden], None)
         self.context = ContextEncoder(
             episode_length, sizes.target_embed, sizes.pattern_embed, n_neurons
@@ -403,6 +412,7 @@ class DMDRQN(nn.Module):
             v_rest_mV=s.v_rest_mV,
             v_threshold_mV=s.v_threshold_mV,
             with_target=s.target_in_input,
+            with_target_voltage=s.target_voltage_in_input,
             dtype=_param_dtype(self),
         )  # [B, T, n, F]
         y, state = self.lstm(x, state)  # [B, T, n, H]
@@ -438,7 +448,7 @@ class TDRQN(nn.Module):
         self.sizes = sizes = sizes or AgentSizes()
         self.n_neurons = n_neurons  # the n it was built for; it runs on any n
         self.episode_length = episode_length
-        self.lstm = PerNeuronLSTM(3 if sizes.target_in_input else 2, sizes.lstm_hidden)
+        self.lstm = PerNeuronLSTM(per_neuron_width(sizes), sizes.lstm_hidden)
         self.mixer = NeuronMixer(
             sizes.lstm_hidden, sizes.attn_width, sizes.attn_layers, sizes.attn_heads, sizes.attn_ff
         )

@@ -119,7 +119,7 @@ def write_metrics(run_dir: Path, rows: list[dict], fields: tuple[str, ...]) -> N
     writer = csv.DictWriter(buffer, fieldnames=fields, lineterminator="\n")
     writer.writeheader()
     for row in rows:
-        writer.writerow({key: _format(row[key]) for key in fields})
+        writer.writerow({key: _format(row.get(key, math.nan)) for key in fields})
     atomic_write_text(run_dir / METRICS_FILE, buffer.getvalue())
 
 

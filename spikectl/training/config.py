@@ -77,6 +77,8 @@ class TrainConfig:
     """Final exploration rate."""
     epsilon_anneal_fraction: float = 0.25
     """Fraction of all episodes over which epsilon decays linearly."""
+    explore_do_nothing: float | None = None
+    """Chance that an exploratory action is "do nothing" (None: uniform over legal actions)."""
     loss: Literal["mse", "huber"] = "mse"
     """TD loss: mean squared error or Huber (smooth L1, delta 1)."""
     n_step: int = 1
@@ -141,6 +143,10 @@ class TrainConfig:
         for name in ("epsilon_start", "epsilon_end", "epsilon_anneal_fraction"):
             if not 0 <= getattr(self, name) <= 1:
                 raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
+        if self.explore_do_nothing is not None and not 0 <= self.explore_do_nothing <= 1:
+            raise ValueError(
+                f"explore_do_nothing must lie in [0, 1] or be None, got {self.explore_do_nothing}"
+            )
         if self.loss not in ("mse", "huber"):
             raise ValueError(f"loss must be 'mse' or 'huber', got {self.loss!r}")
         if self.max_grad_norm < 0:

@@ -51,17 +51,25 @@ METRIC_FIELDS = (
 class EpsilonGreedyPolicy:
     """Acts with the online network's step forward, carrying one hidden state per episode.
 
-    With probability epsilon (per step and episode) a uniformly random legal action
-    replaces the greedy one. A new instance starts every batch of episodes.
+    With probability epsilon (per step and episode) a random legal action replaces the
+    greedy one: uniform over the legal actions (``explore_do_nothing=None``, the paper),
+    or "do nothing" with probability ``explore_do_nothing`` and otherwise a uniform legal
+    stimulation. A new instance starts every batch of episodes.
     """
 
     def __init__(
-        self, network: torch.nn.Module, epsilon: float, rng: np.random.Generator, device: str
+        self,
+        network: torch.nn.Module,
+        epsilon: float,
+        rng: np.random.Generator,
+        device: str,
+        explore_do_nothing: float | None = None,
     ) -> None:
         self.network = network
         self.epsilon = epsilon
         self.rng = rng
         self.device = device
+        self.explore_do_nothing = explore_do_nothing
         self.state = None
 
     @torch.no_grad()
@@ -75,7 +83,13 @@ class EpsilonGreedyPolicy:
         explore = self.rng.random(greedy.shape[0]) < self.epsilon
         scores = self.rng.random(action_mask.shape)  # [S, n + 1]
         scores[~action_mask] = -1.0
-        random_actions = scores.argmax(axis=1) - 1
+        if self.explore_do_nothing is not None:
+            scores[:, 0] = -1.0  # a stimulation, unless the draw below says do nothing
+            random_actions = scores.argmax(axis=1) - 1
+            nothing = self.rng.random(greedy.shape[0]) < self.explore_do_nothing
+            random_actions[nothing] = -1
+        else:
+            random_actions = scores.argmax(axis=1) - 1
         return np.where(explore, random_actions, greedy)
 
 
@@ -283,7 +297,9 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
     while state.episodes < config.total_episodes:
         epsilon = config.epsilon(state.episodes)
         contexts = state.rng.integers(len(train_set), size=config.num_envs)
-        policy = EpsilonGreedyPolicy(online, epsilon, state.rng, config.device)
+        policy = EpsilonGreedyPolicy(
+            online, epsilon, state.rng, config.device, config.explore_do_nothing
+        )
         episodes: EpisodeBatch = run_episodes(collect_env, contexts, policy)
         replay.add(
             episodes.voltage, episodes.actions, episodes.rewards, targets[contexts],
