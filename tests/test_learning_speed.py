@@ -157,3 +157,64 @@ def test_new_mechanisms_are_off_in_the_paper_preset_and_validated():
     saved = paper.to_dict()
     del saved["n_val"]
     assert TrainConfig.from_dict(saved).n_val == 0
+
+
+def test_target_voltage_feature_is_the_targets_normalised_voltage():
+    from spikectl.agents.blocks import per_neuron_features
+
+    voltage = torch.tensor([[-70.0, -50.0, -60.0], [-80.0, -70.0, -30.0]])  # [B=2, n=3]
+    obs = {"voltage": voltage, "last_action": torch.tensor([-1, 0]),
+           "target": torch.tensor([1, 2])}  # fmt: skip
+    x = per_neuron_features(obs, v_rest_mV=-70.0, v_threshold_mV=-50.0, with_target=True,
+                            dtype=torch.float32, with_target_voltage=True)  # fmt: skip
+    assert x.shape == (2, 3, 4)
+    assert x[0, :, 3].tolist() == [1.0, 1.0, 1.0]  # target 1 sits at threshold
+    assert x[1, :, 3].tolist() == [2.0, 2.0, 2.0]  # target 2 at -30 mV
+    assert x[..., :3].equal(per_neuron_features(
+        obs, v_rest_mV=-70.0, v_threshold_mV=-50.0, with_target=True, dtype=torch.float32))
+
+
+@pytest.mark.parametrize("arch", ["ddrqn", "tdrqn"])
+def test_target_voltage_feature_keeps_the_networks_equivariant(arch):
+    net = make_agent(arch, 6, 9, SMOKE.sizes, target_voltage_in_input=True).double()
+    generator = torch.Generator().manual_seed(0)
+    obs = {
+        "voltage": -70 + 30 * torch.rand(2, 5, 6, generator=generator, dtype=torch.float64),
+        "target": torch.full((2, 5), 4),
+        "pattern": torch.randint(0, 2, (2, 5, 9), generator=generator).double(),
+        "step": torch.arange(5).expand(2, 5),
+        "last_action": torch.randint(-1, 6, (2, 5), generator=generator),
+    }
+    q, _ = net(obs)
+    perm = torch.tensor([3, 0, 5, 1, 4, 2])
+    inverse = torch.argsort(perm)
+    moved = dict(obs, voltage=obs["voltage"][..., perm], target=inverse[obs["target"]],
+                 last_action=torch.where(obs["last_action"] >= 0,
+                                         inverse[obs["last_action"].clamp(min=0)], -1))  # fmt: skip
+    q_moved, _ = net(moved)
+    torch.testing.assert_close(q_moved[..., 0], q[..., 0])
+    torch.testing.assert_close(q_moved[..., 1:], q[..., 1:][..., perm])
+
+
+@pytest.mark.parametrize("do_nothing", [0.0, 0.75, 1.0])
+def test_do_nothing_biased_exploration(do_nothing):
+    from spikectl.training.dqn import EpsilonGreedyPolicy
+
+    class Zero(torch.nn.Module):
+        def step(self, obs, state):
+            return torch.zeros(obs["voltage"].shape[0], 5), state
+
+    policy = EpsilonGreedyPolicy(Zero(), 1.0, np.random.default_rng(0), "cpu", do_nothing)
+    mask = np.tile([True, True, False, True, True], (4000, 1))  # neuron 1 is the target
+    obs = {"voltage": np.zeros((4000, 4), np.float32), "target": np.ones(4000),
+           "pattern": np.zeros((4000, 3)), "step": np.zeros(4000),
+           "last_action": np.full(4000, -1)}  # fmt: skip
+    actions = policy(obs, mask)
+    assert not np.any(actions == 1)  # never the illegal target
+    assert np.mean(actions == -1) == pytest.approx(do_nothing, abs=0.02)
+    if do_nothing < 1:
+        stimulated = actions[actions >= 0]
+        counts = np.bincount(stimulated, minlength=4)[[0, 2, 3]]
+        assert counts.min() > 0.8 * counts.max()  # uniform over the legal stimulations
+    with pytest.raises(ValueError, match="explore_do_nothing"):
+        TrainConfig(explore_do_nothing=1.5)
