@@ -51,6 +51,9 @@ def test_bad_sweeps_are_clear_errors(tmp_path):
     )
     sweep = load_sweep_file(path)
     assert sweep.base.n_train == 4 and len(sweep.trials()) == 2
+    # A sizes override changes only the fields it names.
+    one_field = Sweep.from_dict({"base": "smoke", "overrides": {"sizes": {"lstm_hidden": 7}}})
+    assert one_field.base.sizes == dataclasses.replace(SMOKE.sizes, lstm_hidden=7)
 
 
 def test_sweep_runs_skips_and_resumes(tmp_path):

@@ -88,7 +88,10 @@ class Sweep:
             base_config = TrainConfig.from_dict(base)
         overrides = dict(values.get("overrides", {}))
         if overrides:
-            base_config = TrainConfig.from_dict({**base_config.to_dict(), **overrides})
+            merged = base_config.to_dict()
+            # Size overrides change single fields of the base's sizes, not all of them.
+            merged["sizes"] = {**merged["sizes"], **overrides.pop("sizes", {})}
+            base_config = TrainConfig.from_dict({**merged, **overrides})
         unknown = sorted(set(values) - {"base", "overrides", "grid"})
         if unknown:
             raise ValueError(f"unknown sweep file key(s) {unknown}: use base, overrides, grid")
