@@ -3,7 +3,7 @@
 Times each part of the trainer's update at a preset's sizes and batch (default: the
 quick preset, one Torch thread): the replay sample and input tensors, the online
 forward split into its blocks (per-neuron LSTM, transformer across neurons, context
-encoder, Q head), their backward passes, the target network's forward, gradient
+encoder, Q head), their backward passes, the target network's forward, the auxiliary head, gradient
 clipping, Adam and the soft update; then one collection round (``num_envs`` episodes
 of epsilon-greedy acting) and one greedy evaluation of 100 contexts. Each part is
 timed on its own (median of ``--repeats``), interleaved with the whole update, so the
@@ -32,10 +32,11 @@ from spikectl.training.config import PRESETS
 from spikectl.training.dqn import (
     EpsilonGreedyPolicy,
     build_networks,
+    build_predictor,
     greedy_returns,
     sequence_observations,
     soft_update,
-    td_loss,
+    training_losses,
 )
 from spikectl.training.replay import EpisodeReplay
 from spikectl.vector_env import NeuronControlVectorEnv
@@ -79,7 +80,9 @@ def main() -> None:
     rng = np.random.default_rng(0)
     train_set, _ = make_splits(100, 1, config.n_neurons, config.episode_length)
     online, target = build_networks(config)
-    optimizer = torch.optim.Adam(online.parameters(), lr=config.learning_rate)
+    predictor = build_predictor(config, online)
+    trained = [*online.parameters(), *(predictor.parameters() if predictor else [])]
+    optimizer = torch.optim.Adam(trained, lr=config.learning_rate)
     replay = EpisodeReplay(256, config.n_neurons, config.episode_length)
     env = NeuronControlVectorEnv(64, contexts=train_set)
     contexts = rng.integers(len(train_set), size=64)
@@ -90,10 +93,12 @@ def main() -> None:
                episodes.action_mask)  # fmt: skip
 
     def update() -> None:
-        loss = td_loss(online, target, replay.sample(config.batch_size, rng), config)
+        batch = replay.sample(config.batch_size, rng)
+        td, aux = training_losses(online, target, batch, config, predictor)
+        loss = td if aux is None else td + config.aux_voltage_weight * aux
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        torch.nn.utils.clip_grad_norm_(online.parameters(), config.max_grad_norm)
+        torch.nn.utils.clip_grad_norm_(trained, config.max_grad_norm)
         optimizer.step()
         soft_update(target, online, config.tau)
 
@@ -105,6 +110,7 @@ def main() -> None:
     features = per_neuron_features(
         indexed, v_rest_mV=sizes.v_rest_mV, v_threshold_mV=sizes.v_threshold_mV,
         with_target=sizes.target_in_input, dtype=torch.float32,
+        with_target_voltage=sizes.target_voltage_in_input,
     )  # fmt: skip
     state = online.initial_state(config.batch_size, n)
     lstm_out = online.lstm(features, state)[0].detach().requires_grad_()
@@ -134,13 +140,17 @@ def main() -> None:
         ),
         "target network forward (no grad)": torch.no_grad()(lambda: target(obs)),
     }
+    if predictor is not None:
+        actions = torch.as_tensor(batch.actions)
+        parts["auxiliary voltage head, forward + backward"] = forward_backward(
+            lambda: predictor(mixed.detach().requires_grad_()[:, :-1], actions)
+        )
     results = {"whole update": median_ms(update, args.repeats)}
     for name, function in parts.items():
         results[name] = median_ms(function, args.repeats)
-    online.zero_grad()
-    online(obs)[0].sum().backward()
+    update()
     results["gradient clip"] = median_ms(
-        lambda: torch.nn.utils.clip_grad_norm_(online.parameters(), config.max_grad_norm),
+        lambda: torch.nn.utils.clip_grad_norm_(trained, config.max_grad_norm),
         args.repeats,
     )
     results["Adam step"] = median_ms(optimizer.step, args.repeats)

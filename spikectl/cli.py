@@ -150,7 +150,7 @@ class TrainCommand:
 
     config: Annotated[TrainConfig, tyro.conf.arg(name="")]
     preset: Literal["paper", "quick", "smoke"] = "quick"
-    """paper: Table 2 exactly; quick: ~15 minutes on 2 CPU cores; smoke: seconds."""
+    """paper: Table 2 exactly; quick: the main job, under 15 min on one core; smoke: seconds."""
     run_dir: Path | None = None
     """Run directory (default runs/ARCH-PRESET-seedSEED); must be new unless resuming."""
     resume: Path | None = None

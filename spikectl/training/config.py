@@ -4,7 +4,7 @@
 per field, with the docstrings below as help. Presets are plain instances:
 
 - ``paper``: Table 2 exactly (1 M environment steps, batches of 5 episodes, ...);
-- ``quick``: the README's main job, about 15 minutes on a 2-core CPU;
+- ``quick``: the README's main job, under 15 minutes on one CPU core;
 - ``smoke``: seconds, for tests.
 
 How often a batch is drawn is not in the paper. This project's reading: episodes are
@@ -203,14 +203,18 @@ class TrainConfig:
 PAPER = TrainConfig()
 
 QUICK = TrainConfig(
-    total_env_steps=1_000_000,
+    total_env_steps=264_000,
     num_envs=16,
-    updates_per_round=10,
+    updates_per_round=32,
     batch_size=8,
     buffer_size=40_000,
     learning_starts=16,
-    learning_rate=1e-3,
+    learning_rate=2e-3,
+    gamma=0.9,
     tau=0.05,
+    n_step=3,
+    aux_voltage_weight=1.0,
+    explore_do_nothing=0.75,
     sizes=AgentSizes(
         lstm_hidden=64,
         attn_width=64,
@@ -218,11 +222,17 @@ QUICK = TrainConfig(
         tdrqn_head_hidden=(128, 64),
         ff_hidden=256,
         head_hidden=(256, 128, 64),
+        target_voltage_in_input=True,
     ),
-    eval_every_episodes=1000,
-    checkpoint_every_episodes=1000,
-    torch_threads=2,
+    eval_every_episodes=400,
+    checkpoint_every_episodes=800,
+    torch_threads=1,
 )
+"""The README's main job: ~14 minutes on one core of the project's 2-core machine
+(docs/training.md, "Learning fast"): 4 400 episodes, 8 800 updates of 8 episodes,
+n-step targets, the auxiliary next-voltage loss, the target's voltage in each neuron's
+input, do-nothing-biased exploration, gamma 0.9, lr 2e-3, half-width networks, one Torch
+thread."""
 
 SMOKE = TrainConfig(
     total_env_steps=40 * 20 * 8,
