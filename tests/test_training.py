@@ -261,9 +261,15 @@ def run_cli(*args, check=True):
     )
 
 
-def test_resume_after_sigkill_is_exact(tmp_path):
+LEARN_FAST_FLAGS = ("--n-step", "3", "--aux-voltage-weight", "1.0", "--explore-do-nothing",
+                    "0.75", "--sizes.target-voltage-in-input")  # fmt: skip
+
+
+@pytest.mark.parametrize("flags", [(), LEARN_FAST_FLAGS], ids=["paper", "learn-fast"])
+def test_resume_after_sigkill_is_exact(tmp_path, flags):
     """Kill a run with SIGKILL after a checkpoint, resume it: the same metrics.csv rows and
-    bit-identical final weights as an uninterrupted run."""
+    bit-identical final weights as an uninterrupted run (also with the auxiliary head,
+    n-step targets and biased exploration of the quick preset)."""
     import os
     import signal
     import subprocess
@@ -271,10 +277,10 @@ def test_resume_after_sigkill_is_exact(tmp_path):
     import time
 
     reference = tmp_path / "reference"
-    run_cli("train", "--preset", "smoke", "--run-dir", str(reference))
+    run_cli("train", "--preset", "smoke", *flags, "--run-dir", str(reference))
     killed = tmp_path / "killed"
     process = subprocess.Popen(
-        [sys.executable, "-m", "spikectl.cli", "train", "--preset", "smoke",
+        [sys.executable, "-m", "spikectl.cli", "train", "--preset", "smoke", *flags,
          "--run-dir", str(killed)],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )  # fmt: skip

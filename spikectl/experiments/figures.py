@@ -93,14 +93,17 @@ def plot_learning_curve(
     path: str | os.PathLike,
     title: str = "",
 ) -> Path:
-    """Greedy return on the training and the unseen test contexts against environment
-    steps (one run's ``metrics.csv`` rows), with the do-nothing and random levels."""
+    """Greedy return on the training, the unseen test (and validation) contexts against
+    environment steps (one run's ``metrics.csv`` rows), with the do-nothing and random levels."""
     plt = _pyplot()
     steps = np.array([row["env_steps"] for row in metrics])
     figure, axis = plt.subplots(figsize=(6.4, 4.0))
     axis.plot(steps, [row["train_return"] for row in metrics], label="train contexts", marker=".")
     axis.plot(steps, [row["test_return"] for row in metrics], label="unseen test contexts",
               marker=".")  # fmt: skip
+    validation = [row.get("val_return", np.nan) for row in metrics]
+    if not np.all(np.isnan(validation)):
+        axis.plot(steps, validation, label="validation contexts", marker=".", alpha=0.6)
     styles = {"do_nothing": ("do nothing", ":"), "random": ("random", "--")}
     for name, (label, style) in styles.items():
         if name in baselines:

@@ -96,8 +96,9 @@ class TrainConfig:
     """Write a resumable checkpoint every this many episodes (and at the end)."""
     device: str = "cpu"
     """Torch device: cpu, cuda, cuda:1, ..."""
-    torch_threads: int = 0
-    """Torch intra-op threads; 0 leaves Torch's default. Bit-identical reruns need the same."""
+    torch_threads: int = 1
+    """Torch intra-op threads (0: Torch's default). 1 is robust on a shared machine
+    (docs/benchmarks.md); bit-identical reruns need the same number."""
     progress: bool = True
     """Show a progress bar."""
 
