@@ -4,8 +4,10 @@
 round: collect ``num_envs`` episodes at once through the vector environment with an
 epsilon-greedy policy on the online network's step forward, store them in the episodic
 buffer, then make ``updates_per_round`` gradient updates, each on ``batch_size`` whole
-episodes sampled uniformly. After every update the target network moves by a soft
-update. Every ``eval_every_episodes`` the greedy policy is scored on every training and
+episodes sampled uniformly. The TD target is the double-Q target, over ``n_step``
+observed rewards (1 in the paper); with ``aux_voltage_weight > 0`` an auxiliary head
+predicting every neuron's next voltage adds its loss. After every update the target
+network moves by a soft update. Every ``eval_every_episodes`` the greedy policy is scored on every training and
 every test context; every ``checkpoint_every_episodes`` the whole state is saved so
 that ``train(..., resume=True)`` continues bit-identically.
 """
