@@ -24,6 +24,7 @@ from spikectl.contexts import (
     Context,
     _check_episode_length,
     _check_n_neurons,
+    _check_seed,
     _check_size,
     generate_context,
 )
@@ -84,7 +85,8 @@ class ContextSet(Sequence[Context]):
         ``generate(100, seed=s)``. Context-level ``extensions`` (hidden neurons,
         heterogeneous neurons) are drawn with each context.
         """
-        _check_size(size)
+        size = _check_size(size)
+        seed = _check_seed(seed)
         extensions = Extensions.coerce(extensions).context_part()
         contexts = _generate_unique(size, n_neurons, episode_length, seed, params, extensions)
         return cls(contexts, params, seed, extensions)
@@ -240,7 +242,7 @@ class ContextSet(Sequence[Context]):
                 )
             ]  # fmt: skip
             loaded = cls(contexts, params, metadata.get("seed"), metadata.get("extensions"))
-        except (TypeError, ValueError) as error:
+        except (TypeError, ValueError, KeyError, IndexError, AttributeError) as error:
             raise ContextFileError(f"{path} holds an invalid context set: {error}") from error
         if loaded.checksum() != metadata.get("checksum"):
             raise ContextFileError(f"{path} is damaged: its checksum does not match its contents")
@@ -269,8 +271,9 @@ def make_splits(
     sets are prefixes of larger ones (the paper's Figure 5 compares sizes on one
     test set). Context-level ``extensions`` are drawn with each context.
     """
-    _check_size(n_train, "n_train")
-    _check_size(n_test, "n_test")
+    n_train = _check_size(n_train, "n_train")
+    n_test = _check_size(n_test, "n_test")
+    seed = _check_seed(seed)
     extensions = Extensions.coerce(extensions).context_part()
     contexts = _generate_unique(
         n_test + n_train, n_neurons, episode_length, seed, params, extensions
@@ -288,8 +291,10 @@ def _generate_unique(
     params: NeuronParams | None,
     extensions: Extensions | None = None,
 ) -> list[Context]:
-    _check_n_neurons(n_neurons)
-    _check_episode_length(episode_length)
+    n_neurons = _check_n_neurons(n_neurons)
+    episode_length = _check_episode_length(episode_length)
+    if params is not None and not isinstance(params, NeuronParams):
+        raise TypeError(f"params must be a NeuronParams or None, got {type(params).__name__}")
     rng = np.random.default_rng(seed)
     contexts: list[Context] = []
     seen: set[bytes] = set()
@@ -300,8 +305,9 @@ def _generate_unique(
         if key in seen:
             rejected_in_a_row += 1
             if rejected_in_a_row > MAX_TOPOLOGY_ATTEMPTS:
-                raise RuntimeError(
-                    f"could not find {size} distinct topologies of {n_neurons} neurons"
+                raise ValueError(
+                    f"could not find {size} distinct topologies of {n_neurons} neurons: "
+                    "ask for fewer contexts or larger networks"
                 )
             continue
         rejected_in_a_row = 0

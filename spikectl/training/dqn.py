@@ -15,6 +15,7 @@ from __future__ import annotations
 import copy
 import math
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -31,8 +32,10 @@ from spikectl.rollout import (
     run_episodes,
 )
 from spikectl.training.checkpoint import (
+    RunDirError,
     TrainingState,
     load_checkpoint,
+    locked_run,
     prepare_run_dir,
     save_checkpoint,
     write_metrics,
@@ -153,13 +156,17 @@ def build_networks(config: TrainConfig) -> tuple[torch.nn.Module, torch.nn.Modul
     return online, target
 
 
+@locked_run
 def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> list[dict]:
     """Train an agent; returns the metrics rows (also in ``run_dir/metrics.csv``).
 
-    ``resume=True`` continues the run saved in ``run_dir`` from its last checkpoint.
+    ``resume=True`` continues the run saved in ``run_dir`` from its last checkpoint
+    (from step 0 if it stopped before its first). A loss that turns NaN or infinite
+    stops the run with a RunDirError before anything more is written; a run that ends
+    without a single gradient update warns (RuntimeWarning).
     """
     run_dir = Path(run_dir)
-    prepare_run_dir(config, run_dir, resume)
+    resume = prepare_run_dir(config, run_dir, resume)
     if config.torch_threads:
         torch.set_num_threads(config.torch_threads)
     train_set, test_set = load_or_make_contexts(config, run_dir)
@@ -225,6 +232,12 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
         if len(replay) >= max(config.learning_starts, 1):
             for _ in range(config.updates_per_round):
                 loss = td_loss(online, target, replay.sample(config.batch_size, state.rng), config)
+                if not torch.isfinite(loss):
+                    raise RunDirError(
+                        f"the TD loss became {loss.item()} at update {state.updates + 1} "
+                        f"(episode {state.episodes}): training diverged; the last good "
+                        f"checkpoint in {run_dir} is kept (lower --learning-rate?)"
+                    )
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 if config.max_grad_norm > 0:
@@ -241,6 +254,14 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
             state.wall_time_s = time.perf_counter() - started
             save_checkpoint(run_dir, config, state, online, target, optimizer, replay)
     logger.finish(online, state)
+    if state.updates == 0:
+        warnings.warn(
+            f"the run in {run_dir} made no gradient update (learning_starts="
+            f"{config.learning_starts}, updates_per_round={config.updates_per_round}, "
+            f"{config.total_episodes} episodes): model.pt is the untrained initial network",
+            RuntimeWarning,
+            stacklevel=2,
+        )
     return state.metrics
 
 
