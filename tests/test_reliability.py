@@ -416,8 +416,9 @@ def fail_writes(monkeypatch, name: str, code: int) -> None:
 
 @pytest.mark.parametrize(
     ("name", "code"),
-    [("train_contexts.npz", errno.EROFS), ("config.json", errno.ENOSPC),
-     ("checkpoint.pt", errno.ENOSPC), ("model.pt", errno.ENOSPC)],
+    [pytest.param("train_contexts.npz", errno.EROFS, marks=pytest.mark.slow),
+     ("config.json", errno.ENOSPC), ("checkpoint.pt", errno.ENOSPC),
+     pytest.param("model.pt", errno.ENOSPC, marks=pytest.mark.slow)],
 )  # fmt: skip
 def test_full_or_read_only_disk_is_one_line_and_no_trap(name, code, tmp_path, capsys,
                                                         monkeypatch):  # fmt: skip
@@ -445,25 +446,25 @@ def metric_rows(run: Path) -> list[list[str]]:
     return [row[:-1] for row in rows]  # all but wall time
 
 
+@pytest.mark.parametrize("how", ["same command", pytest.param("resume", marks=pytest.mark.slow)])
 def test_a_run_stopped_before_its_first_checkpoint_restarts_exactly(
-    finished_run, tmp_path, capsys, monkeypatch
+    how, finished_run, tmp_path, capsys, monkeypatch
 ):
     import spikectl.training.dqn as dqn
 
     def out_of_disk(*args):
         raise FileWriteError(errno.ENOSPC, "cannot write checkpoint.pt: no space left")
 
-    for how in ("same command", "resume"):
-        run = tmp_path / how
-        command = ["train", *TINY_FLAGS, "--run-dir", str(run)]
-        with monkeypatch.context() as patch:
-            patch.setattr(dqn, "save_checkpoint", out_of_disk)
-            cli_error(command, capsys)
-        assert (run / "config.json").exists() and not (run / "checkpoint.pt").exists()
-        main(command if how == "same command" else ["train", "--resume", str(run)])
-        assert metric_rows(run) == metric_rows(finished_run)
-        ours, reference = (load_model_weights(r / "model.pt") for r in (run, finished_run))
-        assert all(torch.equal(ours[key], reference[key]) for key in reference)
+    run = tmp_path / how
+    command = ["train", *TINY_FLAGS, "--run-dir", str(run)]
+    with monkeypatch.context() as patch:
+        patch.setattr(dqn, "save_checkpoint", out_of_disk)
+        cli_error(command, capsys)
+    assert (run / "config.json").exists() and not (run / "checkpoint.pt").exists()
+    main(command if how == "same command" else ["train", "--resume", str(run)])
+    assert metric_rows(run) == metric_rows(finished_run)
+    ours, reference = (load_model_weights(r / "model.pt") for r in (run, finished_run))
+    assert all(torch.equal(ours[key], reference[key]) for key in reference)
 
 
 def test_a_failed_start_does_not_block_the_same_command(run_copy, tmp_path, capsys):
