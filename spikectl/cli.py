@@ -91,9 +91,7 @@ def demo(config: DemoConfig) -> dict[str, dict[str, float]]:
         config.out_dir / "raster.png",
         title=f"random policy on unseen test network 0: return {random_episodes.returns[0]:.3f}",
     )
-    write_json(
-        config.out_dir / "results.json", {"config": asdict(config), "returns": results}
-    )
+    write_json(config.out_dir / "results.json", {"config": asdict(config), "returns": results})
     print(f"wrote {raster} and {config.out_dir / 'results.json'}")
     return results
 

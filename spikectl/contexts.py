@@ -402,8 +402,7 @@ def _is_int(value: Any) -> bool:
 def _check_n_neurons(n_neurons: int) -> int:
     if not _is_int(n_neurons) or not 2 <= n_neurons <= MAX_N_NEURONS:
         raise ValueError(
-            f"n_neurons must be an integer in 2..{MAX_N_NEURONS} (MAX_N_NEURONS), "
-            f"got {n_neurons!r}"
+            f"n_neurons must be an integer in 2..{MAX_N_NEURONS} (MAX_N_NEURONS), got {n_neurons!r}"
         )
     return int(n_neurons)
 

@@ -196,6 +196,7 @@ def prepare_run_dir(config: TrainConfig, run_dir: Path, resume: bool) -> bool:
         if read_config(run_dir) != config:
             raise RunDirError(f"the config does not match the run saved in {run_dir}")
         if has_checkpoint:
+            _remove_temporaries(run_dir)
             return True
         _clear_unstarted(run_dir)
         return False
@@ -228,6 +229,12 @@ def _clear_unstarted(run_dir: Path) -> None:
             shutil.rmtree(path)
         else:
             path.unlink(missing_ok=True)
+    _remove_temporaries(run_dir)
+
+
+def _remove_temporaries(run_dir: Path) -> None:
+    """Remove the temporary files of writes a kill interrupted (we hold the lock, so no
+    write of ours is under way)."""
     for temporary in run_dir.glob(".*.tmp"):
         temporary.unlink(missing_ok=True)
 
@@ -266,8 +273,7 @@ def read_metrics(run_dir: Path) -> list[dict[str, float]]:
     try:
         with open(path, newline="") as handle:
             return [
-                {key: float(value) for key, value in row.items()}
-                for row in csv.DictReader(handle)
+                {key: float(value) for key, value in row.items()} for row in csv.DictReader(handle)
             ]
     except FileNotFoundError:
         raise
