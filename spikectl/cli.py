@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import math
-import os
+import re
 import sys
-import tempfile
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Annotated, Literal, Union
@@ -14,19 +15,17 @@ from typing import Annotated, Literal, Union
 import numpy as np
 import tyro
 
-from spikectl.contexts import ContextFileError, ContextSet, make_splits
+from spikectl.agents import AgentSizes
+from spikectl.contexts import ContextSet, make_splits
+from spikectl.experiments.sweep import SweepError
+from spikectl.files import FileWriteError, make_dirs, write_json
 from spikectl.training.checkpoint import RunDirError
 from spikectl.training.config import PRESETS, TrainConfig
 
-
-def write_json_atomic(path: Path, payload: object) -> None:
-    """Write JSON so that a crash leaves either the old file or the new one, never half."""
-    path.parent.mkdir(parents=True, exist_ok=True)
-    descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(descriptor, "w") as handle:
-        json.dump(payload, handle, indent=2, default=str)
-        handle.write("\n")
-    os.replace(temporary, path)
+USER_ERRORS = (ValueError, FileNotFoundError, FileWriteError, RunDirError, SweepError)
+"""What the commands raise for bad input or a bad file system: reported in one line with
+exit status 2. ValueError covers every validation error of the library (ContextFileError,
+TooLargeError, config and argument checks); anything else is a bug and keeps its traceback."""
 
 
 @dataclass(frozen=True)
@@ -60,7 +59,7 @@ def demo(config: DemoConfig) -> dict[str, dict[str, float]]:
     train, test = make_splits(
         config.n_train, config.n_test, config.n_neurons, config.episode_length, config.seed
     )
-    config.out_dir.mkdir(parents=True, exist_ok=True)
+    make_dirs(config.out_dir)
     train.save(config.out_dir / "train_contexts.npz")
     test.save(config.out_dir / "test_contexts.npz")
     results: dict[str, dict[str, float]] = {}
@@ -93,9 +92,7 @@ def demo(config: DemoConfig) -> dict[str, dict[str, float]]:
         config.out_dir / "raster.png",
         title=f"random policy on unseen test network 0: return {random_episodes.returns[0]:.3f}",
     )
-    write_json_atomic(
-        config.out_dir / "results.json", {"config": asdict(config), "returns": results}
-    )
+    write_json(config.out_dir / "results.json", {"config": asdict(config), "returns": results})
     print(f"wrote {raster} and {config.out_dir / 'results.json'}")
     return results
 
@@ -120,13 +117,15 @@ class ContextsConfig:
     """Steps per episode."""
     seed: int = 0
     """Generation seed."""
+    overwrite: bool = False
+    """Replace existing train_contexts.npz / test_contexts.npz in --out-dir."""
 
 
 def contexts(config: ContextsConfig) -> None:
     """Generate and save context sets, or print what a saved set holds."""
     if config.action == "show":
         if config.path is None:
-            raise ValueError("show needs --path FILE")
+            raise ValueError("--path: show needs --path FILE")
         described = ContextSet.load(config.path)
         spikes = [int(context.pattern.sum()) for context in described]
         print(f"{config.path}: {described!r}")
@@ -136,11 +135,18 @@ def contexts(config: ContextsConfig) -> None:
         )
         print(f"targets: {[context.target for context in described]}")
         return
+    paths = {name: config.out_dir / f"{name}_contexts.npz" for name in ("train", "test")}
+    existing = [str(path) for path in paths.values() if path.exists()]
+    if existing and not config.overwrite:
+        raise ValueError(
+            f"--out-dir: {' and '.join(existing)} exist(s): pass --overwrite to replace, or "
+            "choose another --out-dir"
+        )
     train, test = make_splits(
         config.n_train, config.n_test, config.n_neurons, config.episode_length, config.seed
     )
     for name, contexts_set in (("train", train), ("test", test)):
-        path = contexts_set.save(config.out_dir / f"{name}_contexts.npz")
+        path = contexts_set.save(paths[name])
         print(f"wrote {path}: {contexts_set!r}")
 
 
@@ -176,9 +182,13 @@ def train(command: TrainCommand) -> None:
         config = command.config
         run_dir = command.run_dir or Path(f"runs/{config.arch}-{command.preset}-seed{config.seed}")
     print(f"run directory: {run_dir}")
-    metrics = run_training(config, run_dir, resume=command.resume is not None)
-    baselines = json.loads((run_dir / "baselines.json").read_text())
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        metrics = run_training(config, run_dir, resume=command.resume is not None)
+    for warning in caught:
+        print(f"spikectl: warning: {warning.message}", file=sys.stderr)
     final = metrics[-1]
+    baselines = json.loads((run_dir / "baselines.json").read_text())
     curve = plot_learning_curve(
         metrics, baselines, run_dir / "learning_curve.png",
         title=f"{config.arch.upper()}, {final['env_steps']:,} steps",
@@ -248,6 +258,8 @@ def sweep(command: SweepCommand) -> None:
 
     if (command.preset is None) == (command.config is None):
         raise ValueError("give exactly one of --preset (fig4, fig5) or --config FILE")
+    if command.workers < 0:
+        raise ValueError(f"--workers must be >= 0 (0: one per CPU core), got {command.workers}")
     if command.config is not None:
         description = load_sweep_file(command.config).to_dict()
     else:
@@ -308,22 +320,47 @@ def _parse_train(argv: list[str]) -> TrainCommand:
 def main(argv: list[str] | None = None) -> None:
     """Entry point of the ``spikectl`` console script."""
     argv = sys.argv[1:] if argv is None else list(argv)
-    if argv and argv[0] == "train":
-        command = _parse_train(argv[1:])
-    else:
-        choices = tuple(
-            Annotated[config_type, tyro.conf.subcommand(name, description=run.__doc__)]
-            for name, (run, config_type) in COMMANDS.items()
-        )
-        command = tyro.cli(Union[choices], args=argv, prog="spikectl")  # noqa: UP007
-    run = next(run for run, config_type in COMMANDS.values() if isinstance(command, config_type))
     try:
+        if argv and argv[0] == "train":
+            command = _parse_train(argv[1:])
+        else:
+            choices = tuple(
+                Annotated[config_type, tyro.conf.subcommand(name, description=run.__doc__)]
+                for name, (run, config_type) in COMMANDS.items()
+            )
+            command = tyro.cli(Union[choices], args=argv, prog="spikectl")  # noqa: UP007
+        run = next(
+            run for run, config_type in COMMANDS.values() if isinstance(command, config_type)
+        )
         run(command)
-    except (
-        ValueError, TypeError, FileNotFoundError, ContextFileError, RunDirError, RuntimeError,
-    ) as error:  # fmt: skip
-        print(f"spikectl: error: {error}", file=sys.stderr)
+    except USER_ERRORS as error:
+        print(f"spikectl: error: {flag_message(str(error))}", file=sys.stderr)
         raise SystemExit(2) from error
+
+
+def _flag_names() -> dict[str, str]:
+    """Field names of the commands' configs (as validation messages name them) and their
+    command-line flags."""
+    names = {}
+    for config_type in (TrainConfig, *(config for _, config in COMMANDS.values())):
+        for field in dataclasses.fields(config_type):
+            names[field.name] = "--" + field.name.replace("_", "-")
+    for field in dataclasses.fields(AgentSizes):
+        flag = "--sizes." + field.name.replace("_", "-")
+        names[f"AgentSizes.{field.name}"] = names[f"sizes.{field.name}"] = flag
+    return names
+
+
+def flag_message(message: str) -> str:
+    """The message on one line, with a leading field name replaced by its flag
+    (``gamma must lie in [0, 1]`` -> ``--gamma must lie in [0, 1]``)."""
+    message = " ".join(message.split())
+    match = re.match(r"(?:NeuronParams\.)?([A-Za-z_][\w.]*)", message)
+    if match:
+        flag = _flag_names().get(match.group(1))
+        if flag is not None:
+            message = flag + message[match.end() :]
+    return message
 
 
 if __name__ == "__main__":

@@ -11,13 +11,14 @@ versions are read. :class:`spikectl.ContextSet` builds on these two functions.
 from __future__ import annotations
 
 import json
-import os
-import tempfile
 import zipfile
+import zlib
 from pathlib import Path
 from typing import Any
 
 import numpy as np
+
+from spikectl.files import atomic_write, physical_memory_bytes
 
 FORMAT_NAME = "spikectl.ContextSet"
 FORMAT_VERSION = 1
@@ -48,31 +49,37 @@ def write_npz(path: Path, arrays: dict[str, np.ndarray], metadata: dict[str, Any
     }
     if not header.get("extensions"):
         header.pop("extensions", None)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    descriptor, temporary = tempfile.mkstemp(
-        dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"
-    )
-    try:
-        with os.fdopen(descriptor, "wb") as handle:
-            np.savez_compressed(handle, metadata=np.array(json.dumps(header)), **arrays)
-            handle.flush()
-            os.fsync(handle.fileno())
-        os.replace(temporary, path)
-    except BaseException:
-        Path(temporary).unlink(missing_ok=True)
-        raise
-    return path
+
+    def write(handle) -> None:
+        np.savez_compressed(handle, metadata=np.array(json.dumps(header)), **arrays)
+
+    return atomic_write(path, write)
 
 
 def read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
-    """The arrays and the header of a file written by :func:`write_npz`, checked."""
+    """The arrays and the header of a file written by :func:`write_npz`, checked.
+
+    Before anything is allocated, every array's header is compared with the size of
+    its data in the file, so a damaged or crafted header (shapes claiming terabytes)
+    is refused instead of allocated. Pickled objects are never loaded.
+    """
     if not path.exists():
         raise FileNotFoundError(f"context set file not found: {path}")
+    if path.is_dir():
+        raise ContextFileError(f"{path} is a folder, not a context set file")
     try:
+        _check_array_sizes(path)
         with np.load(path, allow_pickle=False) as data:
             arrays = {name: data[name] for name in data.files}
-    except (zipfile.BadZipFile, OSError, ValueError, EOFError) as error:
-        raise ContextFileError(f"{path} is not a readable spikectl context set: {error}") from error
+    except ContextFileError:
+        raise
+    except (zipfile.BadZipFile, OSError, ValueError, EOFError, zlib.error) as error:
+        problem = str(error).splitlines()[0] if str(error) else type(error).__name__
+        if path.stat().st_size == 0:
+            problem = "the file is empty"
+        raise ContextFileError(
+            f"{path} is not a readable spikectl context set: {problem}"
+        ) from error
     if "metadata" not in arrays or not REQUIRED_ARRAYS <= set(arrays):
         raise ContextFileError(
             f"{path} is not a spikectl context set (arrays {sorted(arrays)}, expected "
@@ -87,6 +94,33 @@ def read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
             f"(unexpected arrays {unexpected})"
         )
     return arrays, metadata
+
+
+def _check_array_sizes(path: Path) -> None:
+    """Refuse arrays whose header claims more data than the file holds, or more memory
+    than the machine has, before NumPy allocates them."""
+    memory = physical_memory_bytes()
+    with zipfile.ZipFile(path) as archive:
+        for info in archive.infolist():
+            if not info.filename.endswith(".npy"):
+                continue
+            with archive.open(info) as member:
+                version = np.lib.format.read_magic(member)
+                if version == (1, 0):
+                    shape, _, dtype = np.lib.format.read_array_header_1_0(member)
+                else:
+                    shape, _, dtype = np.lib.format.read_array_header_2_0(member)
+                header_bytes = member.tell()
+            name = info.filename[: -len(".npy")]
+            claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
+            if dtype.hasobject:
+                raise ContextFileError(f"{path}: array {name!r} holds Python objects (refused)")
+            if claimed != info.file_size - header_bytes or (memory and claimed > memory):
+                raise ContextFileError(
+                    f"{path} is damaged: the header of array {name!r} claims shape "
+                    f"{tuple(shape)} ({claimed:,} bytes), the file holds "
+                    f"{info.file_size - header_bytes:,} bytes"
+                )
 
 
 def _parse_metadata(path: Path, raw: np.ndarray) -> dict[str, Any]:

@@ -24,6 +24,7 @@ from spikectl.contexts import (
     Context,
     _check_episode_length,
     _check_n_neurons,
+    _check_seed,
     _check_size,
     generate_context,
 )
@@ -84,7 +85,8 @@ class ContextSet(Sequence[Context]):
         ``generate(100, seed=s)``. Context-level ``extensions`` (hidden neurons,
         heterogeneous neurons) are drawn with each context.
         """
-        _check_size(size)
+        size = _check_size(size)
+        seed = _check_seed(seed)
         extensions = Extensions.coerce(extensions).context_part()
         contexts = _generate_unique(size, n_neurons, episode_length, seed, params, extensions)
         return cls(contexts, params, seed, extensions)
@@ -240,7 +242,7 @@ class ContextSet(Sequence[Context]):
                 )
             ]  # fmt: skip
             loaded = cls(contexts, params, metadata.get("seed"), metadata.get("extensions"))
-        except (TypeError, ValueError) as error:
+        except (TypeError, ValueError, KeyError, IndexError, AttributeError) as error:
             raise ContextFileError(f"{path} holds an invalid context set: {error}") from error
         if loaded.checksum() != metadata.get("checksum"):
             raise ContextFileError(f"{path} is damaged: its checksum does not match its contents")
@@ -277,8 +279,9 @@ def make_splits(
     it does not depend on ``n_train`` (beyond skipping, with vanishing probability,
     a topology the training set already holds).
     """
-    _check_size(n_train, "n_train")
-    _check_size(n_test, "n_test")
+    n_train = _check_size(n_train, "n_train")
+    n_test = _check_size(n_test, "n_test")
+    seed = _check_seed(seed)
     if isinstance(n_val, bool) or not isinstance(n_val, int | np.integer) or n_val < 0:
         raise ValueError(f"n_val must be a non-negative integer, got {n_val!r}")
     extensions = Extensions.coerce(extensions).context_part()
@@ -310,7 +313,8 @@ def make_validation_set(
 ) -> ContextSet:
     """A validation set with no topology shared with itself or with any set in ``exclude``
     (the training and test sets), from a generator stream of its own (``VALIDATION_STREAM``)."""
-    _check_size(n_val, "n_val")
+    n_val = _check_size(n_val, "n_val")
+    seed = _check_seed(seed)
     extensions = Extensions.coerce(extensions).context_part()
     taken = {context.weights.tobytes() for contexts in exclude for context in contexts}
     validation = _generate_unique(
@@ -329,8 +333,10 @@ def _generate_unique(
     extensions: Extensions | None = None,
     exclude: set[bytes] = frozenset(),
 ) -> list[Context]:
-    _check_n_neurons(n_neurons)
-    _check_episode_length(episode_length)
+    n_neurons = _check_n_neurons(n_neurons)
+    episode_length = _check_episode_length(episode_length)
+    if params is not None and not isinstance(params, NeuronParams):
+        raise TypeError(f"params must be a NeuronParams or None, got {type(params).__name__}")
     rng = np.random.default_rng(seed)
     contexts: list[Context] = []
     seen: set[bytes] = set(exclude)
@@ -341,8 +347,9 @@ def _generate_unique(
         if key in seen:
             rejected_in_a_row += 1
             if rejected_in_a_row > MAX_TOPOLOGY_ATTEMPTS:
-                raise RuntimeError(
-                    f"could not find {size} distinct topologies of {n_neurons} neurons"
+                raise ValueError(
+                    f"could not find {size} distinct topologies of {n_neurons} neurons: "
+                    "ask for fewer contexts or larger networks"
                 )
             continue
         rejected_in_a_row = 0

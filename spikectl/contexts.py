@@ -34,6 +34,12 @@ EXCITATORY_PROBABILITY = 0.8
 CONNECTION_PROBABILITY_BANDS = ((4, 0.3), (8, 0.2), (12, 0.1))
 LONG_RANGE_CONNECTION_PROBABILITY = 0.01
 
+MAX_N_NEURONS = 1024
+"""The largest network size supported (docs/extensions.md, "Larger networks"): memory
+grows as n^2 per context and per environment, and sizes above are untested."""
+MAX_EPISODE_LENGTH = 100_000
+"""The longest episode supported (steps); the paper's are 60."""
+
 MAX_PATTERN_ATTEMPTS = 10_000
 MAX_TOPOLOGY_ATTEMPTS = 10_000
 EXTENDED_PATTERN_ATTEMPTS = 1_000
@@ -389,23 +395,38 @@ def _check_target(target: int, n_neurons: int) -> None:
         raise ValueError(f"target {target} is not a neuron index in 0..{n_neurons - 1}")
 
 
-def _check_n_neurons(n_neurons: int) -> None:
-    if isinstance(n_neurons, bool) or int(n_neurons) != n_neurons or n_neurons < 2:
-        raise ValueError(f"n_neurons must be an integer >= 2, got {n_neurons!r}")
+def _is_int(value: Any) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
-def _check_episode_length(episode_length: int) -> None:
-    if (
-        isinstance(episode_length, bool)
-        or int(episode_length) != episode_length
-        or episode_length < 2
-    ):
-        raise ValueError(f"episode_length must be an integer >= 2, got {episode_length!r}")
+def _check_n_neurons(n_neurons: int) -> int:
+    if not _is_int(n_neurons) or not 2 <= n_neurons <= MAX_N_NEURONS:
+        raise ValueError(
+            f"n_neurons must be an integer in 2..{MAX_N_NEURONS} (MAX_N_NEURONS), got {n_neurons!r}"
+        )
+    return int(n_neurons)
 
 
-def _check_size(size: int, name: str = "size") -> None:
-    if isinstance(size, bool) or int(size) != size or size < 1:
+def _check_episode_length(episode_length: int) -> int:
+    if not _is_int(episode_length) or not 2 <= episode_length <= MAX_EPISODE_LENGTH:
+        raise ValueError(
+            f"episode_length must be an integer in 2..{MAX_EPISODE_LENGTH} "
+            f"(MAX_EPISODE_LENGTH), got {episode_length!r}"
+        )
+    return int(episode_length)
+
+
+def _check_size(size: int, name: str = "size") -> int:
+    if not _is_int(size) or size < 1:
         raise ValueError(f"{name} must be a positive integer, got {size!r}")
+    return int(size)
+
+
+def _check_seed(seed: Any, name: str = "seed") -> int:
+    """A generation seed: a non-negative Python or NumPy integer."""
+    if not _is_int(seed) or seed < 0:
+        raise ValueError(f"{name} must be a non-negative integer, got {seed!r}")
+    return int(seed)
 
 
 def __getattr__(name: str) -> Any:

@@ -355,6 +355,10 @@ def _observed_actions(actions: np.ndarray, observable: np.ndarray) -> np.ndarray
 
 
 def _context_option(options: dict[str, Any]) -> Any:
+    if not isinstance(options, Mapping):
+        raise TypeError(
+            f"options must be a dict such as {{'context': 3}} or None, got {type(options).__name__}"
+        )
     unknown = set(options) - {"context"}
     if unknown:
         raise ValueError(f"unknown reset option(s) {sorted(unknown)}; the only option is 'context'")

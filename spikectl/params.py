@@ -14,8 +14,12 @@ from dataclasses import asdict, dataclass, fields
 from functools import cached_property
 from typing import Any
 
+import numpy as np
+
 NEVER_RELEASES = 2**31 - 1
 """``min_release_interval_steps`` when the release rule can never be met (p_r < 0.5)."""
+MAX_REFRACTORY_STEPS = 2**30
+"""The simulator counts refractory steps in int32; longer periods would wrap."""
 
 
 @dataclass(frozen=True)
@@ -48,10 +52,15 @@ class NeuronParams:
     def __post_init__(self) -> None:
         for field in fields(self):
             value = getattr(self, field.name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
+            if isinstance(value, (bool, np.bool_)) or not isinstance(
+                value, (int, float, np.integer, np.floating)
+            ):
                 raise TypeError(f"NeuronParams.{field.name} must be a number, got {value!r}")
             if not math.isfinite(value):
                 raise ValueError(f"NeuronParams.{field.name} must be finite, got {value!r}")
+            # NumPy scalars become Python numbers, so to_dict() stays JSON-ready.
+            value = int(value) if isinstance(value, (int, np.integer)) else float(value)
+            object.__setattr__(self, field.name, value)
         if self.v_threshold_mV <= self.v_rest_mV:
             raise ValueError(
                 f"v_threshold_mV ({self.v_threshold_mV}) must be above v_rest_mV ({self.v_rest_mV})"
@@ -66,9 +75,20 @@ class NeuronParams:
                 raise ValueError(f"NeuronParams.{name} must be >= 0, got {getattr(self, name)}")
         if not 0.0 <= self.release_scale <= 1.0:
             raise ValueError(f"release_scale must lie in [0, 1], got {self.release_scale}")
-        if int(self.refractory_steps) != self.refractory_steps or self.refractory_steps < 0:
+        if (
+            int(self.refractory_steps) != self.refractory_steps
+            or not 0 <= self.refractory_steps <= MAX_REFRACTORY_STEPS
+        ):
             raise ValueError(
-                f"refractory_steps must be a non-negative integer, got {self.refractory_steps}"
+                f"refractory_steps must be an integer in 0..{MAX_REFRACTORY_STEPS}, "
+                f"got {self.refractory_steps}"
+            )
+        object.__setattr__(self, "refractory_steps", int(self.refractory_steps))
+        if self.v_rest_mV >= self.v_threshold_mV - self.threshold_tolerance_mV:
+            raise ValueError(
+                f"threshold_tolerance_mV ({self.threshold_tolerance_mV}) must be smaller than "
+                f"v_threshold_mV - v_rest_mV ({self.v_threshold_mV - self.v_rest_mV}): "
+                "otherwise resting neurons spike at every step"
             )
         if self.dt_ms / (self.resistance_GOhm * self.capacitance_pF) > 1.0:
             raise ValueError(

@@ -180,6 +180,11 @@ class NeuronControlVectorEnv(VectorEnv):
         seeds = self._seed_list(seed)
         if is_int(seed):
             super().reset(seed=int(seed))
+        if options is not None and not isinstance(options, Mapping):
+            raise TypeError(
+                "options must be a dict such as {'context': [0, 1]} or None, "
+                f"got {type(options).__name__}"
+            )
         options = dict(options or {})
         which = _reset_mask(options.pop("reset_mask", None), self.num_envs)
         choice = options.pop("context", None)

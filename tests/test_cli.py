@@ -38,4 +38,4 @@ def test_errors_are_one_line_messages(tmp_path, capsys):
     assert "not found" in capsys.readouterr().err
     with pytest.raises(SystemExit):
         main(["demo", "--n-train", "0"])
-    assert "n_train must be a positive integer" in capsys.readouterr().err
+    assert "--n-train must be a positive integer" in capsys.readouterr().err

@@ -12,6 +12,7 @@ import pytest
 import torch
 
 from spikectl import ContextSet, make_context
+from spikectl.files import FileWriteError
 from spikectl.training.checkpoint import RunDirError, atomic_write_bytes, read_metrics
 from spikectl.training.config import PRESETS, SMOKE, TrainConfig
 from spikectl.training.dqn import td_loss, train
@@ -181,7 +182,7 @@ def test_full_disk_is_a_clear_error_and_keeps_the_old_file(tmp_path, monkeypatch
         raise OSError(errno.ENOSPC, "No space left on device")
 
     monkeypatch.setattr("os.replace", no_space)
-    with pytest.raises(RunDirError, match="no space left"):
+    with pytest.raises(FileWriteError, match="no space left.*previous version.*intact"):
         atomic_write_bytes(path, b"new")
     assert path.read_bytes() == b"old"
     assert [p.name for p in tmp_path.iterdir()] == ["file.bin"]

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from spikectl.files import atomic_write
 from spikectl.simulator import DO_NOTHING
 
 
@@ -23,11 +24,11 @@ def _pyplot():
 def save_figure(figure, path: str | os.PathLike) -> Path:
     """Save atomically: a figure half-written by a crash never replaces a good one."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    temporary = path.with_name(f".{path.name}.tmp{path.suffix}")
-    figure.savefig(temporary, dpi=150, bbox_inches="tight")
-    os.replace(temporary, path)
-    return path
+    image_format = path.suffix.lstrip(".") or "png"
+    return atomic_write(
+        path, lambda handle: figure.savefig(handle, format=image_format, dpi=150,
+                                            bbox_inches="tight")
+    )  # fmt: skip
 
 
 def plot_episode_raster(

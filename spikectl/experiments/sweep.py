@@ -17,7 +17,8 @@ import dataclasses
 import itertools
 import json
 import os
-import shutil
+import threading
+import time
 from collections.abc import Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor, as_completed
 from dataclasses import dataclass
@@ -25,11 +26,13 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
+from spikectl.files import FileWriteError, atomic_write_text, make_dirs
 from spikectl.training.checkpoint import (
     CHECKPOINT_FILE,
     CONFIG_FILE,
     MODEL_FILE,
-    atomic_write_text,
+    RunDirError,
+    load_model_weights,
 )
 from spikectl.training.config import PRESETS, TrainConfig
 
@@ -43,6 +46,15 @@ PAPER_SWEEPS: dict[str, dict[str, Any]] = {
                                        "seed": list(range(10))}},
 }  # fmt: skip
 """The paper's two experiments: Figure 4 (architectures) and Figure 5 (training-set size)."""
+PARENT_POLL_S = 0.2
+"""How often a worker checks that the sweep's process is still alive."""
+TRIAL_ERRORS = (ValueError, FileNotFoundError, FileWriteError, RunDirError)
+"""Failures of a trial that are about its inputs or files (reported in one line each);
+anything else is a bug and keeps its traceback."""
+
+
+class SweepError(RuntimeError):
+    """Some trials of a sweep failed; the message names each and its error."""
 
 
 @dataclass(frozen=True)
@@ -79,6 +91,11 @@ class Sweep:
     def from_dict(cls, values: Mapping[str, Any]) -> Sweep:
         """From a sweep file: ``base`` is a preset name or a config dict, plus optional
         ``overrides`` (fields of the base changed for every trial) and the ``grid``."""
+        if not isinstance(values, Mapping):
+            raise ValueError(
+                f"a sweep description is a JSON object with base, overrides and grid, "
+                f"got {type(values).__name__}"
+            )
         base = values.get("base", "quick")
         if isinstance(base, str):
             if base not in PRESETS:
@@ -86,7 +103,11 @@ class Sweep:
             base_config = PRESETS[base]
         else:
             base_config = TrainConfig.from_dict(base)
-        overrides = dict(values.get("overrides", {}))
+        overrides = values.get("overrides", {})
+        grid = values.get("grid", {})
+        for key, value in (("overrides", overrides), ("grid", grid)):
+            if not isinstance(value, Mapping):
+                raise ValueError(f"the sweep's {key} must be a JSON object, got {value!r}")
         if overrides:
             merged = base_config.to_dict()
             # Size overrides change single fields of the base's sizes, not all of them.
@@ -95,23 +116,36 @@ class Sweep:
         unknown = sorted(set(values) - {"base", "overrides", "grid"})
         if unknown:
             raise ValueError(f"unknown sweep file key(s) {unknown}: use base, overrides, grid")
-        return cls(base=base_config, grid=dict(values.get("grid", {})))
+        return cls(base=base_config, grid=dict(grid))
 
 
 def load_sweep_file(path: str | os.PathLike) -> Sweep:
     """Read a sweep description from a JSON file."""
     path = Path(path)
+    return Sweep.from_dict(_read_json(path, "sweep file"))
+
+
+def _read_json(path: Path, what: str) -> Any:
     try:
-        return Sweep.from_dict(json.loads(path.read_text()))
+        return json.loads(path.read_text())
     except FileNotFoundError:
-        raise FileNotFoundError(f"sweep file not found: {path}") from None
-    except json.JSONDecodeError as error:
+        raise FileNotFoundError(f"{what} not found: {path}") from None
+    except IsADirectoryError:
+        raise ValueError(f"{path} is a folder, not a {what}") from None
+    except OSError as error:
+        raise ValueError(f"cannot read {path}: {error.strerror}") from error
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
         raise ValueError(f"{path} is not valid JSON: {error}") from error
 
 
 def trial_status(run_dir: Path) -> str:
-    """'done' (final weights written), 'interrupted' (has a checkpoint) or 'new'."""
+    """'done' (final weights written), 'interrupted' (has a checkpoint) or 'new'.
+
+    The final weights of a done trial are verified (checksum), so a damaged model.pt is
+    a RunDirError, never counted as done.
+    """
     if (run_dir / MODEL_FILE).exists():
+        load_model_weights(run_dir / MODEL_FILE)
         return "done"
     if (run_dir / CHECKPOINT_FILE).exists():
         return "interrupted"
@@ -128,9 +162,8 @@ def run_trial(config: TrainConfig, run_dir: str | os.PathLike) -> dict[str, Any]
     status = trial_status(run_dir)
     if status == "done":
         return {"run_dir": str(run_dir), "status": "skipped (done)"}
-    if status == "new" and run_dir.exists():
-        # Stopped before its first checkpoint: nothing in it can be resumed.
-        shutil.rmtree(run_dir)
+    # A trial stopped before its first checkpoint starts again from step 0 (the trainer
+    # does that under the run directory's lock, so two sweeps never clobber a trial).
     torch.set_num_threads(config.torch_threads or 1)
     metrics = train(config, run_dir, resume=status == "interrupted")
     final = metrics[-1]
@@ -159,14 +192,20 @@ def run_sweep(
     """
     if backend not in ("local", "ray"):
         raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")
+    if workers is not None and (
+        isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
+    ):
+        raise ValueError(f"workers must be a positive integer or None, got {workers!r}")
     sweep_dir = Path(sweep_dir).resolve()
+    if sweep_dir.exists() and not sweep_dir.is_dir():
+        raise ValueError(f"{sweep_dir} is a file, not a sweep directory")
     saved = sweep_dir / SWEEP_FILE
     description = json.loads(json.dumps(sweep.to_dict()))  # tuples as JSON reads them back
-    if saved.exists() and json.loads(saved.read_text()) != description:
+    if saved.exists() and _read_json(saved, "sweep description") != description:
         raise ValueError(
             f"{sweep_dir} holds another sweep ({SWEEP_FILE} differs): choose another directory"
         )
-    sweep_dir.mkdir(parents=True, exist_ok=True)
+    make_dirs(sweep_dir)
     atomic_write_text(saved, json.dumps(sweep.to_dict(), indent=2) + "\n")
     trials = sweep.trials()
     workers = max(1, min(workers or os.cpu_count() or 1, len(trials)))
@@ -177,8 +216,14 @@ def run_sweep(
         (dataclasses.replace(config, torch_threads=1), sweep_dir / TRIALS_DIR / name)
         for name, config in trials
     ]
+    failures: list[tuple[str, BaseException]] = []
     for result in (_run_with_ray(jobs, address, workers) if backend == "ray"
                    else _run_locally(jobs, workers)):  # fmt: skip
+        if isinstance(result, BaseException):
+            name = Path(result.run_dir).name
+            failures.append((name, result))
+            echo(f"{name}: failed: {' '.join(str(result).split())}")
+            continue
         results.append(result)
         scores = (
             f": train {result['train_return']:.3f}, test {result['test_return']:.3f}"
@@ -186,15 +231,46 @@ def run_sweep(
             else ""
         )
         echo(f"{Path(result['run_dir']).name}: {result['status']}{scores}")
+    bugs = [error for _, error in failures if not isinstance(error, TRIAL_ERRORS)]
+    if bugs:
+        raise bugs[0]
+    if failures:
+        name, error = failures[0]
+        raise SweepError(
+            f"{len(failures)} of {len(jobs)} trial(s) failed (first: {name}: "
+            f"{' '.join(str(error).split())}); the others finished: fix the cause and run "
+            "the same command again"
+        )
     return sorted(results, key=lambda result: result["run_dir"])
 
 
+def _exit_with_parent(parent_pid: int) -> None:
+    """Worker initializer: end this worker as soon as the sweep's process is gone
+    (killed, even by SIGKILL), so that no trial outlives it holding its pipes."""
+
+    def watch() -> None:
+        while os.getppid() == parent_pid:
+            time.sleep(PARENT_POLL_S)
+        os._exit(1)
+
+    threading.Thread(target=watch, name="spikectl-parent-watch", daemon=True).start()
+
+
 def _run_locally(jobs: list[tuple[TrainConfig, Path]], workers: int):
-    """Yield trial results as a local process pool finishes them."""
-    with ProcessPoolExecutor(max_workers=workers, mp_context=get_context("spawn")) as pool:
-        futures = [pool.submit(run_trial, config, run_dir) for config, run_dir in jobs]
+    """Yield trial results (or a trial's exception, with ``run_dir`` set on it) as a
+    local process pool finishes them."""
+    with ProcessPoolExecutor(
+        max_workers=workers, mp_context=get_context("spawn"),
+        initializer=_exit_with_parent, initargs=(os.getpid(),),
+    ) as pool:  # fmt: skip
+        futures = {pool.submit(run_trial, config, run_dir): run_dir for config, run_dir in jobs}
         for future in as_completed(futures):
-            yield future.result()
+            error = future.exception()
+            if error is None:
+                yield future.result()
+            else:
+                error.run_dir = str(futures[future])
+                yield error
 
 
 def _run_with_ray(jobs: list[tuple[TrainConfig, Path]], address: str | None, workers: int):
@@ -209,10 +285,16 @@ def _run_with_ray(jobs: list[tuple[TrainConfig, Path]], address: str | None, wor
         ray.init(address=address, log_to_driver=False, **local)
     try:
         remote_trial = ray.remote(num_cpus=1)(run_trial)
-        pending = [remote_trial.remote(config, str(run_dir)) for config, run_dir in jobs]
+        pending = {remote_trial.remote(config, str(run_dir)): run_dir for config, run_dir in jobs}
         while pending:
-            done, pending = ray.wait(pending, num_returns=1)
-            yield ray.get(done[0])
+            done, _ = ray.wait(list(pending), num_returns=1)
+            run_dir = pending.pop(done[0])
+            try:
+                yield ray.get(done[0])
+            except ray.exceptions.RayTaskError as wrapped:
+                error = wrapped.as_instanceof_cause()
+                error.run_dir = str(run_dir)
+                yield error
     finally:
         if started_here:
             ray.shutdown()

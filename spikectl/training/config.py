@@ -23,6 +23,7 @@ from pathlib import Path
 from typing import Any, Literal
 
 from spikectl.agents import AgentSizes
+from spikectl.contexts import MAX_EPISODE_LENGTH, MAX_N_NEURONS
 
 ARCHITECTURES = ("drqn", "ddrqn", "dmdrqn", "tdrqn")
 
@@ -128,8 +129,9 @@ class TrainConfig:
                 raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
         if self.arch not in ARCHITECTURES:
             raise ValueError(f"arch must be one of {ARCHITECTURES}, got {self.arch!r}")
-        if self.n_neurons < 2 or self.episode_length < 2:
-            raise ValueError("n_neurons and episode_length must be >= 2")
+        for name in ("n_neurons", "episode_length"):
+            if getattr(self, name) < 2:
+                raise ValueError(f"{name} must be >= 2, got {getattr(self, name)}")
         if self.total_env_steps < self.episode_length * self.num_envs:
             raise ValueError(
                 f"total_env_steps ({self.total_env_steps}) is less than one round of "
@@ -154,6 +156,31 @@ class TrainConfig:
             raise ValueError(f"max_grad_norm must be >= 0, got {self.max_grad_norm}")
         if self.batch_size > self.buffer_size:
             raise ValueError("batch_size cannot exceed buffer_size")
+        self._check_ranges()
+
+    def _check_ranges(self) -> None:
+        """Seeds, sizes and rates that would wrap, allocate without bound or poison a run."""
+        for name in ("seed", "context_seed"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**63:
+                raise ValueError(f"{name} must be an integer in 0..2**63 - 1, got {value!r}")
+        if self.n_neurons > MAX_N_NEURONS:
+            raise ValueError(
+                f"n_neurons must be at most {MAX_N_NEURONS} (MAX_N_NEURONS), got {self.n_neurons}"
+            )
+        if self.episode_length > MAX_EPISODE_LENGTH:
+            raise ValueError(
+                f"episode_length must be at most {MAX_EPISODE_LENGTH}, got {self.episode_length}"
+            )
+        for name in ("learning_rate", "gamma", "tau", "epsilon_start", "epsilon_end",
+                     "epsilon_anneal_fraction", "max_grad_norm"):  # fmt: skip
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ValueError(f"{name} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ValueError(f"{name} must be finite, got {value!r}")
+        if not isinstance(self.device, str) or not self.device:
+            raise ValueError(f"device must be a string such as cpu or cuda, got {self.device!r}")
 
     @property
     def total_episodes(self) -> int:

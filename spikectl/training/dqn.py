@@ -17,6 +17,7 @@ from __future__ import annotations
 import copy
 import math
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -33,8 +34,10 @@ from spikectl.rollout import (
     run_episodes,
 )
 from spikectl.training.checkpoint import (
+    RunDirError,
     TrainingState,
     load_checkpoint,
+    locked_run,
     prepare_run_dir,
     save_checkpoint,
     write_metrics,
@@ -226,13 +229,17 @@ def build_predictor(config: TrainConfig, online: torch.nn.Module) -> torch.nn.Mo
     return predictor.to(config.device)
 
 
+@locked_run
 def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> list[dict]:
     """Train an agent; returns the metrics rows (also in ``run_dir/metrics.csv``).
 
-    ``resume=True`` continues the run saved in ``run_dir`` from its last checkpoint.
+    ``resume=True`` continues the run saved in ``run_dir`` from its last checkpoint
+    (from step 0 if it stopped before its first). A loss that turns NaN or infinite
+    stops the run with a RunDirError before anything more is written; a run that ends
+    without a single gradient update warns (RuntimeWarning).
     """
     run_dir = Path(run_dir)
-    prepare_run_dir(config, run_dir, resume)
+    resume = prepare_run_dir(config, run_dir, resume)
     if config.torch_threads:
         torch.set_num_threads(config.torch_threads)
     train_set, test_set, val_set = load_or_make_contexts(config, run_dir)
@@ -315,6 +322,12 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
                 batch = replay.sample(config.batch_size, state.rng)
                 td, aux = training_losses(online, target, batch, config, predictor)
                 loss = td if aux is None else td + config.aux_voltage_weight * aux
+                if not torch.isfinite(loss):
+                    raise RunDirError(
+                        f"the training loss became {loss.item()} at update {state.updates + 1} "
+                        f"(episode {state.episodes}): training diverged; the last good "
+                        f"checkpoint in {run_dir} is kept (lower --learning-rate?)"
+                    )
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
                 if config.max_grad_norm > 0:
@@ -332,6 +345,14 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
             state.wall_time_s = time.perf_counter() - started
             save_checkpoint(run_dir, config, state, online, target, optimizer, replay, predictor)
     logger.finish(online, state)
+    if state.updates == 0:
+        warnings.warn(
+            f"the run in {run_dir} made no gradient update (learning_starts="
+            f"{config.learning_starts}, updates_per_round={config.updates_per_round}, "
+            f"{config.total_episodes} episodes): model.pt is the untrained initial network",
+            RuntimeWarning,
+            stacklevel=2,
+        )
     return state.metrics
 
 

@@ -12,7 +12,14 @@ import torch
 from spikectl.agents import make_agent
 from spikectl.contexts import ContextSet
 from spikectl.rollout import EpisodeBatch, do_nothing_policy, evaluate_policy
-from spikectl.training.checkpoint import CHECKPOINT_FILE, MODEL_FILE, RunDirError, read_config
+from spikectl.training.checkpoint import (
+    CHECKPOINT_FILE,
+    MODEL_FILE,
+    RunDirError,
+    checkpoint_weights,
+    load_model_weights,
+    read_config,
+)
 from spikectl.training.contexts import TEST_FILE, TRAIN_FILE, VAL_FILE
 from spikectl.training.dqn import EpsilonGreedyPolicy
 
@@ -42,6 +49,8 @@ class SplitResult:
 def load_agent(run_dir: str | os.PathLike, n_neurons: int | None = None) -> torch.nn.Module:
     """The trained online network of a run (model.pt, else the last checkpoint), on CPU.
 
+    Both files load weights-only with their checksums verified; a damaged, foreign or
+    crafted file, or weights holding NaN or infinite values, is a RunDirError.
     ``n_neurons`` builds the network for another network size (per-neuron architectures
     only; DRQN and DMDRQN refuse it when they run).
     """
@@ -49,17 +58,17 @@ def load_agent(run_dir: str | os.PathLike, n_neurons: int | None = None) -> torc
     config = read_config(run_dir)
     network = make_agent(config.arch, config.n_neurons, config.episode_length, config.sizes)
     if (run_dir / MODEL_FILE).exists():
-        weights = torch.load(run_dir / MODEL_FILE, map_location="cpu", weights_only=True)
+        weights = load_model_weights(run_dir / MODEL_FILE)
     elif (run_dir / CHECKPOINT_FILE).exists():
-        checkpoint = torch.load(run_dir / CHECKPOINT_FILE, map_location="cpu", weights_only=False)
-        weights = checkpoint["online"]
+        weights = checkpoint_weights(run_dir / CHECKPOINT_FILE)
     else:
         raise RunDirError(f"{run_dir} holds no trained weights ({MODEL_FILE} or {CHECKPOINT_FILE})")
     try:
         network.load_state_dict(weights)
     except RuntimeError as error:
         raise RunDirError(
-            f"the weights in {run_dir} do not fit a {config.arch} of the saved config: {error}"
+            f"the weights in {run_dir} do not fit a {config.arch} of the saved config: "
+            f"{str(error).splitlines()[0]}"
         ) from error
     network.eval()
     return network

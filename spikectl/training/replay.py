@@ -13,6 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from spikectl.files import check_fits_in_memory
 from spikectl.simulator import DO_NOTHING
 
 
@@ -40,6 +41,12 @@ class EpisodeReplay:
     def __init__(self, capacity: int, n_neurons: int, episode_length: int) -> None:
         if capacity < 1:
             raise ValueError(f"replay capacity must be >= 1 episode, got {capacity}")
+        check_fits_in_memory(
+            capacity * ((episode_length + 1) * n_neurons * 4 + episode_length * 7 + n_neurons + 9),
+            f"a replay buffer of {capacity:,} episodes of {episode_length} steps and "
+            f"{n_neurons} neurons",
+            "lower buffer_size",
+        )
         self.capacity = capacity
         self.n_neurons = n_neurons
         self.episode_length = episode_length

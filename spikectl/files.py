@@ -1,0 +1,149 @@
+"""Writing files so that nothing is ever half-written, and reading them within bounds.
+
+Every file spikectl writes (context sets, run directories, sweep files, figures) goes
+through :func:`atomic_write`: the data go to a temporary file in the same folder, are
+flushed to disk, and the temporary file is renamed over the target. A crash, a
+``SIGKILL`` or a full disk at any moment leaves either the previous file or the new
+one, never half of one. Failures of the file system (no space, read-only, no
+permission, a file where a folder should be) become one :class:`FileWriteError`
+naming the file and the problem.
+
+This module is at the bottom of the layering: it imports nothing from spikectl.
+"""
+
+from __future__ import annotations
+
+import errno
+import functools
+import json
+import os
+import tempfile
+from collections.abc import Callable
+from pathlib import Path
+from typing import IO, Any
+
+_PROBLEMS = {
+    errno.ENOSPC: "no space left on the device",
+    errno.EDQUOT: "disk quota exceeded",
+    errno.EROFS: "the file system is read-only",
+    errno.EACCES: "permission denied",
+    errno.EPERM: "operation not permitted",
+    errno.ENOTDIR: "a part of the path is a file, not a folder",
+    errno.EISDIR: "the path is a folder, not a file",
+    errno.ENAMETOOLONG: "the file name is too long",
+}
+
+
+class FileWriteError(OSError):
+    """A file could not be written (full disk, read-only, no permission, ...).
+
+    The message names the file and the problem; any previous version of the file is
+    intact. ``errno`` is that of the underlying error.
+    """
+
+    def __str__(self) -> str:
+        return str(self.strerror)
+
+
+class TooLargeError(ValueError):
+    """A size that would need more memory than this machine has (names the setting)."""
+
+
+def describe_os_error(error: OSError) -> str:
+    """A short description of a file-system error, without the Python exception clutter."""
+    return _PROBLEMS.get(error.errno, error.strerror or str(error))
+
+
+def make_dirs(path: Path) -> None:
+    """``mkdir -p`` that fails with a :class:`FileWriteError` naming the folder."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except FileExistsError:
+        raise FileWriteError(
+            errno.ENOTDIR, f"cannot create the folder {path}: a file of that name exists"
+        ) from None
+    except OSError as error:
+        raise FileWriteError(
+            error.errno, f"cannot create the folder {path}: {describe_os_error(error)}"
+        ) from error
+
+
+def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], None]) -> Path:
+    """Write a file atomically: ``write(handle)`` fills a temporary file, which is then
+    renamed over ``path``. Returns ``path``.
+
+    On any failure the temporary file is removed and the previous ``path`` (if any) is
+    left untouched; file-system failures raise :class:`FileWriteError`.
+    """
+    path = Path(path)
+    make_dirs(path.parent)
+    if path.is_dir():
+        raise FileWriteError(errno.EISDIR, f"cannot write {path}: it is a folder, not a file")
+    try:
+        descriptor, temporary = tempfile.mkstemp(
+            dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"
+        )
+    except OSError as error:
+        raise FileWriteError(
+            error.errno, f"cannot write {path}: {describe_os_error(error)}"
+        ) from error
+    try:
+        with os.fdopen(descriptor, "wb") as handle:
+            os.fchmod(handle.fileno(), 0o666 & ~_umask())  # as open() would, not mkstemp's 0600
+            write(handle)
+            handle.flush()
+            os.fsync(handle.fileno())
+        os.replace(temporary, path)
+    except OSError as error:
+        Path(temporary).unlink(missing_ok=True)
+        if isinstance(error, FileWriteError):
+            raise
+        kept = "; the previous version of the file is intact" if path.exists() else ""
+        raise FileWriteError(
+            error.errno, f"cannot write {path}: {describe_os_error(error)}{kept}"
+        ) from error
+    except BaseException:
+        Path(temporary).unlink(missing_ok=True)
+        raise
+    return path
+
+
+@functools.cache
+def _umask() -> int:
+    mask = os.umask(0o022)  # reading the umask means setting it: put it straight back
+    os.umask(mask)
+    return mask
+
+
+def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+    """Write ``data`` to ``path`` atomically (:func:`atomic_write`)."""
+    return atomic_write(path, lambda handle: handle.write(data))
+
+
+def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
+    """Write UTF-8 ``text`` to ``path`` atomically (:func:`atomic_write`)."""
+    return atomic_write_bytes(path, text.encode())
+
+
+def write_json(path: str | os.PathLike, payload: Any) -> Path:
+    """Write ``payload`` as indented JSON atomically; values JSON lacks become strings."""
+    return atomic_write_text(path, json.dumps(payload, indent=2, default=str) + "\n")
+
+
+def physical_memory_bytes() -> int | None:
+    """This machine's physical memory, or None where the OS does not say."""
+    try:
+        return os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES")
+    except (AttributeError, OSError, ValueError):
+        return None
+
+
+def check_fits_in_memory(nbytes: int, what: str, remedy: str) -> None:
+    """Refuse to allocate more than this machine's physical memory: a clear error instead
+    of an allocation that swaps the machine to a halt or gets the process killed."""
+    memory = physical_memory_bytes()
+    if memory is not None and nbytes > memory:
+        raise TooLargeError(
+            f"{what} needs {nbytes / 2**30:,.1f} GiB, more than this machine's "
+            f"{memory / 2**30:,.1f} GiB of memory: {remedy}"
+        )
