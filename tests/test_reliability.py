@@ -310,7 +310,7 @@ def test_a_nan_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, m
 
     monkeypatch.setattr(dqn, "td_loss", loss_that_diverges)
     run = tmp_path / "run"
-    with pytest.raises(RunDirError, match="TD loss became nan.*diverged"):
+    with pytest.raises(RunDirError, match="training loss became nan.*diverged"):
         train(dataclasses.replace(TINY, total_env_steps=8 * 20 * 4), run)
     assert not (run / "model.pt").exists()
     payload = read_checkpoint(run / "checkpoint.pt")  # the last good one, intact

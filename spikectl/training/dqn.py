@@ -7,9 +7,10 @@ buffer, then make ``updates_per_round`` gradient updates, each on ``batch_size``
 episodes sampled uniformly. The TD target is the double-Q target, over ``n_step``
 observed rewards (1 in the paper); with ``aux_voltage_weight > 0`` an auxiliary head
 predicting every neuron's next voltage adds its loss. After every update the target
-network moves by a soft update. Every ``eval_every_episodes`` the greedy policy is scored on every training and
-every test context; every ``checkpoint_every_episodes`` the whole state is saved so
-that ``train(..., resume=True)`` continues bit-identically.
+network moves by a soft update. Every ``eval_every_episodes`` the greedy policy is
+scored on every training, test and validation context; every
+``checkpoint_every_episodes`` the whole state is saved so that
+``train(..., resume=True)`` continues bit-identically.
 """
 
 from __future__ import annotations
