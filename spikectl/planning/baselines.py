@@ -13,13 +13,13 @@ import io
 import os
 import tempfile
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
 from spikectl.contexts import ContextSet
-from spikectl.extensions import Extensions
+from spikectl.extensions import CONTEXT_FIELDS, Extensions
 from spikectl.params import NeuronParams
 from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, plan_episode
 from spikectl.planning.policy import IdentifyAndPlan
@@ -127,11 +127,11 @@ def run_baselines(
     if random_seeds < 1:
         raise ValueError(f"random_seeds must be >= 1, got {random_seeds}")
     if extensions is not None:
-        extensions = Extensions.coerce(extensions)
-        extensions = Extensions(
-            **{**extensions.environment_part().to_dict(),
-               **contexts.extensions.context_part().to_dict()}
-        )  # fmt: skip
+        # The environment-level switches asked for, the context-level ones of the set.
+        extensions = replace(
+            Extensions.coerce(extensions),
+            **{name: getattr(contexts.extensions, name) for name in CONTEXT_FIELDS},
+        )
     env = NeuronControlVectorEnv(
         num_envs=len(contexts), contexts=contexts, params=params, extensions=extensions
     )
