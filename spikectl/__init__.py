@@ -8,6 +8,7 @@ from spikectl.contexts import Context, ContextSet, make_context, make_splits
 from spikectl.env import NeuronControlEnv
 from spikectl.extensions import Extensions
 from spikectl.params import NeuronParams
+from spikectl.planning import IdentifyAndPlan, plan_episode
 from spikectl.registration import register_envs
 from spikectl.simulator import simulate
 from spikectl.vector_env import NeuronControlVectorEnv
@@ -20,9 +21,11 @@ __all__ = [
     "Extensions",
     "NeuronControlEnv",
     "NeuronControlVectorEnv",
+    "IdentifyAndPlan",
     "NeuronParams",
     "make_context",
     "make_splits",
+    "plan_episode",
     "simulate",
 ]
 __version__ = "0.1.0"

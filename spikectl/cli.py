@@ -295,6 +295,51 @@ def plot(command: PlotCommand) -> None:
         print(f"wrote {path}")
 
 
+@dataclass(frozen=True)
+class BaselinesCommand:
+    """Score do nothing, random, identify-and-plan, the oracle planner and the witness."""
+
+    split: Literal["train", "test"] = "test"
+    """Which generated set (make_splits(100, 100, seed=0) with the env's settings) to play."""
+    contexts: Path | None = None
+    """A saved ContextSet (.npz) to play instead of a generated split."""
+    env: str = "spikectl/NeuronControl-v0"
+    """A registered environment id: its n_neurons and extensions apply."""
+    out: Path = Path("runs/baselines/baselines.csv")
+    """Where the per-context CSV is written."""
+    random_seeds: int = 10
+    """Seeds of the random policy (the table shows mean +- sd over them)."""
+    oracle_width: int = 256
+    """Beam width of the oracle planner."""
+
+
+def baselines(command: BaselinesCommand) -> None:
+    """Print the table of training-free controllers and write a per-context CSV."""
+    import gymnasium
+
+    from spikectl.extensions import Extensions
+    from spikectl.planning.baselines import run_baselines
+
+    if command.env not in gymnasium.registry:
+        raise ValueError(f"unknown environment id {command.env!r}")
+    kwargs = dict(gymnasium.spec(command.env).kwargs)
+    extensions = Extensions.coerce(kwargs.get("extensions"))
+    if command.contexts is not None:
+        context_set = ContextSet.load(command.contexts)
+        where = str(command.contexts)
+    else:
+        n_neurons = kwargs.get("n_neurons") or 8
+        train_set, test_set = make_splits(100, 100, n_neurons, seed=0, extensions=extensions)
+        context_set = train_set if command.split == "train" else test_set
+        where = f"the generated {command.split} set ({n_neurons} neurons, seed 0)"
+    results = run_baselines(context_set, extensions=extensions,
+                            random_seeds=command.random_seeds,
+                            oracle_width=command.oracle_width)  # fmt: skip
+    print(f"{len(context_set)} contexts: {where}; environment {command.env}")
+    print(results.table())
+    print(f"wrote {results.write_csv(command.out)}")
+
+
 COMMANDS = {
     "train": (train, TrainCommand),
     "evaluate": (evaluate, EvaluateCommand),
@@ -302,6 +347,7 @@ COMMANDS = {
     "plot": (plot, PlotCommand),
     "demo": (demo, DemoConfig),
     "contexts": (contexts, ContextsConfig),
+    "baselines": (baselines, BaselinesCommand),
 }
 
 

@@ -82,7 +82,8 @@ def run_episodes(
 
     ``context_indices`` has one index per sub-environment (``env.num_envs`` of them).
     """
-    size, length, n = env.num_envs, env.episode_length, env.n_neurons
+    # With hidden neurons (an extension) only the k observable ones are seen.
+    size, length, n = env.num_envs, env.episode_length, env.n_observed
     observations, infos = env.reset(options={"context": [int(i) for i in context_indices]})
     voltage = np.zeros((size, length + 1, n), dtype=np.float32)
     actions = np.zeros((size, length), dtype=np.int64)

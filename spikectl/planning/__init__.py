@@ -1,0 +1,24 @@
+"""Model-based controllers that need no training: an oracle planner and identify-and-plan.
+
+``plan_episode`` knows a context's weights and searches action sequences with the
+batched simulator (the headroom of a network); ``IdentifyAndPlan`` knows only the
+neuron model, estimates the connectivity from what it observes and plans on its
+estimate every step. See docs/baselines.md.
+"""
+
+from spikectl.planning.beam import Plan, PlanningModel, beam_search
+from spikectl.planning.identify import ConnectivityEstimate, ObservedState
+from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, model_of_context, plan_episode
+from spikectl.planning.policy import IdentifyAndPlan
+
+__all__ = [
+    "DEFAULT_ORACLE_WIDTH",
+    "ConnectivityEstimate",
+    "IdentifyAndPlan",
+    "ObservedState",
+    "Plan",
+    "PlanningModel",
+    "beam_search",
+    "model_of_context",
+    "plan_episode",
+]

@@ -1,0 +1,164 @@
+"""Score every training-free controller on a context set: the table of `spikectl baselines`.
+
+Do nothing, uniformly random legal actions (10 seeds), identify-and-plan, the oracle
+planner (its plan replayed open loop in the environment) and the witness, each on
+every context of a set through the vector environment, so that environment-level
+extensions (noise, stochastic release, background input) act on all of them alike.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import os
+import tempfile
+import time
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from spikectl.contexts import ContextSet
+from spikectl.extensions import CONTEXT_FIELDS, Extensions
+from spikectl.params import NeuronParams
+from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, plan_episode
+from spikectl.planning.policy import IdentifyAndPlan
+from spikectl.rollout import (
+    do_nothing_policy,
+    make_random_policy,
+    make_witness_policy,
+    run_episodes,
+)
+from spikectl.simulator import DO_NOTHING
+from spikectl.vector_env import NeuronControlVectorEnv
+
+CONTROLLERS = ("do_nothing", "random", "identify_and_plan", "oracle", "witness")
+
+
+@dataclass
+class BaselineResults:
+    """Per-context returns [S] of each controller, and what the table needs besides."""
+
+    returns: dict[str, np.ndarray]
+    """controller -> [S] returns (random: the mean over its seeds)."""
+    random_seed_means: np.ndarray
+    """[seeds] mean return of the random policy per seed (for mean +- sd)."""
+    identify_seconds_per_episode: float
+    """CPU seconds per episode of identify-and-plan (process time, whole batch / S)."""
+    oracle_seconds_per_context: float
+    """CPU seconds per context of the oracle planner."""
+    extra: dict[str, float] = field(default_factory=dict)
+
+    def table(self) -> str:
+        """The printed table: mean return of each controller."""
+        lines = [f"{'controller':<20}{'mean return':>16}"]
+        for name in CONTROLLERS:
+            if name not in self.returns:
+                continue
+            if name == "random":
+                seeds = self.random_seed_means
+                value = f"{seeds.mean():.3f} +- {seeds.std(ddof=1) if seeds.size > 1 else 0:.3f}"
+            else:
+                value = f"{self.returns[name].mean():.3f}"
+            lines.append(f"{name.replace('_', '-'):<20}{value:>16}")
+        lines.append(
+            f"identify-and-plan: {self.identify_seconds_per_episode:.3f} CPU s per episode; "
+            f"oracle: {self.oracle_seconds_per_context:.3f} CPU s per context"
+        )
+        return "\n".join(lines)
+
+    def write_csv(self, path: str | os.PathLike) -> Path:
+        """One row per context, one column per controller; written atomically."""
+        path = Path(path)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        names = [name for name in CONTROLLERS if name in self.returns]
+        buffer = io.StringIO()
+        writer = csv.writer(buffer, lineterminator="\n")
+        writer.writerow(["context", *names])
+        size = next(iter(self.returns.values())).shape[0]
+        for index in range(size):
+            writer.writerow([index, *(f"{self.returns[name][index]:.6f}" for name in names)])
+        descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
+        with os.fdopen(descriptor, "w") as handle:
+            handle.write(buffer.getvalue())
+        os.replace(temporary, path)
+        return path
+
+
+def _replay_policy(actions: np.ndarray):
+    """Replay fixed agent actions [S, N] open loop."""
+
+    def policy(observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
+        return actions[np.arange(actions.shape[0]), observations["step"]]
+
+    return policy
+
+
+def agent_actions(context, actions: np.ndarray) -> np.ndarray:
+    """Simulator actions (neuron indices) of ``context`` as the agent's indices."""
+    if context.hidden is None:
+        return actions.astype(np.int64)
+    observed = np.searchsorted(context.observable, actions)
+    return np.where(actions >= 0, observed, DO_NOTHING).astype(np.int64)
+
+
+def run_baselines(
+    contexts: ContextSet,
+    params: NeuronParams | None = None,
+    extensions: Extensions | None = None,
+    random_seeds: int = 10,
+    oracle_width: int = DEFAULT_ORACLE_WIDTH,
+    policy: IdentifyAndPlan | None = None,
+    env_seed: int = 0,
+) -> BaselineResults:
+    """Score the controllers of :data:`CONTROLLERS` on every context of ``contexts``.
+
+    Args:
+        contexts: the set to play (one episode per context and controller).
+        params: the neuron model; the set's when None.
+        extensions: environment-level extensions to play with (the context-level ones
+            come from the set); None: the set's own.
+        random_seeds: seeds 0 .. random_seeds - 1 of the random policy.
+        oracle_width: beam width of the oracle planner.
+        policy: the identify-and-plan settings; ``IdentifyAndPlan(noise_mV=sigma)`` with
+            the extensions' measurement noise when None.
+        env_seed: seed of the environments' generators (noise, stochastic release).
+    """
+    if random_seeds < 1:
+        raise ValueError(f"random_seeds must be >= 1, got {random_seeds}")
+    if extensions is not None:
+        # The environment-level switches asked for, the context-level ones of the set.
+        extensions = replace(
+            Extensions.coerce(extensions),
+            **{name: getattr(contexts.extensions, name) for name in CONTEXT_FIELDS},
+        )
+    env = NeuronControlVectorEnv(
+        num_envs=len(contexts), contexts=contexts, params=params, extensions=extensions
+    )
+    params = env.params
+    if policy is None:
+        policy = IdentifyAndPlan(params, noise_mV=env.extensions.observation_noise_mV)
+    indices = np.arange(len(contexts))
+
+    def play(controller) -> np.ndarray:
+        env.reset(seed=env_seed)
+        return run_episodes(env, indices, controller).returns
+
+    returns = {"do_nothing": play(do_nothing_policy)}
+    seed_returns = np.stack([play(make_random_policy(seed)) for seed in range(random_seeds)])
+    returns["random"] = seed_returns.mean(axis=0)
+    started = time.process_time()
+    returns["identify_and_plan"] = play(policy.vector_policy(len(contexts)))
+    identify_seconds = (time.process_time() - started) / len(contexts)
+    started = time.process_time()
+    planned = np.stack([
+        agent_actions(context, plan_episode(context, params, oracle_width,
+                                            env.extensions.allow_target_action)[0])
+        for context in contexts
+    ])  # fmt: skip
+    oracle_seconds = (time.process_time() - started) / len(contexts)
+    returns["oracle"] = play(_replay_policy(planned))
+    if all(context.witness is not None for context in contexts):
+        returns["witness"] = play(make_witness_policy(contexts))
+    env.close()
+    return BaselineResults(returns, seed_returns.mean(axis=1), identify_seconds, oracle_seconds)

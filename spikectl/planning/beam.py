@@ -1,0 +1,183 @@
+"""Beam search over action sequences with the batched simulator (the planner's core).
+
+The planner never has its own copy of the dynamics: every candidate step is one call
+of :func:`spikectl.simulator.advance` on a batch of simulator states, one per
+(beam entry, action) pair. Two facts of the model (SPEC 1) make a beam search strong
+here:
+
+* an action at step t reaches the target no earlier than step t + 1 (the target is
+  not stimulable and synaptic input takes one step), so the reward of step t + 1 is
+  already *committed* once step t is simulated. The beam ranks candidates by their
+  reward so far plus that committed reward, which sees one step past the decision;
+* many action sequences lead to the same simulator state (stimulating a refractory
+  neuron does nothing; release counters saturate), so duplicates are merged and the
+  beam's width is spent on distinct states.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from spikectl.env_support import step_rewards
+from spikectl.params import NeuronParams
+from spikectl.simulator import SimulatorState, advance
+
+# Voltages are compared at this resolution (mV) when duplicate states are merged: far
+# below any difference the dynamics can act on, far above float round-off.
+_VOLTAGE_RESOLUTION_MV = 1e-7
+# Weight of the target's depolarisation (mV) in the ranking: 20 mV of it is worth far
+# less than the smallest reward (0.5 / 59 per step), so it only breaks ties.
+_TIE_BREAK = 1e-6
+
+
+@dataclass(frozen=True)
+class PlanningModel:
+    """What the planner simulates: one network, its target and the legal actions.
+
+    Attributes:
+        weights: [1, n, n] int8 signs or float64 signed synaptic strengths in units of
+            w_in (what :func:`spikectl.simulator.advance` takes).
+        target: the neuron whose spikes are rewarded (a neuron index of the model).
+        actions: int64 [A] the legal simulator actions, do nothing (-1) first.
+        params: the neuron parameters.
+        neurons: per-neuron kernel parameters [1, 2, n] (heterogeneous neurons), or None.
+    """
+
+    weights: np.ndarray
+    target: int
+    actions: np.ndarray
+    params: NeuronParams
+    neurons: np.ndarray | None = None
+
+    @property
+    def n_neurons(self) -> int:
+        return self.weights.shape[-1]
+
+
+@dataclass(frozen=True)
+class Plan:
+    """The best action sequence found from a start state."""
+
+    actions: np.ndarray
+    """int64 [H] simulator actions for steps start .. start + H - 1."""
+    rewards: np.ndarray
+    """float64 [H] the rewards the model predicts for them."""
+
+    @property
+    def predicted_return(self) -> float:
+        return float(self.rewards.sum())
+
+
+def _committed_target_spike(model: PlanningModel, state: SimulatorState) -> np.ndarray:
+    """[B] whether the target spikes at the next step whatever the next action is."""
+    params, target = model.params, model.target
+    if model.neurons is None:
+        threshold = params.v_threshold_mV - params.threshold_tolerance_mV
+        leak = params.dt_ms / params.membrane_time_constant_ms
+    else:
+        threshold, leak = model.neurons[0, 0, target], model.neurons[0, 1, target]
+    synaptic_step = params.dt_ms * params.synaptic_current_pA / params.capacitance_pF
+    column = model.weights[0, :, target].astype(np.float64)  # [n]
+    voltage = state.voltage_mV[:, target]
+    drive = synaptic_step * (state.released.astype(np.float64) @ column)  # [B]
+    next_voltage = voltage - (voltage - params.v_rest_mV) * leak + drive
+    return (next_voltage >= threshold) & (state.refractory_left[:, target] == 0)
+
+
+def _state_keys(state: SimulatorState, release_interval: int) -> np.ndarray:
+    """[B] opaque keys, equal exactly for states the dynamics cannot tell apart."""
+    parts = np.concatenate(
+        [
+            np.round(state.voltage_mV / _VOLTAGE_RESOLUTION_MV),
+            state.refractory_left,
+            np.minimum(state.steps_since_release, release_interval),
+            state.released,
+        ],
+        axis=1,
+    )  # [B, 4n]
+    parts = np.ascontiguousarray(parts, dtype=np.float64)
+    return parts.view(np.dtype((np.void, parts.itemsize * parts.shape[1])))[:, 0]
+
+
+def _take(state: SimulatorState, rows: np.ndarray) -> SimulatorState:
+    return SimulatorState(
+        state.voltage_mV[rows], state.refractory_left[rows],
+        state.steps_since_release[rows], state.released[rows],
+    )  # fmt: skip
+
+
+def beam_search(
+    model: PlanningModel,
+    start: SimulatorState,
+    pattern: np.ndarray,
+    start_step: int = 0,
+    width: int = 64,
+    horizon: int | None = None,
+) -> Plan:
+    """Search action sequences from ``start`` (a batch of one state) for the best return.
+
+    Args:
+        model: the network to plan on.
+        start: the simulator state before step ``start_step`` (batch size 1).
+        pattern: [N] bool target pattern of the whole episode.
+        start_step: the first step to plan.
+        width: beam width (distinct states kept per step).
+        horizon: steps to plan; None: to the end of the episode.
+
+    Returns:
+        The best :class:`Plan` (ties go to the earliest do-nothing-first sequence, so
+        the result is deterministic).
+    """
+    if width < 1:
+        raise ValueError(f"width must be >= 1, got {width}")
+    pattern = np.asarray(pattern, dtype=bool)
+    episode_length = pattern.shape[0]
+    if not 0 <= start_step < episode_length:
+        raise ValueError(f"start_step must lie in 0..{episode_length - 1}, got {start_step}")
+    end = episode_length if horizon is None else min(episode_length, start_step + horizon)
+    reward_if_spike, reward_if_silent = step_rewards(pattern)
+    n, actions = model.n_neurons, model.actions
+    n_actions = actions.shape[0]
+    interval = min(model.params.min_release_interval_steps, 2**30)
+    resting = model.params.v_rest_mV
+    beam = start.copy()
+    score = np.zeros(1)
+    parents, choices, step_rewards_kept = [], [], []
+    for t in range(start_step, end):
+        size = score.shape[0]
+        rows = np.repeat(np.arange(size), n_actions)  # [size * A]
+        children = _take(beam, rows)
+        child_actions = np.tile(actions, size)[:, None]  # [C, 1]
+        voltage = np.empty((rows.shape[0], 1, n))
+        spikes = np.empty((rows.shape[0], 1, n), dtype=bool)
+        advance(children, model.weights, child_actions, model.params, voltage, spikes,
+                model.neurons)  # fmt: skip
+        spiked = spikes[:, 0, model.target]
+        reward = np.where(spiked, reward_if_spike[t], reward_if_silent[t])
+        child_score = score[rows] + reward
+        ranking = child_score.copy()
+        if t + 1 < end:
+            committed = _committed_target_spike(model, children)
+            ranking += np.where(committed, reward_if_spike[t + 1], reward_if_silent[t + 1])
+        # Ties (common: most steps reward silence whatever is done) go to the state
+        # whose target sits highest: an inhibited target needs more input later.
+        depolarisation = np.clip(children.voltage_mV[:, model.target] - resting, -20.0, 20.0)
+        ranking += _TIE_BREAK * depolarisation
+        order = np.argsort(-ranking, kind="stable")
+        _, first = np.unique(_state_keys(children, interval)[order], return_index=True)
+        kept = order[np.sort(first)][:width]
+        beam = _take(children, kept)
+        score = child_score[kept]
+        parents.append(rows[kept])
+        choices.append(child_actions[kept, 0])
+        step_rewards_kept.append(reward[kept])
+    best = int(np.argmax(score))
+    plan_actions = np.empty(end - start_step, dtype=np.int64)
+    plan_rewards = np.empty(end - start_step)
+    for k in range(end - start_step - 1, -1, -1):
+        plan_actions[k] = choices[k][best]
+        plan_rewards[k] = step_rewards_kept[k][best]
+        best = int(parents[k][best])
+    return Plan(plan_actions, plan_rewards)

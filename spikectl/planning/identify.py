@@ -1,0 +1,149 @@
+"""Identify the hidden connectivity from observed potentials (the model is public, G is not).
+
+With the paper's noise-free model, a neuron j that was not refractory at step t
+obeys, exactly (SPEC 1, docs/model.md):
+
+    V_obs,j(t) = V_j(t-1) - (V_j(t-1) - V_r) dt/(RC) + 40 mV [a_t = j]
+                 + 20 mV * sum_i G[i, j] released_i(t-1)
+
+where V_j(t-1) is the potential after the reset of step t-1 (V_r if j spiked, else
+the observation), and ``released_i(t-1)`` follows from i's observed spikes and the
+vesicle rule. So each residual, divided by 20 mV, is a linear equation in column j
+of G with integer right-hand side. :class:`ConnectivityEstimate` keeps one Gaussian
+posterior per column (ridge regression with the topology's connection probabilities
+as prior variances): noise-free and with every release seen alone, its mean is the
+exact weight and its standard deviation near zero; a presynaptic neuron that never
+released keeps its prior (the uncertainty). Measurement noise, hidden neurons,
+stochastic release, heterogeneous neurons and background input all enter as extra
+residual noise: the estimate degrades, it does not break.
+
+:class:`ObservedState` turns the observations into the simulator state the planner
+starts from.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from spikectl.contexts import EXCITATORY_PROBABILITY, connection_probability
+from spikectl.params import NeuronParams
+from spikectl.simulator import DO_NOTHING, SimulatorState
+
+# Residual noise (in units of w_in) assumed without measurement noise: float32
+# observations round potentials at ~1e-6 mV, so this is loose and still makes one
+# clean observation decisive against a prior variance of at most 0.3.
+_NOISE_FREE_SD = 0.01
+
+
+class ConnectivityEstimate:
+    """Gaussian posterior over the signed weights G [n, n] in units of w_in.
+
+    Column j has precision ``prior + X^T X / s^2`` and mean ``precision^-1 X^T y / s^2``
+    (prior mean 0), where the rows of X are the release vectors of the steps before
+    each observation of j and y the residuals over 20 mV.
+    """
+
+    def __init__(self, n_neurons: int, residual_sd: float) -> None:
+        if residual_sd <= 0:
+            raise ValueError(f"residual_sd must be > 0, got {residual_sd}")
+        n = n_neurons
+        index = np.arange(n)
+        prior_variance = connection_probability(np.abs(index[:, None] - index[None, :]))
+        np.fill_diagonal(prior_variance, 1e-9)  # no self-connections
+        self.n_neurons = n
+        self.prior_variance = prior_variance  # [n (pre), n (post)]
+        self._noise_precision = 1.0 / residual_sd**2
+        self.precision = np.zeros((n, n, n))  # [post j, pre, pre]
+        self.precision[:, index, index] = (1.0 / prior_variance).T
+        self.moment = np.zeros((n, n))  # [post j, pre]
+        self.observations = 0
+        self._cache: tuple[np.ndarray, np.ndarray] | None = None
+
+    def add(self, released: np.ndarray, residual: np.ndarray, observed: np.ndarray) -> None:
+        """One step's evidence: ``released`` [n] (0/1, or release probabilities) of the
+        previous step, ``residual`` [n] in units of w_in, ``observed`` [n] bool columns."""
+        if not observed.any() or not np.any(released):
+            return
+        weight = self._noise_precision
+        self.precision[observed] += np.outer(released, released) * weight  # [n, n]
+        self.moment[observed] += residual[observed, None] * released[None, :] * weight
+        self.observations += int(observed.sum())
+        self._cache = None
+
+    def posterior(self) -> tuple[np.ndarray, np.ndarray]:
+        """(mean, standard deviation) of G, both [n (pre), n (post)]."""
+        if self._cache is None:
+            covariance = np.linalg.inv(self.precision)  # [post, pre, pre]
+            mean = np.einsum("jab,jb->ja", covariance, self.moment)  # [post, pre]
+            sd = np.sqrt(np.diagonal(covariance, axis1=1, axis2=2))  # [post, pre]
+            self._cache = (mean.T.copy(), sd.T.copy())
+        return self._cache
+
+    def weights(self, known_sd: float) -> tuple[np.ndarray, np.ndarray]:
+        """(signed weights [n, n] in {-1, 0, +1} to plan with, known [n, n] bool).
+
+        An entry is known when its posterior standard deviation is below ``known_sd``;
+        known entries are the rounded mean, unknown ones 0 (the prior's most likely
+        value: no connection). Rows follow Dale's law: once a row's known nonzero
+        entries agree on a sign, entries of the other sign are dropped.
+        """
+        mean, sd = self.posterior()
+        known = sd < known_sd
+        signs = np.where(known, np.clip(np.rint(mean), -1, 1), 0.0)
+        row_sign = np.sign(signs.sum(axis=1, keepdims=True))  # [n, 1]
+        signs = np.where((row_sign != 0) & (signs != row_sign), 0.0, signs)
+        return signs.astype(np.int8), known
+
+    def excitation_probability(self, target: int, known_sd: float) -> np.ndarray:
+        """[n] probability that neuron i excites ``target`` (1/0 where known, else prior)."""
+        weights, known = self.weights(known_sd)
+        prior = self.prior_variance[:, target] * EXCITATORY_PROBABILITY
+        return np.where(known[:, target], (weights[:, target] > 0).astype(float), prior)
+
+
+class ObservedState:
+    """The simulator state of the observed network, tracked from observations and actions.
+
+    Spikes are read from the observed potential (>= V_th, less ``spike_margin_mV``
+    under noise); releases from the spikes and the vesicle rule; the potential after
+    reset is V_r for a spiking neuron and the observation otherwise.
+    """
+
+    def __init__(self, n_neurons: int, params: NeuronParams, spike_margin_mV: float) -> None:
+        self.params = params
+        self.state = SimulatorState.at_rest(1, n_neurons, params)
+        self._threshold = params.v_threshold_mV - params.threshold_tolerance_mV - spike_margin_mV
+        self._leak = params.dt_ms / params.membrane_time_constant_ms
+        self._stimulus_mV = params.dt_ms * params.stimulus_current_pA / params.capacitance_pF
+        self._synaptic_mV = params.dt_ms * params.synaptic_current_pA / params.capacitance_pF
+        self._interval = params.min_release_interval_steps
+        self.spiked = np.zeros(n_neurons, dtype=bool)
+
+    def observe(self, voltage: np.ndarray, action: int) -> tuple[np.ndarray, ...]:
+        """Take the observation after a step with ``action``; update the state.
+
+        Returns ``(released_before [n], residual [n] in units of w_in, observed [n])``:
+        the evidence of this step for :meth:`ConnectivityEstimate.add`.
+        """
+        state, params = self.state, self.params
+        voltage = np.asarray(voltage, dtype=np.float64)
+        before = state.voltage_mV[0]
+        refractory = state.refractory_left[0] > 0
+        predicted = before - (before - params.v_rest_mV) * self._leak
+        if action != DO_NOTHING:
+            predicted[action] += self._stimulus_mV
+        residual = (voltage - predicted) / self._synaptic_mV
+        released_before = state.released[0].astype(np.float64)
+        observed = ~refractory
+        spiked = observed & (voltage >= self._threshold)
+        since = np.minimum(state.steps_since_release[0] + 1, 2**30)
+        release = spiked & (since >= self._interval)
+        since[release] = 0
+        state.voltage_mV[0] = np.where(spiked | refractory, params.v_rest_mV, voltage)
+        state.refractory_left[0] = np.where(
+            spiked, params.refractory_steps, np.maximum(state.refractory_left[0] - 1, 0)
+        )
+        state.steps_since_release[0] = since
+        state.released[0] = release
+        self.spiked = spiked
+        return released_before, residual, observed

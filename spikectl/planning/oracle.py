@@ -1,0 +1,76 @@
+"""The oracle planner: the best return the planner finds when it knows the weights.
+
+It knows the context's connectivity (and heterogeneous neurons, if any) but not its
+witness, and searches action sequences from rest with :func:`beam_search`. Its return
+is a context's reachable return found without the witness: the headroom a
+topology-agnostic controller is chasing.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from spikectl.contexts import Context, legal_actions
+from spikectl.env_support import step_rewards
+from spikectl.params import NeuronParams
+from spikectl.planning.beam import PlanningModel, beam_search
+from spikectl.simulator import SimulatorState, neuron_parameters, simulate
+
+DEFAULT_ORACLE_WIDTH = 256
+"""Beam width of :func:`plan_episode`: 1.000 on all 100 training networks (n = 8),
+where width 32 gave 0.997 and 128 gave 0.999 (docs/baselines.md)."""
+
+
+def model_of_context(
+    context: Context, params: NeuronParams | None = None, allow_target_action: bool = False
+) -> PlanningModel:
+    """The exact :class:`PlanningModel` of a context: what an oracle knows."""
+    params = NeuronParams() if params is None else params
+    weights: np.ndarray = context.weights[None].astype(np.int8)  # [1, n, n]
+    neurons = None
+    if context.heterogeneity is not None:
+        weights = (context.weights * context.heterogeneity.synaptic_scale)[None]
+        neurons = neuron_parameters(
+            params, context.heterogeneity.thresholds_mV[None],
+            context.heterogeneity.time_constants_ms[None],
+        )  # fmt: skip
+    actions = legal_actions(context.n_neurons, context.target, allow_target_action, context.hidden)
+    return PlanningModel(
+        np.ascontiguousarray(weights), context.target, actions.astype(np.int64), params, neurons
+    )
+
+
+def plan_episode(
+    context: Context,
+    params: NeuronParams | None = None,
+    width: int = DEFAULT_ORACLE_WIDTH,
+    allow_target_action: bool = False,
+) -> tuple[np.ndarray, float]:
+    """Plan a whole episode of ``context`` knowing its weights (not its witness).
+
+    Args:
+        context: the task; its weights, target, pattern, hidden and heterogeneous
+            neurons are used, its witness is not.
+        params: the neuron model; the paper's when None.
+        width: beam width (distinct simulator states kept per step).
+        allow_target_action: whether stimulating the target is legal (an extension).
+
+    Returns:
+        ``(actions, ret)``: int64 [N] simulator actions (neuron indices, -1 = do
+        nothing; never a hidden neuron nor, unless allowed, the target) and their
+        return, checked by replaying them with :func:`spikectl.simulate`.
+    """
+    if not isinstance(context, Context):
+        raise TypeError(f"context must be a spikectl.Context, got {type(context).__name__}")
+    params = NeuronParams() if params is None else params
+    if not isinstance(params, NeuronParams):
+        raise TypeError(f"params must be a NeuronParams, got {type(params).__name__}")
+    if isinstance(width, bool) or not isinstance(width, (int, np.integer)) or width < 1:
+        raise ValueError(f"width must be an integer >= 1, got {width!r}")
+    model = model_of_context(context, params, allow_target_action)
+    start = SimulatorState.at_rest(1, context.n_neurons, params)
+    plan = beam_search(model, start, context.pattern, 0, int(width))
+    _, spikes = simulate(context.weights, plan.actions, params, **context.simulate_kwargs())
+    reward_if_spike, reward_if_silent = step_rewards(context.pattern)
+    ret = float(np.where(spikes[:, context.target], reward_if_spike, reward_if_silent).sum())
+    return plan.actions, ret

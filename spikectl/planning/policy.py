@@ -1,0 +1,205 @@
+"""Identify-and-plan: model-predictive control on a connectivity estimated online.
+
+The policy knows the neuron model (``NeuronParams``) but not the weights. Each step it
+
+1. reads the new observation into its tracked simulator state and adds the step's
+   residuals to its :class:`~spikectl.planning.identify.ConnectivityEstimate`;
+2. re-plans with the beam search on the current estimate (known entries rounded to
+   {-1, 0, +1}, unknown ones 0) whenever the estimate changed or the network did
+   not do what the last plan predicted; otherwise the last plan still holds;
+3. when the plan misses a wanted target spike (the estimate is too uncertain to
+   plan) and would do nothing now, it *probes*: it stimulates the ready neuron whose
+   outgoing weights are still unknown and that most probably excites the target,
+   which reveals that neuron's whole row at the next step.
+
+It acts through the public interface only (observation and ``info["action_mask"]``)
+and never takes an illegal action.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+
+from spikectl.params import NeuronParams
+from spikectl.planning.beam import Plan, PlanningModel, beam_search
+from spikectl.planning.identify import _NOISE_FREE_SD, ConnectivityEstimate, ObservedState
+from spikectl.simulator import DO_NOTHING, advance
+
+
+class IdentifyAndPlan:
+    """A training-free controller: identify the connectivity, then plan (MPC).
+
+    Args:
+        params: the neuron model; the paper's (Table 1) when None.
+        width: beam width of each re-plan.
+        horizon: steps each re-plan looks ahead; None: to the end of the episode.
+        known_sd: a weight counts as known when its posterior standard deviation (in
+            units of w_in) is below this.
+        noise_mV: the measurement noise the policy assumes (0: the paper). It sets the
+            residual noise of the estimate and lowers the spike threshold it reads
+            spikes with by this much.
+
+    ```python
+    policy = IdentifyAndPlan()
+    obs, info = env.reset(seed=0)
+    policy.reset()
+    while True:
+        obs, reward, terminated, truncated, info = env.step(policy.act(obs, info))
+        if terminated or truncated:
+            break
+    ```
+    """
+
+    def __init__(
+        self,
+        params: NeuronParams | None = None,
+        width: int = 32,
+        horizon: int | None = 20,
+        known_sd: float = 0.25,
+        noise_mV: float = 0.0,
+    ) -> None:
+        params = NeuronParams() if params is None else params
+        if not isinstance(params, NeuronParams):
+            raise TypeError(f"params must be a NeuronParams, got {type(params).__name__}")
+        if not isinstance(width, (int, np.integer)) or width < 1:
+            raise ValueError(f"width must be an integer >= 1, got {width!r}")
+        if horizon is not None and (not isinstance(horizon, (int, np.integer)) or horizon < 1):
+            raise ValueError(f"horizon must be an integer >= 1 or None, got {horizon!r}")
+        if not known_sd > 0:
+            raise ValueError(f"known_sd must be > 0, got {known_sd!r}")
+        if not noise_mV >= 0:
+            raise ValueError(f"noise_mV must be >= 0, got {noise_mV!r}")
+        self.params, self.width, self.horizon = params, int(width), horizon
+        self.known_sd, self.noise_mV = float(known_sd), float(noise_mV)
+        # A plan is renewed when less than half its horizon is left, so that a wanted
+        # spike just past its end is seen in time (a receding horizon).
+        self._replan_margin = 1 if horizon is None else max(1, horizon // 2)
+        synaptic_mV = params.dt_ms * params.synaptic_current_pA / params.capacitance_pF
+        leak = params.dt_ms / params.membrane_time_constant_ms
+        # The residual differences two noisy observations, the older one shrunk by the leak.
+        noise_sd = noise_mV * np.hypot(1.0, 1.0 - leak) / synaptic_mV
+        self._residual_sd = max(noise_sd, _NOISE_FREE_SD)
+        self.reset()
+
+    def reset(self) -> None:
+        """Forget the episode (call at each episode's start; ``act`` at step 0 also does)."""
+        self.estimate: ConnectivityEstimate | None = None
+        self._tracker: ObservedState | None = None
+        self._plan: Plan | None = None
+        self._plan_start = 0
+        self._planned_weights: np.ndarray | None = None
+        self._predicted_spikes: np.ndarray | None = None
+        self.probes = 0
+        self.replans = 0
+
+    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
+        """The action for this observation (an agent index, -1 for do nothing)."""
+        step = int(observation["step"])
+        voltage = np.asarray(observation["voltage"], dtype=np.float64)
+        mask = np.asarray(info["action_mask"], dtype=bool)
+        n = voltage.shape[0]
+        if mask.shape != (n + 1,):
+            raise ValueError(f"action_mask must have shape [{n + 1}], got {mask.shape}")
+        if step == 0 or self._tracker is None:
+            if step != 0:
+                raise ValueError("IdentifyAndPlan must see the episode from its first step")
+            self.reset()
+            self._tracker = ObservedState(n, self.params, self.noise_mV)
+            self.estimate = ConnectivityEstimate(n, self._residual_sd)
+        else:
+            evidence = self._tracker.observe(voltage, int(observation["last_action"]))
+            self.estimate.add(*evidence)
+        pattern = np.asarray(observation["pattern"], dtype=bool)
+        if step >= pattern.shape[0]:
+            raise ValueError(f"the episode has ended (step {step}): reset before acting")
+        target = int(observation["target"])
+        weights, known = self.estimate.weights(self.known_sd)
+        surprised = self._predicted_spikes is not None and not np.array_equal(
+            self._predicted_spikes, self._tracker.spiked
+        )
+        if (
+            self._plan is None
+            or surprised
+            or not np.array_equal(weights, self._planned_weights)
+            or self._plan_remaining(step, pattern.shape[0]) < self._replan_margin
+        ):
+            self._replan(weights, target, mask, pattern, step)
+        offset = step - self._plan_start
+        action = int(self._plan.actions[offset])
+        if action == DO_NOTHING and self._misses_wanted_spikes(pattern, offset):
+            action = self._probe(known, target, mask)
+        self._predict(weights, action)
+        return action
+
+    def _replan(self, weights, target, mask, pattern, step) -> None:
+        model = self._model(weights, target, mask)
+        self._plan = beam_search(
+            model, self._tracker.state, pattern, step, self.width, self.horizon
+        )
+        self._plan_start = step
+        self._planned_weights = weights
+        self._model_cache = model
+        self.replans += 1
+
+    def _plan_remaining(self, step: int, episode_length: int) -> float:
+        """Steps of the current plan still ahead of ``step`` (inf when it reaches the end)."""
+        end = self._plan_start + self._plan.actions.shape[0]
+        return np.inf if end >= episode_length else end - step
+
+    def _model(self, weights, target, mask) -> PlanningModel:
+        actions = (np.flatnonzero(mask) + DO_NOTHING).astype(np.int64)  # do nothing first
+        return PlanningModel(weights[None].copy(), target, actions, self.params)
+
+    def _misses_wanted_spikes(self, pattern: np.ndarray, offset: int) -> bool:
+        """True when the current plan does not hit every wanted spike still ahead."""
+        rewards = self._plan.rewards[offset:]
+        wanted = pattern[self._plan_start + offset : self._plan_start + offset + rewards.shape[0]]
+        return bool(np.any(wanted & (rewards == 0)))
+
+    def _probe(self, known: np.ndarray, target: int, mask: np.ndarray) -> int:
+        """The ready neuron with unknown outgoing weights most likely to excite the
+        target (measured on the training contexts: better than saving the likely ones
+        for the steps before wanted spikes), or do nothing when there is none."""
+        state = self._tracker.state
+        ready = (state.refractory_left[0] == 0) & (
+            state.steps_since_release[0] >= self.params.min_release_interval_steps
+        )
+        unknown_row = ~known.all(axis=1)
+        candidates = ready & unknown_row & mask[1:]
+        if not candidates.any():
+            return DO_NOTHING
+        score = self.estimate.excitation_probability(target, self.known_sd)
+        score = score + 1e-3 * (~known).sum(axis=1)  # then the row that teaches most
+        score[~candidates] = -np.inf
+        self.probes += 1
+        return int(np.argmax(score))
+
+    def _predict(self, weights: np.ndarray, action: int) -> None:
+        """The spikes the estimate predicts for the coming step (to detect surprises)."""
+        state = self._tracker.state.copy()
+        n = weights.shape[0]
+        voltage, spikes = np.empty((1, 1, n)), np.empty((1, 1, n), dtype=bool)
+        actions = np.array([[action]], dtype=np.int64)
+        advance(state, weights[None].astype(np.int8), actions, self.params, voltage, spikes)
+        self._predicted_spikes = spikes[0, 0]
+
+    def vector_policy(self, num_envs: int):
+        """A batched policy ``policy(observations, action_mask) -> actions`` for
+        :func:`spikectl.rollout.run_episodes`: one independent copy per environment."""
+        copies = [
+            IdentifyAndPlan(self.params, self.width, self.horizon, self.known_sd, self.noise_mV)
+            for _ in range(num_envs)
+        ]
+
+        def policy(observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
+            actions = np.empty(num_envs, dtype=np.int64)
+            for index, copy in enumerate(copies):
+                observation = {key: value[index] for key, value in observations.items()}
+                actions[index] = copy.act(observation, {"action_mask": action_mask[index]})
+            return actions
+
+        policy.copies = copies
+        return policy
