@@ -300,15 +300,15 @@ def test_damaged_context_files_are_one_clear_error_everywhere(run_copy, kind, tm
 def test_a_nan_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch):
     import spikectl.training.dqn as dqn
 
-    real_loss = dqn.td_loss
+    real_losses = dqn.training_losses
     calls = []
 
     def loss_that_diverges(*args):
         calls.append(1)
-        loss = real_loss(*args)
-        return loss * math.nan if len(calls) > 2 else loss
+        td, aux = real_losses(*args)
+        return (td * math.nan if len(calls) > 2 else td), aux
 
-    monkeypatch.setattr(dqn, "td_loss", loss_that_diverges)
+    monkeypatch.setattr(dqn, "training_losses", loss_that_diverges)
     run = tmp_path / "run"
     with pytest.raises(RunDirError, match="training loss became nan.*diverged"):
         train(dataclasses.replace(TINY, total_env_steps=8 * 20 * 4), run)
@@ -443,7 +443,8 @@ def test_full_or_read_only_disk_is_one_line_and_no_trap(name, code, tmp_path, ca
 
 def metric_rows(run: Path) -> list[list[str]]:
     rows = [line.split(",") for line in (run / "metrics.csv").read_text().splitlines()]
-    return [row[:-1] for row in rows]  # all but wall time
+    wall = rows[0].index("wall_time_s")
+    return [row[:wall] + row[wall + 1 :] for row in rows]  # all but wall time
 
 
 @pytest.mark.parametrize("how", ["same command", pytest.param("resume", marks=pytest.mark.slow)])

@@ -170,7 +170,7 @@ def test_incompatible_checkpoint_is_refused(tmp_path):
     with pytest.raises(RunDirError, match="format 99"):
         train(config, run, resume=True)
     (run / "checkpoint.pt").write_bytes(b"garbage")
-    with pytest.raises(RunDirError, match="not a readable checkpoint"):
+    with pytest.raises(RunDirError, match="not a readable spikectl checkpoint"):
         train(config, run, resume=True)
 
 

@@ -130,7 +130,11 @@ def main() -> None:
         "new quick preset": load_runs(new_quick),
     }
     print(before_after(before))
-    groups = {"new quick preset (all mechanisms)": load_runs(new_quick)}
+    old_quick = before["old quick preset (0.625 updates/episode, 1 M steps)"]
+    groups = {
+        "old quick preset (reference)": old_quick,
+        "new quick preset (all mechanisms)": load_runs(new_quick),
+    }
     for sweep in sorted(results.glob("learn-fast-without-*")):
         if trial_dirs(sweep):
             label = sweep.name.removeprefix("learn-fast-").replace("-", " ")
