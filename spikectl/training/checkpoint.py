@@ -556,7 +556,10 @@ def load_model_weights(path: Path) -> dict[str, torch.Tensor]:
     metadata = getattr(weights, "_metadata", None) or {}
     header = metadata.get("spikectl") if isinstance(metadata, Mapping) else None
     if not isinstance(weights, dict) or not isinstance(header, dict):
-        raise RunDirError(f"{path} is not a spikectl model (no spikectl entry in its metadata)")
+        raise RunDirError(
+            f"{path} is not a spikectl model of this version (no spikectl entry in its "
+            "metadata; a model.pt written before checksums cannot be verified: train again)"
+        )
     if header.get("format") != MODEL_FORMAT or header.get("format_version") != MODEL_VERSION:
         raise RunDirError(
             f"{path} has model format {header.get('format')!r} version "
