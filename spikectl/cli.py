@@ -201,9 +201,10 @@ def train(command: TrainCommand) -> None:
     for name in ("do_nothing", "random"):
         row = baselines[name]
         print(f"{name.replace('_', '-'):<14}{row['train']:>8.3f}{row['test']:>8.3f}")
-    minutes = final["wall_time_s"] / 60
+    minutes, core_minutes = final["wall_time_s"] / 60, final["cpu_time_s"] / 60
     print(f"{final['env_steps']:,} environment steps, {final['updates']:,} updates, "
-          f"{minutes:.1f} wall minutes on {config.torch_threads or torch_threads()} thread(s)")
+          f"{minutes:.1f} wall minutes ({core_minutes:.1f} core minutes) on "
+          f"{config.torch_threads or torch_threads()} thread(s)")
     print(f"wrote {run_dir / 'model.pt'}, {run_dir / 'metrics.csv'} and {curve}")
 
 

@@ -48,7 +48,7 @@ def make_run(root, arch, seed, train, test, steps=STEPS, n_train=6):
     rows = [
         {"episode": 40 * (k + 1), "env_steps": step, "updates": 10 * (k + 1), "epsilon": 0.1,
          "train_return": train[k], "test_return": test[k], "loss": float("nan"),
-         "wall_time_s": 1.0 + k}
+         "wall_time_s": 60.0 * (k + 1) + seed, "cpu_time_s": 30.0 * (k + 1)}
         for k, step in enumerate(steps)
     ]  # fmt: skip
     write_metrics(run_dir, rows, METRIC_FIELDS)
@@ -105,6 +105,12 @@ def test_results_table_numbers(runs, tmp_path):
     assert drqn["gap_mean"] == pytest.approx(0.1)
     assert drqn["test_iqm"] == pytest.approx(0.55)  # 2 seeds: nothing trimmed
     assert "| tdrqn | 4 | 2400 | 0.850 ± 0.112 | 0.750 ± 0.112 | 0.100 ± 0.000 |" in markdown
+    # Minutes of the last row, averaged over the seeds 0..3 (wall) and equal (core).
+    assert tdrqn["wall_minutes"] == pytest.approx((60.0 * len(STEPS) + 1.5) / 60)
+    assert tdrqn["core_minutes"] == pytest.approx(30.0 * len(STEPS) / 60)
+    assert markdown.splitlines()[-1].endswith(
+        f"| {(60.0 * len(STEPS) + 1.5) / 60:.1f} | {30.0 * len(STEPS) / 60:.1f} |"
+    )
 
     markdown_path, csv_path = write_results_table(group_runs(runs), tmp_path / "out",
                                                   n_resamples=500, seed=1)  # fmt: skip

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import io
+import math
 import os
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
@@ -193,7 +194,7 @@ TABLE_FIELDS = (
     "group", "n_seeds", "env_steps",
     "train_mean", "train_std", "test_mean", "test_std", "gap_mean", "gap_std",
     "train_iqm", "train_iqm_low", "train_iqm_high", "test_iqm", "test_iqm_low", "test_iqm_high",
-    "gap_iqm", "gap_iqm_low", "gap_iqm_high",
+    "gap_iqm", "gap_iqm_low", "gap_iqm_high", "wall_minutes", "core_minutes",
 )  # fmt: skip
 
 
@@ -210,7 +211,9 @@ def results_table(
     stratified-bootstrap percentile interval (``confidence``, ``n_resamples``, from
     ``seed``) for the final train and test returns and the gap; a gap interval above 0
     says the group does better on its training contexts than on unseen ones at that
-    confidence. Returns ``(markdown, rows)``.
+    confidence; and the mean wall minutes and core minutes (process CPU time, all
+    threads) a run took, NaN for runs written before spikectl logged CPU time.
+    Returns ``(markdown, rows)``.
     """
     rows = []
     for label, runs in _resolve(groups).items():
@@ -225,6 +228,8 @@ def results_table(
             "train_mean": float(train.mean()), "train_std": float(train.std()),
             "test_mean": float(test.mean()), "test_std": float(test.std()),
             "gap_mean": float(gap.mean()), "gap_std": float(gap.std()),
+            "wall_minutes": float(np.mean([row["wall_time_s"] for row in finals])) / 60,
+            "core_minutes": float(np.mean([row.get("cpu_time_s", math.nan) for row in finals])) / 60,
         }  # fmt: skip
         for name, values in (("train", train), ("test", test), ("gap", gap)):
             interval = bootstrap_ci(values, iqm, n_resamples, confidence, seed)
@@ -235,8 +240,9 @@ def results_table(
     percent = f"{100 * confidence:g}%"
     lines = [
         f"| group | seeds | env steps | train return | test return | gap (train − test) "
-        f"| train IQM [{percent} CI] | test IQM [{percent} CI] | gap IQM [{percent} CI] |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+        f"| train IQM [{percent} CI] | test IQM [{percent} CI] | gap IQM [{percent} CI] "
+        "| wall min | core min |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for row in rows:
         lines.append(
@@ -246,9 +252,14 @@ def results_table(
             f"| {row['gap_mean']:.3f} ± {row['gap_std']:.3f} "
             f"| {row['train_iqm']:.3f} [{row['train_iqm_low']:.3f}, {row['train_iqm_high']:.3f}] "
             f"| {row['test_iqm']:.3f} [{row['test_iqm_low']:.3f}, {row['test_iqm_high']:.3f}] "
-            f"| {row['gap_iqm']:.3f} [{row['gap_iqm_low']:.3f}, {row['gap_iqm_high']:.3f}] |"
+            f"| {row['gap_iqm']:.3f} [{row['gap_iqm_low']:.3f}, {row['gap_iqm_high']:.3f}] "
+            f"| {_minutes(row['wall_minutes'])} | {_minutes(row['core_minutes'])} |"
         )
     return "\n".join(lines) + "\n", rows
+
+
+def _minutes(value: float) -> str:
+    return "–" if math.isnan(value) else f"{value:.1f}"
 
 
 def write_results_table(

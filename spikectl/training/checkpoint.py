@@ -100,6 +100,8 @@ class TrainingState:
     aux_loss_sum: float = 0.0
     loss_count: int = 0
     wall_time_s: float = 0.0
+    cpu_time_s: float = 0.0
+    """Process CPU seconds (all threads): the run's core-seconds."""
     metrics: list[dict] = field(default_factory=list)
     baselines: dict[str, dict[str, float]] = field(default_factory=dict)
 
@@ -429,6 +431,7 @@ def save_checkpoint(
         "aux_loss_sum": float(state.aux_loss_sum),
         "loss_count": int(state.loss_count),
         "wall_time_s": float(state.wall_time_s),
+        "cpu_time_s": float(state.cpu_time_s),
         "metrics": [{key: _plain(value) for key, value in row.items()} for row in state.metrics],
         "baselines": state.baselines,
     }
@@ -527,6 +530,8 @@ def load_checkpoint(
         aux_loss_sum=payload["aux_loss_sum"],
         loss_count=payload["loss_count"],
         wall_time_s=payload["wall_time_s"],
+        # Checkpoints of spikectl before the cpu_time_s column have no CPU clock yet.
+        cpu_time_s=float(payload.get("cpu_time_s", 0.0)),
         metrics=payload["metrics"],
         baselines=payload["baselines"],
     )

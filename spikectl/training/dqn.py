@@ -50,7 +50,7 @@ from spikectl.vector_env import NeuronControlVectorEnv
 
 METRIC_FIELDS = (
     "episode", "env_steps", "updates", "epsilon", "train_return", "test_return", "loss",
-    "wall_time_s", "val_return", "aux_loss",
+    "wall_time_s", "val_return", "aux_loss", "cpu_time_s",
 )  # fmt: skip
 
 
@@ -274,9 +274,15 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
     patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
     logger = _Logger(run_dir, config, state)
     started = time.perf_counter() - state.wall_time_s
+    # Process CPU time counts every thread: core-seconds, fair on a shared machine.
+    started_cpu = time.process_time() - state.cpu_time_s
+
+    def clock() -> None:
+        state.wall_time_s = time.perf_counter() - started
+        state.cpu_time_s = time.process_time() - started_cpu
 
     def evaluate() -> None:
-        state.wall_time_s = time.perf_counter() - started
+        clock()
         row = {
             "episode": state.episodes,
             "env_steps": state.episodes * config.episode_length,
@@ -296,6 +302,7 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
                 if state.loss_count and predictor is not None
                 else math.nan
             ),
+            "cpu_time_s": state.cpu_time_s,
         }
         state.loss_sum, state.aux_loss_sum, state.loss_count = 0.0, 0.0, 0
         state.metrics.append(row)
@@ -343,7 +350,7 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
         if finished or _crossed(before, state.episodes, config.eval_every_episodes):
             evaluate()
         if finished or _crossed(before, state.episodes, config.checkpoint_every_episodes):
-            state.wall_time_s = time.perf_counter() - started
+            clock()
             save_checkpoint(run_dir, config, state, online, target, optimizer, replay, predictor)
     logger.finish(online, state)
     if state.updates == 0:
