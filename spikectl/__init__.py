@@ -12,6 +12,7 @@ from spikectl.planning import IdentifyAndPlan, plan_episode
 from spikectl.registration import register_envs
 from spikectl.simulator import simulate
 from spikectl.vector_env import NeuronControlVectorEnv
+from spikectl.wrappers import sb3_compatible, sb3_vec_env
 
 register_envs()
 
@@ -26,6 +27,8 @@ __all__ = [
     "make_context",
     "make_splits",
     "plan_episode",
+    "sb3_compatible",
+    "sb3_vec_env",
     "simulate",
 ]
 __version__ = "0.1.0"
