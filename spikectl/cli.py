@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import dataclasses
+import io
 import json
 import math
 import re
@@ -10,7 +12,7 @@ import sys
 import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Annotated, Literal, Union
+from typing import Annotated, Any, Literal, Union
 
 import numpy as np
 import tyro
@@ -360,8 +362,69 @@ def _parse_train(argv: list[str]) -> TrainCommand:
     peek.add_argument("--preset", choices=sorted(PRESETS), default="quick")
     known, _ = peek.parse_known_args(argv)
     default = TrainCommand(config=PRESETS[known.preset], preset=known.preset)
-    return tyro.cli(TrainCommand, args=argv, default=default, prog="spikectl train",
-                    description=TrainCommand.__doc__)  # fmt: skip
+    return _cli(TrainCommand, args=argv, default=default, prog="spikectl train",
+                description=TrainCommand.__doc__)  # fmt: skip
+
+
+def _cli(*args: Any, **kwargs: Any) -> Any:
+    """``tyro.cli``, with its framed parse errors turned into our one-line form."""
+    captured = io.StringIO()
+    reported = False
+    try:
+        with contextlib.redirect_stderr(captured):
+            return tyro.cli(*args, **kwargs)
+    except SystemExit as exit:
+        line = parse_error_line(captured.getvalue()) if exit.code not in (0, None) else None
+        if line is None:
+            raise
+        print(f"spikectl: error: {flag_message(line)}", file=sys.stderr)
+        reported = True
+        raise SystemExit(2) from None
+    finally:
+        if not reported:
+            sys.stderr.write(captured.getvalue())  # warnings, and frames we cannot read
+
+
+_BOX_TOP = re.compile(r"^╭─ (?P<title>.+?) ─+╮$")
+_ANSI = re.compile(r"\x1b\[[0-9;]*m")
+
+
+def _is_rule(line: str) -> bool:
+    return bool(line) and set(line) <= {"─", "-"}
+
+
+def parse_error_line(text: str) -> str | None:
+    """One line from tyro's framed parse error (title, message up to the first rule,
+    the help command of its footer); None when ``text`` holds no such frame.
+
+    tyro draws the frame in box characters on UTF-8 consoles and as a title over a
+    dashed rule elsewhere; both are read.
+    """
+    lines = [_ANSI.sub("", line).strip().strip("│╰╯").strip() for line in text.splitlines()]
+    lines = [line for line in lines if line]
+    top = next((i for i, line in enumerate(lines) if _BOX_TOP.match(line)), None)
+    if top is not None:
+        title, body = _BOX_TOP.match(lines[top]).group("title"), lines[top + 1 :]
+    elif len(lines) >= 3 and not _is_rule(lines[0]) and _is_rule(lines[1]):
+        title, body = lines[0], lines[2:]
+    else:
+        return None
+    rule = next((i for i, line in enumerate(body) if _is_rule(line)), len(body))
+    message = " ".join(" ".join(body[:rule]).split())
+    if not message:
+        return None
+    # "Error parsing --seed: ..." names a flag; "Error parsing config.sizes: ..." a
+    # nested config whose own message names the field (flag_message turns it into a flag).
+    message = re.sub(
+        r"^Error parsing (\S+):\s*",
+        lambda match: f"{match.group(1)}: " if match.group(1).startswith("-") else "",
+        message,
+    )
+    first_words = message.lower().split()[:3]
+    if title != "Value error" and title.split()[0].lower() not in first_words:
+        message = f"{title.lower()}: {message}"  # e.g. "missing subcommand: Expected one of"
+    hint = re.search(r"(spikectl[\w .-]* --help)", " ".join(" ".join(body[rule:]).split()))
+    return message + (f" (see {hint.group(1)})" if hint else "")
 
 
 def main(argv: list[str] | None = None) -> None:
@@ -375,7 +438,7 @@ def main(argv: list[str] | None = None) -> None:
                 Annotated[config_type, tyro.conf.subcommand(name, description=run.__doc__)]
                 for name, (run, config_type) in COMMANDS.items()
             )
-            command = tyro.cli(Union[choices], args=argv, prog="spikectl")  # noqa: UP007
+            command = _cli(Union[choices], args=argv, prog="spikectl")  # noqa: UP007
         run = next(
             run for run, config_type in COMMANDS.values() if isinstance(command, config_type)
         )

@@ -32,7 +32,7 @@ from spikectl import ContextSet, NeuronParams
 from spikectl.cli import main
 from spikectl.context_files import ContextFileError
 from spikectl.env import NeuronControlEnv
-from spikectl.experiments.sweep import Sweep, run_sweep, run_trial
+from spikectl.experiments.sweep import Sweep, SweepError, run_sweep, run_trial
 from spikectl.files import FileWriteError
 from spikectl.training.checkpoint import (
     RunDirError,
@@ -194,6 +194,31 @@ def test_a_sweep_reports_a_damaged_trial_in_one_line(finished_run, tmp_path, cap
     flip_tensor_byte(trial / "model.pt")
     with pytest.raises(Exception, match="1 of 1 trial.*model.pt is damaged"):
         run_sweep(sweep, tmp_path / "sweep", workers=1, echo=lambda line: None)
+
+
+@pytest.mark.slow
+def test_a_ray_sweep_reports_a_damaged_trial_in_one_line(finished_run, tmp_path, capsys):
+    pytest.importorskip("ray")
+    sweep = Sweep(base=TINY, grid={"seed": [0, 1]})
+    trial = tmp_path / "sweep" / "trials" / "seed=0"
+    shutil.copytree(finished_run, trial)
+    flip_tensor_byte(trial / "model.pt")
+    with pytest.raises(SweepError, match=r"1 of 2 trial.*seed=0.*model.pt is damaged"):
+        run_sweep(sweep, tmp_path / "sweep", workers=2, backend="ray", echo=lambda line: None)
+    # The healthy trial finished and is usable.
+    assert load_model_weights(tmp_path / "sweep" / "trials" / "seed=1" / "model.pt")
+    with pytest.raises(SystemExit) as exit_info:  # and on the command line: one line, exit 2
+        main(["sweep", "--config", str(write_sweep_file(tmp_path, sweep)), "--backend", "ray",
+              "--workers", "2", "--sweep-dir", str(tmp_path / "sweep")])  # fmt: skip
+    assert exit_info.value.code == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert lines[-1].startswith("spikectl: error: 1 of 2 trial(s) failed")
+
+
+def write_sweep_file(folder: Path, sweep: Sweep) -> Path:
+    path = folder / "sweep-file.json"
+    path.write_text(json.dumps(sweep.to_dict()))
+    return path
 
 
 def test_model_files_are_plain_state_dicts_with_a_checksum(finished_run):
@@ -373,6 +398,46 @@ def test_every_train_config_error_names_its_flag(flag, value, tmp_path, capsys):
                       str(tmp_path / "run")], capsys)  # fmt: skip
     assert flag in line
     assert not (tmp_path / "run").exists(), "a refused start left a directory behind"
+
+
+@pytest.mark.parametrize(
+    ("argv", "named"),
+    [(["train", "--seed", "abc"], "--seed: invalid literal"),
+     (["train", "--total-env-steps", "1e5"], "--total-env-steps"),
+     (["train", "--gamma"], "'--gamma'"),
+     (["train", "--arch", "nope"], "'--arch'"),
+     (["train", "--sizes.head-hidden", "a", "b"], "--sizes.head-hidden"),
+     (["train", "--sizes.lstm-hidden", "0"], "--sizes.lstm-hidden must be an int >= 1"),
+     (["train", "--sizes.do-nothing-head", "x"], "--sizes.do-nothing-head must be one of"),
+     (["sweep", "--workers", "x"], "--workers"),
+     (["contexts", "--n-neurons", "q"], "--n-neurons"),
+     (["evaluate"], "PATH"),
+     (["nosuch"], "nosuch"),
+     ([], "missing subcommand")],
+)  # fmt: skip
+def test_parse_errors_are_one_line_naming_the_flag(argv, named, tmp_path, capsys, monkeypatch):
+    monkeypatch.chdir(tmp_path)
+    line = cli_error(argv, capsys)
+    assert named in line and "╭" not in line and "│" not in line
+    assert list(tmp_path.iterdir()) == [], "a refused command wrote something"
+
+
+def test_help_and_unreadable_frames_pass_through(capsys):
+    from spikectl.cli import parse_error_line
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", "--help"])
+    assert exit_info.value.code == 0
+    assert "--total-env-steps" in capsys.readouterr().out
+    assert parse_error_line("a warning\nnot a frame\n") is None
+    assert parse_error_line("╭─ Value error ─╮\n╰───╯\n") is None  # nothing in it to say
+    boxed = ("╭─ Value error ──╮\n│ Error parsing --seed: bad │\n│ ──── │\n"
+             "│ see spikectl train --help │\n╰──╯")  # fmt: skip
+    dashed = (" Value error \n ------ \n  Error parsing --seed: bad \n  -----\n"
+              "  see spikectl train --help")  # fmt: skip
+    assert parse_error_line(boxed) == parse_error_line(dashed) == (
+        "--seed: bad (see spikectl train --help)"
+    )
 
 
 @pytest.mark.skipif(torch.cuda.is_available(), reason="this machine has CUDA")

@@ -100,19 +100,21 @@ class AgentSizes:
                 object.__setattr__(self, field.name, tuple(value))
         if self.attn_width % self.attn_heads:
             raise ValueError(
-                f"attn_heads ({self.attn_heads}) must divide attn_width ({self.attn_width})"
+                f"AgentSizes.attn_heads ({self.attn_heads}) must divide "
+                f"AgentSizes.attn_width ({self.attn_width})"
             )
         if self.do_nothing_head not in PerNeuronQHead.MODES:
             raise ValueError(
-                f"do_nothing_head must be one of {PerNeuronQHead.MODES}, got "
+                f"AgentSizes.do_nothing_head must be one of {PerNeuronQHead.MODES}, got "
                 f"{self.do_nothing_head!r}"
             )
         for name in ("target_in_input", "target_voltage_in_input"):
             if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"{name} must be a bool, got {getattr(self, name)!r}")
+                raise ValueError(f"AgentSizes.{name} must be a bool, got {getattr(self, name)!r}")
         if not self.v_threshold_mV > self.v_rest_mV:
             raise ValueError(
-                f"v_threshold_mV ({self.v_threshold_mV}) must be above v_rest_mV ({self.v_rest_mV})"
+                f"AgentSizes.v_threshold_mV ({self.v_threshold_mV}) must be above "
+                f"AgentSizes.v_rest_mV ({self.v_rest_mV})"
             )
 
 

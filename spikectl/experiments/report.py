@@ -229,7 +229,8 @@ def results_table(
             "test_mean": float(test.mean()), "test_std": float(test.std()),
             "gap_mean": float(gap.mean()), "gap_std": float(gap.std()),
             "wall_minutes": float(np.mean([row["wall_time_s"] for row in finals])) / 60,
-            "core_minutes": float(np.mean([row.get("cpu_time_s", math.nan) for row in finals])) / 60,
+            "core_minutes": float(np.mean([row.get("cpu_time_s", math.nan) for row in finals]))
+            / 60,
         }  # fmt: skip
         for name, values in (("train", train), ("test", test), ("gap", gap)):
             interval = bootstrap_ci(values, iqm, n_resamples, confidence, seed)
