@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from scipy import stats
 
 from spikectl.experiments.stats import bootstrap_ci, iqm, summarise
 
@@ -24,7 +25,6 @@ def test_iqm_hand_cases(values, expected):
 
 
 def test_iqm_matches_scipy_trim_mean():
-    stats = pytest.importorskip("scipy.stats")
     rng = np.random.default_rng(3)
     for size in range(1, 30):
         values = rng.normal(size=size)

@@ -124,9 +124,7 @@ def test_figure3_contexts_are_regenerated_when_a_trial_kept_only_its_metrics(tmp
     assert _training_contexts(run_dir, read_config(run_dir).to_dict()) == saved
 
 
-def same_trials(dir_a, dir_b):
-    from test_training import assert_same_weights, comparable
-
+def same_trials(dir_a, dir_b, comparable, assert_same_weights):
     names = sorted(path.name for path in trial_dirs(dir_a))
     assert names == sorted(path.name for path in trial_dirs(dir_b)) and names
     for name in names:
@@ -136,13 +134,15 @@ def same_trials(dir_a, dir_b):
 
 
 @pytest.mark.slow
-def test_ray_backend_gives_the_same_results_as_the_local_pool(tmp_path):
+def test_ray_backend_gives_the_same_results_as_the_local_pool(
+    tmp_path, comparable, assert_same_weights
+):
     pytest.importorskip("ray")
     sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "seed": [0]})
     run_sweep(sweep, tmp_path / "local", workers=2, echo=lambda line: None)
     results = run_sweep(sweep, tmp_path / "ray", workers=2, backend="ray", echo=lambda line: None)
     assert [r["status"] for r in results] == ["trained", "trained"]
-    same_trials(tmp_path / "local", tmp_path / "ray")
+    same_trials(tmp_path / "local", tmp_path / "ray", comparable, assert_same_weights)
 
 
 def test_unknown_backend():
