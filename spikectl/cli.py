@@ -49,7 +49,7 @@ class DemoConfig:
 
 
 def demo(config: DemoConfig) -> dict[str, dict[str, float]]:
-    """Run the demo; returns mean returns per policy and split."""
+    """A 3-second tour: score do-nothing, random and witness policies; save an episode raster."""
     from spikectl.experiments.figures import plot_episode_raster
     from spikectl.rollout import (
         do_nothing_policy,

@@ -89,7 +89,7 @@ class TrainConfig:
     max_grad_norm: float = 10.0
     """Gradient-norm clip; 0 turns it off."""
     sizes: AgentSizes = field(default_factory=AgentSizes)
-    """Network sizes (Table 2 by default)."""
+    """Network sizes: the preset's (Table 2's with --preset paper), then these flags."""
 
     eval_every_episodes: int = 500
     """Greedy evaluation on every training and test context every this many episodes."""
