@@ -275,6 +275,10 @@ class SB3CompatibleEnv(gym.Env):
     def _np_random(self, value: np.random.Generator | None) -> None:
         self.env.unwrapped._np_random = value
 
+    @property
+    def np_random_seed(self) -> int:
+        return self.env.unwrapped.np_random_seed
+
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray | dict[str, Any], dict[str, Any]]:

@@ -244,6 +244,8 @@ def test_seeded_episodes_repeat():
     a, b = make(), make()
     obs_a, _ = a.reset(seed=7)
     obs_b, _ = b.reset(seed=7)
+    assert a.np_random is a.env.unwrapped.np_random  # one generator, the base env's
+    assert a.np_random_seed == 7
     np.testing.assert_array_equal(obs_a, obs_b)
     for _ in range(30):
         action = a.action_space.sample()
@@ -369,3 +371,63 @@ def test_sb3_vec_env_without_sb3_says_what_to_install(monkeypatch):
     monkeypatch.delitem(sys.modules, "spikectl.sb3_vec_adapter", raising=False)
     with pytest.raises(ImportError, match=r'pip install "spikectl\[sb3\]"'):
         sb3_vec_env(gym.make_vec(ENV_ID, num_envs=2, **SMALL))
+
+
+# -- MaskablePPO (slow) -------------------------------------------------------------------
+
+
+def one_easy_context(episode_length: int = 6):
+    """Three neurons, one excitatory edge 0 -> 2, target 2, wanted spike at step 1:
+    stimulating neuron 0 at step 0 (action 1) scores 1, doing nothing 0.5."""
+    weights = np.zeros((3, 3), dtype=np.int8)
+    weights[0, 2] = 1
+    pattern = np.zeros(episode_length, dtype=bool)
+    pattern[1] = True
+    witness = np.full(episode_length, -1)
+    witness[0] = 0
+    return spikectl.ContextSet([make_context(weights, 2, pattern, witness)])
+
+
+@pytest.fixture
+def one_torch_thread():
+    """One Torch thread: on a busy machine two threads slow PPO down many times over."""
+    import torch
+
+    threads = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(threads)
+
+
+@pytest.mark.slow
+def test_maskable_ppo_learns_an_easy_network_and_predicts_legal_actions(one_torch_thread):
+    pytest.importorskip("stable_baselines3")
+    sb3_contrib = pytest.importorskip("sb3_contrib")
+
+    easy = one_easy_context()
+    venv = sb3_vec_env(NeuronControlVectorEnv(num_envs=4, contexts=easy))
+    model = sb3_contrib.MaskablePPO(
+        "MlpPolicy", venv, n_steps=48, batch_size=48, seed=0, device="cpu"
+    )
+    model.learn(4000)
+    env = sb3_compatible(NeuronControlEnv(contexts=easy))
+    obs, _ = env.reset(seed=0)
+    total, done = 0.0, False
+    while not done:
+        action, _ = model.predict(obs, action_masks=env.action_masks(), deterministic=True)
+        obs, reward, done, _, info = env.step(action)
+        total += reward
+    assert total == pytest.approx(1.0, abs=1e-12)  # do nothing: 0.5
+
+    # On the paper's networks (n = 8, N = 60): a short run, then only legal predictions.
+    venv = sb3_vec_env(gym.make_vec(ENV_ID, num_envs=4, **SMALL))
+    model = sb3_contrib.MaskablePPO("MlpPolicy", venv, n_steps=60, seed=0, device="cpu")
+    model.learn(480)
+    env = make()
+    for seed in range(3):
+        obs, _ = env.reset(seed=seed)
+        done = False
+        while not done:
+            action, _ = model.predict(obs, action_masks=env.action_masks())
+            obs, _, done, _, info = env.step(action)
+            assert not info["illegal_action"]
