@@ -319,14 +319,15 @@ def test_vec_env_equals_dummy_vec_env_across_episodes(flatten):
         assert row in batched.observation_space
 
 
-def test_vec_env_masks_reach_maskable_ppo_helpers():
+def test_vec_env_masks_reach_maskable_ppo_helpers_through_vec_wrappers():
     pytest.importorskip("stable_baselines3")
     utils = pytest.importorskip("sb3_contrib.common.maskable.utils")
-    from stable_baselines3.common.vec_env import VecMonitor, VecNormalize
+    from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor, VecNormalize
 
-    venv = VecNormalize(VecMonitor(sb3_vec_env(gym.make_vec(ENV_ID, num_envs=4, **SMALL))))
+    base = sb3_vec_env(gym.make_vec(ENV_ID, num_envs=4, **SMALL))
+    venv = VecFrameStack(VecNormalize(VecMonitor(base)), n_stack=2)
     venv.seed(0)
-    venv.reset()
+    assert venv.reset().shape == (4, 2 * 206)
     assert utils.is_masking_supported(venv)
     masks = utils.get_action_masks(venv)
     inner = venv.unwrapped
