@@ -257,9 +257,9 @@ def test_resume_after_sigkill_is_exact(tmp_path, flags, comparable, assert_same_
     bit-identical final weights as an uninterrupted run (also with the auxiliary head,
     n-step targets and biased exploration of the quick preset).
 
-    The kill comes once the run has checkpointed (episode 80) and gone on to evaluate at
-    episode 160, so it lands after work that the resume must redo or discard, with no
-    fixed sleep that a busy machine could make too short or too long."""
+    The kill comes once the run has checkpointed (episode 80) and written its evaluation
+    at episode 160, just before or after its second checkpoint: polling for that
+    progress, not a fixed sleep that a busy machine makes too short or too long."""
     import os
     import signal
     import subprocess
