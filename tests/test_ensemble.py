@@ -180,7 +180,8 @@ def test_group_resume_after_sigkill_is_exact_and_seeds_evaluate(tmp_path):
     weights equal an uninterrupted group's; each model.pt evaluates with the CLI."""
     flags = ("train", "--preset", "smoke", "--seeds", "0", "1", "--n-step", "3",
              "--aux-voltage-weight", "1.0", "--explore-do-nothing", "0.75",
-             "--total-env-steps", str(20 * 8 * 24), "--checkpoint-every-episodes", "64")  # fmt: skip
+             "--total-env-steps", str(20 * 8 * 24),
+             "--checkpoint-every-episodes", "64")  # fmt: skip
     reference = tmp_path / "reference"
     run_cli(*flags, "--run-dir", str(reference))
     killed = tmp_path / "killed"
