@@ -303,6 +303,8 @@ class SweepCommand:
     """local: a process pool on this machine; ray: Ray tasks (pip install 'spikectl[ray]')."""
     address: str | None = None
     """Ray cluster address (ray backend); a local Ray instance when not given."""
+    group_seeds: bool = False
+    """Train the trials that differ only in seed as one batched process per group."""
 
 
 def sweep(command: SweepCommand) -> None:
@@ -326,7 +328,7 @@ def sweep(command: SweepCommand) -> None:
         description["overrides"] = {"total_env_steps": command.total_env_steps}
     run_sweep(
         Sweep.from_dict(description), command.sweep_dir, command.workers or None,
-        backend=command.backend, address=command.address,
+        backend=command.backend, address=command.address, group_seeds=command.group_seeds,
     )  # fmt: skip
 
 

@@ -234,3 +234,38 @@ def test_group_trains_on_cuda_and_matches_the_cpu_group_at_the_start(tmp_path):
         assert on_gpu[1]["loss"] == pytest.approx(on_cpu[1]["loss"], rel=1e-3)
     network = make_agent(TINY.arch, TINY.n_neurons, TINY.episode_length, TINY.sizes)
     network.load_state_dict(load_model_weights(tmp_path / "cuda/seed=1/model.pt"))
+
+
+def test_sweep_groups_trials_that_differ_only_in_seed(tmp_path):
+    from spikectl.experiments.sweep import Sweep, run_sweep, trial_dirs
+
+    sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "seed": [0, 1]})
+    results = run_sweep(sweep, tmp_path / "s", workers=2, echo=lambda line: None,
+                        group_seeds=True)  # fmt: skip
+    assert [r["status"] for r in results] == ["trained in a group of 2"] * 4
+    assert len(trial_dirs(tmp_path / "s")) == 4
+    assert sorted(p.name for p in (tmp_path / "s/groups").iterdir()) == ["arch=drqn", "arch=tdrqn"]
+    # A trial's result equals the same group trained in this process.
+    configs = [dataclasses.replace(c, torch_threads=1) for _, c in sweep.trials()[2:]]
+    direct = train_group(configs, [tmp_path / "d0", tmp_path / "d1"], tmp_path / "d")
+    pooled = read_metrics(tmp_path / "s/trials/arch=tdrqn-seed=1")
+    assert comparable(pooled) == comparable(direct[1])
+    again = run_sweep(sweep, tmp_path / "s", workers=2, echo=lambda line: None,
+                      group_seeds=True)  # fmt: skip
+    assert [r["status"] for r in again] == ["skipped (done)"] * 4
+
+
+@pytest.mark.slow
+def test_ray_runs_seed_groups_like_the_local_pool(tmp_path):
+    pytest.importorskip("ray")
+    from spikectl.experiments.sweep import Sweep, run_sweep
+
+    sweep = Sweep(TINY, {"seed": [0, 1]})
+    run_sweep(sweep, tmp_path / "local", workers=1, echo=lambda line: None, group_seeds=True)
+    results = run_sweep(sweep, tmp_path / "ray", workers=1, backend="ray",
+                        echo=lambda line: None, group_seeds=True)  # fmt: skip
+    assert [r["status"] for r in results] == ["trained in a group of 2"] * 2
+    for name in ("seed=0", "seed=1"):
+        assert comparable(read_metrics(tmp_path / "local/trials" / name)) == comparable(
+            read_metrics(tmp_path / "ray/trials" / name)
+        )
