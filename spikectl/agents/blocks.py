@@ -102,7 +102,9 @@ def check_observation(
             f"length = episode length {episode_length}), got {tuple(pattern.shape)}"
         )
 
-    # Inside vmap (stacked seed groups) values cannot be read; the caller checks them.
+    # Inside vmap (stacked seed groups) values cannot be read without leaving the
+    # transform; shapes and dtypes are still checked, and the trainer's inputs come
+    # from the environment and the replay buffer.
     if voltage.device.type == "cpu" and voltage.numel() > 0 and not _is_transformed(voltage):
         _check_range(obs["target"], 0, n - 1, "target", where)
         _check_range(obs["last_action"], -1, n - 1, "last_action", where)

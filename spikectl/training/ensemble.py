@@ -279,7 +279,7 @@ def _train_group(
         before = states[0].episodes
         for state in states:
             state.episodes += E
-        loggers[0].progress(E * K, epsilon, float(episodes.returns.mean()))
+        loggers[0].progress(E, epsilon, float(episodes.returns.mean()))  # episodes per seed
         if len(replays[0]) >= max(config.learning_starts, 1):
             for _ in range(config.updates_per_round):
                 seed_tensors = [
@@ -305,10 +305,7 @@ def _train_group(
                 with torch.no_grad():
                     for name in target.names:
                         target.params[name].lerp_(online.params[name], config.tau)
-                for k, (state, td_k, aux_k) in enumerate(
-                    zip(states, td.tolist(), aux.tolist(), strict=True)
-                ):
-                    del k
+                for state, td_k, aux_k in zip(states, td.tolist(), aux.tolist(), strict=True):
                     state.updates += 1
                     state.loss_sum += td_k
                     state.aux_loss_sum += aux_k
