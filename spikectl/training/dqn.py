@@ -98,7 +98,7 @@ def explore(
 ) -> np.ndarray:
     """Epsilon-greedy: greedy actions [S] with each replaced, with probability epsilon, by
     a random legal one (the draws every policy of a run makes, in this order)."""
-    explore = rng.random(greedy.shape[0]) < epsilon
+    exploring = rng.random(greedy.shape[0]) < epsilon  # [S]
     scores = rng.random(action_mask.shape)  # [S, n + 1]
     scores[~action_mask] = -1.0
     if explore_do_nothing is not None:
@@ -108,7 +108,7 @@ def explore(
         random_actions[nothing] = -1
     else:
         random_actions = scores.argmax(axis=1) - 1
-    return np.where(explore, random_actions, greedy)
+    return np.where(exploring, random_actions, greedy)
 
 
 def sequence_observations(batch: EpisodeBatchArrays, device: str) -> dict[str, torch.Tensor]:
