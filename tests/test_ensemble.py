@@ -216,7 +216,7 @@ def test_group_resume_after_sigkill_is_exact_and_seeds_evaluate(tmp_path):
 
 @pytest.mark.parametrize("arch", ["drqn", "ddrqn", "dmdrqn"])
 def test_every_architecture_trains_in_a_group(tmp_path, arch):
-    config = dataclasses.replace(TINY, arch=arch, total_env_steps=16 * 20 * 8)
+    config = dataclasses.replace(TINY, arch=arch, total_env_steps=4 * 20 * 8)
     metrics = train_seeds(config, [0, 1], tmp_path / arch)
     assert metrics[0][-1]["updates"] == metrics[1][-1]["updates"] > 0
     assert np.isfinite([row["loss"] for row in metrics[0][1:]]).all()
@@ -239,7 +239,8 @@ def test_group_trains_on_cuda_and_matches_the_cpu_group_at_the_start(tmp_path):
 def test_sweep_groups_trials_that_differ_only_in_seed(tmp_path):
     from spikectl.experiments.sweep import Sweep, run_sweep, trial_dirs
 
-    sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "seed": [0, 1]})
+    short = dataclasses.replace(TINY, total_env_steps=4 * 20 * 8, eval_every_episodes=16)
+    sweep = Sweep(short, {"arch": ["drqn", "tdrqn"], "seed": [0, 1]})
     results = run_sweep(sweep, tmp_path / "s", workers=2, echo=lambda line: None,
                         group_seeds=True)  # fmt: skip
     assert [r["status"] for r in results] == ["trained in a group of 2"] * 4
@@ -260,7 +261,8 @@ def test_ray_runs_seed_groups_like_the_local_pool(tmp_path):
     pytest.importorskip("ray")
     from spikectl.experiments.sweep import Sweep, run_sweep
 
-    sweep = Sweep(TINY, {"seed": [0, 1]})
+    short = dataclasses.replace(TINY, total_env_steps=4 * 20 * 8, eval_every_episodes=16)
+    sweep = Sweep(short, {"seed": [0, 1]})
     run_sweep(sweep, tmp_path / "local", workers=1, echo=lambda line: None, group_seeds=True)
     results = run_sweep(sweep, tmp_path / "ray", workers=1, backend="ray",
                         echo=lambda line: None, group_seeds=True)  # fmt: skip

@@ -297,8 +297,9 @@ def run_sweep(
         raise bugs[0]
     if failures:
         name, error = failures[0]
+        what = "task(s) (trials or seed groups)" if group_seeds else "trial(s)"
         raise SweepError(
-            f"{len(failures)} of {len(tasks)} task(s) failed (first: {name}: "
+            f"{len(failures)} of {len(tasks)} {what} failed (first: {name}: "
             f"{' '.join(str(error).split())}); the others finished: fix the cause and run "
             "the same command again"
         )
