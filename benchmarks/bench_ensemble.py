@@ -130,7 +130,7 @@ def stacked_timings(K: int, replay, rng, observation, timed, repeats: int) -> tu
         build_predictor,
         losses_on_tensors,
     )
-    from spikectl.training.ensemble import clip_grad_norm_per_seed
+    from spikectl.training.ensemble import clip_grad_norm_per_seed, stack_seeds
 
     config = QUICK
     pairs = [build_networks(dataclasses.replace(config, seed=s)) for s in range(K)]
@@ -149,7 +149,7 @@ def stacked_timings(K: int, replay, rng, observation, timed, repeats: int) -> tu
     def update() -> None:
         seeds_tensors = [batch_tensors(replay.sample(config.batch_size, rng), "cpu")
                          for _ in range(K)]  # fmt: skip
-        tensors = torch.utils._pytree.tree_map(lambda *x: torch.stack(x), *seeds_tensors)
+        tensors = stack_seeds(seeds_tensors)
         td, aux = batched(stacked.params, targets.params, heads.params, tensors)
         adam.zero_grad()
         (td + config.aux_voltage_weight * aux).sum().backward()

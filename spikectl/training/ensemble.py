@@ -286,9 +286,7 @@ def _train_group(
                     batch_tensors(replay.sample(config.batch_size, state.rng), device)
                     for replay, state in zip(replays, states, strict=True)
                 ]
-                tensors = torch.utils._pytree.tree_map(
-                    lambda *leaves: torch.stack(leaves), *seed_tensors
-                )  # every leaf [K, B, ...]
+                tensors = stack_seeds(seed_tensors)  # every tensor [K, B, ...]
                 td, aux = batched_losses(
                     online.params,
                     target.params,
@@ -334,6 +332,17 @@ def _train_group(
             stacklevel=2,
         )
     return [state.metrics for state in states]
+
+
+def stack_seeds(seed_tensors: list[dict]) -> dict:
+    """K seeds' ``batch_tensors`` stacked into one dict of [K, ...] tensors."""
+    first = seed_tensors[0]
+    return {
+        key: stack_seeds([seed[key] for seed in seed_tensors])
+        if isinstance(first[key], dict)
+        else torch.stack([seed[key] for seed in seed_tensors])
+        for key in first
+    }
 
 
 def _check_finite_losses(losses: torch.Tensor, states, run_dirs) -> None:
