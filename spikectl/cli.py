@@ -162,7 +162,9 @@ class TrainCommand:
     run_dir: Path | None = None
     """Run directory (default runs/ARCH-PRESET-seedSEED); must be new unless resuming."""
     resume: Path | None = None
-    """Continue the interrupted run in this directory (its saved config is used)."""
+    """Continue the interrupted run (or seed group) in this directory (its saved config is used)."""
+    seeds: tuple[int, ...] | None = None
+    """Train these seeds in one process as one batched computation (RUN_DIR/seed=S each)."""
 
 
 def torch_threads() -> int:
@@ -176,7 +178,13 @@ def train(command: TrainCommand) -> None:
     from spikectl.experiments.figures import plot_learning_curve
     from spikectl.training.checkpoint import read_config
     from spikectl.training.dqn import train as run_training
+    from spikectl.training.group_files import GROUP_FILE
 
+    if command.seeds is not None or (
+        command.resume is not None and (command.resume / GROUP_FILE).exists()
+    ):
+        train_group_command(command)
+        return
     if command.resume is not None:
         run_dir = command.resume
         config = read_config(run_dir)
@@ -195,8 +203,10 @@ def train(command: TrainCommand) -> None:
         metrics, baselines, run_dir / "learning_curve.png",
         title=f"{config.arch.upper()}, {final['env_steps']:,} steps",
     )  # fmt: skip
-    validation = "" if math.isnan(final.get("val_return", math.nan)) else (
-        f"  (validation {final['val_return']:.3f})"
+    validation = (
+        ""
+        if math.isnan(final.get("val_return", math.nan))
+        else (f"  (validation {final['val_return']:.3f})")
     )
     print(f"{'':<14}{'train':>8}{'test':>8}")
     print(f"{config.arch:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}{validation}")
@@ -204,10 +214,52 @@ def train(command: TrainCommand) -> None:
         row = baselines[name]
         print(f"{name.replace('_', '-'):<14}{row['train']:>8.3f}{row['test']:>8.3f}")
     minutes, core_minutes = final["wall_time_s"] / 60, final["cpu_time_s"] / 60
-    print(f"{final['env_steps']:,} environment steps, {final['updates']:,} updates, "
-          f"{minutes:.1f} wall minutes ({core_minutes:.1f} core minutes) on "
-          f"{config.torch_threads or torch_threads()} thread(s)")
+    print(
+        f"{final['env_steps']:,} environment steps, {final['updates']:,} updates, "
+        f"{minutes:.1f} wall minutes ({core_minutes:.1f} core minutes) on "
+        f"{config.torch_threads or torch_threads()} thread(s)"
+    )
     print(f"wrote {run_dir / 'model.pt'}, {run_dir / 'metrics.csv'} and {curve}")
+
+
+def train_group_command(command: TrainCommand) -> None:
+    """``spikectl train --seeds ...`` (or ``--resume`` of a group): one batched process,
+    then each seed's final train/test return."""
+    from spikectl.training.ensemble import seed_dirs, train_group, train_seeds
+    from spikectl.training.group_files import group_configs
+
+    if command.resume is not None:
+        group_dir = command.resume
+        configs, run_dirs = group_configs(group_dir)
+        print(f"seed group: {group_dir}")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RuntimeWarning)
+            metrics = train_group(configs, run_dirs, group_dir, resume=True)
+    else:
+        config, seeds = command.config, list(command.seeds)
+        if not seeds:
+            raise ValueError("--seeds needs at least one seed")
+        label = "-".join(str(seed) for seed in seeds)
+        group_dir = command.run_dir or Path(f"runs/{config.arch}-{command.preset}-seeds{label}")
+        configs = [dataclasses.replace(config, seed=seed) for seed in seeds]
+        run_dirs = seed_dirs(group_dir, seeds)
+        print(f"seed group: {group_dir} ({len(seeds)} seeds in one process)")
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always", RuntimeWarning)
+            metrics = train_seeds(config, seeds, group_dir)
+    for warning in caught:
+        print(f"spikectl: warning: {warning.message}", file=sys.stderr)
+    print(f"{'seed':<14}{'train':>8}{'test':>8}")
+    for config, rows in zip(configs, metrics, strict=True):
+        final = rows[-1]
+        print(f"{config.seed:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}")
+    final = metrics[0][-1]
+    print(
+        f"{len(configs)} x {final['env_steps']:,} environment steps, {final['updates']:,} "
+        f"updates each, {final['wall_time_s'] / 60:.1f} wall minutes "
+        f"({final['cpu_time_s'] / 60:.1f} core minutes) for the whole group"
+    )
+    print(f"wrote model.pt and metrics.csv in {', '.join(str(d) for d in run_dirs)}")
 
 
 @dataclass(frozen=True)
@@ -253,6 +305,8 @@ class SweepCommand:
     """local: a process pool on this machine; ray: Ray tasks (pip install 'spikectl[ray]')."""
     address: str | None = None
     """Ray cluster address (ray backend); a local Ray instance when not given."""
+    group_seeds: bool = False
+    """Train the trials that differ only in seed as one batched process per group."""
 
 
 def sweep(command: SweepCommand) -> None:
@@ -276,7 +330,7 @@ def sweep(command: SweepCommand) -> None:
         description["overrides"] = {"total_env_steps": command.total_env_steps}
     run_sweep(
         Sweep.from_dict(description), command.sweep_dir, command.workers or None,
-        backend=command.backend, address=command.address,
+        backend=command.backend, address=command.address, group_seeds=command.group_seeds,
     )  # fmt: skip
 
 

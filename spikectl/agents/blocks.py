@@ -102,11 +102,19 @@ def check_observation(
             f"length = episode length {episode_length}), got {tuple(pattern.shape)}"
         )
 
-    if voltage.device.type == "cpu" and voltage.numel() > 0:
+    # Inside vmap (stacked seed groups) values cannot be read without leaving the
+    # transform; shapes and dtypes are still checked, and the trainer's inputs come
+    # from the environment and the replay buffer.
+    if voltage.device.type == "cpu" and voltage.numel() > 0 and not _is_transformed(voltage):
         _check_range(obs["target"], 0, n - 1, "target", where)
         _check_range(obs["last_action"], -1, n - 1, "last_action", where)
         _check_range(obs["step"], 0, episode_length, "step", where)
     return lead, n
+
+
+def _is_transformed(tensor: torch.Tensor) -> bool:
+    """Whether ``tensor`` is wrapped by a torch.func transform (vmap, grad)."""
+    return torch._C._functorch.is_functorch_wrapped_tensor(tensor)
 
 
 def _check_range(value: torch.Tensor, low: int, high: int, key: str, where: str) -> None:

@@ -8,7 +8,9 @@ checkpoints), so a sweep can be stopped and restarted at any moment.
 
 Trials run in a local process pool (one worker per core by default); each trial uses
 one Torch thread so that workers do not fight over cores and so that a trial's result
-does not depend on how many ran beside it.
+does not depend on how many ran beside it. With ``group_seeds`` the trials that differ
+only in seed run as one seed group per process (``spikectl.training.ensemble``), each
+still in its own trial directory; the group's checkpoint lives in ``SWEEP_DIR/groups/``.
 """
 
 from __future__ import annotations
@@ -38,6 +40,7 @@ from spikectl.training.config import PRESETS, TrainConfig
 
 SWEEP_FILE = "sweep.json"
 TRIALS_DIR = "trials"
+GROUPS_DIR = "groups"
 
 PAPER_SWEEPS: dict[str, dict[str, Any]] = {
     "fig4": {"base": "paper", "grid": {"arch": ["drqn", "ddrqn", "dmdrqn", "tdrqn"],
@@ -175,6 +178,57 @@ def run_trial(config: TrainConfig, run_dir: str | os.PathLike) -> dict[str, Any]
     }
 
 
+def run_group_trial(
+    configs: list[TrainConfig], run_dirs: list[str | os.PathLike], group_dir: str | os.PathLike
+) -> list[dict[str, Any]]:
+    """Train trials that differ only in seed as one seed group (one process, stacked
+    networks); each trial keeps its own run directory. Resumes the group if interrupted."""
+    import torch
+
+    from spikectl.training.ensemble import train_group
+    from spikectl.training.group_files import GROUP_CHECKPOINT_FILE
+
+    group_dir = Path(group_dir)
+    resume = (group_dir / GROUP_CHECKPOINT_FILE).exists()
+    torch.set_num_threads(configs[0].torch_threads or 1)
+    metrics = train_group(configs, [Path(d) for d in run_dirs], group_dir, resume=resume)
+    return [
+        {
+            "run_dir": str(run_dir),
+            "status": f"{'resumed' if resume else 'trained'} in a group of {len(configs)}",
+            "train_return": rows[-1]["train_return"],
+            "test_return": rows[-1]["test_return"],
+        }
+        for run_dir, rows in zip(run_dirs, metrics, strict=True)
+    ]
+
+
+def seed_group_tasks(jobs: list[tuple[TrainConfig, Path]], sweep_dir: Path) -> list[tuple]:
+    """(function, arguments, run_dir) tasks: trials that differ only in seed become one
+    ``run_group_trial`` in ``SWEEP_DIR/groups/NAME``; trials already done or interrupted
+    as single runs stay single ``run_trial`` tasks."""
+    groups: dict[TrainConfig, list[tuple[TrainConfig, Path]]] = {}
+    tasks = []
+    for config, run_dir in jobs:
+        if trial_status(run_dir) != "new":
+            tasks.append((run_trial, (config, run_dir), run_dir))
+        else:
+            groups.setdefault(dataclasses.replace(config, seed=0), []).append((config, run_dir))
+    for members in groups.values():
+        if len(members) == 1:
+            tasks.append((run_trial, members[0], members[0][1]))
+            continue
+        name = (
+            "-".join(part for part in members[0][1].name.split("-") if not part.startswith("seed="))
+            or "base"
+        )
+        group_dir = sweep_dir / GROUPS_DIR / name
+        configs = [config for config, _ in members]
+        run_dirs = [run_dir for _, run_dir in members]
+        tasks.append((run_group_trial, (configs, run_dirs, group_dir), group_dir))
+    return tasks
+
+
 def run_sweep(
     sweep: Sweep,
     sweep_dir: str | os.PathLike,
@@ -182,13 +236,15 @@ def run_sweep(
     echo=print,
     backend: str = "local",
     address: str | None = None,
+    group_seeds: bool = False,
 ) -> list[dict[str, Any]]:
     """Run every trial of ``sweep`` under ``sweep_dir``.
 
     ``backend="local"``: a process pool of ``workers`` (default: one per core).
     ``backend="ray"``: Ray tasks of one CPU each on the cluster at ``address`` (a local
     Ray instance when None); ``sweep_dir`` must then be on storage every node sees.
-    Each trial's result is the same whichever backend ran it.
+    Each trial's result is the same whichever backend ran it. ``group_seeds``: trials
+    that differ only in seed train as one seed group per process (``run_group_trial``).
     """
     if backend not in ("local", "ray"):
         raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")
@@ -216,28 +272,34 @@ def run_sweep(
         (dataclasses.replace(config, torch_threads=1), sweep_dir / TRIALS_DIR / name)
         for name, config in trials
     ]
+    if group_seeds:
+        tasks = seed_group_tasks(jobs, sweep_dir)
+    else:
+        tasks = [(run_trial, (config, run_dir), run_dir) for config, run_dir in jobs]
     failures: list[tuple[str, BaseException]] = []
-    for result in (_run_with_ray(jobs, address, workers) if backend == "ray"
-                   else _run_locally(jobs, workers)):  # fmt: skip
-        if isinstance(result, BaseException):
-            name = Path(result.run_dir).name
-            failures.append((name, result))
-            echo(f"{name}: failed: {' '.join(str(result).split())}")
+    for outcome in (_run_with_ray(tasks, address, workers) if backend == "ray"
+                    else _run_locally(tasks, workers)):  # fmt: skip
+        if isinstance(outcome, BaseException):
+            name = Path(outcome.run_dir).name
+            failures.append((name, outcome))
+            echo(f"{name}: failed: {' '.join(str(outcome).split())}")
             continue
-        results.append(result)
-        scores = (
-            f": train {result['train_return']:.3f}, test {result['test_return']:.3f}"
-            if "test_return" in result
-            else ""
-        )
-        echo(f"{Path(result['run_dir']).name}: {result['status']}{scores}")
+        for result in outcome if isinstance(outcome, list) else [outcome]:
+            results.append(result)
+            scores = (
+                f": train {result['train_return']:.3f}, test {result['test_return']:.3f}"
+                if "test_return" in result
+                else ""
+            )
+            echo(f"{Path(result['run_dir']).name}: {result['status']}{scores}")
     bugs = [error for _, error in failures if not isinstance(error, TRIAL_ERRORS)]
     if bugs:
         raise bugs[0]
     if failures:
         name, error = failures[0]
+        what = "task(s) (trials or seed groups)" if group_seeds else "trial(s)"
         raise SweepError(
-            f"{len(failures)} of {len(jobs)} trial(s) failed (first: {name}: "
+            f"{len(failures)} of {len(tasks)} {what} failed (first: {name}: "
             f"{' '.join(str(error).split())}); the others finished: fix the cause and run "
             "the same command again"
         )
@@ -256,14 +318,14 @@ def _exit_with_parent(parent_pid: int) -> None:
     threading.Thread(target=watch, name="spikectl-parent-watch", daemon=True).start()
 
 
-def _run_locally(jobs: list[tuple[TrainConfig, Path]], workers: int):
-    """Yield trial results (or a trial's exception, with ``run_dir`` set on it) as a
-    local process pool finishes them."""
+def _run_locally(tasks: list[tuple], workers: int):
+    """Yield task results (or a task's exception, with ``run_dir`` set on it) as a local
+    process pool finishes them."""
     with ProcessPoolExecutor(
         max_workers=workers, mp_context=get_context("spawn"),
         initializer=_exit_with_parent, initargs=(os.getpid(),),
     ) as pool:  # fmt: skip
-        futures = {pool.submit(run_trial, config, run_dir): run_dir for config, run_dir in jobs}
+        futures = {pool.submit(function, *args): run_dir for function, args, run_dir in tasks}
         for future in as_completed(futures):
             error = future.exception()
             if error is None:
@@ -273,8 +335,8 @@ def _run_locally(jobs: list[tuple[TrainConfig, Path]], workers: int):
                 yield error
 
 
-def _run_with_ray(jobs: list[tuple[TrainConfig, Path]], address: str | None, workers: int):
-    """Yield trial results as Ray tasks (one CPU each) finish them."""
+def _run_with_ray(tasks: list[tuple], address: str | None, workers: int):
+    """Yield task results as Ray tasks (one CPU each) finish them."""
     try:
         import ray
     except ImportError:
@@ -284,8 +346,8 @@ def _run_with_ray(jobs: list[tuple[TrainConfig, Path]], address: str | None, wor
         local = {"num_cpus": workers, "include_dashboard": False} if address is None else {}
         ray.init(address=address, log_to_driver=False, **local)
     try:
-        remote_trial = ray.remote(num_cpus=1)(run_trial)
-        pending = {remote_trial.remote(config, str(run_dir)): run_dir for config, run_dir in jobs}
+        remote = {function: ray.remote(num_cpus=1)(function) for function, _, _ in tasks}
+        pending = {remote[function].remote(*args): run_dir for function, args, run_dir in tasks}
         while pending:
             done, _ = ray.wait(list(pending), num_returns=1)
             run_dir = pending.pop(done[0])

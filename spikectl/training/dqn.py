@@ -86,17 +86,29 @@ class EpsilonGreedyPolicy:
         greedy = masked_q(q_values, legal).argmax(dim=1).cpu().numpy() - 1  # [S]
         if self.epsilon <= 0:
             return greedy
-        explore = self.rng.random(greedy.shape[0]) < self.epsilon
-        scores = self.rng.random(action_mask.shape)  # [S, n + 1]
-        scores[~action_mask] = -1.0
-        if self.explore_do_nothing is not None:
-            scores[:, 0] = -1.0  # a stimulation, unless the draw below says do nothing
-            random_actions = scores.argmax(axis=1) - 1
-            nothing = self.rng.random(greedy.shape[0]) < self.explore_do_nothing
-            random_actions[nothing] = -1
-        else:
-            random_actions = scores.argmax(axis=1) - 1
-        return np.where(explore, random_actions, greedy)
+        return explore(greedy, action_mask, self.epsilon, self.rng, self.explore_do_nothing)
+
+
+def explore(
+    greedy: np.ndarray,
+    action_mask: np.ndarray,
+    epsilon: float,
+    rng: np.random.Generator,
+    explore_do_nothing: float | None,
+) -> np.ndarray:
+    """Epsilon-greedy: greedy actions [S] with each replaced, with probability epsilon, by
+    a random legal one (the draws every policy of a run makes, in this order)."""
+    exploring = rng.random(greedy.shape[0]) < epsilon  # [S]
+    scores = rng.random(action_mask.shape)  # [S, n + 1]
+    scores[~action_mask] = -1.0
+    if explore_do_nothing is not None:
+        scores[:, 0] = -1.0  # a stimulation, unless the draw below says do nothing
+        random_actions = scores.argmax(axis=1) - 1
+        nothing = rng.random(greedy.shape[0]) < explore_do_nothing
+        random_actions[nothing] = -1
+    else:
+        random_actions = scores.argmax(axis=1) - 1
+    return np.where(exploring, random_actions, greedy)
 
 
 def sequence_observations(batch: EpisodeBatchArrays, device: str) -> dict[str, torch.Tensor]:
@@ -146,11 +158,31 @@ def training_losses(
 ) -> tuple[torch.Tensor, torch.Tensor | None]:
     """The double-Q TD loss over every step of the sampled episodes and, with a
     ``predictor``, the auxiliary next-voltage loss (None without one)."""
-    device = config.device
-    obs_seq = sequence_observations(batch, device)
-    actions = torch.as_tensor(batch.actions, device=device)  # [B, N]
-    rewards = torch.as_tensor(batch.rewards, device=device)  # [B, N]
-    legal = torch.as_tensor(batch.action_masks, device=device)[:, None]  # [B, 1, n+1]
+    return losses_on_tensors(online, target, batch_tensors(batch, config.device), config, predictor)
+
+
+def batch_tensors(batch: EpisodeBatchArrays, device: str) -> dict[str, torch.Tensor]:
+    """Sampled episodes as the tensors the losses read (``obs_seq`` is a nested dict)."""
+    return {
+        "obs_seq": sequence_observations(batch, device),
+        "actions": torch.as_tensor(batch.actions, device=device),  # [B, N]
+        "rewards": torch.as_tensor(batch.rewards, device=device),  # [B, N]
+        "legal": torch.as_tensor(batch.action_masks, device=device)[:, None],  # [B, 1, n+1]
+    }
+
+
+def losses_on_tensors(
+    online,
+    target,
+    tensors: dict,
+    config: TrainConfig,
+    predictor=None,
+) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """:func:`training_losses` on :func:`batch_tensors`' output; the networks may be
+    modules or one seed's view of stacked networks (inside vmap)."""
+    obs_seq, actions, rewards, legal = (
+        tensors["obs_seq"], tensors["actions"], tensors["rewards"], tensors["legal"]
+    )  # fmt: skip
     # One online forward serves the taken-action values, the double-Q argmax and the
     # auxiliary prediction (which reads the encoder's features).
     if predictor is None:

@@ -1,0 +1,227 @@
+"""The files of a seed group (``spikectl.training.ensemble``): its description and its
+one checkpoint.
+
+A group directory holds ``group.json`` (the seeds' configs and run directories) and
+``group_checkpoint.pt``: the stacked online, target and auxiliary networks, the stacked
+optimiser, and per seed its replay buffer, generator state, counters, metrics and
+baselines. One file written atomically (``spikectl.files``) keeps the seeds in lockstep:
+a kill at any moment leaves the previous checkpoint of the whole group. Like
+``checkpoint.pt`` it loads weights-only and carries a SHA-256 checksum of its content.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from spikectl.training.checkpoint import (
+    CONFIG_FILE,
+    LOCK_FILE,
+    RunDirError,
+    TrainingState,
+    _check_finite,
+    _first_line,
+    _load_torch_file,
+    _plain,
+    _remove_temporaries,
+    _torch_bytes,
+    atomic_write_bytes,
+    atomic_write_text,
+    make_dirs,
+    payload_checksum,
+    prepare_run_dir,
+    read_config,
+)
+from spikectl.training.config import TrainConfig
+from spikectl.training.replay import EpisodeReplay
+
+GROUP_FILE = "group.json"
+GROUP_CHECKPOINT_FILE = "group_checkpoint.pt"
+GROUP_FORMAT = "spikectl.group_checkpoint"
+GROUP_VERSION = 1
+
+
+def group_description(configs: list[TrainConfig], run_dirs: list[Path], group_dir: Path) -> dict:
+    """What group.json holds: the seeds' configs and run directories (relative to the
+    group directory when inside it)."""
+    return {
+        "format": "spikectl.group",
+        "configs": [config.to_dict() for config in configs],
+        "run_dirs": [os.path.relpath(Path(d).resolve(), group_dir.resolve()) for d in run_dirs],
+    }
+
+
+def read_group(group_dir: str | os.PathLike) -> dict:
+    """The description a group directory holds (group.json)."""
+    if not (Path(group_dir) / GROUP_FILE).exists():
+        raise RunDirError(f"{group_dir} holds no seed group (no {GROUP_FILE})")
+    return _read_description(Path(group_dir))
+
+
+def _read_description(group_dir: Path) -> dict:
+    path = group_dir / GROUP_FILE
+    try:
+        return json.loads(path.read_text())
+    except (OSError, json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise RunDirError(f"{path} is not a valid seed-group file: {_first_line(error)}") from None
+
+
+def prepare_group(
+    configs: list[TrainConfig], run_dirs: list[Path], group_dir: Path, resume: bool
+) -> bool:
+    """Create the group and its seeds' run directories, or check that ``group_dir`` holds
+    this group to resume. Returns whether there is a group checkpoint to resume from; a
+    group that stopped before its first checkpoint starts again from step 0."""
+    description = json.loads(json.dumps(group_description(configs, run_dirs, group_dir)))
+    has_file = (group_dir / GROUP_FILE).exists()
+    has_checkpoint = (group_dir / GROUP_CHECKPOINT_FILE).exists()
+    if has_file and _read_description(group_dir) != description:
+        raise RunDirError(
+            f"{group_dir} holds another seed group (its {GROUP_FILE} has other configs or "
+            "seeds): choose another --run-dir"
+        )
+    if resume and not has_file:
+        raise RunDirError(f"{group_dir} holds no seed group to resume (no {GROUP_FILE})")
+    if has_checkpoint:
+        if not resume:
+            raise RunDirError(
+                f"{group_dir} already holds a seed group: resume it with `spikectl train "
+                f"--resume {group_dir}` or choose another --run-dir"
+            )
+        for config, run_dir in zip(configs, run_dirs, strict=True):
+            if not (run_dir / CONFIG_FILE).exists():
+                raise RunDirError(f"{run_dir}, a seed of the group, has lost its {CONFIG_FILE}")
+            if read_config(run_dir) != config:
+                raise RunDirError(f"the config in {run_dir} does not match its seed group")
+            if (run_dir / "checkpoint.pt").exists():
+                raise RunDirError(f"{run_dir} holds a single run's checkpoint, not a group seed")
+            _remove_temporaries(run_dir)
+        _remove_temporaries(group_dir)
+        return True
+    if not has_file:
+        members = {Path(d).resolve() for d in run_dirs}
+        if group_dir.exists() and any(
+            p.name != LOCK_FILE and p.resolve() not in members for p in group_dir.iterdir()
+        ):
+            raise RunDirError(f"{group_dir} is not empty and holds no seed group: choose another")
+    for config, run_dir in zip(configs, run_dirs, strict=True):
+        # A seed's directory from a group that never checkpointed starts again too.
+        prepare_run_dir(config, run_dir, resume=(run_dir / CONFIG_FILE).exists())
+        if (run_dir / "checkpoint.pt").exists() or (run_dir / "model.pt").exists():
+            raise RunDirError(f"{run_dir} already holds a run: it cannot join a seed group")
+    make_dirs(group_dir)
+    atomic_write_text(group_dir / GROUP_FILE, json.dumps(description, indent=2) + "\n")
+    return False
+
+
+def _replay_state(replay: EpisodeReplay) -> dict:
+    return {
+        name: torch.from_numpy(np.ascontiguousarray(value)) if isinstance(value, np.ndarray)
+        else int(value)
+        for name, value in replay.state_dict().items()
+    }  # fmt: skip
+
+
+def save_group_checkpoint(
+    group_dir, configs, run_dirs, states, online, target, predictor, optimizer, replays
+) -> None:
+    """Write group_checkpoint.pt atomically (then each seed's baselines.json); refuses
+    networks holding NaN or infinite values (the previous checkpoint stays)."""
+    from spikectl import __version__
+
+    _check_finite(online.stacked_state(), f"the online networks of {group_dir}")
+    _check_finite(target.stacked_state(), f"the target networks of {group_dir}")
+    payload = {
+        "format": GROUP_FORMAT,
+        "format_version": GROUP_VERSION,
+        "spikectl_version": __version__,
+        "configs": [config.to_dict() for config in configs],
+        "online": online.stacked_state(),
+        "target": target.stacked_state(),
+        "predictor": None if predictor is None else predictor.stacked_state(),
+        "optimizer": optimizer.state_dict(),
+        "seeds": [
+            {
+                "replay": _replay_state(replay),
+                "rng": state.rng.bit_generator.state,
+                "episodes": int(state.episodes),
+                "updates": int(state.updates),
+                "loss_sum": float(state.loss_sum),
+                "aux_loss_sum": float(state.aux_loss_sum),
+                "loss_count": int(state.loss_count),
+                "wall_time_s": float(state.wall_time_s),
+                "cpu_time_s": float(state.cpu_time_s),
+                "metrics": [{k: _plain(v) for k, v in row.items()} for row in state.metrics],
+                "baselines": state.baselines,
+            }
+            for state, replay in zip(states, replays, strict=True)
+        ],
+    }
+    payload["checksum"] = payload_checksum(payload)
+    atomic_write_bytes(group_dir / GROUP_CHECKPOINT_FILE, _torch_bytes(payload))
+    for state, run_dir in zip(states, run_dirs, strict=True):
+        atomic_write_text(run_dir / "baselines.json", json.dumps(state.baselines, indent=2) + "\n")
+
+
+def load_group_checkpoint(
+    group_dir, configs, online, target, predictor, optimizer, replays
+) -> list[TrainingState]:
+    """Restore a group saved by ``save_group_checkpoint``; refuse a damaged one, one of
+    another format or configs, or one whose networks hold NaN or infinite values."""
+    path = Path(group_dir) / GROUP_CHECKPOINT_FILE
+    payload = _load_torch_file(path, "spikectl seed-group checkpoint", configs[0].device)
+    if not isinstance(payload, dict) or payload.get("format") != GROUP_FORMAT:
+        raise RunDirError(f"{path} is not a spikectl seed-group checkpoint")
+    if payload.get("format_version") != GROUP_VERSION:
+        raise RunDirError(
+            f"{path} has seed-group checkpoint format {payload.get('format_version')}; this "
+            f"spikectl reads format {GROUP_VERSION}"
+        )
+    checksum = payload.pop("checksum", None)
+    if payload_checksum(payload) != checksum:
+        raise RunDirError(f"{path} is damaged: its checksum does not match its contents")
+    if payload["configs"] != [config.to_dict() for config in configs]:
+        raise RunDirError(f"{path} was written for other configs than {group_dir / GROUP_FILE}")
+    _check_finite(payload["online"], str(path))
+    _check_finite(payload["target"], str(path))
+    states = []
+    try:
+        online.load_stacked_state(payload["online"])
+        target.load_stacked_state(payload["target"])
+        if predictor is not None:
+            predictor.load_stacked_state(payload["predictor"])
+        optimizer.load_state_dict(payload["optimizer"])
+        for seed, replay in zip(payload["seeds"], replays, strict=True):
+            replay.load_state_dict(
+                {k: v.numpy() if torch.is_tensor(v) else v for k, v in seed["replay"].items()}
+            )
+            rng = np.random.default_rng()
+            rng.bit_generator.state = seed["rng"]
+            states.append(TrainingState(
+                rng=rng, episodes=seed["episodes"], updates=seed["updates"],
+                loss_sum=seed["loss_sum"], aux_loss_sum=seed["aux_loss_sum"],
+                loss_count=seed["loss_count"], wall_time_s=seed["wall_time_s"],
+                cpu_time_s=seed["cpu_time_s"], metrics=seed["metrics"],
+                baselines=seed["baselines"],
+            ))  # fmt: skip
+    except (RuntimeError, ValueError, KeyError, TypeError) as error:
+        raise RunDirError(f"{path} does not fit this group: {_first_line(error)}") from None
+    return states
+
+
+def group_configs(group_dir: str | os.PathLike) -> tuple[list[TrainConfig], list[Path]]:
+    """The seeds' configs and run directories saved in a group directory."""
+    group_dir = Path(group_dir)
+    description = read_group(group_dir)
+    try:
+        configs = [TrainConfig.from_dict(values) for values in description["configs"]]
+        run_dirs = [group_dir / relative for relative in description["run_dirs"]]
+    except (KeyError, TypeError, ValueError) as error:
+        raise RunDirError(
+            f"{group_dir / GROUP_FILE} is not a valid seed-group file: {_first_line(error)}"
+        ) from None
+    return configs, run_dirs
