@@ -291,6 +291,25 @@ def test_resume_after_sigkill_is_exact(tmp_path, flags, comparable, assert_same_
     assert_same_weights(killed / "model.pt", reference / "model.pt")
 
 
+def test_evaluate_reproduces_the_last_evaluation_exactly(tmp_path):
+    """evaluate_run scores as training did: the same networks, the same greedy episodes,
+    on the run's own thread count whatever the caller's (then restored)."""
+    from spikectl.training.evaluate import evaluate_run
+
+    config = dataclasses.replace(SMOKE, n_val=3)
+    train(config, tmp_path / "run")
+    final = read_metrics(tmp_path / "run")[-1]
+    before = torch.get_num_threads()
+    torch.set_num_threads(2)
+    try:
+        results = {result.name: result.mean for result in evaluate_run(tmp_path / "run")}
+        assert torch.get_num_threads() == 2
+    finally:
+        torch.set_num_threads(before)
+    assert results == {"train": final["train_return"], "test": final["test_return"],
+                       "validation": final["val_return"]}  # fmt: skip
+
+
 def test_cli_train_then_evaluate(tmp_path):
     run = tmp_path / "run"
     out = run_cli("train", "--preset", "smoke", "--arch", "ddrqn", "--total-env-steps", "1600",

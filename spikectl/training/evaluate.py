@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -104,7 +106,21 @@ def evaluate_run(
                 f"{name}: episodes of {context_set.episode_length} steps; the agent was "
                 f"trained on {config.episode_length} (its pattern encoder has that width)"
             )
-        episodes = greedy_episodes(network, context_set)
+        with torch_threads(config.torch_threads):
+            episodes = greedy_episodes(network, context_set)
         baseline = float(evaluate_policy(context_set, do_nothing_policy).returns.mean())
         results.append(SplitResult(name, episodes.returns, baseline))
     return results
+
+
+@contextlib.contextmanager
+def torch_threads(n_threads: int) -> Iterator[None]:
+    """Run with the thread count the run trained with (0: Torch's default), so that a
+    greedy episode sums in the same order and its return matches metrics.csv exactly."""
+    before = torch.get_num_threads()
+    if n_threads:
+        torch.set_num_threads(n_threads)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)
