@@ -41,6 +41,15 @@ class IdentifyAndPlan:
         noise_mV: the measurement noise the policy assumes (0: the paper). It sets the
             residual noise of the estimate and lowers the spike threshold it reads
             spikes with by this much.
+        hypotheses: K; 1 plans on the estimate (unknown weights 0). K > 1 plans one
+            action sequence on K networks sampled from the estimate
+            (:meth:`ConnectivityEstimate.sample`) for the best mean return; measured
+            worse than K = 1 on the training networks (docs/baselines.md), kept to
+            reproduce that result.
+        seed: seeds the hypotheses' draws (one draw per episode: ``seed`` and the
+            number of episodes this policy has started); copies made by
+            :meth:`vector_policy` get ``seed + index``.
+        probe: whether to probe when the plan misses wanted spikes.
 
     ```python
     policy = IdentifyAndPlan()
@@ -60,6 +69,9 @@ class IdentifyAndPlan:
         horizon: int | None = 20,
         known_sd: float = 0.25,
         noise_mV: float = 0.0,
+        hypotheses: int = 1,
+        seed: int = 0,
+        probe: bool = True,
     ) -> None:
         params = NeuronParams() if params is None else params
         if not isinstance(params, NeuronParams):
@@ -72,6 +84,15 @@ class IdentifyAndPlan:
             raise ValueError(f"known_sd must be > 0, got {known_sd!r}")
         if not noise_mV >= 0:
             raise ValueError(f"noise_mV must be >= 0, got {noise_mV!r}")
+        if (
+            not isinstance(hypotheses, (int, np.integer))
+            or isinstance(hypotheses, bool)
+            or (hypotheses < 1)
+        ):
+            raise ValueError(f"hypotheses must be an integer >= 1, got {hypotheses!r}")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        self.hypotheses, self.seed, self.probe = int(hypotheses), int(seed), bool(probe)
         self.params, self.width, self.horizon = params, int(width), horizon
         self.known_sd, self.noise_mV = float(known_sd), float(noise_mV)
         # A plan is renewed when less than half its horizon is left, so that a wanted
@@ -94,6 +115,8 @@ class IdentifyAndPlan:
         self._predicted_spikes: np.ndarray | None = None
         self.probes = 0
         self.replans = 0
+        self._episodes = getattr(self, "_episodes", -1) + 1
+        self._uniforms: tuple[np.ndarray, np.ndarray] | None = None
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
         """The action for this observation (an agent index, -1 for do nothing)."""
@@ -109,6 +132,12 @@ class IdentifyAndPlan:
             self.reset()
             self._tracker = ObservedState(n, self.params, self.noise_mV)
             self.estimate = ConnectivityEstimate(n, self._residual_sd)
+            if self.hypotheses > 1:
+                # One draw per episode, reused by every re-plan: hypotheses change only
+                # where the estimate does (common random numbers).
+                rng = np.random.default_rng([self.seed, self._episodes])
+                self._uniforms = (rng.random((self.hypotheses, n, n)),
+                                  rng.random((self.hypotheses, n)))  # fmt: skip
         else:
             evidence = self._tracker.observe(voltage, int(observation["last_action"]))
             self.estimate.add(*evidence)
@@ -129,7 +158,7 @@ class IdentifyAndPlan:
             self._replan(weights, target, mask, pattern, step)
         offset = step - self._plan_start
         action = int(self._plan.actions[offset])
-        if action == DO_NOTHING and self._misses_wanted_spikes(pattern, offset):
+        if self.probe and action == DO_NOTHING and self._misses_wanted_spikes(pattern, offset):
             action = self._probe(known, target, mask)
         self._predict(weights, action)
         return action
@@ -151,6 +180,9 @@ class IdentifyAndPlan:
 
     def _model(self, weights, target, mask) -> PlanningModel:
         actions = (np.flatnonzero(mask) + DO_NOTHING).astype(np.int64)  # do nothing first
+        if self.hypotheses > 1:
+            hypotheses = self.estimate.sample(self.known_sd, *self._uniforms)  # [K, n, n]
+            return PlanningModel(hypotheses, target, actions, self.params)
         return PlanningModel(weights[None].copy(), target, actions, self.params)
 
     def _misses_wanted_spikes(self, pattern: np.ndarray, offset: int) -> bool:
@@ -190,8 +222,17 @@ class IdentifyAndPlan:
         """A batched policy ``policy(observations, action_mask) -> actions`` for
         :func:`spikectl.rollout.run_episodes`: one independent copy per environment."""
         copies = [
-            IdentifyAndPlan(self.params, self.width, self.horizon, self.known_sd, self.noise_mV)
-            for _ in range(num_envs)
+            IdentifyAndPlan(
+                self.params,
+                self.width,
+                self.horizon,
+                self.known_sd,
+                self.noise_mV,
+                self.hypotheses,
+                self.seed + index,
+                self.probe,
+            )  # fmt: skip
+            for index in range(num_envs)
         ]
 
         def policy(observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
