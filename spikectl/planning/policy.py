@@ -25,8 +25,13 @@ import numpy as np
 
 from spikectl.params import NeuronParams
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
+from spikectl.planning.discrete import DiscreteConnectivityEstimate
 from spikectl.planning.identify import _NOISE_FREE_SD, ConnectivityEstimate, ObservedState
 from spikectl.simulator import DO_NOTHING, advance
+
+IDENTIFICATIONS = ("gaussian", "discrete")
+"""How the policy identifies G: a Gaussian posterior (ridge regression, any n) or the
+exact posterior over {-1, 0, +1} (n <= 11)."""
 
 
 class IdentifyAndPlan:
@@ -50,6 +55,9 @@ class IdentifyAndPlan:
             number of episodes this policy has started); copies made by
             :meth:`vector_policy` get ``seed + index``.
         probe: whether to probe when the plan misses wanted spikes.
+        identification: ``"gaussian"`` (ridge regression, any n) or ``"discrete"``
+            (the exact posterior over {-1, 0, +1}, n <= 11; it knows more entries but
+            scored no better on the training networks, docs/baselines.md).
 
     ```python
     policy = IdentifyAndPlan()
@@ -72,6 +80,7 @@ class IdentifyAndPlan:
         hypotheses: int = 1,
         seed: int = 0,
         probe: bool = True,
+        identification: str = "gaussian",
     ) -> None:
         params = NeuronParams() if params is None else params
         if not isinstance(params, NeuronParams):
@@ -93,6 +102,12 @@ class IdentifyAndPlan:
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
         self.hypotheses, self.seed, self.probe = int(hypotheses), int(seed), bool(probe)
+        if identification not in IDENTIFICATIONS:
+            raise ValueError(
+                f"identification must be one of {', '.join(IDENTIFICATIONS)}, "
+                f"got {identification!r}"
+            )
+        self.identification = identification
         self.params, self.width, self.horizon = params, int(width), horizon
         self.known_sd, self.noise_mV = float(known_sd), float(noise_mV)
         # A plan is renewed when less than half its horizon is left, so that a wanted
@@ -131,7 +146,7 @@ class IdentifyAndPlan:
                 raise ValueError("IdentifyAndPlan must see the episode from its first step")
             self.reset()
             self._tracker = ObservedState(n, self.params, self.noise_mV)
-            self.estimate = ConnectivityEstimate(n, self._residual_sd)
+            self.estimate = self._new_estimate(n)
             if self.hypotheses > 1:
                 # One draw per episode, reused by every re-plan: hypotheses change only
                 # where the estimate does (common random numbers).
@@ -162,6 +177,11 @@ class IdentifyAndPlan:
             action = self._probe(known, target, mask)
         self._predict(weights, action)
         return action
+
+    def _new_estimate(self, n: int) -> ConnectivityEstimate | DiscreteConnectivityEstimate:
+        if self.identification == "discrete":
+            return DiscreteConnectivityEstimate(n, self._residual_sd)
+        return ConnectivityEstimate(n, self._residual_sd)
 
     def _replan(self, weights, target, mask, pattern, step) -> None:
         model = self._model(weights, target, mask)
@@ -223,14 +243,9 @@ class IdentifyAndPlan:
         :func:`spikectl.rollout.run_episodes`: one independent copy per environment."""
         copies = [
             IdentifyAndPlan(
-                self.params,
-                self.width,
-                self.horizon,
-                self.known_sd,
-                self.noise_mV,
-                self.hypotheses,
-                self.seed + index,
-                self.probe,
+                self.params, self.width, self.horizon, self.known_sd, self.noise_mV,
+                hypotheses=self.hypotheses, seed=self.seed + index, probe=self.probe,
+                identification=self.identification,
             )  # fmt: skip
             for index in range(num_envs)
         ]
