@@ -243,8 +243,14 @@ class IdentifyAndPlan:
         :func:`spikectl.rollout.run_episodes`: one independent copy per environment."""
         copies = [
             IdentifyAndPlan(
-                self.params, self.width, self.horizon, self.known_sd, self.noise_mV,
-                hypotheses=self.hypotheses, seed=self.seed + index, probe=self.probe,
+                self.params,
+                self.width,
+                self.horizon,
+                self.known_sd,
+                self.noise_mV,
+                hypotheses=self.hypotheses,
+                seed=self.seed + index,
+                probe=self.probe,
                 identification=self.identification,
             )  # fmt: skip
             for index in range(num_envs)
