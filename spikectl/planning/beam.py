@@ -30,6 +30,8 @@ _VOLTAGE_RESOLUTION_MV = 1e-7
 # Weight of the target's depolarisation (mV) in the ranking: 20 mV of it is worth far
 # less than the smallest reward (0.5 / 59 per step), so it only breaks ties.
 _TIE_BREAK = 1e-6
+# Seed of the fixed projections that hash simulator states for merging duplicates.
+_PROJECTION_SEED = 20261122
 
 
 @dataclass(frozen=True)
@@ -96,11 +98,11 @@ def _committed_target_spike(model: PlanningModel, state: SimulatorState) -> np.n
     return (next_voltage >= threshold) & (state.refractory_left[:, target] == 0)
 
 
-def _state_keys(
-    state: SimulatorState, release_interval: int, hypotheses: int = 1, entries: int | None = None
+def _state_rows(
+    state: SimulatorState, release_interval: int, hypotheses: int, entries: int
 ) -> np.ndarray:
-    """[entries] opaque keys, equal exactly for beam entries the dynamics cannot tell
-    apart (under every hypothesis; rows are hypothesis-major)."""
+    """[entries, K * 4n] float64 rows, equal exactly for beam entries the dynamics
+    cannot tell apart (under every hypothesis; state rows are hypothesis-major)."""
     parts = np.concatenate(
         [
             np.round(state.voltage_mV / _VOLTAGE_RESOLUTION_MV),
@@ -110,10 +112,26 @@ def _state_keys(
         ],
         axis=1,
     )  # [K * E, 4n]
-    entries = parts.shape[0] if entries is None else entries
     parts = parts.reshape(hypotheses, entries, -1).transpose(1, 0, 2).reshape(entries, -1)
-    parts = np.ascontiguousarray(parts, dtype=np.float64)  # [E, K * 4n]
-    return parts.view(np.dtype((np.void, parts.itemsize * parts.shape[1])))[:, 0]
+    return np.ascontiguousarray(parts, dtype=np.float64)  # [E, K * 4n]
+
+
+def _first_of_each(rows: np.ndarray) -> np.ndarray:
+    """Indices of the first occurrence of each distinct row of ``rows`` [E, D], sorted.
+
+    Rows are compared through a fixed random projection (fast: np.unique on [E]
+    numbers instead of E keys of 8 D bytes); every row is then checked against the
+    representative it was merged with, and any collision falls back to comparing
+    whole rows, so the result is exact.
+    """
+    projection = np.random.default_rng(_PROJECTION_SEED).standard_normal(rows.shape[1])
+    hashed = rows @ projection  # [E]
+    _, first, inverse = np.unique(hashed, return_index=True, return_inverse=True)
+    if np.array_equal(rows, rows[first[inverse]]):
+        return np.sort(first)
+    keys = rows.view(np.dtype((np.void, rows.itemsize * rows.shape[1])))[:, 0]
+    _, first = np.unique(keys, return_index=True)
+    return np.sort(first)
 
 
 def _take(state: SimulatorState, rows: np.ndarray) -> SimulatorState:
@@ -201,9 +219,8 @@ def beam_search(
         depolarisation = np.clip(children.voltage_mV[:, model.target] - resting, -20.0, 20.0)
         ranking += _TIE_BREAK * depolarisation.reshape(k, n_children).mean(axis=0)
         order = np.argsort(-ranking, kind="stable")
-        keys = _state_keys(children, interval, k, n_children)
-        _, first = np.unique(keys[order], return_index=True)
-        kept = order[np.sort(first)][:width]
+        rows_ordered = _state_rows(children, interval, k, n_children)[order]  # [C, K * 4n]
+        kept = order[_first_of_each(rows_ordered)][:width]
         beam = _take(children, (np.arange(k)[:, None] * n_children + kept[None, :]).ravel())
         score = child_score[kept]
         parents.append(rows[kept])
