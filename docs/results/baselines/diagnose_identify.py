@@ -65,12 +65,16 @@ def main() -> None:
     contexts = validation[: args.size]
     size = len(contexts)
     identify, seconds = _play(contexts, IdentifyAndPlan())
-    print(f"identify-and-plan:           {identify.returns.mean():.3f} "
-          f"+- {identify.returns.std(ddof=1):.3f}  ({seconds:.3f} CPU s per episode)")
+    print(
+        f"identify-and-plan:           {identify.returns.mean():.3f} "
+        f"+- {identify.returns.std(ddof=1):.3f}  ({seconds:.3f} CPU s per episode)"
+    )
     with _told_the_weights(contexts):
         told, seconds = _play(contexts, IdentifyAndPlan())
-    print(f"same loop, told the weights: {told.returns.mean():.3f} "
-          f"+- {told.returns.std(ddof=1):.3f}  ({seconds:.3f} CPU s per episode)")
+    print(
+        f"same loop, told the weights: {told.returns.mean():.3f} "
+        f"+- {told.returns.std(ddof=1):.3f}  ({seconds:.3f} CPU s per episode)"
+    )
     patterns = np.stack([context.pattern for context in contexts])  # [S, N]
     targets = np.array([context.target for context in contexts])
     if_spike, if_silent = step_rewards(patterns)
@@ -80,14 +84,18 @@ def main() -> None:
     print("loss of identify-and-plan by step (mean over networks):")
     print(f"{'steps':<10}{'missed spikes':>15}{'unwanted spikes':>17}{'wanted spikes':>15}")
     for low, high in zip(STEP_BINS[:-1], STEP_BINS[1:], strict=True):
-        print(f"{low:>2}-{high - 1:<7}{missed[:, low:high].sum() / size:>15.4f}"
-              f"{unwanted[:, low:high].sum() / size:>17.4f}"
-              f"{patterns[:, low:high].sum() / size:>15.2f}")
+        print(
+            f"{low:>2}-{high - 1:<7}{missed[:, low:high].sum() / size:>15.4f}"
+            f"{unwanted[:, low:high].sum() / size:>17.4f}"
+            f"{patterns[:, low:high].sum() / size:>15.2f}"
+        )
     print(f"{'all':<10}{missed.sum() / size:>15.4f}{unwanted.sum() / size:>17.4f}")
     few = patterns.sum(axis=1) <= 2
-    print(f"networks whose pattern has <= 2 spikes: {few.sum()}, identify-and-plan "
-          f"{identify.returns[few].mean():.3f} on them, {identify.returns[~few].mean():.3f} "
-          "on the others")
+    print(
+        f"networks whose pattern has <= 2 spikes: {few.sum()}, identify-and-plan "
+        f"{identify.returns[few].mean():.3f} on them, {identify.returns[~few].mean():.3f} "
+        "on the others"
+    )
 
 
 if __name__ == "__main__":
