@@ -34,6 +34,9 @@ class _TrueWeights:
     def weights(self, known_sd: float) -> tuple[np.ndarray, np.ndarray]:
         return self._weights, np.ones(self._weights.shape, dtype=bool)
 
+    def posterior(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._weights.astype(np.float64), np.zeros(self._weights.shape)
+
     def excitation_probability(self, target: int, known_sd: float) -> np.ndarray:
         return (self._weights[:, target] > 0).astype(float)
 

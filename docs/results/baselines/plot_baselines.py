@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from spikectl.files import atomic_write_text
+
 NOISE_MV = (0, 1, 2, 4)
 HIDDEN_FRACTIONS = ("0", "0.25")
 CONTROLLERS = ("do_nothing", "random", "identify_and_plan", "oracle", "witness")
@@ -64,7 +66,7 @@ def summary_table(results: Path) -> str:
 
 
 def tdrqn_test_return(results: Path) -> tuple[float, float] | None:
-    path = results.parent / "learn-fast-quick" / "results.csv"
+    path = results.resolve().parent / "learn-fast-quick" / "results.csv"
     if not path.exists():
         return None
     with path.open() as handle:
@@ -115,9 +117,10 @@ def plot(results: Path, out: Path) -> None:
 if __name__ == "__main__":
     results_dir, figure_path = Path(sys.argv[1]), Path(sys.argv[2])
     table = summary_table(results_dir)
-    (results_dir / "summary.md").write_text(
+    atomic_write_text(
+        results_dir / "summary.md",
         "Mean return over 100 unseen test networks (± sd over networks), from the CSVs "
-        "beside this file\n(written by plot_baselines.py).\n\n" + table + "\n"
+        "beside this file\n(written by plot_baselines.py).\n\n" + table + "\n",
     )
     print(table)
     plot(results_dir, figure_path)

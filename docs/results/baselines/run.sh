@@ -15,8 +15,9 @@ for hidden in 0 0.25; do
       --out $out/curve_noise${sigma}_hidden${hidden}.csv | tee $out/curve_noise${sigma}_hidden${hidden}.txt
   done
 done
-# n = 32 (identify-and-plan with beam width 16 to stay under 1 s per episode)
-spikectl baselines --split test --env spikectl/NeuronControl32-v0 --identify-width 16 \
+# n = 32 (identify-and-plan with beam width 16 to stay under 1 s per episode; oracle width
+# 1024: 0.989 on 20 training networks where 256 gave 0.961)
+spikectl baselines --split test --env spikectl/NeuronControl32-v0 --identify-width 16 --oracle-width 1024 \
   --out $out/test_n32.csv | tee $out/test_n32.txt
 # Why identify-and-plan loses to the oracle (validation networks, not the test set)
 python $out/diagnose_identify.py | tee $out/diagnose_identify_n8.txt
