@@ -303,6 +303,10 @@ def test_identify_and_plan_rejects_bad_settings_and_mid_episode_starts(splits):
         IdentifyAndPlan(seed=-1)
     with pytest.raises(ValueError, match="identification"):
         IdentifyAndPlan(identification="exact")
+    with pytest.raises(ValueError, match="plan_on"):
+        IdentifyAndPlan(plan_on="mode")
+    with pytest.raises(ValueError, match="spike_margin_sd"):
+        IdentifyAndPlan(spike_margin_sd=-1.0)
     with pytest.raises(TypeError, match="NeuronParams"):
         IdentifyAndPlan(params="paper")
     env = spikectl.NeuronControlEnv(contexts=splits[0][:2])
