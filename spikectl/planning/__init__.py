@@ -7,6 +7,7 @@ estimate every step. See docs/baselines.md.
 """
 
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
+from spikectl.planning.discrete import DiscreteConnectivityEstimate
 from spikectl.planning.identify import ConnectivityEstimate, ObservedState
 from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, model_of_context, plan_episode
 from spikectl.planning.policy import IdentifyAndPlan
@@ -14,6 +15,7 @@ from spikectl.planning.policy import IdentifyAndPlan
 __all__ = [
     "DEFAULT_ORACLE_WIDTH",
     "ConnectivityEstimate",
+    "DiscreteConnectivityEstimate",
     "IdentifyAndPlan",
     "ObservedState",
     "Plan",

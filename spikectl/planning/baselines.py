@@ -11,7 +11,6 @@ from __future__ import annotations
 import csv
 import io
 import os
-import tempfile
 import time
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -20,6 +19,7 @@ import numpy as np
 
 from spikectl.contexts import ContextSet
 from spikectl.extensions import CONTEXT_FIELDS, Extensions
+from spikectl.files import atomic_write_text
 from spikectl.params import NeuronParams
 from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, plan_episode
 from spikectl.planning.policy import IdentifyAndPlan
@@ -69,8 +69,6 @@ class BaselineResults:
 
     def write_csv(self, path: str | os.PathLike) -> Path:
         """One row per context, one column per controller; written atomically."""
-        path = Path(path)
-        path.parent.mkdir(parents=True, exist_ok=True)
         names = [name for name in CONTROLLERS if name in self.returns]
         buffer = io.StringIO()
         writer = csv.writer(buffer, lineterminator="\n")
@@ -78,11 +76,7 @@ class BaselineResults:
         size = next(iter(self.returns.values())).shape[0]
         for index in range(size):
             writer.writerow([index, *(f"{self.returns[name][index]:.6f}" for name in names)])
-        descriptor, temporary = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-        with os.fdopen(descriptor, "w") as handle:
-            handle.write(buffer.getvalue())
-        os.replace(temporary, path)
-        return path
+        return atomic_write_text(path, buffer.getvalue())
 
 
 def _replay_policy(actions: np.ndarray):

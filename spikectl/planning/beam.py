@@ -30,6 +30,8 @@ _VOLTAGE_RESOLUTION_MV = 1e-7
 # Weight of the target's depolarisation (mV) in the ranking: 20 mV of it is worth far
 # less than the smallest reward (0.5 / 59 per step), so it only breaks ties.
 _TIE_BREAK = 1e-6
+# Seed of the fixed projections that hash simulator states for merging duplicates.
+_PROJECTION_SEED = 20261122
 
 
 @dataclass(frozen=True)
@@ -37,8 +39,10 @@ class PlanningModel:
     """What the planner simulates: one network, its target and the legal actions.
 
     Attributes:
-        weights: [1, n, n] int8 signs or float64 signed synaptic strengths in units of
-            w_in (what :func:`spikectl.simulator.advance` takes).
+        weights: [K, n, n] int8 signs or float64 signed synaptic strengths in units of
+            w_in (what :func:`spikectl.simulator.advance` takes): K = 1 for a known
+            network, K > 1 for hypotheses about an uncertain one (planned on at once,
+            ranked by the mean return over them).
         target: the neuron whose spikes are rewarded (a neuron index of the model).
         actions: int64 [A] the legal simulator actions, do nothing (-1) first.
         params: the neuron parameters.
@@ -54,6 +58,11 @@ class PlanningModel:
     @property
     def n_neurons(self) -> int:
         return self.weights.shape[-1]
+
+    @property
+    def hypotheses(self) -> int:
+        """K, the number of networks planned on at once (1: a known network)."""
+        return self.weights.shape[0]
 
 
 @dataclass(frozen=True)
@@ -71,7 +80,8 @@ class Plan:
 
 
 def _committed_target_spike(model: PlanningModel, state: SimulatorState) -> np.ndarray:
-    """[B] whether the target spikes at the next step whatever the next action is."""
+    """[K * E] whether the target spikes at the next step whatever the next action is
+    (rows hypothesis-major, as in the beam)."""
     params, target = model.params, model.target
     if model.neurons is None:
         threshold = params.v_threshold_mV - params.threshold_tolerance_mV
@@ -79,15 +89,20 @@ def _committed_target_spike(model: PlanningModel, state: SimulatorState) -> np.n
     else:
         threshold, leak = model.neurons[0, 0, target], model.neurons[0, 1, target]
     synaptic_step = params.dt_ms * params.synaptic_current_pA / params.capacitance_pF
-    column = model.weights[0, :, target].astype(np.float64)  # [n]
+    k = model.hypotheses
+    columns = model.weights[:, :, target].astype(np.float64)  # [K, n]
+    released = state.released.reshape(k, -1, model.n_neurons).astype(np.float64)  # [K, E, n]
+    drive = synaptic_step * np.einsum("hen,hn->he", released, columns).ravel()  # [K * E]
     voltage = state.voltage_mV[:, target]
-    drive = synaptic_step * (state.released.astype(np.float64) @ column)  # [B]
     next_voltage = voltage - (voltage - params.v_rest_mV) * leak + drive
     return (next_voltage >= threshold) & (state.refractory_left[:, target] == 0)
 
 
-def _state_keys(state: SimulatorState, release_interval: int) -> np.ndarray:
-    """[B] opaque keys, equal exactly for states the dynamics cannot tell apart."""
+def _state_rows(
+    state: SimulatorState, release_interval: int, hypotheses: int, entries: int
+) -> np.ndarray:
+    """[entries, K * 4n] float64 rows, equal exactly for beam entries the dynamics
+    cannot tell apart (under every hypothesis; state rows are hypothesis-major)."""
     parts = np.concatenate(
         [
             np.round(state.voltage_mV / _VOLTAGE_RESOLUTION_MV),
@@ -96,12 +111,38 @@ def _state_keys(state: SimulatorState, release_interval: int) -> np.ndarray:
             state.released,
         ],
         axis=1,
-    )  # [B, 4n]
-    parts = np.ascontiguousarray(parts, dtype=np.float64)
-    return parts.view(np.dtype((np.void, parts.itemsize * parts.shape[1])))[:, 0]
+    )  # [K * E, 4n]
+    parts = parts.reshape(hypotheses, entries, -1).transpose(1, 0, 2).reshape(entries, -1)
+    return np.ascontiguousarray(parts, dtype=np.float64)  # [E, K * 4n]
+
+
+def _first_of_each(rows: np.ndarray) -> np.ndarray:
+    """Indices of the first occurrence of each distinct row of ``rows`` [E, D], sorted.
+
+    Rows are compared through a fixed random projection (fast: np.unique on [E]
+    numbers instead of E keys of 8 D bytes); every row is then checked against the
+    representative it was merged with, and any collision falls back to comparing
+    whole rows, so the result is exact.
+    """
+    projection = np.random.default_rng(_PROJECTION_SEED).standard_normal(rows.shape[1])
+    hashed = rows @ projection  # [E]
+    _, first, inverse = np.unique(hashed, return_index=True, return_inverse=True)
+    if np.array_equal(rows, rows[first[inverse]]):
+        return np.sort(first)
+    keys = rows.view(np.dtype((np.void, rows.itemsize * rows.shape[1])))[:, 0]
+    _, first = np.unique(keys, return_index=True)
+    return np.sort(first)
 
 
 def _take(state: SimulatorState, rows: np.ndarray) -> SimulatorState:
+    return SimulatorState(
+        state.voltage_mV[rows], state.refractory_left[rows],
+        state.steps_since_release[rows], state.released[rows],
+    )  # fmt: skip
+
+
+def _block(state: SimulatorState, rows: slice) -> SimulatorState:
+    """A view of contiguous rows (the kernel advances it in place)."""
     return SimulatorState(
         state.voltage_mV[rows], state.refractory_left[rows],
         state.steps_since_release[rows], state.released[rows],
@@ -118,8 +159,12 @@ def beam_search(
 ) -> Plan:
     """Search action sequences from ``start`` (a batch of one state) for the best return.
 
+    With K hypotheses (``model.weights`` [K, n, n], K > 1) one action sequence is
+    played on all K networks at once and ranked by its mean return over them: the
+    sequence that is best in expectation over what the weights might be.
+
     Args:
-        model: the network to plan on.
+        model: the network (or the K hypothetical networks) to plan on.
         start: the simulator state before step ``start_step`` (batch size 1).
         pattern: [N] bool target pattern of the whole episode.
         start_step: the first step to plan.
@@ -128,7 +173,7 @@ def beam_search(
 
     Returns:
         The best :class:`Plan` (ties go to the earliest do-nothing-first sequence, so
-        the result is deterministic).
+        the result is deterministic); its rewards are means over the hypotheses.
     """
     if width < 1:
         raise ValueError(f"width must be >= 1, got {width}")
@@ -138,46 +183,54 @@ def beam_search(
         raise ValueError(f"start_step must lie in 0..{episode_length - 1}, got {start_step}")
     end = episode_length if horizon is None else min(episode_length, start_step + horizon)
     reward_if_spike, reward_if_silent = step_rewards(pattern)
-    n, actions = model.n_neurons, model.actions
+    n, actions, k = model.n_neurons, model.actions, model.hypotheses
     n_actions = actions.shape[0]
     interval = min(model.params.min_release_interval_steps, 2**30)
     resting = model.params.v_rest_mV
-    beam = start.copy()
+    # States are stored hypothesis-major: row h * size + e is beam entry e under
+    # hypothesis h, so each hypothesis is one contiguous block for the kernel.
+    beam = _take(start, np.zeros(k, dtype=np.int64))  # [K * 1, n]
     score = np.zeros(1)
     parents, choices, step_rewards_kept = [], [], []
     for t in range(start_step, end):
         size = score.shape[0]
+        n_children = size * n_actions
         rows = np.repeat(np.arange(size), n_actions)  # [size * A]
-        children = _take(beam, rows)
-        child_actions = np.tile(actions, size)[:, None]  # [C, 1]
-        voltage = np.empty((rows.shape[0], 1, n))
-        spikes = np.empty((rows.shape[0], 1, n), dtype=bool)
-        advance(children, model.weights, child_actions, model.params, voltage, spikes,
-                model.neurons)  # fmt: skip
-        spiked = spikes[:, 0, model.target]
-        reward = np.where(spiked, reward_if_spike[t], reward_if_silent[t])
+        state_rows = (np.arange(k)[:, None] * size + rows[None, :]).ravel()  # [K * size * A]
+        children = _take(beam, state_rows)
+        child_actions = np.tile(actions, size)  # [size * A]
+        voltage = np.empty((k * n_children, 1, n))
+        spikes = np.empty((k * n_children, 1, n), dtype=bool)
+        step_actions = np.ascontiguousarray(child_actions[:, None])  # [size * A, 1]
+        for h in range(k):
+            block = slice(h * n_children, (h + 1) * n_children)
+            advance(_block(children, block), model.weights[h : h + 1], step_actions,
+                    model.params, voltage[block], spikes[block], model.neurons)  # fmt: skip
+        spiked = spikes[:, 0, model.target].reshape(k, n_children)  # [K, size * A]
+        reward = np.where(spiked, reward_if_spike[t], reward_if_silent[t]).mean(axis=0)
         child_score = score[rows] + reward
         ranking = child_score.copy()
         if t + 1 < end:
-            committed = _committed_target_spike(model, children)
-            ranking += np.where(committed, reward_if_spike[t + 1], reward_if_silent[t + 1])
+            committed = _committed_target_spike(model, children).reshape(k, n_children)
+            ranking += np.where(committed, reward_if_spike[t + 1],
+                                reward_if_silent[t + 1]).mean(axis=0)  # fmt: skip
         # Ties (common: most steps reward silence whatever is done) go to the state
         # whose target sits highest: an inhibited target needs more input later.
         depolarisation = np.clip(children.voltage_mV[:, model.target] - resting, -20.0, 20.0)
-        ranking += _TIE_BREAK * depolarisation
+        ranking += _TIE_BREAK * depolarisation.reshape(k, n_children).mean(axis=0)
         order = np.argsort(-ranking, kind="stable")
-        _, first = np.unique(_state_keys(children, interval)[order], return_index=True)
-        kept = order[np.sort(first)][:width]
-        beam = _take(children, kept)
+        rows_ordered = _state_rows(children, interval, k, n_children)[order]  # [C, K * 4n]
+        kept = order[_first_of_each(rows_ordered)][:width]
+        beam = _take(children, (np.arange(k)[:, None] * n_children + kept[None, :]).ravel())
         score = child_score[kept]
         parents.append(rows[kept])
-        choices.append(child_actions[kept, 0])
+        choices.append(child_actions[kept])
         step_rewards_kept.append(reward[kept])
     best = int(np.argmax(score))
     plan_actions = np.empty(end - start_step, dtype=np.int64)
     plan_rewards = np.empty(end - start_step)
-    for k in range(end - start_step - 1, -1, -1):
-        plan_actions[k] = choices[k][best]
-        plan_rewards[k] = step_rewards_kept[k][best]
-        best = int(parents[k][best])
+    for step in range(end - start_step - 1, -1, -1):
+        plan_actions[step] = choices[step][best]
+        plan_rewards[step] = step_rewards_kept[step][best]
+        best = int(parents[step][best])
     return Plan(plan_actions, plan_rewards)

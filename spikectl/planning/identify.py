@@ -23,11 +23,15 @@ starts from.
 
 from __future__ import annotations
 
+from math import erfc as _erfc
+
 import numpy as np
 
 from spikectl.contexts import EXCITATORY_PROBABILITY, connection_probability
 from spikectl.params import NeuronParams
 from spikectl.simulator import DO_NOTHING, SimulatorState
+
+erfc = np.vectorize(_erfc, otypes=[np.float64])
 
 # Residual noise (in units of w_in) assumed without measurement noise: float32
 # observations round potentials at ~1e-6 mV, so this is loose and still makes one
@@ -93,6 +97,38 @@ class ConnectivityEstimate:
         row_sign = np.sign(signs.sum(axis=1, keepdims=True))  # [n, 1]
         signs = np.where((row_sign != 0) & (signs != row_sign), 0.0, signs)
         return signs.astype(np.int8), known
+
+    def sample(
+        self, known_sd: float, connection_uniforms: np.ndarray, sign_uniforms: np.ndarray
+    ) -> np.ndarray:
+        """K hypotheses int8 [K, n, n] about G: known entries as in :meth:`weights`, the
+        others drawn from what is known of them, by the uniforms given.
+
+        An unknown entry the evidence has not touched (posterior sd still at least 0.9
+        of the prior's) is a connection with the topology's probability for its
+        distance; one the evidence has narrowed, with probability P(|w| > 1/2) under
+        its Gaussian posterior. A connection's sign is its row's (Dale's law) when the
+        row has a known nonzero entry, else excitatory with probability 0.8.
+
+        Args:
+            known_sd: as in :meth:`weights`.
+            connection_uniforms: [K, n, n] uniforms in [0, 1), one per hypothesis and entry.
+            sign_uniforms: [K, n] uniforms in [0, 1), one per hypothesis and row.
+        """
+        signs, known = self.weights(known_sd)
+        mean, sd = self.posterior()
+        prior_sd = np.sqrt(self.prior_variance)
+        # P(|w| > 1/2) for w ~ N(mean, sd): the rounded weight is nonzero.
+        scale = sd * np.sqrt(2.0)
+        tail = 0.5 * (erfc((0.5 - mean) / scale) + erfc((0.5 + mean) / scale))
+        probability = np.where(sd >= 0.9 * prior_sd, self.prior_variance, tail)  # [n, n]
+        probability = np.where(known, 0.0, probability)
+        row_sign = np.sign(signs.sum(axis=1))  # [n]
+        drawn_sign = np.where(sign_uniforms < EXCITATORY_PROBABILITY, 1, -1)  # [K, n]
+        sign = np.where(row_sign != 0, row_sign, drawn_sign)[:, :, None]  # [K, n, 1]
+        connected = connection_uniforms < probability  # [K, n, n]
+        hypotheses = np.where(known, signs, np.where(connected, sign, 0))
+        return np.ascontiguousarray(hypotheses, dtype=np.int8)
 
     def excitation_probability(self, target: int, known_sd: float) -> np.ndarray:
         """[n] probability that neuron i excites ``target`` (1/0 where known, else prior)."""

@@ -5,8 +5,9 @@ The policy knows the neuron model (``NeuronParams``) but not the weights. Each s
 1. reads the new observation into its tracked simulator state and adds the step's
    residuals to its :class:`~spikectl.planning.identify.ConnectivityEstimate`;
 2. re-plans with the beam search on the current estimate (known entries rounded to
-   {-1, 0, +1}, unknown ones 0) whenever the estimate changed or the network did
-   not do what the last plan predicted; otherwise the last plan still holds;
+   {-1, 0, +1}, unknown ones at their posterior mean) whenever the estimate changed
+   or the network did not do what the last plan predicted; otherwise the last plan
+   still holds;
 3. when the plan misses a wanted target spike (the estimate is too uncertain to
    plan) and would do nothing now, it *probes*: it stimulates the ready neuron whose
    outgoing weights are still unknown and that most probably excites the target,
@@ -25,8 +26,13 @@ import numpy as np
 
 from spikectl.params import NeuronParams
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
+from spikectl.planning.discrete import DiscreteConnectivityEstimate
 from spikectl.planning.identify import _NOISE_FREE_SD, ConnectivityEstimate, ObservedState
 from spikectl.simulator import DO_NOTHING, advance
+
+IDENTIFICATIONS = ("gaussian", "discrete")
+"""How the policy identifies G: a Gaussian posterior (ridge regression, any n) or the
+exact posterior over {-1, 0, +1} (n <= 11)."""
 
 
 class IdentifyAndPlan:
@@ -40,7 +46,27 @@ class IdentifyAndPlan:
             units of w_in) is below this.
         noise_mV: the measurement noise the policy assumes (0: the paper). It sets the
             residual noise of the estimate and lowers the spike threshold it reads
-            spikes with by this much.
+            spikes with by ``spike_margin_sd`` times this much.
+        hypotheses: K; 1 plans on the estimate (unknown weights 0). K > 1 plans one
+            action sequence on K networks sampled from the estimate
+            (:meth:`ConnectivityEstimate.sample`) for the best mean return; measured
+            worse than K = 1 on the training networks (docs/baselines.md), kept to
+            reproduce that result.
+        seed: seeds the hypotheses' draws (one draw per episode: ``seed`` and the
+            number of episodes this policy has started); copies made by
+            :meth:`vector_policy` get ``seed + index``.
+        probe: whether to probe when the plan misses wanted spikes.
+        identification: ``"gaussian"`` (ridge regression, any n) or ``"discrete"``
+            (the exact posterior over {-1, 0, +1}, n <= 11; it knows more entries but
+            scored no better on the training networks, docs/baselines.md).
+        plan_on: what the planner takes for weights that are not known: ``"mean"``
+            their posterior mean (noise-free: 0.879 / 0.866 on the training /
+            validation networks), ``"known"`` 0 (0.869 / 0.850; better under
+            measurement noise, where the mean is noisy), ``"auto"``: ``"mean"``
+            without measurement noise, ``"known"`` with it.
+        spike_margin_sd: spikes are read at the threshold less this many ``noise_mV``
+            (2: chosen on the first 50 training networks at 1, 2 and 4 mV; 1 lost
+            0.03-0.05, 3 lost 0.05 at 4 mV).
 
     ```python
     policy = IdentifyAndPlan()
@@ -60,6 +86,12 @@ class IdentifyAndPlan:
         horizon: int | None = 20,
         known_sd: float = 0.25,
         noise_mV: float = 0.0,
+        hypotheses: int = 1,
+        seed: int = 0,
+        probe: bool = True,
+        identification: str = "gaussian",
+        plan_on: str = "auto",
+        spike_margin_sd: float = 2.0,
     ) -> None:
         params = NeuronParams() if params is None else params
         if not isinstance(params, NeuronParams):
@@ -72,6 +104,26 @@ class IdentifyAndPlan:
             raise ValueError(f"known_sd must be > 0, got {known_sd!r}")
         if not noise_mV >= 0:
             raise ValueError(f"noise_mV must be >= 0, got {noise_mV!r}")
+        if (
+            not isinstance(hypotheses, (int, np.integer))
+            or isinstance(hypotheses, bool)
+            or (hypotheses < 1)
+        ):
+            raise ValueError(f"hypotheses must be an integer >= 1, got {hypotheses!r}")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        self.hypotheses, self.seed, self.probe = int(hypotheses), int(seed), bool(probe)
+        if identification not in IDENTIFICATIONS:
+            raise ValueError(
+                f"identification must be one of {', '.join(IDENTIFICATIONS)}, "
+                f"got {identification!r}"
+            )
+        self.identification = identification
+        if plan_on not in ("auto", "mean", "known"):
+            raise ValueError(f"plan_on must be 'auto', 'mean' or 'known', got {plan_on!r}")
+        if not spike_margin_sd >= 0:
+            raise ValueError(f"spike_margin_sd must be >= 0, got {spike_margin_sd!r}")
+        self.plan_on, self.spike_margin_sd = plan_on, float(spike_margin_sd)
         self.params, self.width, self.horizon = params, int(width), horizon
         self.known_sd, self.noise_mV = float(known_sd), float(noise_mV)
         # A plan is renewed when less than half its horizon is left, so that a wanted
@@ -94,6 +146,8 @@ class IdentifyAndPlan:
         self._predicted_spikes: np.ndarray | None = None
         self.probes = 0
         self.replans = 0
+        self._episodes = getattr(self, "_episodes", -1) + 1
+        self._uniforms: tuple[np.ndarray, np.ndarray] | None = None
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
         """The action for this observation (an agent index, -1 for do nothing)."""
@@ -107,8 +161,14 @@ class IdentifyAndPlan:
             if step != 0:
                 raise ValueError("IdentifyAndPlan must see the episode from its first step")
             self.reset()
-            self._tracker = ObservedState(n, self.params, self.noise_mV)
-            self.estimate = ConnectivityEstimate(n, self._residual_sd)
+            self._tracker = ObservedState(n, self.params, self.spike_margin_sd * self.noise_mV)
+            self.estimate = self._new_estimate(n)
+            if self.hypotheses > 1:
+                # One draw per episode, reused by every re-plan: hypotheses change only
+                # where the estimate does (common random numbers).
+                rng = np.random.default_rng([self.seed, self._episodes])
+                self._uniforms = (rng.random((self.hypotheses, n, n)),
+                                  rng.random((self.hypotheses, n)))  # fmt: skip
         else:
             evidence = self._tracker.observe(voltage, int(observation["last_action"]))
             self.estimate.add(*evidence)
@@ -116,7 +176,7 @@ class IdentifyAndPlan:
         if step >= pattern.shape[0]:
             raise ValueError(f"the episode has ended (step {step}): reset before acting")
         target = int(observation["target"])
-        weights, known = self.estimate.weights(self.known_sd)
+        weights, known = self._planning_weights()
         surprised = self._predicted_spikes is not None and not np.array_equal(
             self._predicted_spikes, self._tracker.spiked
         )
@@ -129,10 +189,30 @@ class IdentifyAndPlan:
             self._replan(weights, target, mask, pattern, step)
         offset = step - self._plan_start
         action = int(self._plan.actions[offset])
-        if action == DO_NOTHING and self._misses_wanted_spikes(pattern, offset):
+        if self.probe and action == DO_NOTHING and self._misses_wanted_spikes(pattern, offset):
             action = self._probe(known, target, mask)
         self._predict(weights, action)
         return action
+
+    def _planning_weights(self) -> tuple[np.ndarray, np.ndarray]:
+        """(weights [n, n] to plan with, known [n, n]): known entries at their value;
+        the others 0 (``plan_on="known"``) or their posterior mean (``"mean"``), which
+        carries what is known of neurons that only ever released together (their
+        summed effect) at 0.01 w_in resolution (so that tiny changes of the mean do
+        not force a re-plan)."""
+        signs, known = self.estimate.weights(self.known_sd)
+        plan_on = self.plan_on
+        if plan_on == "auto":
+            plan_on = "mean" if self.noise_mV == 0 else "known"
+        if plan_on == "known":
+            return signs, known
+        mean, _ = self.estimate.posterior()
+        return np.where(known, signs, np.round(mean, 2)), known
+
+    def _new_estimate(self, n: int) -> ConnectivityEstimate | DiscreteConnectivityEstimate:
+        if self.identification == "discrete":
+            return DiscreteConnectivityEstimate(n, self._residual_sd)
+        return ConnectivityEstimate(n, self._residual_sd)
 
     def _replan(self, weights, target, mask, pattern, step) -> None:
         model = self._model(weights, target, mask)
@@ -151,6 +231,9 @@ class IdentifyAndPlan:
 
     def _model(self, weights, target, mask) -> PlanningModel:
         actions = (np.flatnonzero(mask) + DO_NOTHING).astype(np.int64)  # do nothing first
+        if self.hypotheses > 1:
+            hypotheses = self.estimate.sample(self.known_sd, *self._uniforms)  # [K, n, n]
+            return PlanningModel(hypotheses, target, actions, self.params)
         return PlanningModel(weights[None].copy(), target, actions, self.params)
 
     def _misses_wanted_spikes(self, pattern: np.ndarray, offset: int) -> bool:
@@ -183,15 +266,27 @@ class IdentifyAndPlan:
         n = weights.shape[0]
         voltage, spikes = np.empty((1, 1, n)), np.empty((1, 1, n), dtype=bool)
         actions = np.array([[action]], dtype=np.int64)
-        advance(state, weights[None].astype(np.int8), actions, self.params, voltage, spikes)
+        advance(state, np.ascontiguousarray(weights[None]), actions, self.params, voltage, spikes)
         self._predicted_spikes = spikes[0, 0]
 
     def vector_policy(self, num_envs: int):
         """A batched policy ``policy(observations, action_mask) -> actions`` for
         :func:`spikectl.rollout.run_episodes`: one independent copy per environment."""
         copies = [
-            IdentifyAndPlan(self.params, self.width, self.horizon, self.known_sd, self.noise_mV)
-            for _ in range(num_envs)
+            IdentifyAndPlan(
+                self.params,
+                self.width,
+                self.horizon,
+                self.known_sd,
+                self.noise_mV,
+                hypotheses=self.hypotheses,
+                seed=self.seed + index,
+                probe=self.probe,
+                identification=self.identification,
+                plan_on=self.plan_on,
+                spike_margin_sd=self.spike_margin_sd,
+            )  # fmt: skip
+            for index in range(num_envs)
         ]
 
         def policy(observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:

@@ -1,7 +1,13 @@
-"""Draw the figure of docs/baselines.md from the committed per-context CSVs.
+"""Draw the figure and tables of docs/baselines.md from the committed per-context CSVs.
 
     python docs/results/baselines/plot_baselines.py docs/results/baselines \
         docs/images/baselines.png
+
+Reads ``curve_noise{sigma}_hidden{fraction}.csv`` (measurement noise x hidden
+fraction, n = 8), ``test_n32.csv`` and, for the one setting a trained agent exists
+for (noise 0, nothing hidden), TDRQN's test return from
+``../learn-fast-quick/results.csv``. Writes the figure and ``summary.md`` (the
+tables) beside the CSVs. Nothing is recomputed: only saved results are read.
 """
 
 import csv
@@ -10,13 +16,62 @@ from pathlib import Path
 
 import numpy as np
 
-SETTINGS = {  # CSV stem -> label
-    "test_n8": "n = 8\n(the paper)",
-    "test_noisy2": "n = 8, noise\n2 mV",
-    "test_partial": "n = 8, 2 of 8\nhidden",
-    "test_n32": "n = 32",
-}
+from spikectl.files import atomic_write_text
+
+NOISE_MV = (0, 1, 2, 4)
+HIDDEN_FRACTIONS = ("0", "0.25")
 CONTROLLERS = ("do_nothing", "random", "identify_and_plan", "oracle", "witness")
+LABELS = {
+    "do_nothing": "do nothing",
+    "random": "random",
+    "identify_and_plan": "identify-and-plan",
+    "oracle": "oracle planner",
+    "witness": "witness",
+}
+
+
+def read_returns(path: Path) -> dict[str, np.ndarray]:
+    """controller -> per-context returns [S] of one CSV."""
+    with path.open() as handle:
+        rows = list(csv.DictReader(handle))
+    return {
+        name: np.array([float(row[name]) for row in rows]) for name in rows[0] if name != "context"
+    }
+
+
+def cell(values: np.ndarray, spread: bool) -> str:
+    if not spread:
+        return f"{values.mean():.3f}"
+    return f"{values.mean():.3f} ± {values.std(ddof=1):.3f}"
+
+
+def summary_table(results: Path) -> str:
+    header = "| setting | " + " | ".join(LABELS[name] for name in CONTROLLERS) + " |"
+    lines = [header, "|---" * (len(CONTROLLERS) + 1) + "|"]
+    settings = [
+        (f"n = 8, noise {sigma} mV, hidden {fraction}",
+         results / f"curve_noise{sigma}_hidden{fraction}.csv")
+        for fraction in HIDDEN_FRACTIONS for sigma in NOISE_MV
+    ] + [("n = 32", results / "test_n32.csv")]  # fmt: skip
+    for label, path in settings:
+        if not path.exists():
+            continue
+        returns = read_returns(path)
+        values = [
+            cell(returns[name], name in ("identify_and_plan", "oracle")) if name in returns else "–"
+            for name in CONTROLLERS
+        ]
+        lines.append(f"| {label} | " + " | ".join(values) + " |")
+    return "\n".join(lines)
+
+
+def tdrqn_test_return(results: Path) -> tuple[float, float] | None:
+    path = results.resolve().parent / "learn-fast-quick" / "results.csv"
+    if not path.exists():
+        return None
+    with path.open() as handle:
+        row = next(row for row in csv.DictReader(handle) if row["group"] == "tdrqn")
+    return float(row["test_mean"]), float(row["test_std"])
 
 
 def plot(results: Path, out: Path) -> None:
@@ -25,28 +80,47 @@ def plot(results: Path, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    present = [stem for stem in SETTINGS if (results / f"{stem}.csv").exists()]
-    figure, axis = plt.subplots(figsize=(8, 3.6))
-    width = 0.8 / len(CONTROLLERS)
-    for k, name in enumerate(CONTROLLERS):
-        means, errors = [], []
-        for stem in present:
-            with (results / f"{stem}.csv").open() as handle:
-                values = np.array([float(row[name]) for row in csv.DictReader(handle)])
-            means.append(values.mean())
-            errors.append(values.std(ddof=1) / np.sqrt(values.size))
-        positions = np.arange(len(present)) + (k - (len(CONTROLLERS) - 1) / 2) * width
-        axis.bar(positions, means, width, yerr=errors, label=name.replace("_", "-"))
-    axis.set_xticks(np.arange(len(present)), [SETTINGS[stem] for stem in present])
-    axis.set_ylim(0.4, 1.02)
-    axis.set_ylabel("mean return, 100 unseen networks")
-    axis.axhline(0.5, color="grey", linewidth=0.5)
-    axis.legend(ncol=5, fontsize=8, loc="upper center", bbox_to_anchor=(0.5, 1.15))
-    figure.tight_layout()
+    figure, axes = plt.subplots(1, 2, figsize=(9, 3.6), sharey=True)
+    for axis, fraction in zip(axes, HIDDEN_FRACTIONS, strict=True):
+        paths = [results / f"curve_noise{sigma}_hidden{fraction}.csv" for sigma in NOISE_MV]
+        present = [(sigma, path) for sigma, path in zip(NOISE_MV, paths, strict=True)
+                   if path.exists()]  # fmt: skip
+        if not present:
+            continue
+        curves = [read_returns(path) for _, path in present]
+        sigmas = [sigma for sigma, _ in present]
+        for name in CONTROLLERS:
+            if not all(name in curve for curve in curves):
+                continue
+            means = [curve[name].mean() for curve in curves]
+            errors = [curve[name].std(ddof=1) / np.sqrt(curve[name].size) for curve in curves]
+            axis.errorbar(sigmas, means, yerr=errors, marker="o", capsize=2, label=LABELS[name])
+        tdrqn = tdrqn_test_return(results)
+        if fraction == "0" and tdrqn is not None:
+            axis.errorbar([0], [tdrqn[0]], yerr=[tdrqn[1]], marker="s", color="black",
+                          linestyle="none", capsize=3,
+                          label="TDRQN (quick preset, 3 seeds)")  # fmt: skip
+        axis.set_title(f"n = 8, hidden fraction {fraction}")
+        axis.set_xlabel("measurement noise sigma (mV)")
+        axis.set_xticks(list(NOISE_MV))
+        axis.axhline(0.5, color="grey", linewidth=0.5)
+    axes[0].set_ylabel("mean return, 100 unseen networks")
+    axes[0].set_ylim(0.4, 1.03)
+    handles, labels = axes[0].get_legend_handles_labels()
+    figure.legend(handles, labels, ncol=3, fontsize=8, loc="upper center")
+    figure.tight_layout(rect=(0, 0, 1, 0.84))
     out.parent.mkdir(parents=True, exist_ok=True)
     figure.savefig(out, dpi=120)
     print(f"wrote {out}")
 
 
 if __name__ == "__main__":
-    plot(Path(sys.argv[1]), Path(sys.argv[2]))
+    results_dir, figure_path = Path(sys.argv[1]), Path(sys.argv[2])
+    table = summary_table(results_dir)
+    atomic_write_text(
+        results_dir / "summary.md",
+        "Mean return over 100 unseen test networks (± sd over networks), from the CSVs "
+        "beside this file\n(written by plot_baselines.py).\n\n" + table + "\n",
+    )
+    print(table)
+    plot(results_dir, figure_path)
