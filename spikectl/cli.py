@@ -548,7 +548,7 @@ def flag_message(message: str) -> str:
     """The message on one line, with a leading field name replaced by its flag
     (``gamma must lie in [0, 1]`` -> ``--gamma must lie in [0, 1]``)."""
     message = " ".join(message.split())
-    match = re.match(r"(?:NeuronParams\.)?([A-Za-z_][\w.]*)", message)
+    match = re.match(r"(?:NeuronParams\.|Extensions\.)?([A-Za-z_][\w.]*)", message)
     if match:
         flag = _flag_names().get(match.group(1))
         if flag is not None:

@@ -411,6 +411,8 @@ def test_every_train_config_error_names_its_flag(flag, value, tmp_path, capsys):
      (["train", "--sizes.do-nothing-head", "x"], "--sizes.do-nothing-head must be one of"),
      (["sweep", "--workers", "x"], "--workers"),
      (["contexts", "--n-neurons", "q"], "--n-neurons"),
+     (["baselines", "--hidden-fraction", "2"], "--hidden-fraction must lie in [0, 1)"),
+     (["baselines", "--observation-noise-mV", "-1"], "--observation-noise-mV must be >= 0"),
      (["evaluate"], "PATH"),
      (["nosuch"], "nosuch"),
      ([], "missing subcommand")],
