@@ -75,11 +75,12 @@ def baseline_rows(results: Path) -> list[str]:
         rows = list(csv.DictReader(handle))
     column = {name: np.array([float(row[name]) for row in rows]) for name in rows[0]}
     random_seeds = _random_seed_spread(results / "baselines" / "test_n8.txt")
+    blank = "| – | – | – | – |"
     return [
-        f"| doing nothing (baseline) | – | – | – | {column['do_nothing'].mean():.3f} | – | – | – | – |",
-        f"| random legal policy (baseline, 10 seeds) | – | – | – | {random_seeds} | – | – | – | – |",
+        f"| doing nothing (baseline) | – | – | – | {column['do_nothing'].mean():.3f} {blank}",
+        f"| random legal policy (baseline, 10 seeds) | – | – | – | {random_seeds} {blank}",
         f"| identify-and-plan (no training) | – | – | – "
-        f"| {column['identify_and_plan'].mean():.3f} | – | – | – | – |",
+        f"| {column['identify_and_plan'].mean():.3f} {blank}",
     ]
 
 
