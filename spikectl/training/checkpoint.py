@@ -408,11 +408,6 @@ def save_checkpoint(
 
     _check_finite(online.state_dict(), f"the online network of {run_dir}")
     _check_finite(target.state_dict(), f"the target network of {run_dir}")
-    replay_state = {
-        name: torch.from_numpy(np.ascontiguousarray(value)) if isinstance(value, np.ndarray)
-        else int(value)
-        for name, value in replay.state_dict().items()
-    }  # fmt: skip
     payload = {
         "format": CHECKPOINT_FORMAT,
         "format_version": CHECKPOINT_VERSION,
@@ -423,7 +418,22 @@ def save_checkpoint(
         "target": target.state_dict(),
         "predictor": None if predictor is None else predictor.state_dict(),
         "optimizer": optimizer.state_dict(),
-        "replay": replay_state,
+        **state_payload(state, replay),
+    }
+    payload["checksum"] = payload_checksum(payload)
+    atomic_write_bytes(run_dir / CHECKPOINT_FILE, _torch_bytes(payload))
+    atomic_write_text(run_dir / BASELINES_FILE, json.dumps(state.baselines, indent=2) + "\n")
+
+
+def state_payload(state: TrainingState, replay: EpisodeReplay) -> dict[str, Any]:
+    """One run's changing state and replay buffer as plain data and tensors (what a
+    weights-only load takes back); :func:`restore_state` inverts it."""
+    return {
+        "replay": {
+            name: torch.from_numpy(np.ascontiguousarray(value))
+            if isinstance(value, np.ndarray) else int(value)
+            for name, value in replay.state_dict().items()
+        },
         "rng": state.rng.bit_generator.state,
         "episodes": int(state.episodes),
         "updates": int(state.updates),
@@ -434,10 +444,30 @@ def save_checkpoint(
         "cpu_time_s": float(state.cpu_time_s),
         "metrics": [{key: _plain(value) for key, value in row.items()} for row in state.metrics],
         "baselines": state.baselines,
-    }
-    payload["checksum"] = payload_checksum(payload)
-    atomic_write_bytes(run_dir / CHECKPOINT_FILE, _torch_bytes(payload))
-    atomic_write_text(run_dir / BASELINES_FILE, json.dumps(state.baselines, indent=2) + "\n")
+    }  # fmt: skip
+
+
+def restore_state(entry: dict[str, Any], replay: EpisodeReplay) -> TrainingState:
+    """Fill ``replay`` from a :func:`state_payload` entry and return its TrainingState."""
+    replay.load_state_dict(
+        {name: value.numpy() if torch.is_tensor(value) else value
+         for name, value in entry["replay"].items()}
+    )  # fmt: skip
+    rng = np.random.default_rng()
+    rng.bit_generator.state = entry["rng"]
+    return TrainingState(
+        rng=rng,
+        episodes=entry["episodes"],
+        updates=entry["updates"],
+        loss_sum=entry["loss_sum"],
+        aux_loss_sum=entry["aux_loss_sum"],
+        loss_count=entry["loss_count"],
+        wall_time_s=entry["wall_time_s"],
+        # Checkpoints of spikectl before the cpu_time_s column have no CPU clock yet.
+        cpu_time_s=float(entry.get("cpu_time_s", 0.0)),
+        metrics=entry["metrics"],
+        baselines=entry["baselines"],
+    )
 
 
 def _plain(value: Any) -> Any:
@@ -512,29 +542,9 @@ def load_checkpoint(
         if predictor is not None:
             predictor.load_state_dict(payload["predictor"])
         optimizer.load_state_dict(payload["optimizer"])
-        replay.load_state_dict(
-            {
-                name: value.numpy() if torch.is_tensor(value) else value
-                for name, value in payload["replay"].items()
-            }
-        )
-        rng = np.random.default_rng()
-        rng.bit_generator.state = payload["rng"]
+        return restore_state(payload, replay)
     except (RuntimeError, ValueError, KeyError, TypeError) as error:
         raise RunDirError(f"{path} does not fit this run: {_first_line(error)}") from None
-    return TrainingState(
-        rng=rng,
-        episodes=payload["episodes"],
-        updates=payload["updates"],
-        loss_sum=payload["loss_sum"],
-        aux_loss_sum=payload["aux_loss_sum"],
-        loss_count=payload["loss_count"],
-        wall_time_s=payload["wall_time_s"],
-        # Checkpoints of spikectl before the cpu_time_s column have no CPU clock yet.
-        cpu_time_s=float(payload.get("cpu_time_s", 0.0)),
-        metrics=payload["metrics"],
-        baselines=payload["baselines"],
-    )
 
 
 def save_model(run_dir: Path, network: torch.nn.Module) -> Path:

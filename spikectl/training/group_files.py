@@ -15,9 +15,6 @@ import json
 import os
 from pathlib import Path
 
-import numpy as np
-import torch
-
 from spikectl.training.checkpoint import (
     CONFIG_FILE,
     LOCK_FILE,
@@ -26,7 +23,6 @@ from spikectl.training.checkpoint import (
     _check_finite,
     _first_line,
     _load_torch_file,
-    _plain,
     _remove_temporaries,
     _torch_bytes,
     atomic_write_bytes,
@@ -35,9 +31,10 @@ from spikectl.training.checkpoint import (
     payload_checksum,
     prepare_run_dir,
     read_config,
+    restore_state,
+    state_payload,
 )
 from spikectl.training.config import TrainConfig
-from spikectl.training.replay import EpisodeReplay
 
 GROUP_FILE = "group.json"
 GROUP_CHECKPOINT_FILE = "group_checkpoint.pt"
@@ -118,14 +115,6 @@ def prepare_group(
     return False
 
 
-def _replay_state(replay: EpisodeReplay) -> dict:
-    return {
-        name: torch.from_numpy(np.ascontiguousarray(value)) if isinstance(value, np.ndarray)
-        else int(value)
-        for name, value in replay.state_dict().items()
-    }  # fmt: skip
-
-
 def save_group_checkpoint(
     group_dir, configs, run_dirs, states, online, target, predictor, optimizer, replays
 ) -> None:
@@ -145,20 +134,7 @@ def save_group_checkpoint(
         "predictor": None if predictor is None else predictor.stacked_state(),
         "optimizer": optimizer.state_dict(),
         "seeds": [
-            {
-                "replay": _replay_state(replay),
-                "rng": state.rng.bit_generator.state,
-                "episodes": int(state.episodes),
-                "updates": int(state.updates),
-                "loss_sum": float(state.loss_sum),
-                "aux_loss_sum": float(state.aux_loss_sum),
-                "loss_count": int(state.loss_count),
-                "wall_time_s": float(state.wall_time_s),
-                "cpu_time_s": float(state.cpu_time_s),
-                "metrics": [{k: _plain(v) for k, v in row.items()} for row in state.metrics],
-                "baselines": state.baselines,
-            }
-            for state, replay in zip(states, replays, strict=True)
+            state_payload(state, replay) for state, replay in zip(states, replays, strict=True)
         ],
     }
     payload["checksum"] = payload_checksum(payload)
@@ -196,18 +172,7 @@ def load_group_checkpoint(
             predictor.load_stacked_state(payload["predictor"])
         optimizer.load_state_dict(payload["optimizer"])
         for seed, replay in zip(payload["seeds"], replays, strict=True):
-            replay.load_state_dict(
-                {k: v.numpy() if torch.is_tensor(v) else v for k, v in seed["replay"].items()}
-            )
-            rng = np.random.default_rng()
-            rng.bit_generator.state = seed["rng"]
-            states.append(TrainingState(
-                rng=rng, episodes=seed["episodes"], updates=seed["updates"],
-                loss_sum=seed["loss_sum"], aux_loss_sum=seed["aux_loss_sum"],
-                loss_count=seed["loss_count"], wall_time_s=seed["wall_time_s"],
-                cpu_time_s=seed["cpu_time_s"], metrics=seed["metrics"],
-                baselines=seed["baselines"],
-            ))  # fmt: skip
+            states.append(restore_state(seed, replay))
     except (RuntimeError, ValueError, KeyError, TypeError) as error:
         raise RunDirError(f"{path} does not fit this group: {_first_line(error)}") from None
     return states
