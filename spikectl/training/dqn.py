@@ -315,31 +315,10 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
 
     def evaluate() -> None:
         clock()
-        row = {
-            "episode": state.episodes,
-            "env_steps": state.episodes * config.episode_length,
-            "updates": state.updates,
-            "epsilon": config.epsilon(state.episodes),
-            "train_return": greedy_returns(online, eval_envs["train"], config.device),
-            "test_return": greedy_returns(online, eval_envs["test"], config.device),
-            "loss": state.loss_sum / state.loss_count if state.loss_count else math.nan,
-            "wall_time_s": state.wall_time_s,
-            "val_return": (
-                greedy_returns(online, eval_envs["val"], config.device)
-                if "val" in eval_envs
-                else math.nan
-            ),
-            "aux_loss": (
-                state.aux_loss_sum / state.loss_count
-                if state.loss_count and predictor is not None
-                else math.nan
-            ),
-            "cpu_time_s": state.cpu_time_s,
+        returns = {
+            split: greedy_returns(online, env, config.device) for split, env in eval_envs.items()
         }
-        state.loss_sum, state.aux_loss_sum, state.loss_count = 0.0, 0.0, 0
-        state.metrics.append(row)
-        write_metrics(run_dir, state.metrics, METRIC_FIELDS)
-        logger.log(row)
+        record_evaluation(state, config, returns, predictor is not None, run_dir, logger)
 
     if not state.metrics:
         evaluate()
@@ -394,6 +373,36 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
             stacklevel=2,
         )
     return state.metrics
+
+
+def record_evaluation(
+    state: TrainingState,
+    config: TrainConfig,
+    returns: dict[str, float],
+    with_aux: bool,
+    run_dir: Path,
+    logger: _Logger,
+) -> None:
+    """Append one metrics.csv row (greedy ``returns`` per split, mean losses since the
+    last row, both clocks), write it and log it; the loss sums start again."""
+    n = state.loss_count
+    row = {
+        "episode": state.episodes,
+        "env_steps": state.episodes * config.episode_length,
+        "updates": state.updates,
+        "epsilon": config.epsilon(state.episodes),
+        "train_return": float(returns["train"]),
+        "test_return": float(returns["test"]),
+        "loss": state.loss_sum / n if n else math.nan,
+        "wall_time_s": state.wall_time_s,
+        "val_return": float(returns["val"]) if "val" in returns else math.nan,
+        "aux_loss": state.aux_loss_sum / n if n and with_aux else math.nan,
+        "cpu_time_s": state.cpu_time_s,
+    }
+    state.loss_sum, state.aux_loss_sum, state.loss_count = 0.0, 0.0, 0
+    state.metrics.append(row)
+    write_metrics(run_dir, state.metrics, METRIC_FIELDS)
+    logger.log(row)
 
 
 def _crossed(before: int, after: int, every: int) -> bool:

@@ -38,12 +38,10 @@ from spikectl.training.checkpoint import (
     check_device,
     run_lock,
     save_model,
-    write_metrics,
 )
 from spikectl.training.config import TrainConfig
 from spikectl.training.contexts import load_or_make_contexts
 from spikectl.training.dqn import (
-    METRIC_FIELDS,
     _crossed,
     _Logger,
     batch_tensors,
@@ -52,6 +50,7 @@ from spikectl.training.dqn import (
     explore,
     greedy_returns,
     losses_on_tensors,
+    record_evaluation,
 )
 from spikectl.training.group_files import (
     load_group_checkpoint,
@@ -232,27 +231,10 @@ def _train_group(
             for split, env in eval_envs.items()
         }
         for k, (state, run_dir) in enumerate(zip(states, run_dirs, strict=True)):
-            row = {
-                "episode": state.episodes,
-                "env_steps": state.episodes * config.episode_length,
-                "updates": state.updates,
-                "epsilon": config.epsilon(state.episodes),
-                "train_return": float(returns["train"][k]),
-                "test_return": float(returns["test"][k]),
-                "loss": state.loss_sum / state.loss_count if state.loss_count else math.nan,
-                "wall_time_s": state.wall_time_s,
-                "val_return": float(returns["val"][k]) if "val" in returns else math.nan,
-                "aux_loss": (
-                    state.aux_loss_sum / state.loss_count
-                    if state.loss_count and predictor is not None
-                    else math.nan
-                ),
-                "cpu_time_s": state.cpu_time_s,
-            }
-            state.loss_sum, state.aux_loss_sum, state.loss_count = 0.0, 0.0, 0
-            state.metrics.append(row)
-            write_metrics(run_dir, state.metrics, METRIC_FIELDS)
-            loggers[k].log(row)
+            seed_returns = {split: values[k] for split, values in returns.items()}
+            record_evaluation(
+                state, config, seed_returns, predictor is not None, run_dir, loggers[k]
+            )
 
     def seed_losses(online_params, target_params, predictor_params, tensors):
         td, aux = losses_on_tensors(
