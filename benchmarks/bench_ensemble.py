@@ -14,12 +14,15 @@ updates each. Reported: env steps/s and updates/s summed over the K seeds, and t
 batched/separate throughput ratio, median over ``--repeats`` interleaved repeats.
 
 ``--micro`` instead times the two parts in this process: one gradient update (sample,
-losses, backward, clip, Adam, soft update) and one acting step (16 episodes) of K
-stacked seeds against K times one plain network's, at quick sizes, one thread.
+losses, backward, clip, Adam) and one acting step (16 episodes) of K stacked seeds
+against K times one plain network's, one thread, at the sizes of ``--preset`` (quick
+by default; paper is Table 2) on ``--device`` (cpu by default; cuda times the GPU path,
+synchronising before each clock read).
 
     python benchmarks/bench_ensemble.py               # K = 2, 5, 10, 3 rounds
     python benchmarks/bench_ensemble.py --quick       # K = 2, 1 round of 4 updates
     python benchmarks/bench_ensemble.py --micro --seeds 1 2 5 10
+    python benchmarks/bench_ensemble.py --micro --preset paper --device cuda --seeds 1 10 40
 """
 
 from __future__ import annotations
@@ -32,7 +35,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from spikectl.training.config import QUICK
+from spikectl.training.config import PRESETS, QUICK
 
 
 def train_flags(rounds: int, updates_per_round: int) -> list[str]:
@@ -60,8 +63,10 @@ def run_processes(commands: list[list[str]], cores: int) -> float:
     return time.perf_counter() - started
 
 
-def micro(seeds: list[int], repeats: int) -> None:
+def micro(seeds: list[int], repeats: int, preset: str, device: str) -> None:
     """Milliseconds per update and per acting step: K stacked seeds against K plain."""
+    import dataclasses
+
     import numpy as np
     import torch
 
@@ -69,7 +74,8 @@ def micro(seeds: list[int], repeats: int) -> None:
     from spikectl.training.replay import EpisodeReplay
 
     torch.set_num_threads(1)
-    config, rng = QUICK, np.random.default_rng(0)
+    config = dataclasses.replace(PRESETS[preset], device=device)
+    rng = np.random.default_rng(0)
     n, N, E = config.n_neurons, config.episode_length, 64
     replay = EpisodeReplay(E, n, N)
     replay.add((rng.random((E, N + 1, n)) * 25 - 70).astype(np.float32),
@@ -77,48 +83,59 @@ def micro(seeds: list[int], repeats: int) -> None:
                rng.integers(0, n, E), rng.integers(0, 2, (E, N)).astype(np.int8),
                np.ones((E, n + 1), dtype=bool))  # fmt: skip
 
+    def sync() -> None:
+        if config.device.startswith("cuda"):
+            torch.cuda.synchronize()
+
     def timed(step, count: int) -> float:
         step()
         times = []
         for _ in range(count):
+            sync()
             started = time.perf_counter()
             step()
+            sync()
             times.append(time.perf_counter() - started)
         return statistics.median(times) * 1e3
 
     online, target = build_networks(config)
     predictor = build_predictor(config, online)
-    params = list(online.parameters()) + list(predictor.parameters())
+    params = list(online.parameters()) + (list(predictor.parameters()) if predictor else [])
     adam = torch.optim.Adam(params, lr=config.learning_rate)
 
     def single_update() -> None:
         td, aux = training_losses(online, target, replay.sample(config.batch_size, rng), config,
                                   predictor)  # fmt: skip
         adam.zero_grad()
-        (td + config.aux_voltage_weight * aux).backward()
+        (td if aux is None else td + config.aux_voltage_weight * aux).backward()
         torch.nn.utils.clip_grad_norm_(params, config.max_grad_norm)
         adam.step()
 
     def observation(lead: tuple[int, ...]) -> dict[str, torch.Tensor]:
-        return {"voltage": torch.rand(*lead, n) * 25 - 70, "target": torch.zeros(lead).long(),
-                "pattern": torch.ones(*lead, N), "step": torch.zeros(lead).long(),
-                "last_action": torch.full(lead, -1)}  # fmt: skip
+        tensors = {"voltage": torch.rand(*lead, n) * 25 - 70, "target": torch.zeros(lead).long(),
+                   "pattern": torch.ones(*lead, N), "step": torch.zeros(lead).long(),
+                   "last_action": torch.full(lead, -1)}  # fmt: skip
+        return {key: value.to(config.device) for key, value in tensors.items()}
 
     single_obs = observation((16,))
     with torch.no_grad():
         single_step = timed(lambda: online.step(single_obs, None), 10 * repeats)
     single = timed(single_update, 5 * repeats)
+    print(f"{preset} sizes on {device}, batch {config.batch_size} episodes of {N} steps, "
+          f"{n} neurons, {config.arch}")  # fmt: skip
     print(f"one plain network: update {single:.0f} ms, acting step {single_step:.1f} ms")
     print(f"{'K':>3}{'update ms':>11}{'per seed':>10}{'vs K plain':>12}"
           f"{'step ms':>9}{'vs K plain':>12}")  # fmt: skip
     for K in seeds:
-        update, step = stacked_timings(K, replay, rng, observation, timed, repeats)
+        update, step = stacked_timings(config, K, replay, rng, observation, timed, repeats)
         print(f"{K:>3}{update:>11.0f}{update / K:>10.0f}{K * single / update:>11.2f}x"
               f"{step:>9.1f}{K * single_step / step:>11.2f}x")  # fmt: skip
 
 
-def stacked_timings(K: int, replay, rng, observation, timed, repeats: int) -> tuple[float, float]:
-    """Milliseconds of one update and one acting step of K stacked quick-size seeds."""
+def stacked_timings(
+    config, K: int, replay, rng, observation, timed, repeats: int
+) -> tuple[float, float]:
+    """Milliseconds of one update and one acting step of K stacked seeds of ``config``."""
     import dataclasses
 
     import torch
@@ -132,32 +149,35 @@ def stacked_timings(K: int, replay, rng, observation, timed, repeats: int) -> tu
     )
     from spikectl.training.ensemble import clip_grad_norm_per_seed, stack_seeds
 
-    config = QUICK
     pairs = [build_networks(dataclasses.replace(config, seed=s)) for s in range(K)]
     stacked = StackedNetworks([pair[0] for pair in pairs])
     targets = StackedNetworks([pair[1] for pair in pairs], trainable=False)
-    heads = StackedNetworks([build_predictor(config, pair[0]) for pair in pairs])
-    trained = stacked.parameters() + heads.parameters()
+    predictors = [build_predictor(config, pair[0]) for pair in pairs]
+    heads = None if predictors[0] is None else StackedNetworks(predictors)
+    trained = stacked.parameters() + (heads.parameters() if heads else [])
     adam = torch.optim.Adam(trained, lr=config.learning_rate)
 
     def seed_losses(online_params, target_params, head_params, tensors):
-        return losses_on_tensors(stacked.bound(online_params), targets.bound(target_params),
-                                 tensors, config, heads.bound(head_params))  # fmt: skip
+        td, aux = losses_on_tensors(
+            stacked.bound(online_params), targets.bound(target_params), tensors, config,
+            None if heads is None else heads.bound(head_params),
+        )  # fmt: skip
+        return td, (torch.zeros_like(td) if aux is None else aux)
 
-    batched = torch.func.vmap(seed_losses)
+    batched = torch.func.vmap(seed_losses, in_dims=(0, 0, 0 if heads else None, 0))
 
     def update() -> None:
-        seeds_tensors = [batch_tensors(replay.sample(config.batch_size, rng), "cpu")
+        seeds_tensors = [batch_tensors(replay.sample(config.batch_size, rng), config.device)
                          for _ in range(K)]  # fmt: skip
         tensors = stack_seeds(seeds_tensors)
-        td, aux = batched(stacked.params, targets.params, heads.params, tensors)
+        td, aux = batched(stacked.params, targets.params, heads.params if heads else None, tensors)
         adam.zero_grad()
         (td + config.aux_voltage_weight * aux).sum().backward()
         clip_grad_norm_per_seed(trained, config.max_grad_norm)
         adam.step()
 
     obs = observation((K, 16))
-    state = pairs[0][0].initial_state(16, config.n_neurons)
+    state = pairs[0][0].initial_state(16, config.n_neurons, device=config.device)
     state = tuple(s.expand(K, *s.shape).clone() for s in state)
     with torch.no_grad():
         step = timed(lambda: stacked.call("step", obs, state), 10 * repeats)
@@ -174,9 +194,11 @@ def main() -> None:
     parser.add_argument("--repeats", type=int, default=1)
     parser.add_argument("--quick", action="store_true", help="K = 2, 1 round of 4 updates")
     parser.add_argument("--micro", action="store_true", help="time update and step in-process")
+    parser.add_argument("--preset", choices=sorted(PRESETS), default="quick", help="--micro sizes")
+    parser.add_argument("--device", default="cpu", help="--micro device: cpu, cuda, ...")
     args = parser.parse_args()
     if args.micro:
-        micro(args.seeds, args.repeats)
+        micro(args.seeds, args.repeats, args.preset, args.device)
         return
     if args.quick:
         args.seeds, args.rounds, args.updates_per_round = [2], 1, 4

@@ -1,0 +1,65 @@
+#!/usr/bin/env bash
+# One GPU session (docs/benchmarks.md, "Seed groups on a GPU"), in steps that fit the
+# device tool's 10-minute commands; run from the repository root:
+#
+#   source benchmarks/gpu_session.sh setup   # carried wheels (gymnasium, tyro) + PYTHONPATH
+#   bash benchmarks/gpu_session.sh check     # CUDA tests, micro benchmark (Table-2 and quick)
+#   bash benchmarks/gpu_session.sh start     # the sweeps below, detached (setsid), as seed groups
+#   bash benchmarks/gpu_session.sh status    # progress of every trial, GPU use
+#   bash benchmarks/gpu_session.sh collect   # results (no checkpoints) -> $OUT/gpu-results.tgz
+#
+# The sweeps: docs/results/fig4-fast (quick preset, 4 architectures x 5 seeds),
+# docs/results/fig5-quick-n20 (quick, 20 training networks, 3 seeds) and
+# docs/results/fig4-paper-gpu (Table 2, 4 architectures x 10 seeds, as far as the time goes),
+# all at once on one GPU, one process per seed group.
+RESULTS=${RESULTS:-/tmp/gpu-results}
+OUT=${OUT:-/tmp/gpu-out}
+SWEEPS="fig4-fast:4 fig5-quick-n20:1 fig4-paper-gpu:4"
+
+for step in "$@"; do
+  case $step in
+    setup)
+      python3 -m pip install -q --no-index --no-deps --no-compile --no-cache-dir --upgrade \
+        --target /tmp/site .whl/*.whl || return 1 2>/dev/null || exit 1
+      export PYTHONPATH=/tmp/site:$PWD PYTHONUNBUFFERED=1
+      nvidia-smi --query-gpu=name,memory.total,driver_version --format=csv,noheader
+      python3 -c "import torch; print('torch', torch.__version__, 'cuda', torch.cuda.is_available())"
+      ;;
+    check)
+      python3 -m pytest -q -p no:cacheprovider tests/test_ensemble.py -k "cuda or identical" 2>&1 | tail -4
+      for preset in paper quick; do
+        python3 benchmarks/bench_ensemble.py --micro --preset $preset --device cuda \
+          --seeds 1 10 40 | tee "$OUT/micro-$preset-cuda.txt"
+      done
+      ;;
+    start)
+      mkdir -p "$RESULTS"
+      nohup nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv -l 15 \
+        > "$RESULTS/gpu-use.csv" 2>&1 < /dev/null &
+      for entry in $SWEEPS; do
+        name=${entry%%:*}
+        setsid nohup python3 -m spikectl.cli sweep --config "docs/results/$name/sweep-file.json" \
+          --sweep-dir "$RESULTS/$name" --group-seeds --workers "${entry##*:}" \
+          > "$RESULTS/$name.log" 2>&1 < /dev/null &
+      done
+      sleep 5
+      ;;
+    status)
+      date -u
+      nvidia-smi --query-gpu=utilization.gpu,memory.used --format=csv,noheader
+      for entry in $SWEEPS; do
+        name=${entry%%:*}
+        echo "== $name: $(tail -n 2 "$RESULTS/$name.log" | tr '\n' ' ')"
+        for metrics in "$RESULTS/$name"/trials/*/metrics.csv; do
+          [ -f "$metrics" ] && echo "$(basename "$(dirname "$metrics")") $(tail -n 1 "$metrics")"
+        done | head -n 12
+      done
+      ;;
+    collect)
+      tar -C "$RESULTS" -czf "$OUT/gpu-results.tgz" --exclude='checkpoint.pt' \
+        --exclude='group_checkpoint.pt' --exclude='model.pt' --exclude='*.npz' \
+        --exclude='tensorboard' --exclude='*.lock' . && ls -la "$OUT"
+      ;;
+    *) echo "unknown step $step (setup, check, start, status, collect)"; exit 2 ;;
+  esac
+done
