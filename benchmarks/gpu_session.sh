@@ -8,10 +8,11 @@
 #   bash benchmarks/gpu_session.sh status    # progress of every trial, GPU use
 #   bash benchmarks/gpu_session.sh collect   # results (no checkpoints) -> $OUT/gpu-results.tgz
 #
-# The sweeps: docs/results/fig4-fast (quick preset, 4 architectures x 5 seeds),
-# docs/results/fig5-quick-n20 (quick, 20 training networks, 3 seeds) and
-# docs/results/fig4-paper-gpu (Table 2, 4 architectures x 10 seeds, as far as the time goes),
-# all at once on one GPU, one process per seed group.
+# The sweeps, all at once on one GPU, one process per seed group: the sweep files of
+# docs/results/fig4-fast (quick preset, 4 architectures x 5 seeds) and
+# docs/results/fig5-quick-n20 (quick, 20 training networks, 3 seeds) with "device": "cuda"
+# added to their overrides, and fig4-paper-gpu (Table 2, 4 architectures x 10 seeds, as far
+# as the time goes).
 RESULTS=${RESULTS:-/tmp/gpu-results}
 OUT=${OUT:-/tmp/gpu-out}
 SWEEPS="fig4-fast:4 fig5-quick-n20:1 fig4-paper-gpu:4"
@@ -34,11 +35,23 @@ for step in "$@"; do
       ;;
     start)
       mkdir -p "$RESULTS"
+      python3 - "$RESULTS" <<'PY'
+import json, pathlib, sys
+root = pathlib.Path(sys.argv[1])
+for name in ("fig4-fast", "fig5-quick-n20"):
+    sweep = json.loads(pathlib.Path(f"docs/results/{name}/sweep-file.json").read_text())
+    sweep.setdefault("overrides", {})["device"] = "cuda"
+    (root / f"{name}.json").write_text(json.dumps(sweep))
+archs = ["drqn", "ddrqn", "dmdrqn", "tdrqn"]
+paper = {"base": "paper", "overrides": {"device": "cuda"},
+         "grid": {"arch": archs, "seed": list(range(10))}}
+(root / "fig4-paper-gpu.json").write_text(json.dumps(paper))
+PY
       nohup nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv -l 15 \
         > "$RESULTS/gpu-use.csv" 2>&1 < /dev/null &
       for entry in $SWEEPS; do
         name=${entry%%:*}
-        setsid nohup python3 -m spikectl.cli sweep --config "docs/results/$name/sweep-file.json" \
+        setsid nohup python3 -m spikectl.cli sweep --config "$RESULTS/$name.json" \
           --sweep-dir "$RESULTS/$name" --group-seeds --workers "${entry##*:}" \
           > "$RESULTS/$name.log" 2>&1 < /dev/null &
       done
