@@ -3,11 +3,11 @@ preset" section, from committed run directories and baseline CSVs.
 
     python docs/results/paper_claims_table.py docs/results [docs/images/fig5_quick.png]
 
-Prints two markdown tables, each with the baselines of the same 100 unseen test
+Prints three markdown tables, each with the baselines of the same 100 unseen test
 networks (doing nothing; a random legal policy, mean ± sd over its 10 seeds; the
-identify-and-plan controller, no training): the TDRQN design choices (this project's
-input and head against the paper-literal ones), and Figure 5 (TDRQN trained on 10, 20,
-40 and 100 networks). Every trial is the quick preset (264 000 steps) on one Torch
+identify-and-plan controller, no training): Figure 4 (the four architectures, 5 seeds
+each), the TDRQN design choices (this project's input and head against the
+paper-literal ones), and Figure 5 (TDRQN trained on 10, 20, 40 and 100 networks). Every trial is the quick preset (264 000 steps) on one Torch
 thread; wall minutes depend on what else ran on the machine, core minutes (process CPU
 time) do not, and are missing for runs made before spikectl logged CPU time. With a
 figure path, also draws Figure 5 (test return against steps, one curve per size).
@@ -31,6 +31,8 @@ DESIGN = {
     "paper-literal input: target indicator only after the transformer": "tdrqn-literal-input",
     "pooled do-nothing head (Q of doing nothing without a value stream)": "tdrqn-pooled-head",
 }
+FIGURE4 = "fig4-fast"
+ARCH_LABELS = {"drqn": "DRQN", "ddrqn": "DDRQN", "dmdrqn": "DMDRQN", "tdrqn": "TDRQN"}
 SIZES = {
     10: "fig5-quick-n10",
     20: "fig5-quick-n20",
@@ -106,6 +108,9 @@ def runs_of(results: Path, name: str):
 
 def main() -> None:
     results = Path(sys.argv[1])
+    by_arch = group_runs(runs_of(results, FIGURE4), "arch")
+    architectures = {label: by_arch.get(arch, []) for arch, label in ARCH_LABELS.items()}
+    print(table("architecture", architectures, results))
     design = {label: runs_of(results, name) for label, name in DESIGN.items()}
     print(table("TDRQN variant", design, results))
     sizes = {f"{n} training networks": runs_of(results, name) for n, name in SIZES.items()}
