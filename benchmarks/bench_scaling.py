@@ -25,11 +25,12 @@ import numba
 import numpy as np
 from bench_simulator import median_seconds  # a sibling script in benchmarks/
 
-from spikectl.contexts import ContextSet, generate_topology
-from spikectl.env import NeuronControlEnv
-from spikectl.params import NeuronParams
-from spikectl.simulator import SimulatorState, advance, as_weight_batch
-from spikectl.vector_env import NeuronControlVectorEnv
+from spikectl.contexts import ContextSet
+from spikectl.contexts.generation import generate_topology
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import SimulatorState, advance, as_weight_batch
 
 SIZES = (8, 16, 32, 64, 128, 256)
 STEPS = 60

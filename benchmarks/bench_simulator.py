@@ -21,7 +21,7 @@ import numba
 import numpy as np
 
 from spikectl import NeuronParams, simulate
-from spikectl.contexts import generate_topology
+from spikectl.contexts.generation import generate_topology
 
 CASES = [
     (1, 8),

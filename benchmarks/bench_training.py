@@ -25,7 +25,8 @@ import torch
 import torch.nn.functional as F
 
 from spikectl.contexts import make_splits
-from spikectl.rollout import run_episodes
+from spikectl.envs.rollout import run_episodes
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.training.config import PAPER, PRESETS
 from spikectl.training.dqn import (
     EpsilonGreedyPolicy,
@@ -35,7 +36,6 @@ from spikectl.training.dqn import (
     td_loss,
 )
 from spikectl.training.replay import EpisodeReplay
-from spikectl.vector_env import NeuronControlVectorEnv
 
 
 def filled_replay(config, train_set, rng) -> EpisodeReplay:

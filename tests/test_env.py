@@ -17,10 +17,10 @@ from gymnasium.error import ResetNeeded
 from gymnasium.utils.env_checker import check_env
 
 import spikectl
-from spikectl import registration
 from spikectl.contexts import ContextSet, make_context, make_splits
-from spikectl.env import MAX_REWARD, NeuronControlEnv, step_rewards
-from spikectl.params import NeuronParams
+from spikectl.envs import registration
+from spikectl.envs.env import MAX_REWARD, NeuronControlEnv, step_rewards
+from spikectl.neuron.params import NeuronParams
 
 ENV_ID = registration.ENV_ID
 SMALL = {"n_train": 10, "n_test": 10}
@@ -111,8 +111,8 @@ def test_registration_is_idempotent():
         importlib.reload(registration).register_envs()
         importlib.reload(spikectl)
     spec = gym.spec(ENV_ID)
-    assert spec.entry_point == "spikectl.env:NeuronControlEnv"
-    assert spec.vector_entry_point == "spikectl.vector_env:NeuronControlVectorEnv"
+    assert spec.entry_point == "spikectl.envs.env:NeuronControlEnv"
+    assert spec.vector_entry_point == "spikectl.envs.vector_env:NeuronControlVectorEnv"
 
 
 def test_same_seed_same_episodes():

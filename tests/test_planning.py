@@ -11,9 +11,9 @@ import pytest
 import spikectl
 from spikectl import IdentifyAndPlan, NeuronParams, make_context, make_splits, plan_episode
 from spikectl.cli import main
+from spikectl.envs.rollout import evaluate_policy
 from spikectl.planning import ConnectivityEstimate, DiscreteConnectivityEstimate, ObservedState
 from spikectl.planning.baselines import run_baselines
-from spikectl.rollout import evaluate_policy
 
 
 @pytest.fixture(scope="module")
@@ -201,8 +201,8 @@ def test_sampled_hypotheses_keep_known_entries_and_follow_the_uniforms():
 def test_beam_search_on_identical_hypotheses_is_the_single_network_search(splits):
     from dataclasses import replace
 
+    from spikectl.neuron.simulator import SimulatorState
     from spikectl.planning import beam_search, model_of_context
-    from spikectl.simulator import SimulatorState
 
     for context in splits[0][:4]:
         model = model_of_context(context)
@@ -218,8 +218,8 @@ def test_beam_search_ranks_by_the_mean_over_hypotheses():
     # Two hypotheses about 0 -> 1 and 2 -> 1: under the first only 0 excites the target,
     # under the second only 2 does; stimulating 0 at step 0 hits the wanted spike at
     # step 1 under one of them (mean reward half of the spike's), as does 2.
+    from spikectl.neuron.simulator import SimulatorState
     from spikectl.planning import PlanningModel, beam_search
-    from spikectl.simulator import SimulatorState
 
     first = np.zeros((3, 3), dtype=np.int8)
     first[0, 1] = 1

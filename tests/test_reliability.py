@@ -30,8 +30,9 @@ import torch
 import spikectl  # noqa: F401  (registers the environments)
 from spikectl import ContextSet, NeuronParams
 from spikectl.cli import main
-from spikectl.context_files import ContextFileError
-from spikectl.env import NeuronControlEnv
+from spikectl.contexts.file_format import ContextFileError
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.experiments.sweep import Sweep, SweepError, run_sweep, run_trial
 from spikectl.files import FileWriteError
 from spikectl.training.checkpoint import (
@@ -44,7 +45,6 @@ from spikectl.training.checkpoint import (
 )
 from spikectl.training.config import SMOKE, TrainConfig
 from spikectl.training.dqn import train
-from spikectl.vector_env import NeuronControlVectorEnv
 
 TINY = dataclasses.replace(
     SMOKE, total_env_steps=8 * 20 * 2, checkpoint_every_episodes=8, eval_every_episodes=8

@@ -8,7 +8,7 @@ from pathlib import Path
 import numpy as np
 
 from spikectl.files import atomic_write
-from spikectl.simulator import DO_NOTHING
+from spikectl.neuron.simulator import DO_NOTHING
 
 
 def _pyplot():

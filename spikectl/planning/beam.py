@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spikectl.env_support import step_rewards
-from spikectl.params import NeuronParams
-from spikectl.simulator import SimulatorState, advance
+from spikectl.envs.env_support import step_rewards
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import SimulatorState, advance
 
 # Voltages are compared at this resolution (mV) when duplicate states are merged: far
 # below any difference the dynamics can act on, far above float round-off.

@@ -27,9 +27,9 @@ from math import erfc as _erfc
 
 import numpy as np
 
-from spikectl.contexts import EXCITATORY_PROBABILITY, connection_probability
-from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING, SimulatorState
+from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING, SimulatorState
 
 erfc = np.vectorize(_erfc, otypes=[np.float64])
 

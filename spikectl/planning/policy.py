@@ -24,11 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from spikectl.params import NeuronParams
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING, advance
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.discrete import DiscreteConnectivityEstimate
 from spikectl.planning.identify import _NOISE_FREE_SD, ConnectivityEstimate, ObservedState
-from spikectl.simulator import DO_NOTHING, advance
 
 IDENTIFICATIONS = ("gaussian", "discrete")
 """How the policy identifies G: a Gaussian posterior (ridge regression, any n) or the

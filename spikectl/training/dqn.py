@@ -27,13 +27,14 @@ import torch.nn.functional as F
 
 from spikectl.agents import make_agent, make_voltage_predictor, masked_q
 from spikectl.agents.blocks import normalised_voltage, observation_batch
-from spikectl.rollout import (
+from spikectl.envs.rollout import (
     EpisodeBatch,
     do_nothing_policy,
     evaluate_policy,
     make_random_policy,
     run_episodes,
 )
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.training.checkpoint import (
     RunDirError,
     TrainingState,
@@ -46,7 +47,6 @@ from spikectl.training.checkpoint import (
 from spikectl.training.config import TrainConfig
 from spikectl.training.contexts import load_or_make_contexts
 from spikectl.training.replay import EpisodeBatchArrays, EpisodeReplay
-from spikectl.vector_env import NeuronControlVectorEnv
 
 METRIC_FIELDS = (
     "episode", "env_steps", "updates", "epsilon", "train_return", "test_return", "loss",

@@ -31,7 +31,13 @@ import torch
 
 from spikectl.agents import make_agent
 from spikectl.agents.stacked import StackedNetworks
-from spikectl.rollout import do_nothing_policy, evaluate_policy, make_random_policy, run_episodes
+from spikectl.envs.rollout import (
+    do_nothing_policy,
+    evaluate_policy,
+    make_random_policy,
+    run_episodes,
+)
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.training.checkpoint import (
     RunDirError,
     TrainingState,
@@ -58,7 +64,6 @@ from spikectl.training.group_files import (
     save_group_checkpoint,
 )
 from spikectl.training.replay import EpisodeReplay
-from spikectl.vector_env import NeuronControlVectorEnv
 
 
 def seed_dirs(run_dir: str | Path, seeds: list[int]) -> list[Path]:

@@ -28,7 +28,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from spikectl.params import NeuronParams
+from spikectl.neuron.params import NeuronParams
 
 CONTEXT_FIELDS = (
     "hidden_neurons",

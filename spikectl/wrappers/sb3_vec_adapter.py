@@ -1,7 +1,7 @@
 """The batched environment as a Stable-Baselines3 ``VecEnv`` (needs the ``[sb3]`` extra).
 
 Build it with :func:`spikectl.wrappers.sb3_vec_env`. It steps every environment of a
-:class:`~spikectl.vector_env.NeuronControlVectorEnv` in one call, in the spaces of
+:class:`~spikectl.envs.vector_env.NeuronControlVectorEnv` in one call, in the spaces of
 :func:`spikectl.wrappers.sb3_compatible`, and follows SB3's conventions: an environment
 that ends is reset within the same ``step`` (its last observation is in
 ``info["terminal_observation"]``), seeds and options given with ``seed()`` /
@@ -22,13 +22,8 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices
 
-from spikectl.vector_env import NeuronControlVectorEnv
-from spikectl.wrappers import (
-    DO_NOTHING,
-    ILLEGAL_ACTIONS,
-    observation_for,
-    to_env_action,
-)
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.wrappers.sb3 import DO_NOTHING, ILLEGAL_ACTIONS, observation_for, to_env_action
 
 
 class SB3VecEnv(VecEnv):

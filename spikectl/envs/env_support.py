@@ -19,9 +19,9 @@ import numpy as np
 from gymnasium import spaces
 
 from spikectl.contexts import Context, ContextSet, make_splits
-from spikectl.extensions import CONTEXT_FIELDS, Extensions
-from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING, neuron_parameters
+from spikectl.neuron.extensions import CONTEXT_FIELDS, Extensions
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING, neuron_parameters
 
 MAX_REWARD = 0.5
 """R_max: the return of an episode's correct spikes, and separately of its correct silences."""

@@ -20,12 +20,12 @@ from typing import Any
 import numpy as np
 
 # The file format moved to spikectl.context_files; these names stay importable here.
-from spikectl.context_files import FORMAT_NAME as FORMAT_NAME
-from spikectl.context_files import FORMAT_VERSION as FORMAT_VERSION
-from spikectl.context_files import ContextFileError as ContextFileError
-from spikectl.extensions import Extensions, Heterogeneity, draw_heterogeneity, draw_hidden
-from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING, as_weight_batch, simulate
+from spikectl.contexts.file_format import FORMAT_NAME as FORMAT_NAME
+from spikectl.contexts.file_format import FORMAT_VERSION as FORMAT_VERSION
+from spikectl.contexts.file_format import ContextFileError as ContextFileError
+from spikectl.neuron.extensions import Extensions, Heterogeneity, draw_heterogeneity, draw_hidden
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING, as_weight_batch, simulate
 
 EXCITATORY_PROBABILITY = 0.8
 """Probability that a neuron is excitatory (Dale's law: all its outgoing edges are +1)."""
@@ -433,7 +433,7 @@ def __getattr__(name: str) -> Any:
     # ContextSet and make_splits live in spikectl.context_set (which imports this
     # module); they stay importable from here, where they have always been.
     if name in ("ContextSet", "make_splits"):
-        from spikectl import context_set
+        from spikectl.contexts import context_set
 
         return getattr(context_set, name)
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

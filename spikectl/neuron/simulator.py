@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spikectl.kernel import (
+from spikectl.neuron.kernel import (
     _SINCE_RELEASE_CAP,
     PARALLEL_MIN_BATCH,
     PARALLEL_MIN_WORK,
@@ -33,7 +33,7 @@ from spikectl.kernel import (
     _advance_serial,
     kernel_constants,
 )
-from spikectl.params import NeuronParams
+from spikectl.neuron.params import NeuronParams
 
 __all__ = [
     "DO_NOTHING",

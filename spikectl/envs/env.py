@@ -15,9 +15,9 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.error import ResetNeeded
 
-from spikectl import render as rendering
 from spikectl.contexts import Context, ContextSet
-from spikectl.env_support import (
+from spikectl.envs import render as rendering
+from spikectl.envs.env_support import (
     DEFAULT_EPISODE_LENGTH,
     DEFAULT_N_NEURONS,
     MAX_REWARD,
@@ -35,9 +35,9 @@ from spikectl.env_support import (
     resolve_extensions,
     step_rewards,
 )
-from spikectl.extensions import EnvironmentEffects, Extensions
-from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING, SimulatorState, advance
+from spikectl.neuron.extensions import EnvironmentEffects, Extensions
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance
 
 __all__ = [
     "DEFAULT_EPISODE_LENGTH",

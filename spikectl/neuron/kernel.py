@@ -14,7 +14,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from spikectl.params import NeuronParams
+from spikectl.neuron.params import NeuronParams
 
 # A call is split over threads only when it has at least this many networks and this
 # much work (networks x steps x neurons). Below, thread start-up costs more than it

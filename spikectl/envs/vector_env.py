@@ -20,9 +20,9 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from spikectl import render as rendering
 from spikectl.contexts import Context, ContextSet
-from spikectl.env_support import (
+from spikectl.envs import render as rendering
+from spikectl.envs.env_support import (
     RENDER_FPS,
     RENDER_MODES,
     ContextTables,
@@ -33,9 +33,9 @@ from spikectl.env_support import (
     resolve_contexts,
     resolve_extensions,
 )
-from spikectl.extensions import EnvironmentEffects, Extensions
-from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING, SimulatorState, advance, uniform_neuron_parameters
+from spikectl.neuron.extensions import EnvironmentEffects, Extensions
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance, uniform_neuron_parameters
 
 
 class LegalActionBatchSpace(spaces.MultiDiscrete):

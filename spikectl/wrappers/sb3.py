@@ -29,12 +29,12 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.envs.registration import EnvSpec
 
-from spikectl.env import NeuronControlEnv
-from spikectl.params import NEVER_RELEASES, NeuronParams
-from spikectl.vector_env import NeuronControlVectorEnv
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.neuron.params import NEVER_RELEASES, NeuronParams
 
 if TYPE_CHECKING:
-    from spikectl.sb3_vec_adapter import SB3VecEnv
+    from spikectl.wrappers.sb3_vec_adapter import SB3VecEnv
 
 DO_NOTHING = 0
 """The zero-based action that stimulates no neuron (the base environment's -1)."""
@@ -346,7 +346,7 @@ def sb3_vec_env(
     a Stable-Baselines3 ``VecEnv``, with the spaces of :func:`sb3_compatible` and per-env
     ``action_masks`` for ``MaskablePPO``; needs ``pip install "spikectl[sb3]"``."""
     try:
-        from spikectl.sb3_vec_adapter import SB3VecEnv
+        from spikectl.wrappers.sb3_vec_adapter import SB3VecEnv
     except ImportError as error:
         raise ImportError(
             f"sb3_vec_env needs Stable-Baselines3 ({error}); install it with "

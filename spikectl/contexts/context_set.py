@@ -18,8 +18,8 @@ from typing import Any, overload
 
 import numpy as np
 
-from spikectl.context_files import ContextFileError, read_npz, write_npz
-from spikectl.contexts import (
+from spikectl.contexts.file_format import ContextFileError, read_npz, write_npz
+from spikectl.contexts.generation import (
     MAX_TOPOLOGY_ATTEMPTS,
     Context,
     _check_episode_length,
@@ -28,8 +28,8 @@ from spikectl.contexts import (
     _check_size,
     generate_context,
 )
-from spikectl.extensions import Extensions, Heterogeneity
-from spikectl.params import NeuronParams
+from spikectl.neuron.extensions import Extensions, Heterogeneity
+from spikectl.neuron.params import NeuronParams
 
 
 class ContextSet(Sequence[Context]):

@@ -49,7 +49,7 @@ def register_envs() -> None:
             continue
         gymnasium.register(
             id=env_id,
-            entry_point="spikectl.env:NeuronControlEnv",
-            vector_entry_point="spikectl.vector_env:NeuronControlVectorEnv",
+            entry_point="spikectl.envs.env:NeuronControlEnv",
+            vector_entry_point="spikectl.envs.vector_env:NeuronControlVectorEnv",
             kwargs=kwargs,
         )

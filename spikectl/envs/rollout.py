@@ -14,9 +14,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from spikectl.contexts import ContextSet
-from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING
-from spikectl.vector_env import NeuronControlVectorEnv
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING
 
 Policy = Callable[[dict[str, np.ndarray], np.ndarray], np.ndarray]
 
