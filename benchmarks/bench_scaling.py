@@ -2,7 +2,7 @@
 
 For each n, on random topologies of the paper's rule and uniformly random actions:
 
-- the simulator kernel through ``spikectl.simulator.advance`` (the environments' hot
+- the simulator kernel through ``spikectl.neuron.simulator.advance`` (the environments' hot
   path, no input checks) on a fixed batch of networks for 60 steps: neuron-steps/s
   and µs per network-step;
 - the vector environment (``NeuronControlVectorEnv``, ``num_envs`` = the batch) stepped

@@ -19,7 +19,8 @@ from gymnasium.utils.env_checker import check_env
 import spikectl
 from spikectl.contexts import ContextSet, make_context, make_splits
 from spikectl.envs import registration
-from spikectl.envs.env import MAX_REWARD, NeuronControlEnv, step_rewards
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.env_support import MAX_REWARD, step_rewards
 from spikectl.neuron.params import NeuronParams
 
 ENV_ID = registration.ENV_ID

@@ -2,7 +2,7 @@
 
 What the vector environment shares with :class:`NeuronControlEnv` (the context
 tables, the reward formula, the spaces and the argument checks) lives in
-``spikectl.env_support`` and is importable from here too.
+``spikectl.envs.env_support``.
 """
 
 from __future__ import annotations
@@ -18,46 +18,22 @@ from gymnasium.error import ResetNeeded
 from spikectl.contexts import Context, ContextSet
 from spikectl.envs import render as rendering
 from spikectl.envs.env_support import (
-    DEFAULT_EPISODE_LENGTH,
-    DEFAULT_N_NEURONS,
-    MAX_REWARD,
     RENDER_FPS,
     RENDER_MODES,
-    SPLITS,
     ContextTables,
     LegalActionSpace,
     as_action,
     check_context,
     check_context_index,
-    is_int,
     observation_space,
     resolve_contexts,
     resolve_extensions,
-    step_rewards,
 )
 from spikectl.neuron.extensions import EnvironmentEffects, Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance
 
-__all__ = [
-    "DEFAULT_EPISODE_LENGTH",
-    "DEFAULT_N_NEURONS",
-    "MAX_REWARD",
-    "RENDER_FPS",
-    "RENDER_MODES",
-    "SPLITS",
-    "ContextTables",
-    "LegalActionSpace",
-    "NeuronControlEnv",
-    "as_action",
-    "check_context",
-    "check_context_index",
-    "is_int",
-    "observation_space",
-    "resolve_contexts",
-    "resolve_extensions",
-    "step_rewards",
-]
+__all__ = ["NeuronControlEnv"]
 
 
 class NeuronControlEnv(gym.Env[dict[str, Any], int]):

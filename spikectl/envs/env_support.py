@@ -1,9 +1,9 @@
 """What the single and the vector environment share (SPEC 3).
 
 Resolving the ``contexts`` / ``extensions`` arguments to a :class:`ContextSet` and the
-effective :class:`~spikectl.extensions.Extensions`, the per-context lookup tables
+effective :class:`~spikectl.neuron.extensions.Extensions`, the per-context lookup tables
 (:class:`ContextTables`), the reward formula (:func:`step_rewards`), the spaces and the
-action checks. Everything here is importable from ``spikectl.env`` as well.
+action checks.
 """
 
 from __future__ import annotations
@@ -19,6 +19,7 @@ import numpy as np
 from gymnasium import spaces
 
 from spikectl.contexts import Context, ContextSet, make_splits
+from spikectl.contexts.generation import is_int
 from spikectl.neuron.extensions import CONTEXT_FIELDS, Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, neuron_parameters
@@ -256,11 +257,6 @@ def observation_space(n_neurons: int, episode_length: int) -> spaces.Dict:
             "last_action": spaces.Discrete(n_neurons + 1, start=DO_NOTHING),
         }
     )
-
-
-def is_int(value: Any) -> bool:
-    """True for Python and NumPy integers, False for booleans (which Python calls ints)."""
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
 class LegalActionSpace(spaces.Discrete):

@@ -1,6 +1,6 @@
-"""The batched twin of :class:`~spikectl.env.NeuronControlEnv`: all networks in one call.
+"""The batched twin of :class:`~spikectl.envs.env.NeuronControlEnv`: all networks in one call.
 
-``step`` advances every sub-environment with a single :func:`spikectl.simulator.advance`
+``step`` advances every sub-environment with a single :func:`spikectl.neuron.simulator.advance`
 on a [num_envs, n, n] weight batch; rewards, observations, infos and autoresets are
 array operations. It behaves exactly like a ``gymnasium.vector.SyncVectorEnv`` of single
 environments (same seeds, same contexts, same autoreset), only faster.
@@ -21,6 +21,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from spikectl.contexts import Context, ContextSet
+from spikectl.contexts.generation import is_int
 from spikectl.envs import render as rendering
 from spikectl.envs.env_support import (
     RENDER_FPS,
@@ -28,7 +29,6 @@ from spikectl.envs.env_support import (
     ContextTables,
     check_context,
     check_context_index,
-    is_int,
     observation_space,
     resolve_contexts,
     resolve_extensions,
@@ -61,7 +61,7 @@ class LegalActionBatchSpace(spaces.MultiDiscrete):
 
 
 class NeuronControlVectorEnv(VectorEnv):
-    """``num_envs`` copies of :class:`~spikectl.env.NeuronControlEnv` stepped as one batch.
+    """``num_envs`` copies of :class:`~spikectl.envs.env.NeuronControlEnv` stepped as one batch.
 
     Takes ``num_envs`` plus the single environment's arguments; spaces are the single
     ones batched. Actions: int array [num_envs]. Infos: ``action_mask`` [num_envs, n + 1],

@@ -60,7 +60,7 @@ def plot_episode_raster(
     stimulus_mark = {"marker": "s", "s": 22, "facecolors": "none", "edgecolors": "tab:blue"}
     target_row = y[f"target n{target}"]
     # (row, steps marked, style): the pattern, then the target's steps classified as in
-    # spikectl.render (hit, unwanted spike, missed spike), then every other neuron.
+    # spikectl.envs.render (hit, unwanted spike, missed spike), then every other neuron.
     marks = [
         (y["pattern"], pattern, {**spike_mark, "color": "black", "label": "wanted spike"}),
         (target_row, pattern & target_spikes, {**spike_mark, "color": "tab:green", "label": "hit"}),

@@ -5,8 +5,9 @@
 (serially and with threads over the batch). The extensions (heterogeneous neurons,
 stochastic release, extra input) are optional arguments of the same kernel: None
 prunes their branches at compile time, so the paper's model does the paper's
-arithmetic and nothing more. ``spikectl.simulator`` is the interface (``advance``, ``simulate``);
-with ``NUMBA_DISABLE_JIT=1`` the same code runs as plain Python.
+arithmetic and nothing more. ``spikectl.neuron.simulator`` is the interface
+(``advance``, ``simulate``); with ``NUMBA_DISABLE_JIT=1`` the same code runs as plain
+Python.
 """
 
 from __future__ import annotations

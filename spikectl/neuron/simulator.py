@@ -1,7 +1,7 @@
 """The batched simulator of SPEC section 1: LIF neurons with short-term depression.
 
 There is one implementation of the dynamics, the Numba kernel ``_advance_kernel`` in
-``spikectl.kernel``. It moves a batch of independent networks forward by any number of
+``spikectl.neuron.kernel``. It moves a batch of independent networks forward by any number of
 1 ms steps and writes what an observer sees. ``simulate`` runs whole action sequences
 through it; ``advance`` runs one step (or a few) of a :class:`SimulatorState` and is
 what the environments call. With ``NUMBA_DISABLE_JIT=1`` the same code runs as plain

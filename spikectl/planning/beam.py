@@ -1,7 +1,7 @@
 """Beam search over action sequences with the batched simulator (the planner's core).
 
 The planner never has its own copy of the dynamics: every candidate step is one call
-of :func:`spikectl.simulator.advance` on a batch of simulator states, one per
+of :func:`spikectl.neuron.simulator.advance` on a batch of simulator states, one per
 (beam entry, action) pair. Two facts of the model (SPEC 1) make a beam search strong
 here:
 
@@ -40,7 +40,7 @@ class PlanningModel:
 
     Attributes:
         weights: [K, n, n] int8 signs or float64 signed synaptic strengths in units of
-            w_in (what :func:`spikectl.simulator.advance` takes): K = 1 for a known
+            w_in (what :func:`spikectl.neuron.simulator.advance` takes): K = 1 for a known
             network, K > 1 for hypotheses about an uncertain one (planned on at once,
             ranked by the mean return over them).
         target: the neuron whose spikes are rewarded (a neuron index of the model).

@@ -271,7 +271,7 @@ class IdentifyAndPlan:
 
     def vector_policy(self, num_envs: int):
         """A batched policy ``policy(observations, action_mask) -> actions`` for
-        :func:`spikectl.rollout.run_episodes`: one independent copy per environment."""
+        :func:`spikectl.envs.rollout.run_episodes`: one independent copy per environment."""
         copies = [
             IdentifyAndPlan(
                 self.params,

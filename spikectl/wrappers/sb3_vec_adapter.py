@@ -23,7 +23,12 @@ from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices
 
 from spikectl.envs.vector_env import NeuronControlVectorEnv
-from spikectl.wrappers.sb3 import DO_NOTHING, ILLEGAL_ACTIONS, observation_for, to_env_action
+from spikectl.wrappers.sb3_spaces import (
+    DO_NOTHING,
+    check_illegal_action,
+    observation_for,
+    to_env_action,
+)
 
 
 class SB3VecEnv(VecEnv):
@@ -52,10 +57,7 @@ class SB3VecEnv(VecEnv):
                 "sb3_vec_env wraps a spikectl NeuronControlVectorEnv (or gymnasium.make_vec of "
                 f"a spikectl id), got {type(vector_env).__name__}"
             )
-        if illegal_action not in ILLEGAL_ACTIONS:
-            raise ValueError(
-                f"illegal_action must be one of {ILLEGAL_ACTIONS}, got {illegal_action!r}"
-            )
+        check_illegal_action(illegal_action)
         self.vector_env = vector_env
         self.illegal_action = illegal_action
         self.observation_codec = observation_for(vector_env, flatten)
