@@ -24,6 +24,7 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from spikectl.agents import ARCHITECTURES
 from spikectl.contexts import make_splits
 from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
@@ -110,7 +111,7 @@ def collection_rate(config, train_set, num_envs: int, episodes: int, rng) -> flo
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--archs", nargs="+", default=["tdrqn", "drqn", "ddrqn", "dmdrqn"])
+    parser.add_argument("--archs", nargs="+", default=list(ARCHITECTURES))
     parser.add_argument("--updates", type=int, default=30)
     parser.add_argument("--episodes", type=int, default=5, help="collection repeats")
     parser.add_argument("--threads", type=int, default=2)

@@ -28,6 +28,7 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
+from spikectl.agents import ARCHITECTURES
 from spikectl.files import FileWriteError, atomic_write_text, make_dirs
 from spikectl.training.checkpoint import (
     CHECKPOINT_FILE,
@@ -43,7 +44,7 @@ TRIALS_DIR = "trials"
 GROUPS_DIR = "groups"
 
 PAPER_SWEEPS: dict[str, dict[str, Any]] = {
-    "fig4": {"base": "paper", "grid": {"arch": ["drqn", "ddrqn", "dmdrqn", "tdrqn"],
+    "fig4": {"base": "paper", "grid": {"arch": list(ARCHITECTURES),
                                        "seed": list(range(10))}},
     "fig5": {"base": "paper", "grid": {"arch": ["tdrqn"], "n_train": [10, 20, 40, 100],
                                        "seed": list(range(10))}},
