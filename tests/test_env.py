@@ -343,3 +343,16 @@ def test_documented_example_runs():
     assert blocks
     for block in blocks:
         exec(compile(block, "docs/environment.md", "exec"), {})
+
+
+def test_random_legal_actions_uniform_over_legal_and_seeded():
+    from spikectl.envs.env_support import random_legal_actions
+
+    mask = np.array([[True, False, True, True], [False, False, False, False]])  # [2, n + 1]
+    draws = random_legal_actions(np.repeat(mask[:1], 30_000, axis=0), np.random.default_rng(0))
+    values, counts = np.unique(draws, return_counts=True)
+    assert values.tolist() == [-1, 1, 2]  # never action 0, the illegal one
+    assert np.all(np.abs(counts / 30_000 - 1 / 3) < 0.01)
+    assert random_legal_actions(mask, np.random.default_rng(0))[1] == -1  # nothing legal
+    first, second = (random_legal_actions(mask, np.random.default_rng(7)) for _ in range(2))
+    assert first.dtype == np.int64 and first.tolist() == second.tolist()

@@ -50,6 +50,19 @@ def step_rewards(patterns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return reward_if_spike, reward_if_silent
 
 
+def random_legal_actions(action_mask: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """One uniformly random legal action per row: the library's only random-action sampler.
+
+    ``action_mask`` is bool [S, n + 1] (column a + 1 = action a, as in ``info["action_mask"]``);
+    returns int64 [S] in -1..n-1, -1 (do nothing) for a row with nothing legal. Draws exactly
+    ``rng.random(action_mask.shape)``, so a seed gives the same actions everywhere.
+    """
+    legal = np.asarray(action_mask, dtype=bool)
+    scores = rng.random(legal.shape)  # [S, n + 1]
+    scores[~legal] = -1.0
+    return scores.argmax(axis=1).astype(np.int64) + DO_NOTHING  # [S]
+
+
 @dataclass(frozen=True, eq=False)
 class ContextTables:
     """What the environments read about contexts, stacked over S contexts.
@@ -274,6 +287,6 @@ class LegalActionSpace(spaces.Discrete):
     def sample(
         self, mask: np.ndarray | None = None, probability: np.ndarray | None = None
     ) -> np.int64:
-        if mask is None and probability is None:
-            mask = self.legal_mask
-        return super().sample(mask=mask, probability=probability)
+        if mask is not None or probability is not None:
+            return super().sample(mask=mask, probability=probability)
+        return random_legal_actions(self.legal_mask[None], self.np_random)[0]

@@ -30,6 +30,7 @@ from spikectl.envs.env_support import (
     check_context,
     check_context_index,
     observation_space,
+    random_legal_actions,
     resolve_contexts,
     resolve_extensions,
 )
@@ -54,10 +55,7 @@ class LegalActionBatchSpace(spaces.MultiDiscrete):
     def sample(self, mask: tuple | None = None, probability: tuple | None = None) -> np.ndarray:
         if mask is not None or probability is not None:
             return super().sample(mask=mask, probability=probability)
-        counts = self.legal.sum(axis=1)
-        choice = (self.np_random.random(counts.shape) * counts).astype(np.int64)
-        legal_first = np.argsort(~self.legal, axis=1, kind="stable")
-        return (legal_first[np.arange(counts.size), choice] + DO_NOTHING).astype(self.dtype)
+        return random_legal_actions(self.legal, self.np_random).astype(self.dtype)
 
 
 class NeuronControlVectorEnv(VectorEnv):

@@ -29,7 +29,7 @@ from pathlib import Path
 from typing import Any
 
 from spikectl.agents import ARCHITECTURES
-from spikectl.files import FileWriteError, atomic_write_text, make_dirs
+from spikectl.files import FileWriteError, make_dirs, write_json
 from spikectl.training.checkpoint import (
     CHECKPOINT_FILE,
     CONFIG_FILE,
@@ -263,7 +263,7 @@ def run_sweep(
             f"{sweep_dir} holds another sweep ({SWEEP_FILE} differs): choose another directory"
         )
     make_dirs(sweep_dir)
-    atomic_write_text(saved, json.dumps(sweep.to_dict(), indent=2) + "\n")
+    write_json(saved, sweep.to_dict())
     trials = sweep.trials()
     workers = max(1, min(workers or os.cpu_count() or 1, len(trials)))
     echo(f"{len(trials)} trials in {sweep_dir / TRIALS_DIR}, {workers} worker(s)")

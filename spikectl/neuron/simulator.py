@@ -26,11 +26,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from spikectl.neuron.kernel import (
-    _SINCE_RELEASE_CAP,
     PARALLEL_MIN_BATCH,
     PARALLEL_MIN_WORK,
-    _advance_parallel,
-    _advance_serial,
+    SINCE_RELEASE_CAP,
+    advance_parallel,
+    advance_serial,
     kernel_constants,
 )
 from spikectl.neuron.params import NeuronParams
@@ -80,7 +80,7 @@ class SimulatorState:
         """Put the networks selected by the [B] mask ``which`` back at rest."""
         self.voltage_mV[which] = params.v_rest_mV
         self.refractory_left[which] = 0
-        self.steps_since_release[which] = _SINCE_RELEASE_CAP
+        self.steps_since_release[which] = SINCE_RELEASE_CAP
         self.released[which] = False
 
     def copy(self) -> SimulatorState:
@@ -146,7 +146,7 @@ def advance(
     batch, steps = actions.shape
     work = batch * steps * weights.shape[-1]
     threaded = batch >= PARALLEL_MIN_BATCH and work >= PARALLEL_MIN_WORK
-    kernel = _advance_parallel if threaded else _advance_serial
+    kernel = advance_parallel if threaded else advance_serial
     kernel(
         weights,
         actions,

@@ -36,7 +36,7 @@ erfc = np.vectorize(_erfc, otypes=[np.float64])
 # Residual noise (in units of w_in) assumed without measurement noise: float32
 # observations round potentials at ~1e-6 mV, so this is loose and still makes one
 # clean observation decisive against a prior variance of at most 0.3.
-_NOISE_FREE_SD = 0.01
+NOISE_FREE_SD = 0.01
 
 
 class ConnectivityEstimate:

@@ -28,7 +28,7 @@ from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, advance
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.discrete import DiscreteConnectivityEstimate
-from spikectl.planning.identify import _NOISE_FREE_SD, ConnectivityEstimate, ObservedState
+from spikectl.planning.identify import NOISE_FREE_SD, ConnectivityEstimate, ObservedState
 
 IDENTIFICATIONS = ("gaussian", "discrete")
 """How the policy identifies G: a Gaussian posterior (ridge regression, any n) or the
@@ -133,7 +133,7 @@ class IdentifyAndPlan:
         leak = params.dt_ms / params.membrane_time_constant_ms
         # The residual differences two noisy observations, the older one shrunk by the leak.
         noise_sd = noise_mV * np.hypot(1.0, 1.0 - leak) / synaptic_mV
-        self._residual_sd = max(noise_sd, _NOISE_FREE_SD)
+        self._residual_sd = max(noise_sd, NOISE_FREE_SD)
         self.reset()
 
     def reset(self) -> None:
