@@ -170,8 +170,11 @@ def test_target_voltage_feature_is_the_targets_normalised_voltage():
     assert x.shape == (2, 3, 4)
     assert x[0, :, 3].tolist() == [1.0, 1.0, 1.0]  # target 1 sits at threshold
     assert x[1, :, 3].tolist() == [2.0, 2.0, 2.0]  # target 2 at -30 mV
-    assert x[..., :3].equal(per_neuron_features(
-        obs, v_rest_mV=-70.0, v_threshold_mV=-50.0, with_target=True, dtype=torch.float32))
+    assert x[..., :3].equal(
+        per_neuron_features(
+            obs, v_rest_mV=-70.0, v_threshold_mV=-50.0, with_target=True, dtype=torch.float32
+        )
+    )
 
 
 @pytest.mark.parametrize("arch", ["ddrqn", "tdrqn"])

@@ -93,12 +93,8 @@ def _identify(weights: np.ndarray, actions: list[int], estimator=ConnectivityEst
     return estimate
 
 
-@pytest.mark.parametrize("estimator", [ConnectivityEstimate, DiscreteConnectivityEstimate])
-def test_identification_recovers_the_rows_of_every_released_neuron_exactly(estimator):
-    # A feed-forward network: stimulating 0, 1, 2 and 3 in turn releases each of 0..4
-    # at least once (0 makes 1 and 2 fire together, which is ambiguous for 3's
-    # column until 1 and 2 are stimulated alone). Neuron 5 has no input and is never
-    # stimulated, so it never releases.
+def feed_forward_probe() -> tuple[np.ndarray, list[int]]:
+    """A 6-neuron feed-forward network and 28 actions stimulating 0, 1, 2 and 3 in turn."""
     weights = np.zeros((6, 6), dtype=int)
     weights[0, [1, 2]] = 1
     weights[1, [3, 4]] = 1
@@ -108,6 +104,16 @@ def test_identification_recovers_the_rows_of_every_released_neuron_exactly(estim
     actions = [-1] * 28
     for step, neuron in ((0, 0), (7, 1), (14, 2), (21, 3)):
         actions[step] = neuron
+    return weights, actions
+
+
+@pytest.mark.parametrize("estimator", [ConnectivityEstimate, DiscreteConnectivityEstimate])
+def test_identification_recovers_the_rows_of_every_released_neuron_exactly(estimator):
+    # A feed-forward network: stimulating 0, 1, 2 and 3 in turn releases each of 0..4
+    # at least once (0 makes 1 and 2 fire together, which is ambiguous for 3's
+    # column until 1 and 2 are stimulated alone). Neuron 5 has no input and is never
+    # stimulated, so it never releases.
+    weights, actions = feed_forward_probe()
     estimate = _identify(weights, actions, estimator)
     signs, known = estimate.weights(known_sd=0.25)
     mean, sd = estimate.posterior()
@@ -173,15 +179,7 @@ def test_discrete_identification_knows_more_and_is_rarely_wrong(splits):
 
 
 def test_sampled_hypotheses_keep_known_entries_and_follow_the_uniforms():
-    weights = np.zeros((6, 6), dtype=int)
-    weights[0, [1, 2]] = 1
-    weights[1, [3, 4]] = 1
-    weights[2, 3] = -1
-    weights[3, 4] = 1
-    weights[5, 4] = 1
-    actions = [-1] * 28
-    for step, neuron in ((0, 0), (7, 1), (14, 2), (21, 3)):
-        actions[step] = neuron
+    weights, actions = feed_forward_probe()
     estimate = _identify(weights, actions)
     signs, known = estimate.weights(known_sd=0.25)
     k = 3
