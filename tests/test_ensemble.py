@@ -16,7 +16,7 @@ import pytest
 import torch
 from torch import nn
 
-from spikectl.agents import make_agent
+from spikectl.agents import ARCHITECTURES, make_agent
 from spikectl.agents.stacked import StackableLSTM, StackedNetworks
 from spikectl.training.checkpoint import RunDirError, load_model_weights, read_metrics
 from spikectl.training.config import SMOKE
@@ -72,7 +72,7 @@ def test_stackable_lstm_equals_nn_lstm_and_shares_its_parameters():
         StackableLSTM(nn.LSTM(4, 16, num_layers=2, batch_first=True))
 
 
-@pytest.mark.parametrize("arch", ["drqn", "ddrqn", "dmdrqn", "tdrqn"])
+@pytest.mark.parametrize("arch", ARCHITECTURES)
 def test_stacked_networks_compute_each_seeds_network(arch):
     networks = [build_networks(dataclasses.replace(SMOKE, arch=arch, seed=s))[0] for s in range(3)]
     stacked = StackedNetworks(networks)

@@ -184,14 +184,31 @@ def _step_via_forward(
     return q.squeeze(1), state  # [B, n+1]
 
 
-def _per_neuron_state(
-    net: nn.Module, lstm: PerNeuronLSTM, obs: Observation, state: State | None, B: int, n: int
-) -> State:
+def _per_neuron_lstm(
+    net: nn.Module, obs_seq: Observation, state: State | None, n_fixed: int | None
+) -> tuple[torch.Tensor, State]:
+    """The part DDRQN, DMDRQN and TDRQN share: check the observation, featurise each
+    neuron and run the shared per-neuron LSTM → outputs [B, T, n, H], final state."""
+    where = f"{type(net).__name__}.forward"
+    (B, T), n = check_observation(
+        obs_seq, leading_dims=2, episode_length=net.episode_length, n_neurons=n_fixed,
+        where=where,
+    )  # fmt: skip
+    obs_seq = long_indices(obs_seq)
     if state is None:
-        return net.initial_state(B, n, device=obs["voltage"].device)
-    H = lstm.hidden
-    check_state(state, [(B, n, H), (B, n, H)], f"{type(net).__name__}.forward")
-    return state
+        state = net.initial_state(B, n, device=obs_seq["voltage"].device)
+    H = net.lstm.hidden
+    check_state(state, [(B, n, H), (B, n, H)], where)
+    s = net.sizes
+    x = per_neuron_features(
+        obs_seq,
+        v_rest_mV=s.v_rest_mV,
+        v_threshold_mV=s.v_threshold_mV,
+        with_target=s.target_in_input,
+        with_target_voltage=s.target_voltage_in_input,
+        dtype=_param_dtype(net),
+    )  # [B, T, n, F]
+    return net.lstm(x, state)  # [B, T, n, H], (h, c)
 
 
 # ----------------------------------------------------------------------------
@@ -338,25 +355,7 @@ class PerNeuronQNetwork(nn.Module):
         self, obs_seq: Observation, state: State | None = None
     ) -> tuple[torch.Tensor, State]:
         """Per-neuron embeddings [B, T, n, M] before the context and the head."""
-        (B, T), n = check_observation(
-            obs_seq,
-            leading_dims=2,
-            episode_length=self.episode_length,
-            n_neurons=None,
-            where=f"{type(self).__name__}.forward",
-        )
-        obs_seq = long_indices(obs_seq)
-        state = _per_neuron_state(self, self.lstm, obs_seq, state, B, n)
-        s = self.sizes
-        x = per_neuron_features(
-            obs_seq,
-            v_rest_mV=s.v_rest_mV,
-            v_threshold_mV=s.v_threshold_mV,
-            with_target=s.target_in_input,
-            with_target_voltage=s.target_voltage_in_input,
-            dtype=_param_dtype(self),
-        )  # [B, T, n, F]
-        y, state = self.lstm(x, state)  # [B, T, n, H]
+        y, state = _per_neuron_lstm(self, obs_seq, state, n_fixed=None)  # [B, T, n, H]
         return self.mix(y), state  # [B, T, n, M]
 
     def q_values(self, features: torch.Tensor, obs_seq: Observation) -> torch.Tensor:
@@ -445,26 +444,9 @@ class DMDRQN(nn.Module):
         self, obs_seq: Observation, state: State | None = None
     ) -> tuple[torch.Tensor, State]:
         """The mixed system embedding [B, T, ff_hidden] before the context and the head."""
-        (B, T), n = check_observation(
-            obs_seq,
-            leading_dims=2,
-            episode_length=self.episode_length,
-            n_neurons=self.n_neurons,
-            where="DMDRQN.forward",
-        )
-        obs_seq = long_indices(obs_seq)
-        state = _per_neuron_state(self, self.lstm, obs_seq, state, B, n)
-        s = self.sizes
-        x = per_neuron_features(
-            obs_seq,
-            v_rest_mV=s.v_rest_mV,
-            v_threshold_mV=s.v_threshold_mV,
-            with_target=s.target_in_input,
-            with_target_voltage=s.target_voltage_in_input,
-            dtype=_param_dtype(self),
-        )  # [B, T, n, F]
-        y, state = self.lstm(x, state)  # [B, T, n, H]
-        y = y.reshape(B, T, n * s.lstm_hidden)  # [B, T, n*H]
+        y, state = _per_neuron_lstm(self, obs_seq, state, n_fixed=self.n_neurons)
+        B, T, n, H = y.shape
+        y = y.reshape(B, T, n * H)  # [B, T, n*H]
         return self.mix(y), state  # [B, T, ff_hidden]
 
     def q_values(self, features: torch.Tensor, obs_seq: Observation) -> torch.Tensor:
