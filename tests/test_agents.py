@@ -1,4 +1,4 @@
-"""Tests of the four recurrent Q-networks (spikectl.agents, SPEC 4)."""
+"""Tests of the four recurrent Q-networks (spikectl.agents, docs/agents.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Context generation (SPEC section 2), ContextSet files and bring-your-own contexts."""
+"""Context generation (docs/model.md), ContextSet files and bring-your-own contexts."""
 
 from __future__ import annotations
 

@@ -25,7 +25,8 @@ from spikectl.neuron.params import NeuronParams
 
 ENV_ID = registration.ENV_ID
 SMALL = {"n_train": 10, "n_test": 10}
-# Gymnasium's checker warns about any unbounded Box; the voltage is unbounded by design (SPEC 3).
+# Gymnasium's checker warns about any unbounded Box; the voltage is unbounded by design
+# (docs/environment.md).
 UNBOUNDED_BOX = re.compile(r"Box observation space (minimum|maximum) value is -?infinity")
 
 

@@ -1,4 +1,4 @@
-"""The extensions (SPEC 6, docs/extensions.md): each one's effect, off = the paper bit for bit."""
+"""The extensions (docs/extensions.md): each one's effect, off = the paper bit for bit."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Hand-computed dynamics of SPEC section 1, batching and input validation."""
+"""Hand-computed dynamics of the model (docs/model.md), batching and input validation."""
 
 from __future__ import annotations
 

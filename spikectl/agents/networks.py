@@ -1,4 +1,4 @@
-"""The paper's four recurrent Q-networks (Section 5.2, App. C and D; SPEC 4).
+"""The paper's four recurrent Q-networks (Section 5.2, App. C and D; docs/agents.md).
 
 - :class:`DRQN`   one LSTM over the whole system, + context → FF → n+1 Q-values.
 - :class:`DDRQN`  one shared LSTM with a state per neuron → per-neuron FF, + context
@@ -50,7 +50,7 @@ Observation = Mapping[str, torch.Tensor]
 
 @dataclass(frozen=True)
 class AgentSizes:
-    """Sizes and settings of the networks; defaults are the paper's Table 2 (SPEC 4).
+    """Sizes and settings of the networks; defaults are the paper's Table 2 (docs/agents.md).
 
     The fields marked "not in the paper" are this project's choices (docs/agents.md).
     """

@@ -1,4 +1,4 @@
-"""Context sets (SPEC 2): sequences of contexts, their splits, files and checksums.
+"""Context sets (docs/model.md): sequences of contexts, their splits, files and checksums.
 
 :class:`ContextSet` holds contexts of one shape with the parameters (and context-level
 extensions) they were made with, and saves to / loads from one ``.npz`` file

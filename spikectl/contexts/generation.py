@@ -1,4 +1,4 @@
-"""Procedurally generated contexts (SPEC section 2): topology, target neuron, pattern.
+"""Procedurally generated contexts (docs/model.md): topology, target neuron, pattern.
 
 A context is the hidden connectivity of one network, the neuron to control and the
 spike pattern it must produce, plus the *witness*: an action sequence that produces
@@ -348,7 +348,7 @@ def make_context(
 ) -> Context:
     """Bring your own connectome: build a validated context from a connectivity matrix.
 
-    Whatever is not given is generated as in SPEC 2 from ``seed``: the target
+    Whatever is not given is generated as in docs/model.md from ``seed``: the target
     (uniform among neurons with an excitatory input) and the pattern with its
     witness (random legal actions from rest, never a ``hidden`` neuron). A given
     witness must reproduce the given pattern under ``params`` and ``heterogeneity``;

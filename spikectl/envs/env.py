@@ -1,4 +1,4 @@
-"""The Gymnasium environment of SPEC section 3: make one neuron spike a target pattern.
+"""The Gymnasium environment (docs/environment.md): make one neuron spike a target pattern.
 
 What the vector environment shares with :class:`NeuronControlEnv` (the context
 tables, the reward formula, the spaces and the argument checks) lives in
@@ -41,7 +41,7 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     ## Description
 
     Closed-loop control of a simulated network of leaky integrate-and-fire neurons
-    with short-term synaptic depression (SPEC 1). In each episode a *context* fixes the
+    with short-term synaptic depression (docs/model.md). In each episode a *context* fixes the
     hidden signed connectivity, a target neuron and a binary target pattern of N steps;
     the agent stimulates one (non-target) neuron per step, or none, so that the target
     spikes exactly when the pattern says. Every context carries a witness action sequence
@@ -100,9 +100,9 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     | `n_train`, `n_test`   | 100, 100  | sizes of the generated sets (`make_splits`)      |
     | `context_seed`        | 0         | seed of the generated sets                       |
     | `params`              | `None`    | `NeuronParams`; None: the context set's          |
-    | `allow_target_action` | `False`   | make stimulating the target legal (SPEC 6)       |
+    | `allow_target_action` | `False`   | make stimulating the target legal (an extension) |
     | `render_mode`         | `None`    | `"ansi"` or `"rgb_array"`                        |
-    | `extensions`          | `None`    | `Extensions` or a dict of its fields (SPEC 6)    |
+    | `extensions`          | `None`    | `Extensions` or a dict of its fields             |
 
     `extensions` (docs/extensions.md) switches on measurement noise, photobleaching,
     stochastic release, background activity and the target as an action; its
@@ -129,7 +129,7 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     ```
 
     ## Version History
-    * v0: Initial version (SPEC sections 1-3); extensions (SPEC 6) off by default.
+    * v0: Initial version; the extensions (docs/extensions.md) off by default.
     """
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}

@@ -1,4 +1,4 @@
-"""What the single and the vector environment share (SPEC 3).
+"""What the single and the vector environment share (docs/environment.md).
 
 Resolving the ``contexts`` / ``extensions`` arguments to a :class:`ContextSet` and the
 effective :class:`~spikectl.neuron.extensions.Extensions`, the per-context lookup tables
@@ -38,7 +38,7 @@ def step_rewards(patterns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Reward of each step [..., N] if the target spikes, and if it stays silent.
 
     With m spikes in a pattern of N steps: R_max / m for a wanted spike,
-    R_max / (N - m) for a wanted silence, 0 otherwise (SPEC 3).
+    R_max / (N - m) for a wanted silence, 0 otherwise (docs/environment.md).
     """
     wanted = np.asarray(patterns).astype(bool)
     episode_length = wanted.shape[-1]
@@ -260,7 +260,8 @@ def as_action(action: Any) -> int:
 
 
 def observation_space(n_neurons: int, episode_length: int) -> spaces.Dict:
-    """The observation space of one environment (SPEC 3); the connectivity is not in it."""
+    """The observation space of one environment (docs/environment.md); the connectivity is
+    not in it."""
     return spaces.Dict(
         {
             "voltage": spaces.Box(-np.inf, np.inf, (n_neurons,), np.float32),

@@ -1,4 +1,4 @@
-"""The one implementation of the step (SPEC 1): a Numba kernel over a batch of networks.
+"""The one implementation of the step (docs/model.md): a Numba kernel over a batch of networks.
 
 ``_advance_kernel`` moves a batch of independent networks forward by any number of
 1 ms steps and writes what an observer sees; it is compiled twice from the same source

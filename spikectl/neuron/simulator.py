@@ -1,4 +1,4 @@
-"""The batched simulator of SPEC section 1: LIF neurons with short-term depression.
+"""The batched simulator (docs/model.md): LIF neurons with short-term depression.
 
 There is one implementation of the dynamics, the Numba kernel ``_advance_kernel`` in
 ``spikectl.neuron.kernel``. It moves a batch of independent networks forward by any number of
@@ -7,7 +7,7 @@ through it; ``advance`` runs one step (or a few) of a :class:`SimulatorState` an
 what the environments call. With ``NUMBA_DISABLE_JIT=1`` the same code runs as plain
 Python.
 
-Order inside step t, given action a_t (SPEC 1):
+Order inside step t, given action a_t (docs/model.md):
 
 1. I_syn,j = w_in * sum_i G[i, j] * released_i(t-1)      (one-step synaptic delay)
 2. I_ext,j = w_e if a_t == j else 0

@@ -2,7 +2,7 @@
 
 The planner never has its own copy of the dynamics: every candidate step is one call
 of :func:`spikectl.neuron.simulator.advance` on a batch of simulator states, one per
-(beam entry, action) pair. Two facts of the model (SPEC 1) make a beam search strong
+(beam entry, action) pair. Two facts of the model (docs/model.md) make a beam search strong
 here:
 
 * an action at step t reaches the target no earlier than step t + 1 (the target is

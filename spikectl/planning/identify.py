@@ -1,7 +1,7 @@
 """Identify the hidden connectivity from observed potentials (the model is public, G is not).
 
 With the paper's noise-free model, a neuron j that was not refractory at step t
-obeys, exactly (SPEC 1, docs/model.md):
+obeys, exactly (docs/model.md):
 
     V_obs,j(t) = V_j(t-1) - (V_j(t-1) - V_r) dt/(RC) + 40 mV [a_t = j]
                  + 20 mV * sum_i G[i, j] released_i(t-1)

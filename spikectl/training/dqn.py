@@ -1,4 +1,4 @@
-"""Recurrent double Q-learning over whole episodes (SPEC section 5, paper Appendix D).
+"""Recurrent double Q-learning over whole episodes (docs/training.md, paper Appendix D).
 
 ``train(config, run_dir)`` runs a whole training job and returns its metrics. One
 round: collect ``num_envs`` episodes at once through the vector environment with an
