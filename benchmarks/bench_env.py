@@ -17,7 +17,7 @@ import gymnasium as gym
 import numpy as np
 
 import spikectl  # noqa: F401  (registers the environment ids)
-from spikectl.vector_env import NeuronControlVectorEnv
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 
 BLOCK = 1000
 

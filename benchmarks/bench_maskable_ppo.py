@@ -23,7 +23,8 @@ from sb3_contrib import MaskablePPO
 from stable_baselines3.common.vec_env import DummyVecEnv, VecEnv
 
 import spikectl  # noqa: F401  (registers the environment ids)
-from spikectl.wrappers import sb3_compatible, sb3_vec_env
+from spikectl.envs.env_support import random_legal_actions
+from spikectl.wrappers import from_env_action, sb3_compatible, sb3_vec_env
 
 ENV_ID = "spikectl/NeuronControl-v0"
 
@@ -55,7 +56,7 @@ def env_steps_per_s(venv: VecEnv, steps: int, repeats: int) -> float:
         start = time.perf_counter()
         for _ in range(steps // venv.num_envs):
             masks = np.stack(venv.env_method("action_masks"))  # [num_envs, k + 1]
-            actions = (rng.random(masks.shape) * masks).argmax(axis=1)  # a random legal one
+            actions = from_env_action(random_legal_actions(masks, rng))  # zero-based
             venv.step(actions)
         rates.append(steps / (time.perf_counter() - start))
     return float(np.median(rates))

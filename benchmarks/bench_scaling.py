@@ -2,7 +2,7 @@
 
 For each n, on random topologies of the paper's rule and uniformly random actions:
 
-- the simulator kernel through ``spikectl.simulator.advance`` (the environments' hot
+- the simulator kernel through ``spikectl.neuron.simulator.advance`` (the environments' hot
   path, no input checks) on a fixed batch of networks for 60 steps: neuron-steps/s
   and µs per network-step;
 - the vector environment (``NeuronControlVectorEnv``, ``num_envs`` = the batch) stepped
@@ -25,11 +25,12 @@ import numba
 import numpy as np
 from bench_simulator import median_seconds  # a sibling script in benchmarks/
 
-from spikectl.contexts import ContextSet, generate_topology
-from spikectl.env import NeuronControlEnv
-from spikectl.params import NeuronParams
-from spikectl.simulator import SimulatorState, advance, as_weight_batch
-from spikectl.vector_env import NeuronControlVectorEnv
+from spikectl.contexts import ContextSet
+from spikectl.contexts.generation import generate_topology
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import SimulatorState, advance, as_weight_batch
 
 SIZES = (8, 16, 32, 64, 128, 256)
 STEPS = 60

@@ -13,7 +13,6 @@ Prints a Markdown table of medians; docs/benchmarks.md records a run.
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import time
 
@@ -21,7 +20,8 @@ import numba
 import numpy as np
 
 from spikectl import NeuronParams, simulate
-from spikectl.contexts import generate_topology
+from spikectl.contexts.generation import generate_topology
+from spikectl.files import write_json
 
 CASES = [
     (1, 8),
@@ -121,8 +121,7 @@ def main() -> None:
             flush=True,
         )
     if args.json:
-        with open(args.json, "w") as handle:
-            json.dump(results, handle, indent=2)
+        write_json(args.json, results)
 
 
 if __name__ == "__main__":

@@ -24,8 +24,10 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
+from spikectl.agents import ARCHITECTURES
 from spikectl.contexts import make_splits
-from spikectl.rollout import run_episodes
+from spikectl.envs.rollout import run_episodes
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.training.config import PAPER, PRESETS
 from spikectl.training.dqn import (
     EpsilonGreedyPolicy,
@@ -35,7 +37,6 @@ from spikectl.training.dqn import (
     td_loss,
 )
 from spikectl.training.replay import EpisodeReplay
-from spikectl.vector_env import NeuronControlVectorEnv
 
 
 def filled_replay(config, train_set, rng) -> EpisodeReplay:
@@ -110,7 +111,7 @@ def collection_rate(config, train_set, num_envs: int, episodes: int, rng) -> flo
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--archs", nargs="+", default=["tdrqn", "drqn", "ddrqn", "dmdrqn"])
+    parser.add_argument("--archs", nargs="+", default=list(ARCHITECTURES))
     parser.add_argument("--updates", type=int, default=30)
     parser.add_argument("--episodes", type=int, default=5, help="collection repeats")
     parser.add_argument("--threads", type=int, default=2)

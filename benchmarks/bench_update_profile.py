@@ -27,7 +27,8 @@ import torch.nn.functional as F
 
 from spikectl.agents.blocks import long_indices, per_neuron_features
 from spikectl.contexts import make_splits
-from spikectl.rollout import run_episodes
+from spikectl.envs.rollout import run_episodes
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.training.config import PRESETS
 from spikectl.training.dqn import (
     EpsilonGreedyPolicy,
@@ -39,7 +40,6 @@ from spikectl.training.dqn import (
     training_losses,
 )
 from spikectl.training.replay import EpisodeReplay
-from spikectl.vector_env import NeuronControlVectorEnv
 
 
 def median_ms(function, repeats: int) -> float:

@@ -5,13 +5,13 @@ environment ids (a cheap dictionary entry) and does no other work.
 """
 
 from spikectl.contexts import Context, ContextSet, make_context, make_splits
-from spikectl.env import NeuronControlEnv
-from spikectl.extensions import Extensions
-from spikectl.params import NeuronParams
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.registration import register_envs
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.neuron.extensions import Extensions
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import simulate
 from spikectl.planning import IdentifyAndPlan, plan_episode
-from spikectl.registration import register_envs
-from spikectl.simulator import simulate
-from spikectl.vector_env import NeuronControlVectorEnv
 from spikectl.wrappers import sb3_compatible, sb3_vec_env
 
 register_envs()

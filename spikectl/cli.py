@@ -50,13 +50,13 @@ class DemoConfig:
 
 def demo(config: DemoConfig) -> dict[str, dict[str, float]]:
     """A 3-second tour: score do-nothing, random and witness policies; save an episode raster."""
-    from spikectl.experiments.figures import plot_episode_raster
-    from spikectl.rollout import (
+    from spikectl.envs.rollout import (
         do_nothing_policy,
         evaluate_policy,
         make_random_policy,
         make_witness_policy,
     )
+    from spikectl.experiments.figures import plot_episode_raster
 
     train, test = make_splits(
         config.n_train, config.n_test, config.n_neurons, config.episode_length, config.seed
@@ -383,7 +383,7 @@ def baselines(command: BaselinesCommand) -> None:
 
     import gymnasium
 
-    from spikectl.extensions import Extensions
+    from spikectl.neuron.extensions import Extensions
     from spikectl.planning import IdentifyAndPlan
     from spikectl.planning.baselines import run_baselines
 

@@ -2,6 +2,9 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+import time
 from collections.abc import Callable
 from pathlib import Path
 
@@ -32,3 +35,66 @@ def comparable() -> Callable[[list[dict]], list[dict]]:
 def assert_same_weights() -> Callable[[Path, Path], None]:
     """Assert that two saved state dicts (model.pt) hold bit-identical tensors."""
     return _assert_same_weights
+
+
+def _run_cli(*args: str, check: bool = True, env: dict | None = None):
+    return subprocess.run(
+        [sys.executable, "-m", "spikectl.cli", *args], capture_output=True, text=True,
+        check=check, env=env,
+    )  # fmt: skip
+
+
+def _wait_until(
+    condition: Callable[[], bool],
+    what: str,
+    timeout_s: float,
+    process: subprocess.Popen | None = None,
+) -> None:
+    deadline = time.monotonic() + timeout_s
+    while not condition():
+        assert process is None or process.poll() is None, f"the process ended before {what}"
+        assert time.monotonic() < deadline, f"no {what} within {timeout_s} s"
+        time.sleep(0.02)
+
+
+@pytest.fixture
+def run_cli() -> Callable[..., subprocess.CompletedProcess]:
+    """Run ``python -m spikectl.cli *args`` in a subprocess, capturing its output
+    (``check``: raise on a non-zero exit; ``env``: the subprocess's environment)."""
+    return _run_cli
+
+
+@pytest.fixture
+def wait_until() -> Callable[..., None]:
+    """Poll ``condition()`` every 20 ms until it holds: fail after ``timeout_s``, or as soon
+    as ``process`` (when given) has exited, naming ``what`` was awaited."""
+    return _wait_until
+
+
+@pytest.fixture
+def easy_network_config(tmp_path):
+    """A smoke-sized DRQN config on one easy 3-neuron network (stimulating neuron 0 fires
+    the target one step later), tested on another: training must clearly beat doing
+    nothing on it. The context files are saved under ``tmp_path``."""
+    import dataclasses
+
+    import numpy as np
+
+    from spikectl import ContextSet, make_context
+    from spikectl.training.config import SMOKE
+
+    weights = np.zeros((3, 3), dtype=np.int8)
+    weights[0, 2] = 1
+    witness = np.full(12, -1)
+    witness[[2, 8]] = 0
+    easy = make_context(weights, target=2, pattern=np.eye(12)[3] + np.eye(12)[9], witness=witness)
+    other = make_context(np.array([[0, 1, 0], [0, 0, 1], [0, 1, 0]]), target=2, seed=0,
+                         episode_length=12)  # fmt: skip
+    ContextSet([easy]).save(tmp_path / "train.npz")
+    ContextSet([other]).save(tmp_path / "test.npz")
+    return dataclasses.replace(
+        SMOKE, arch="drqn", n_neurons=3, episode_length=12, total_env_steps=12 * 8 * 50,
+        train_contexts=tmp_path / "train.npz", test_contexts=tmp_path / "test.npz",
+        updates_per_round=16, learning_rate=3e-3, eval_every_episodes=160,
+        checkpoint_every_episodes=400, epsilon_anneal_fraction=0.3, gamma=0.9,
+    )  # fmt: skip

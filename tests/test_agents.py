@@ -1,4 +1,4 @@
-"""Tests of the four recurrent Q-networks (spikectl.agents, SPEC 4)."""
+"""Tests of the four recurrent Q-networks (spikectl.agents, docs/agents.md)."""
 
 from __future__ import annotations
 
@@ -459,3 +459,87 @@ def test_fits_fixed_q_targets(name: str) -> None:
         optimiser.step()
         losses.append(loss.item())
     assert losses[-1] < 0.5 * losses[0]
+
+
+# The state_dict layout the networks had before DDRQN and TDRQN became one class: saved
+# model.pt files (SMALL sizes here) must keep loading.
+OLD_STATE_DICT_LAYOUT = {
+    "ddrqn": [
+        ("lstm.lstm.weight_ih_l0", (48, 3)),
+        ("lstm.lstm.weight_hh_l0", (48, 12)),
+        ("lstm.lstm.bias_ih_l0", (48,)),
+        ("lstm.lstm.bias_hh_l0", (48,)),
+        ("ff.0.weight", (24, 12)),
+        ("ff.0.bias", (24,)),
+        ("context.target.0.weight", (4, 1)),
+        ("context.target.0.bias", (4,)),
+        ("context.pattern.0.weight", (4, 12)),
+        ("context.pattern.0.bias", (4,)),
+        ("head.advantage.0.weight", (24, 32)),
+        ("head.advantage.0.bias", (24,)),
+        ("head.advantage.2.weight", (12, 24)),
+        ("head.advantage.2.bias", (12,)),
+        ("head.advantage.4.weight", (1, 12)),
+        ("head.advantage.4.bias", (1,)),
+        ("head.value.0.weight", (8, 64)),
+        ("head.value.0.bias", (8,)),
+        ("head.value.2.weight", (1, 8)),
+        ("head.value.2.bias", (1,)),
+    ],
+    "tdrqn": [
+        ("lstm.lstm.weight_ih_l0", (48, 3)),
+        ("lstm.lstm.weight_hh_l0", (48, 12)),
+        ("lstm.lstm.bias_ih_l0", (48,)),
+        ("lstm.lstm.bias_hh_l0", (48,)),
+        ("mixer.project.weight", (16, 12)),
+        ("mixer.project.bias", (16,)),
+        ("mixer.encoder.layers.0.self_attn.in_proj_weight", (48, 16)),
+        ("mixer.encoder.layers.0.self_attn.in_proj_bias", (48,)),
+        ("mixer.encoder.layers.0.self_attn.out_proj.weight", (16, 16)),
+        ("mixer.encoder.layers.0.self_attn.out_proj.bias", (16,)),
+        ("mixer.encoder.layers.0.linear1.weight", (32, 16)),
+        ("mixer.encoder.layers.0.linear1.bias", (32,)),
+        ("mixer.encoder.layers.0.linear2.weight", (16, 32)),
+        ("mixer.encoder.layers.0.linear2.bias", (16,)),
+        ("mixer.encoder.layers.0.norm1.weight", (16,)),
+        ("mixer.encoder.layers.0.norm1.bias", (16,)),
+        ("mixer.encoder.layers.0.norm2.weight", (16,)),
+        ("mixer.encoder.layers.0.norm2.bias", (16,)),
+        ("mixer.encoder.layers.1.self_attn.in_proj_weight", (48, 16)),
+        ("mixer.encoder.layers.1.self_attn.in_proj_bias", (48,)),
+        ("mixer.encoder.layers.1.self_attn.out_proj.weight", (16, 16)),
+        ("mixer.encoder.layers.1.self_attn.out_proj.bias", (16,)),
+        ("mixer.encoder.layers.1.linear1.weight", (32, 16)),
+        ("mixer.encoder.layers.1.linear1.bias", (32,)),
+        ("mixer.encoder.layers.1.linear2.weight", (16, 32)),
+        ("mixer.encoder.layers.1.linear2.bias", (16,)),
+        ("mixer.encoder.layers.1.norm1.weight", (16,)),
+        ("mixer.encoder.layers.1.norm1.bias", (16,)),
+        ("mixer.encoder.layers.1.norm2.weight", (16,)),
+        ("mixer.encoder.layers.1.norm2.bias", (16,)),
+        ("context.target.0.weight", (4, 1)),
+        ("context.target.0.bias", (4,)),
+        ("context.pattern.0.weight", (4, 12)),
+        ("context.pattern.0.bias", (4,)),
+        ("head.advantage.0.weight", (16, 24)),
+        ("head.advantage.0.bias", (16,)),
+        ("head.advantage.2.weight", (8, 16)),
+        ("head.advantage.2.bias", (8,)),
+        ("head.advantage.4.weight", (1, 8)),
+        ("head.advantage.4.bias", (1,)),
+        ("head.value.0.weight", (8, 48)),
+        ("head.value.0.bias", (8,)),
+        ("head.value.2.weight", (1, 8)),
+        ("head.value.2.bias", (1,)),
+    ],
+}
+
+
+@pytest.mark.parametrize("name", ["ddrqn", "tdrqn"])
+def test_state_dict_layout_unchanged_and_loads(name: str) -> None:
+    net = make_agent(name, 5, N_STEPS, **SMALL)
+    layout = [(key, tuple(value.shape)) for key, value in net.state_dict().items()]
+    assert layout == OLD_STATE_DICT_LAYOUT[name]
+    old_weights = {key: torch.randn(shape) for key, shape in OLD_STATE_DICT_LAYOUT[name]}
+    net.load_state_dict(old_weights, strict=True)
+    assert all(net.state_dict()[key].equal(value) for key, value in old_weights.items())

@@ -1,4 +1,4 @@
-"""Context generation (SPEC section 2), ContextSet files and bring-your-own contexts."""
+"""Context generation (docs/model.md), ContextSet files and bring-your-own contexts."""
 
 from __future__ import annotations
 
@@ -9,9 +9,9 @@ import numpy as np
 import pytest
 
 from spikectl import Context, ContextSet, NeuronParams, make_context, make_splits, simulate
-from spikectl.contexts import (
+from spikectl.contexts import ContextFileError
+from spikectl.contexts.generation import (
     CONNECTION_PROBABILITY_BANDS,
-    ContextFileError,
     connection_probability,
     generate_context,
     generate_topology,

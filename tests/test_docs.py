@@ -38,3 +38,36 @@ def test_committed_results_table_is_what_its_trials_say():
         runs = load_runs(trial_dirs(sweep_dir))
         markdown, _ = results_table(group_runs(runs, "arch"))
         assert (sweep_dir / "results.md").read_text() == markdown, sweep_dir.name
+
+
+def doc_pages() -> list[Path]:
+    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+
+
+def test_module_paths_and_names_in_the_docs_exist():
+    import importlib
+
+    for page in doc_pages():
+        text = page.read_text()
+        for path in set(re.findall(r"(?<![\w/.])(spikectl/[\w/]+\.py)", text)):
+            assert (ROOT / path).exists(), f"{page.name} names missing {path}"
+        for dotted in set(re.findall(r"`(spikectl(?:\.\w+)+)", text)):
+            parts = dotted.split(".")
+            for split in range(len(parts), 0, -1):
+                try:
+                    target = importlib.import_module(".".join(parts[:split]))
+                except ModuleNotFoundError:
+                    continue
+                break
+            for name in parts[split:]:
+                assert hasattr(target, name), f"{page.name} names missing {dotted}"
+                target = getattr(target, name)
+
+
+def test_the_docs_cite_nothing_outside_the_repository():
+    # The project's working notes (SPEC.md, NOTES.md) are not shipped: the docs carry
+    # the facts themselves.
+    for page in doc_pages():
+        text = page.read_text()
+        for pattern in (r"\bSPEC\b", r"NOTES\.md", r"SPEC\.md", r"(?<![\w/])shared/(?!runs)"):
+            assert not re.search(pattern, text), f"{page.name} cites {pattern}"

@@ -10,14 +10,13 @@ import os
 import signal
 import subprocess
 import sys
-import time
 
 import numpy as np
 import pytest
 import torch
 from torch import nn
 
-from spikectl.agents import make_agent
+from spikectl.agents import ARCHITECTURES, make_agent
 from spikectl.agents.stacked import StackableLSTM, StackedNetworks
 from spikectl.training.checkpoint import RunDirError, load_model_weights, read_metrics
 from spikectl.training.config import SMOKE
@@ -73,7 +72,7 @@ def test_stackable_lstm_equals_nn_lstm_and_shares_its_parameters():
         StackableLSTM(nn.LSTM(4, 16, num_layers=2, batch_first=True))
 
 
-@pytest.mark.parametrize("arch", ["drqn", "ddrqn", "dmdrqn", "tdrqn"])
+@pytest.mark.parametrize("arch", ARCHITECTURES)
 def test_stacked_networks_compute_each_seeds_network(arch):
     networks = [build_networks(dataclasses.replace(SMOKE, arch=arch, seed=s))[0] for s in range(3)]
     stacked = StackedNetworks(networks)
@@ -168,14 +167,7 @@ def test_group_refuses_bad_groups_and_directories(tmp_path):
         train_seeds(single, [0, 1], tmp_path / "nothing", resume=True)
 
 
-def run_cli(*args, check=True, env=None):
-    return subprocess.run(
-        [sys.executable, "-m", "spikectl.cli", *args], capture_output=True, text=True,
-        check=check, env=env,
-    )  # fmt: skip
-
-
-def test_group_resume_after_sigkill_is_exact_and_seeds_evaluate(tmp_path):
+def test_group_resume_after_sigkill_is_exact_and_seeds_evaluate(tmp_path, run_cli, wait_until):
     """SIGKILL a group after its first checkpoint, resume it: every seed's metrics and
     weights equal an uninterrupted group's; each model.pt evaluates with the CLI."""
     flags = ("train", "--preset", "smoke", "--seeds", "0", "1", "--n-step", "3",
@@ -189,12 +181,11 @@ def test_group_resume_after_sigkill_is_exact_and_seeds_evaluate(tmp_path):
         [sys.executable, "-m", "spikectl.cli", *flags, "--run-dir", str(killed)],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )  # fmt: skip
-    deadline = time.monotonic() + 180
-    while not (killed / "group_checkpoint.pt").exists():
-        assert process.poll() is None, "the group ended before its first checkpoint"
-        assert time.monotonic() < deadline
-        time.sleep(0.02)
-    time.sleep(0.3)
+    # The checkpoint is complete once the seeds' baselines.json, written after it, exist.
+    wait_until(
+        lambda: all((killed / f"seed={s}" / "baselines.json").exists() for s in (0, 1)),
+        "a complete first group checkpoint", timeout_s=180, process=process,
+    )  # fmt: skip
     os.kill(process.pid, signal.SIGKILL)
     process.wait()
     assert not (killed / "seed=0/model.pt").exists(), "killed too late to test anything"
@@ -273,28 +264,11 @@ def test_ray_runs_seed_groups_like_the_local_pool(tmp_path):
         )
 
 
-def test_every_seed_of_a_group_learns_one_easy_network(tmp_path):
+def test_every_seed_of_a_group_learns_one_easy_network(tmp_path, easy_network_config):
     """test_training's easy network: both seeds of a group learn it, as single runs of
     these seeds do (measured: single runs of seeds 1 and 2 give the group's train returns
     at every evaluation; seed 2 stops at 0.75 alone too, so it is not used here)."""
-    from spikectl import ContextSet, make_context
-
-    weights = np.zeros((3, 3), dtype=np.int8)
-    weights[0, 2] = 1  # stimulating neuron 0 fires the target one step later
-    witness = np.full(12, -1)
-    witness[[2, 8]] = 0
-    easy = make_context(weights, target=2, pattern=np.eye(12)[3] + np.eye(12)[9], witness=witness)
-    other = make_context(np.array([[0, 1, 0], [0, 0, 1], [0, 1, 0]]), target=2, seed=0,
-                         episode_length=12)  # fmt: skip
-    ContextSet([easy]).save(tmp_path / "train.npz")
-    ContextSet([other]).save(tmp_path / "test.npz")
-    config = dataclasses.replace(
-        SMOKE, arch="drqn", n_neurons=3, episode_length=12, total_env_steps=12 * 8 * 50,
-        train_contexts=tmp_path / "train.npz", test_contexts=tmp_path / "test.npz",
-        updates_per_round=16, learning_rate=3e-3, eval_every_episodes=160,
-        checkpoint_every_episodes=400, epsilon_anneal_fraction=0.3, gamma=0.9,
-    )  # fmt: skip
-    metrics = train_seeds(config, [0, 1], tmp_path / "group")
+    metrics = train_seeds(easy_network_config, [0, 1], tmp_path / "group")
     for rows in metrics:
         assert rows[0]["train_return"] < 0.75
         assert rows[-1]["train_return"] > 0.9

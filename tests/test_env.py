@@ -17,14 +17,16 @@ from gymnasium.error import ResetNeeded
 from gymnasium.utils.env_checker import check_env
 
 import spikectl
-from spikectl import registration
 from spikectl.contexts import ContextSet, make_context, make_splits
-from spikectl.env import MAX_REWARD, NeuronControlEnv, step_rewards
-from spikectl.params import NeuronParams
+from spikectl.envs import registration
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.env_support import MAX_REWARD, step_rewards
+from spikectl.neuron.params import NeuronParams
 
 ENV_ID = registration.ENV_ID
 SMALL = {"n_train": 10, "n_test": 10}
-# Gymnasium's checker warns about any unbounded Box; the voltage is unbounded by design (SPEC 3).
+# Gymnasium's checker warns about any unbounded Box; the voltage is unbounded by design
+# (docs/environment.md).
 UNBOUNDED_BOX = re.compile(r"Box observation space (minimum|maximum) value is -?infinity")
 
 
@@ -111,8 +113,8 @@ def test_registration_is_idempotent():
         importlib.reload(registration).register_envs()
         importlib.reload(spikectl)
     spec = gym.spec(ENV_ID)
-    assert spec.entry_point == "spikectl.env:NeuronControlEnv"
-    assert spec.vector_entry_point == "spikectl.vector_env:NeuronControlVectorEnv"
+    assert spec.entry_point == "spikectl.envs.env:NeuronControlEnv"
+    assert spec.vector_entry_point == "spikectl.envs.vector_env:NeuronControlVectorEnv"
 
 
 def test_same_seed_same_episodes():
@@ -342,3 +344,16 @@ def test_documented_example_runs():
     assert blocks
     for block in blocks:
         exec(compile(block, "docs/environment.md", "exec"), {})
+
+
+def test_random_legal_actions_uniform_over_legal_and_seeded():
+    from spikectl.envs.env_support import random_legal_actions
+
+    mask = np.array([[True, False, True, True], [False, False, False, False]])  # [2, n + 1]
+    draws = random_legal_actions(np.repeat(mask[:1], 30_000, axis=0), np.random.default_rng(0))
+    values, counts = np.unique(draws, return_counts=True)
+    assert values.tolist() == [-1, 1, 2]  # never action 0, the illegal one
+    assert np.all(np.abs(counts / 30_000 - 1 / 3) < 0.01)
+    assert random_legal_actions(mask, np.random.default_rng(0))[1] == -1  # nothing legal
+    first, second = (random_legal_actions(mask, np.random.default_rng(7)) for _ in range(2))
+    assert first.dtype == np.int64 and first.tolist() == second.tolist()

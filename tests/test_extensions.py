@@ -1,4 +1,4 @@
-"""The extensions (SPEC 6, docs/extensions.md): each one's effect, off = the paper bit for bit."""
+"""The extensions (docs/extensions.md): each one's effect, off = the paper bit for bit."""
 
 from __future__ import annotations
 
@@ -21,13 +21,14 @@ from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from spikectl import simulate
-from spikectl.contexts import ContextSet, generate_topology, make_context, make_splits
-from spikectl.env import NeuronControlEnv
-from spikectl.extensions import EnvironmentEffects, Extensions, Heterogeneity
-from spikectl.params import NeuronParams
-from spikectl.registration import VARIANTS
-from spikectl.simulator import PARALLEL_MIN_BATCH, PARALLEL_MIN_WORK
-from spikectl.vector_env import NeuronControlVectorEnv
+from spikectl.contexts import ContextSet, make_context, make_splits
+from spikectl.contexts.generation import generate_topology
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.registration import VARIANTS
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.neuron.extensions import EnvironmentEffects, Extensions, Heterogeneity
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import PARALLEL_MIN_BATCH, PARALLEL_MIN_WORK
 
 SMALL = {"n_train": 10, "n_test": 10}
 SHORT = {"n_train": 6, "n_test": 2, "episode_length": 12}

@@ -191,13 +191,11 @@ def test_networks_figure(tmp_path):
 
 
 def test_network_edges_by_sign():
-    from spikectl.experiments.figures import _pyplot
+    from spikectl.experiments.figures import subplots
 
     context = ContextSet.generate(1, seed=0)[0]
-    plt = _pyplot()
-    figure, axis = plt.subplots()
+    _, axis = subplots(figsize=(3, 3))
     edges = draw_network(context, axis, "(a)")
-    plt.close(figure)
     weights = np.asarray(context.weights)
     assert sorted(edges["excitatory"]) == sorted(map(tuple, np.argwhere(weights > 0).tolist()))
     assert sorted(edges["inhibitory"]) == sorted(map(tuple, np.argwhere(weights < 0).tolist()))

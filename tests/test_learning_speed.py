@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from spikectl import ContextSet, make_splits
-from spikectl.agents import make_agent, make_voltage_predictor
+from spikectl.agents import ARCHITECTURES, make_agent, make_voltage_predictor
 from spikectl.training.checkpoint import read_metrics
 from spikectl.training.config import PRESETS, SMOKE, TrainConfig
 from spikectl.training.dqn import n_step_targets, td_loss, train, training_losses
@@ -59,7 +59,7 @@ def episode_batch(n: int, length: int, seed: int) -> EpisodeBatchArrays:
     )
 
 
-@pytest.mark.parametrize("arch", ["drqn", "ddrqn", "dmdrqn", "tdrqn"])
+@pytest.mark.parametrize("arch", ARCHITECTURES)
 def test_auxiliary_loss_reads_the_encoder_and_leaves_the_td_loss_unchanged(arch):
     config = dataclasses.replace(SMOKE, arch=arch, aux_voltage_weight=1.0)
     torch.manual_seed(0)
@@ -170,8 +170,11 @@ def test_target_voltage_feature_is_the_targets_normalised_voltage():
     assert x.shape == (2, 3, 4)
     assert x[0, :, 3].tolist() == [1.0, 1.0, 1.0]  # target 1 sits at threshold
     assert x[1, :, 3].tolist() == [2.0, 2.0, 2.0]  # target 2 at -30 mV
-    assert x[..., :3].equal(per_neuron_features(
-        obs, v_rest_mV=-70.0, v_threshold_mV=-50.0, with_target=True, dtype=torch.float32))
+    assert x[..., :3].equal(
+        per_neuron_features(
+            obs, v_rest_mV=-70.0, v_threshold_mV=-50.0, with_target=True, dtype=torch.float32
+        )
+    )
 
 
 @pytest.mark.parametrize("arch", ["ddrqn", "tdrqn"])

@@ -7,7 +7,7 @@ import dataclasses
 import pytest
 
 from spikectl import NeuronParams
-from spikectl.params import NEVER_RELEASES
+from spikectl.neuron.params import NEVER_RELEASES
 
 
 def test_defaults_are_table_1():

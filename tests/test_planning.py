@@ -11,9 +11,9 @@ import pytest
 import spikectl
 from spikectl import IdentifyAndPlan, NeuronParams, make_context, make_splits, plan_episode
 from spikectl.cli import main
+from spikectl.envs.rollout import evaluate_policy
 from spikectl.planning import ConnectivityEstimate, DiscreteConnectivityEstimate, ObservedState
 from spikectl.planning.baselines import run_baselines
-from spikectl.rollout import evaluate_policy
 
 
 @pytest.fixture(scope="module")
@@ -93,12 +93,8 @@ def _identify(weights: np.ndarray, actions: list[int], estimator=ConnectivityEst
     return estimate
 
 
-@pytest.mark.parametrize("estimator", [ConnectivityEstimate, DiscreteConnectivityEstimate])
-def test_identification_recovers_the_rows_of_every_released_neuron_exactly(estimator):
-    # A feed-forward network: stimulating 0, 1, 2 and 3 in turn releases each of 0..4
-    # at least once (0 makes 1 and 2 fire together, which is ambiguous for 3's
-    # column until 1 and 2 are stimulated alone). Neuron 5 has no input and is never
-    # stimulated, so it never releases.
+def feed_forward_probe() -> tuple[np.ndarray, list[int]]:
+    """A 6-neuron feed-forward network and 28 actions stimulating 0, 1, 2 and 3 in turn."""
     weights = np.zeros((6, 6), dtype=int)
     weights[0, [1, 2]] = 1
     weights[1, [3, 4]] = 1
@@ -108,6 +104,16 @@ def test_identification_recovers_the_rows_of_every_released_neuron_exactly(estim
     actions = [-1] * 28
     for step, neuron in ((0, 0), (7, 1), (14, 2), (21, 3)):
         actions[step] = neuron
+    return weights, actions
+
+
+@pytest.mark.parametrize("estimator", [ConnectivityEstimate, DiscreteConnectivityEstimate])
+def test_identification_recovers_the_rows_of_every_released_neuron_exactly(estimator):
+    # A feed-forward network: stimulating 0, 1, 2 and 3 in turn releases each of 0..4
+    # at least once (0 makes 1 and 2 fire together, which is ambiguous for 3's
+    # column until 1 and 2 are stimulated alone). Neuron 5 has no input and is never
+    # stimulated, so it never releases.
+    weights, actions = feed_forward_probe()
     estimate = _identify(weights, actions, estimator)
     signs, known = estimate.weights(known_sd=0.25)
     mean, sd = estimate.posterior()
@@ -173,15 +179,7 @@ def test_discrete_identification_knows_more_and_is_rarely_wrong(splits):
 
 
 def test_sampled_hypotheses_keep_known_entries_and_follow_the_uniforms():
-    weights = np.zeros((6, 6), dtype=int)
-    weights[0, [1, 2]] = 1
-    weights[1, [3, 4]] = 1
-    weights[2, 3] = -1
-    weights[3, 4] = 1
-    weights[5, 4] = 1
-    actions = [-1] * 28
-    for step, neuron in ((0, 0), (7, 1), (14, 2), (21, 3)):
-        actions[step] = neuron
+    weights, actions = feed_forward_probe()
     estimate = _identify(weights, actions)
     signs, known = estimate.weights(known_sd=0.25)
     k = 3
@@ -201,8 +199,8 @@ def test_sampled_hypotheses_keep_known_entries_and_follow_the_uniforms():
 def test_beam_search_on_identical_hypotheses_is_the_single_network_search(splits):
     from dataclasses import replace
 
+    from spikectl.neuron.simulator import SimulatorState
     from spikectl.planning import beam_search, model_of_context
-    from spikectl.simulator import SimulatorState
 
     for context in splits[0][:4]:
         model = model_of_context(context)
@@ -218,8 +216,8 @@ def test_beam_search_ranks_by_the_mean_over_hypotheses():
     # Two hypotheses about 0 -> 1 and 2 -> 1: under the first only 0 excites the target,
     # under the second only 2 does; stimulating 0 at step 0 hits the wanted spike at
     # step 1 under one of them (mean reward half of the spike's), as does 2.
+    from spikectl.neuron.simulator import SimulatorState
     from spikectl.planning import PlanningModel, beam_search
-    from spikectl.simulator import SimulatorState
 
     first = np.zeros((3, 3), dtype=np.int8)
     first[0, 1] = 1

@@ -30,8 +30,9 @@ import torch
 import spikectl  # noqa: F401  (registers the environments)
 from spikectl import ContextSet, NeuronParams
 from spikectl.cli import main
-from spikectl.context_files import ContextFileError
-from spikectl.env import NeuronControlEnv
+from spikectl.contexts.file_format import ContextFileError
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.experiments.sweep import Sweep, SweepError, run_sweep, run_trial
 from spikectl.files import FileWriteError
 from spikectl.training.checkpoint import (
@@ -44,7 +45,6 @@ from spikectl.training.checkpoint import (
 )
 from spikectl.training.config import SMOKE, TrainConfig
 from spikectl.training.dqn import train
-from spikectl.vector_env import NeuronControlVectorEnv
 
 TINY = dataclasses.replace(
     SMOKE, total_env_steps=8 * 20 * 2, checkpoint_every_episodes=8, eval_every_episodes=8
@@ -437,8 +437,10 @@ def test_help_and_unreadable_frames_pass_through(capsys):
              "│ see spikectl train --help │\n╰──╯")  # fmt: skip
     dashed = (" Value error \n ------ \n  Error parsing --seed: bad \n  -----\n"
               "  see spikectl train --help")  # fmt: skip
-    assert parse_error_line(boxed) == parse_error_line(dashed) == (
-        "--seed: bad (see spikectl train --help)"
+    assert (
+        parse_error_line(boxed)
+        == parse_error_line(dashed)
+        == ("--seed: bad (see spikectl train --help)")
     )
 
 
@@ -588,7 +590,7 @@ def children(pid: int) -> set[int]:
 
 
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
-def test_killing_a_sweep_stops_its_workers(tmp_path):
+def test_killing_a_sweep_stops_its_workers(tmp_path, wait_until):
     sweep_file = tmp_path / "sweep.json"
     sweep_file.write_text(json.dumps(
         {"base": "smoke", "overrides": {"total_env_steps": 10**7}, "grid": {"seed": [0, 1]}}
@@ -599,11 +601,10 @@ def test_killing_a_sweep_stops_its_workers(tmp_path):
          "--sweep-dir", str(sweep_dir), "--workers", "2"],
         stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
     )  # fmt: skip
-    deadline = time.monotonic() + 120
-    while not all((sweep_dir / "trials" / f"seed={s}" / "metrics.csv").exists() for s in (0, 1)):
-        assert parent.poll() is None, parent.stdout.read().decode()
-        assert time.monotonic() < deadline, "the trials never started"
-        time.sleep(0.1)
+    wait_until(
+        lambda: all((sweep_dir / "trials" / f"seed={s}" / "metrics.csv").exists() for s in (0, 1)),
+        "both trials started", timeout_s=120, process=parent,
+    )  # fmt: skip
     workers = children(parent.pid)
     assert workers
     parent.send_signal(signal.SIGKILL)
@@ -618,9 +619,10 @@ def test_killing_a_sweep_stops_its_workers(tmp_path):
             pass
         assert time.monotonic() < deadline, "workers outlived the sweep, holding its pipe"
         time.sleep(0.1)
-    while any(Path(f"/proc/{pid}").exists() for pid in workers):
-        assert time.monotonic() < deadline, "workers outlived the sweep"
-        time.sleep(0.1)
+    wait_until(
+        lambda: not any(Path(f"/proc/{pid}").exists() for pid in workers),
+        "the end of the sweep's workers", timeout_s=30,
+    )  # fmt: skip
 
 
 # --- API arguments --------------------------------------------------------------------
@@ -659,3 +661,28 @@ def test_reset_options_must_be_a_dict(options):
         NeuronControlVectorEnv(2, contexts=contexts).reset(options=options)
     with pytest.raises(TypeError, match="options must be a dict"):
         gym.make("spikectl/NeuronControl-v0", contexts=contexts).reset(options=options)
+
+
+@pytest.mark.parametrize("bug", [TypeError, RuntimeError, AttributeError, KeyError])
+def test_cli_keeps_the_traceback_of_a_bug(monkeypatch, bug):
+    """Only user errors become one-line messages; a bug inside a command propagates."""
+    import spikectl.cli as cli
+
+    def broken(config):
+        raise bug("a bug in the command")
+
+    monkeypatch.setitem(cli.COMMANDS, "demo", (broken, cli.DemoConfig))
+    with pytest.raises(bug, match="a bug in the command"):
+        main(["demo"])
+
+
+def test_cli_reports_a_user_error_of_a_command_in_one_line(monkeypatch, capsys):
+    import spikectl.cli as cli
+
+    def refuses(config):
+        raise ValueError("n_test must be a positive integer, got 0")
+
+    monkeypatch.setitem(cli.COMMANDS, "demo", (refuses, cli.DemoConfig))
+    assert cli_error(["demo"], capsys) == (
+        "spikectl: error: --n-test must be a positive integer, got 0"
+    )

@@ -5,10 +5,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from spikectl import render
 from spikectl.contexts import ContextSet, make_context
-from spikectl.env import NeuronControlEnv
-from spikectl.vector_env import NeuronControlVectorEnv
+from spikectl.envs import render
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 
 # Three neurons, edge 0 -> 2, target 2, pattern: spike at step 1 only.
 PATTERN = np.array([0, 1, 0, 0, 0, 0], dtype=np.int8)

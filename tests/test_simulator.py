@@ -1,4 +1,4 @@
-"""Hand-computed dynamics of SPEC section 1, batching and input validation."""
+"""Hand-computed dynamics of the model (docs/model.md), batching and input validation."""
 
 from __future__ import annotations
 
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 
 from spikectl import NeuronParams, simulate
-from spikectl.contexts import generate_topology
-from spikectl.simulator import (
+from spikectl.contexts.generation import generate_topology
+from spikectl.neuron.simulator import (
     PARALLEL_MIN_BATCH,
     PARALLEL_MIN_WORK,
     SimulatorState,

@@ -112,7 +112,7 @@ def test_plot_a_sweep(tmp_path, capsys):
 
 def test_figure3_contexts_are_regenerated_when_a_trial_kept_only_its_metrics(tmp_path):
     from spikectl.contexts import ContextSet
-    from spikectl.experiments.plot import _training_contexts
+    from spikectl.experiments.plot import training_contexts
     from spikectl.training.checkpoint import read_config
     from spikectl.training.contexts import TRAIN_FILE
 
@@ -121,7 +121,7 @@ def test_figure3_contexts_are_regenerated_when_a_trial_kept_only_its_metrics(tmp
     train(config, run_dir)
     saved = ContextSet.load(run_dir / TRAIN_FILE)
     (run_dir / TRAIN_FILE).unlink()  # as in docs/results/: config and metrics only
-    assert _training_contexts(run_dir, read_config(run_dir).to_dict()) == saved
+    assert training_contexts(run_dir, read_config(run_dir).to_dict()) == saved
 
 
 def same_trials(dir_a, dir_b, comparable, assert_same_weights):

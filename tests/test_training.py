@@ -11,9 +11,9 @@ import numpy as np
 import pytest
 import torch
 
-from spikectl import ContextSet, make_context
-from spikectl.files import FileWriteError
-from spikectl.training.checkpoint import RunDirError, atomic_write_bytes, read_metrics
+from spikectl import ContextSet
+from spikectl.files import FileWriteError, atomic_write_bytes
+from spikectl.training.checkpoint import RunDirError, read_metrics
 from spikectl.training.config import PRESETS, SMOKE, TrainConfig
 from spikectl.training.dqn import td_loss, train
 from spikectl.training.replay import EpisodeBatchArrays, EpisodeReplay
@@ -216,35 +216,11 @@ def test_paper_preset_is_table_2():
     assert paper.total_episodes == 16_665  # whole rounds of 5 episodes
 
 
-def test_learnability_on_one_easy_network(tmp_path):
+def test_learnability_on_one_easy_network(tmp_path, easy_network_config):
     """One network, short episodes: a smoke-sized run clearly beats doing nothing."""
-    weights = np.zeros((3, 3), dtype=np.int8)
-    weights[0, 2] = 1  # stimulating neuron 0 fires the target one step later
-    witness = np.full(12, -1)
-    witness[[2, 8]] = 0
-    easy = make_context(weights, target=2, pattern=np.eye(12)[3] + np.eye(12)[9], witness=witness)
-    other = make_context(np.array([[0, 1, 0], [0, 0, 1], [0, 1, 0]]), target=2, seed=0,
-                         episode_length=12)  # fmt: skip
-    ContextSet([easy]).save(tmp_path / "train.npz")
-    ContextSet([other]).save(tmp_path / "test.npz")
-    config = dataclasses.replace(
-        SMOKE, arch="drqn", n_neurons=3, episode_length=12, total_env_steps=12 * 8 * 50,
-        train_contexts=tmp_path / "train.npz", test_contexts=tmp_path / "test.npz",
-        updates_per_round=16, learning_rate=3e-3, eval_every_episodes=160,
-        checkpoint_every_episodes=400, epsilon_anneal_fraction=0.3, gamma=0.9,
-    )  # fmt: skip
-    metrics = train(config, tmp_path / "run")
+    metrics = train(easy_network_config, tmp_path / "run")
     assert metrics[0]["train_return"] < 0.75
     assert metrics[-1]["train_return"] > 0.9
-
-
-def run_cli(*args, check=True):
-    import subprocess
-    import sys
-
-    return subprocess.run(
-        [sys.executable, "-m", "spikectl.cli", *args], capture_output=True, text=True, check=check
-    )
 
 
 LEARN_FAST_FLAGS = ("--n-step", "3", "--aux-voltage-weight", "1.0", "--explore-do-nothing",
@@ -252,7 +228,9 @@ LEARN_FAST_FLAGS = ("--n-step", "3", "--aux-voltage-weight", "1.0", "--explore-d
 
 
 @pytest.mark.parametrize("flags", [(), LEARN_FAST_FLAGS], ids=["paper", "learn-fast"])
-def test_resume_after_sigkill_is_exact(tmp_path, flags, comparable, assert_same_weights):
+def test_resume_after_sigkill_is_exact(
+    tmp_path, flags, comparable, assert_same_weights, run_cli, wait_until
+):
     """Kill a run with SIGKILL after a checkpoint, resume it: the same metrics.csv rows and
     bit-identical final weights as an uninterrupted run (also with the auxiliary head,
     n-step targets and biased exploration of the quick preset).
@@ -264,7 +242,6 @@ def test_resume_after_sigkill_is_exact(tmp_path, flags, comparable, assert_same_
     import signal
     import subprocess
     import sys
-    import time
 
     reference = tmp_path / "reference"
     run_cli("train", "--preset", "smoke", *flags, "--run-dir", str(reference))
@@ -275,13 +252,12 @@ def test_resume_after_sigkill_is_exact(tmp_path, flags, comparable, assert_same_
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )  # fmt: skip
     metrics = killed / "metrics.csv"
-    deadline = time.monotonic() + 120
     # Rows for episodes 0, 80 and 160 under the header; checkpoint.pt from episode 80 on.
-    while not ((killed / "checkpoint.pt").exists() and metrics.exists()
-               and len(metrics.read_text().splitlines()) >= 4):  # fmt: skip
-        assert process.poll() is None, "the run ended before its second evaluation"
-        assert time.monotonic() < deadline
-        time.sleep(0.02)
+    wait_until(
+        lambda: (killed / "checkpoint.pt").exists() and metrics.exists()
+        and len(metrics.read_text().splitlines()) >= 4,
+        "the second evaluation", timeout_s=120, process=process,
+    )  # fmt: skip
     os.kill(process.pid, signal.SIGKILL)
     process.wait()
     assert not (killed / "model.pt").exists(), "killed too late to test anything"
@@ -310,7 +286,7 @@ def test_evaluate_reproduces_the_last_evaluation_exactly(tmp_path):
                        "validation": final["val_return"]}  # fmt: skip
 
 
-def test_cli_train_then_evaluate(tmp_path):
+def test_cli_train_then_evaluate(tmp_path, run_cli):
     run = tmp_path / "run"
     out = run_cli("train", "--preset", "smoke", "--arch", "ddrqn", "--total-env-steps", "1600",
                   "--run-dir", str(run))  # fmt: skip

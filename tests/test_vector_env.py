@@ -12,11 +12,11 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 from gymnasium.vector.utils import batch_space
 
-import spikectl.vector_env
+import spikectl.envs.vector_env
 from spikectl.contexts import make_splits
-from spikectl.env import NeuronControlEnv
-from spikectl.registration import ENV_ID
-from spikectl.vector_env import NeuronControlVectorEnv
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.registration import ENV_ID
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 
 SMALL = {"n_train": 10, "n_test": 10}
 INFO_KEYS = ("action_mask", "context_index", "spikes", "target_spiked")
@@ -145,13 +145,13 @@ def test_make_vec_builds_the_batched_env():
 
 def test_one_simulator_call_per_step(monkeypatch):
     calls = []
-    original = spikectl.vector_env.advance
+    original = spikectl.envs.vector_env.advance
 
     def counting_advance(state, weights, actions, *args):
         calls.append((weights.shape, actions.shape))
         original(state, weights, actions, *args)
 
-    monkeypatch.setattr(spikectl.vector_env, "advance", counting_advance)
+    monkeypatch.setattr(spikectl.envs.vector_env, "advance", counting_advance)
     envs = NeuronControlVectorEnv(num_envs=6, episode_length=5, **SMALL)
     envs.reset(seed=0)
     for _ in range(12):  # two episodes and two autoreset steps

@@ -17,9 +17,9 @@ from gymnasium.utils.env_checker import check_env as gymnasium_check_env
 
 import spikectl
 from spikectl.contexts import make_context
-from spikectl.env import NeuronControlEnv
-from spikectl.params import NeuronParams
-from spikectl.vector_env import NeuronControlVectorEnv
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.neuron.params import NeuronParams
 from spikectl.wrappers import (
     DO_NOTHING,
     SB3CompatibleEnv,
@@ -369,7 +369,7 @@ def test_sb3_vec_env_without_sb3_says_what_to_install(monkeypatch):
     for name in [name for name in sys.modules if name.startswith("stable_baselines3")]:
         monkeypatch.setitem(sys.modules, name, None)  # as if it were not installed
     monkeypatch.setitem(sys.modules, "stable_baselines3", None)
-    monkeypatch.delitem(sys.modules, "spikectl.sb3_vec_adapter", raising=False)
+    monkeypatch.delitem(sys.modules, "spikectl.wrappers.sb3_vec_adapter", raising=False)
     with pytest.raises(ImportError, match=r'pip install "spikectl\[sb3\]"'):
         sb3_vec_env(gym.make_vec(ENV_ID, num_envs=2, **SMALL))
 

@@ -13,11 +13,13 @@ from spikectl.agents.blocks import (
 )
 from spikectl.agents.networks import (
     AGENTS,
+    ARCHITECTURES,
     DDRQN,
     DMDRQN,
     DRQN,
     TDRQN,
     AgentSizes,
+    Architecture,
     RecurrentQNetwork,
     count_parameters,
     make_agent,
@@ -28,12 +30,14 @@ from spikectl.agents.networks import (
 
 __all__ = [
     "AGENTS",
+    "ARCHITECTURES",
     "DDRQN",
     "DMDRQN",
     "DRQN",
     "OBS_KEYS",
     "TDRQN",
     "AgentSizes",
+    "Architecture",
     "RecurrentQNetwork",
     "count_parameters",
     "greedy_action",

@@ -1,4 +1,4 @@
-"""Building blocks shared by the four recurrent Q-networks (SPEC 4, paper App. C).
+"""Building blocks shared by the four recurrent Q-networks (docs/agents.md, paper App. C).
 
 Shapes in comments use B = batch (episodes), T = time steps, n = neurons,
 N = episode length (= pattern length), F = per-neuron input features,
@@ -222,7 +222,7 @@ def per_neuron_features(
     """Per-neuron LSTM input [..., n, F]: normalised V, stimulated at t-1, (is target),
     (the target's normalised V).
 
-    F = 2 + with_target + with_target_voltage (SPEC 4). The target's voltage, the same
+    F = 2 + with_target + with_target_voltage (docs/agents.md). The target's voltage, the same
     for every neuron, keeps the input permutation equivariant and lets each neuron's
     memory relate its own spikes to the target's response.
     """

@@ -1,4 +1,4 @@
-"""The paper's four recurrent Q-networks (Section 5.2, App. C and D; SPEC 4).
+"""The paper's four recurrent Q-networks (Section 5.2, App. C and D; docs/agents.md).
 
 - :class:`DRQN`   one LSTM over the whole system, + context → FF → n+1 Q-values.
 - :class:`DDRQN`  one shared LSTM with a state per neuron → per-neuron FF, + context
@@ -18,9 +18,9 @@ W attention width, C context width, U per-neuron head input width.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields, replace
-from typing import Protocol, runtime_checkable
+from typing import Literal, Protocol, get_args, runtime_checkable
 
 import torch
 from torch import nn
@@ -40,13 +40,17 @@ from spikectl.agents.blocks import (
     system_features,
 )
 
+Architecture = Literal["drqn", "ddrqn", "dmdrqn", "tdrqn"]
+"""The architectures' names (the paper's order); :data:`AGENTS` maps them to classes."""
+ARCHITECTURES: tuple[str, ...] = get_args(Architecture)
+
 State = tuple[torch.Tensor, ...]
 Observation = Mapping[str, torch.Tensor]
 
 
 @dataclass(frozen=True)
 class AgentSizes:
-    """Sizes and settings of the networks; defaults are the paper's Table 2 (SPEC 4).
+    """Sizes and settings of the networks; defaults are the paper's Table 2 (docs/agents.md).
 
     The fields marked "not in the paper" are this project's choices (docs/agents.md).
     """
@@ -180,50 +184,35 @@ def _step_via_forward(
     return q.squeeze(1), state  # [B, n+1]
 
 
-def _per_neuron_state(
-    net: nn.Module, lstm: PerNeuronLSTM, obs: Observation, state: State | None, B: int, n: int
-) -> State:
-    if state is None:
-        return net.initial_state(B, n, device=obs["voltage"].device)
-    H = lstm.hidden
-    check_state(state, [(B, n, H), (B, n, H)], f"{type(net).__name__}.forward")
-    return state
-
-
-# ----------------------------------------------------------------------------
-# the four networks
-
-
-def _per_neuron_encode(
-    network: nn.Module, mix: nn.Module, obs_seq: Observation, state: State | None, where: str
+def _per_neuron_lstm(
+    net: nn.Module, obs_seq: Observation, state: State | None, n_fixed: int | None
 ) -> tuple[torch.Tensor, State]:
-    """The sequence encoder DDRQN and TDRQN share; they differ only in ``mix``, which
-    maps the per-neuron LSTM outputs [B, T, n, H] to embeddings [B, T, n, M]: a
-    per-neuron FF layer (DDRQN) or a transformer across neurons (TDRQN)."""
+    """The part DDRQN, DMDRQN and TDRQN share: check the observation, featurise each
+    neuron and run the shared per-neuron LSTM → outputs [B, T, n, H], final state."""
+    where = f"{type(net).__name__}.forward"
     (B, T), n = check_observation(
-        obs_seq, leading_dims=2, episode_length=network.episode_length, n_neurons=None,
+        obs_seq, leading_dims=2, episode_length=net.episode_length, n_neurons=n_fixed,
         where=where,
     )  # fmt: skip
     obs_seq = long_indices(obs_seq)
-    state = _per_neuron_state(network, network.lstm, obs_seq, state, B, n)
-    s = network.sizes
+    if state is None:
+        state = net.initial_state(B, n, device=obs_seq["voltage"].device)
+    H = net.lstm.hidden
+    check_state(state, [(B, n, H), (B, n, H)], where)
+    s = net.sizes
     x = per_neuron_features(
         obs_seq,
         v_rest_mV=s.v_rest_mV,
         v_threshold_mV=s.v_threshold_mV,
         with_target=s.target_in_input,
         with_target_voltage=s.target_voltage_in_input,
-        dtype=_param_dtype(network),
+        dtype=_param_dtype(net),
     )  # [B, T, n, F]
-    y, state = network.lstm(x, state)  # [B, T, n, H]
-    return mix(y), state  # [B, T, n, M]
+    return net.lstm(x, state)  # [B, T, n, H], (h, c)
 
 
-def _per_neuron_q(network: nn.Module, z: torch.Tensor, obs_seq: Observation) -> torch.Tensor:
-    """Per-neuron embeddings z [B, T, n, M] with their context → Q-values [B, T, n+1]."""
-    obs_seq = long_indices(obs_seq)
-    u = torch.cat([z, network.context(obs_seq, z.shape[-2])], dim=-1)  # [B, T, n, M+C]
-    return network.head(u, obs_seq["target"])  # [B, T, n+1]
+# ----------------------------------------------------------------------------
+# the four networks
 
 
 class DRQN(nn.Module):
@@ -303,33 +292,53 @@ class DRQN(nn.Module):
         return _step_via_forward(self, obs, state, self.n_neurons)
 
 
-class DDRQN(nn.Module):
-    """Distributed DRQN: shared per-neuron LSTM → per-neuron FF; any n, equivariant.
+class PerNeuronQNetwork(nn.Module):
+    """Per-neuron LSTM → mixing block → per-neuron Q-values; any n, equivariant.
 
-    per neuron: [v_norm, stimulated, (is target)] → LSTM (H) → FF ff_hidden + ReLU
-    ⊕ per-neuron context (C) → PerNeuronQHead (head_hidden). No mixing between
-    neurons except the pooled do-nothing value. State (h, c), each [B, n, H].
+    per neuron: [v_norm, stimulated, (is target), (target voltage)] → LSTM (H) → ``mix``
+    ([B, T, n, H] → [B, T, n, M]) ⊕ per-neuron context (C) → PerNeuronQHead
+    (``head_hidden``). The mixing block is the only difference between DDRQN (a
+    per-neuron FF layer: no mixing) and TDRQN (a transformer across neurons); it is
+    registered under ``mix_name`` (``ff``, ``mixer``) so that saved weights keep their
+    key names. State (h, c), each [B, n, H].
     """
 
     equivariant = True
 
-    def __init__(self, n_neurons: int, episode_length: int, sizes: AgentSizes | None = None):
+    def __init__(
+        self,
+        n_neurons: int,
+        episode_length: int,
+        sizes: AgentSizes | None,
+        *,
+        mix_name: str,
+        make_mix: Callable[[AgentSizes], nn.Module],
+        head_hidden: tuple[int, ...],
+    ):
         super().__init__()
-        _check_dims(n_neurons, episode_length, "DDRQN")
+        _check_dims(n_neurons, episode_length, type(self).__name__)
         self.sizes = sizes = sizes or AgentSizes()
         self.n_neurons = n_neurons  # the n it was built for; it runs on any n
         self.episode_length = episode_length
+        # Built in this order (LSTM, mix, context, head) so that a seed gives the
+        # initial weights it always gave.
         self.lstm = PerNeuronLSTM(per_neuron_width(sizes), sizes.lstm_hidden)
-        self.ff = MLP(sizes.lstm_hidden, [sizes.ff_hidden], None)
+        self.mix_name = mix_name
+        self.add_module(mix_name, make_mix(sizes))
         self.context = ContextEncoder(episode_length, sizes.target_embed, sizes.pattern_embed, None)
         self.head = PerNeuronQHead(
-            self.ff.out_features + self.context.out_features,
-            sizes.head_hidden,
+            self.mix.out_features + self.context.out_features,
+            head_hidden,
             sizes.value_hidden,
             sizes.do_nothing_head,
         )
-        self.feature_width = self.ff.out_features
+        self.feature_width = self.mix.out_features
         """Width of :meth:`encode`'s per-neuron output."""
+
+    @property
+    def mix(self) -> nn.Module:
+        """The mixing block, [B, T, n, H] → [B, T, n, M]."""
+        return self.get_submodule(self.mix_name)
 
     def initial_state(
         self, batch_size: int, n_neurons: int, device: torch.device | str | None = None
@@ -346,14 +355,50 @@ class DDRQN(nn.Module):
         self, obs_seq: Observation, state: State | None = None
     ) -> tuple[torch.Tensor, State]:
         """Per-neuron embeddings [B, T, n, M] before the context and the head."""
-        return _per_neuron_encode(self, self.ff, obs_seq, state, "DDRQN.forward")
+        y, state = _per_neuron_lstm(self, obs_seq, state, n_fixed=None)  # [B, T, n, H]
+        return self.mix(y), state  # [B, T, n, M]
 
     def q_values(self, features: torch.Tensor, obs_seq: Observation) -> torch.Tensor:
         """Features [B, T, n, M] from :meth:`encode` → Q-values [B, T, n+1]."""
-        return _per_neuron_q(self, features, obs_seq)
+        obs_seq = long_indices(obs_seq)
+        context = self.context(obs_seq, features.shape[-2])  # [B, T, n, C]
+        u = torch.cat([features, context], dim=-1)  # [B, T, n, M+C]
+        return self.head(u, obs_seq["target"])  # [B, T, n+1]
 
     def step(self, obs: Observation, state: State | None) -> tuple[torch.Tensor, State]:
         return _step_via_forward(self, obs, state, None)
+
+
+def feed_forward_mix(sizes: AgentSizes) -> nn.Module:
+    """DDRQN's block: one FF layer (ff_hidden + ReLU) per neuron, no mixing."""
+    return MLP(sizes.lstm_hidden, [sizes.ff_hidden], None)
+
+
+def attention_mix(sizes: AgentSizes) -> nn.Module:
+    """TDRQN's block: a transformer encoder over the n neuron tokens at each step."""
+    return NeuronMixer(
+        sizes.lstm_hidden, sizes.attn_width, sizes.attn_layers, sizes.attn_heads, sizes.attn_ff
+    )
+
+
+class DDRQN(PerNeuronQNetwork):
+    """Distributed DRQN: shared per-neuron LSTM → per-neuron FF; any n, equivariant.
+
+    per neuron: [v_norm, stimulated, (is target)] → LSTM (H) → FF ff_hidden + ReLU
+    ⊕ per-neuron context (C) → PerNeuronQHead (head_hidden). No mixing between
+    neurons except the pooled do-nothing value. State (h, c), each [B, n, H].
+    """
+
+    def __init__(self, n_neurons: int, episode_length: int, sizes: AgentSizes | None = None):
+        sizes = sizes or AgentSizes()
+        super().__init__(
+            n_neurons,
+            episode_length,
+            sizes,
+            mix_name="ff",
+            make_mix=feed_forward_mix,
+            head_hidden=sizes.head_hidden,
+        )
 
 
 class DMDRQN(nn.Module):
@@ -399,26 +444,9 @@ class DMDRQN(nn.Module):
         self, obs_seq: Observation, state: State | None = None
     ) -> tuple[torch.Tensor, State]:
         """The mixed system embedding [B, T, ff_hidden] before the context and the head."""
-        (B, T), n = check_observation(
-            obs_seq,
-            leading_dims=2,
-            episode_length=self.episode_length,
-            n_neurons=self.n_neurons,
-            where="DMDRQN.forward",
-        )
-        obs_seq = long_indices(obs_seq)
-        state = _per_neuron_state(self, self.lstm, obs_seq, state, B, n)
-        s = self.sizes
-        x = per_neuron_features(
-            obs_seq,
-            v_rest_mV=s.v_rest_mV,
-            v_threshold_mV=s.v_threshold_mV,
-            with_target=s.target_in_input,
-            with_target_voltage=s.target_voltage_in_input,
-            dtype=_param_dtype(self),
-        )  # [B, T, n, F]
-        y, state = self.lstm(x, state)  # [B, T, n, H]
-        y = y.reshape(B, T, n * s.lstm_hidden)  # [B, T, n*H]
+        y, state = _per_neuron_lstm(self, obs_seq, state, n_fixed=self.n_neurons)
+        B, T, n, H = y.shape
+        y = y.reshape(B, T, n * H)  # [B, T, n*H]
         return self.mix(y), state  # [B, T, ff_hidden]
 
     def q_values(self, features: torch.Tensor, obs_seq: Observation) -> torch.Tensor:
@@ -432,7 +460,7 @@ class DMDRQN(nn.Module):
         return _step_via_forward(self, obs, state, self.n_neurons)
 
 
-class TDRQN(nn.Module):
+class TDRQN(PerNeuronQNetwork):
     """Transformer-based DRQN: per-neuron LSTM → attention across neurons; any n.
 
     per neuron: [v_norm, stimulated, (is target)] → LSTM (H) → transformer encoder
@@ -442,63 +470,25 @@ class TDRQN(nn.Module):
     reaches the network only after the transformer. State (h, c), each [B, n, H].
     """
 
-    equivariant = True
-
     def __init__(self, n_neurons: int, episode_length: int, sizes: AgentSizes | None = None):
-        super().__init__()
-        _check_dims(n_neurons, episode_length, "TDRQN")
-        self.sizes = sizes = sizes or AgentSizes()
-        self.n_neurons = n_neurons  # the n it was built for; it runs on any n
-        self.episode_length = episode_length
-        self.lstm = PerNeuronLSTM(per_neuron_width(sizes), sizes.lstm_hidden)
-        self.mixer = NeuronMixer(
-            sizes.lstm_hidden, sizes.attn_width, sizes.attn_layers, sizes.attn_heads, sizes.attn_ff
+        sizes = sizes or AgentSizes()
+        super().__init__(
+            n_neurons,
+            episode_length,
+            sizes,
+            mix_name="mixer",
+            make_mix=attention_mix,
+            head_hidden=sizes.tdrqn_head_hidden,
         )
-        self.context = ContextEncoder(episode_length, sizes.target_embed, sizes.pattern_embed, None)
-        self.head = PerNeuronQHead(
-            self.mixer.out_features + self.context.out_features,
-            sizes.tdrqn_head_hidden,
-            sizes.value_hidden,
-            sizes.do_nothing_head,
-        )
-        self.feature_width = self.mixer.out_features
-        """Width of :meth:`encode`'s per-neuron output."""
-
-    def initial_state(
-        self, batch_size: int, n_neurons: int, device: torch.device | str | None = None
-    ) -> State:
-        return self.lstm.initial_state(batch_size, n_neurons, device, _param_dtype(self))
-
-    def forward(
-        self, obs_seq: Observation, state: State | None = None
-    ) -> tuple[torch.Tensor, State]:
-        features, state = self.encode(obs_seq, state)
-        return self.q_values(features, obs_seq), state
-
-    def encode(
-        self, obs_seq: Observation, state: State | None = None
-    ) -> tuple[torch.Tensor, State]:
-        """Per-neuron embeddings [B, T, n, M] before the context and the head."""
-        return _per_neuron_encode(self, self.mixer, obs_seq, state, "TDRQN.forward")
-
-    def q_values(self, features: torch.Tensor, obs_seq: Observation) -> torch.Tensor:
-        """Features [B, T, n, M] from :meth:`encode` → Q-values [B, T, n+1]."""
-        return _per_neuron_q(self, features, obs_seq)
-
-    def step(self, obs: Observation, state: State | None) -> tuple[torch.Tensor, State]:
-        return _step_via_forward(self, obs, state, None)
 
 
 # ----------------------------------------------------------------------------
 # construction
 
 
-AGENTS: dict[str, type[nn.Module]] = {
-    "drqn": DRQN,
-    "ddrqn": DDRQN,
-    "dmdrqn": DMDRQN,
-    "tdrqn": TDRQN,
-}
+AGENTS: dict[str, type[nn.Module]] = dict(
+    zip(ARCHITECTURES, (DRQN, DDRQN, DMDRQN, TDRQN), strict=True)
+)
 """Architecture name → class."""
 
 

@@ -8,17 +8,20 @@ from pathlib import Path
 import numpy as np
 
 from spikectl.files import atomic_write
-from spikectl.simulator import DO_NOTHING
+from spikectl.neuron.simulator import DO_NOTHING
 
 
-def _pyplot():
-    # Imported here so that importing spikectl never loads matplotlib or picks a GUI backend.
-    import matplotlib
+def subplots(nrows: int = 1, ncols: int = 1, *, figsize: tuple[float, float], **kwargs):
+    """A new ``(figure, axes)`` made without pyplot, as ``plt.subplots`` would make it.
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    A plain ``matplotlib.figure.Figure`` needs no backend and is kept in no global
+    registry, so drawing never changes the caller's matplotlib state (backend, current
+    figure) and there is nothing to close. Matplotlib is imported here, not at import.
+    """
+    from matplotlib.figure import Figure
 
-    return plt
+    figure = Figure(figsize=figsize)
+    return figure, figure.subplots(nrows, ncols, **kwargs)
 
 
 def save_figure(figure, path: str | os.PathLike) -> Path:
@@ -44,7 +47,6 @@ def plot_episode_raster(
 
     ``pattern`` [N] bool, ``actions`` [N] int, ``spikes`` [N, n] bool.
     """
-    plt = _pyplot()
     pattern = np.asarray(pattern, dtype=bool)
     actions = np.asarray(actions)
     spikes = np.asarray(spikes, dtype=bool)
@@ -52,7 +54,7 @@ def plot_episode_raster(
     others = [j for j in range(n) if j != target]
     target_spikes = spikes[:, target]
     steps = np.arange(length)
-    figure, axis = plt.subplots(figsize=(10, 1.2 + 0.28 * (n + 2)))
+    figure, axis = subplots(figsize=(10, 1.2 + 0.28 * (n + 2)))
     row_labels = ["pattern", f"target n{target}"] + [f"n{j}" for j in others]
     y = {label: len(row_labels) - 1 - i for i, label in enumerate(row_labels)}
 
@@ -60,7 +62,7 @@ def plot_episode_raster(
     stimulus_mark = {"marker": "s", "s": 22, "facecolors": "none", "edgecolors": "tab:blue"}
     target_row = y[f"target n{target}"]
     # (row, steps marked, style): the pattern, then the target's steps classified as in
-    # spikectl.render (hit, unwanted spike, missed spike), then every other neuron.
+    # spikectl.envs.render (hit, unwanted spike, missed spike), then every other neuron.
     marks = [
         (y["pattern"], pattern, {**spike_mark, "color": "black", "label": "wanted spike"}),
         (target_row, pattern & target_spikes, {**spike_mark, "color": "tab:green", "label": "hit"}),
@@ -84,7 +86,6 @@ def plot_episode_raster(
     axis.set_title(title or f"{stimulations} stimulations")
     axis.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8, frameon=False)
     path = save_figure(figure, path)
-    plt.close(figure)
     return path
 
 
@@ -96,9 +97,8 @@ def plot_learning_curve(
 ) -> Path:
     """Greedy return on the training, the unseen test (and validation) contexts against
     environment steps (one run's ``metrics.csv`` rows), with the do-nothing and random levels."""
-    plt = _pyplot()
     steps = np.array([row["env_steps"] for row in metrics])
-    figure, axis = plt.subplots(figsize=(6.4, 4.0))
+    figure, axis = subplots(figsize=(6.4, 4.0))
     axis.plot(steps, [row["train_return"] for row in metrics], label="train contexts", marker=".")
     axis.plot(steps, [row["test_return"] for row in metrics], label="unseen test contexts",
               marker=".")  # fmt: skip
@@ -116,7 +116,6 @@ def plot_learning_curve(
     axis.grid(alpha=0.3)
     axis.legend(fontsize=8)
     path = save_figure(figure, path)
-    plt.close(figure)
     return path
 
 
@@ -165,18 +164,17 @@ def plot_networks(contexts, path: str | os.PathLike, n_networks: int = 3) -> Pat
     contexts = list(contexts)[:n_networks]
     if not contexts:
         raise ValueError("plot_networks needs at least one context")
-    plt = _pyplot()
-    figure, axes = plt.subplots(1, len(contexts), figsize=(3.4 * len(contexts), 3.6),
-                                squeeze=False)  # fmt: skip
+    from matplotlib.lines import Line2D
+
+    figure, axes = subplots(1, len(contexts), figsize=(3.4 * len(contexts), 3.6), squeeze=False)
     for index, (context, axis) in enumerate(zip(contexts, axes[0], strict=True)):
         draw_network(context, axis, f"({chr(ord('a') + index)})")
     handles = [
-        plt.Line2D([], [], color=EXCITATORY_COLOUR, label="excitatory"),
-        plt.Line2D([], [], color=INHIBITORY_COLOUR, label="inhibitory"),
-        plt.Line2D([], [], marker="o", linestyle="", markerfacecolor=TARGET_COLOUR,
-                   markeredgecolor="black", label="target neuron"),
+        Line2D([], [], color=EXCITATORY_COLOUR, label="excitatory"),
+        Line2D([], [], color=INHIBITORY_COLOUR, label="inhibitory"),
+        Line2D([], [], marker="o", linestyle="", markerfacecolor=TARGET_COLOUR,
+               markeredgecolor="black", label="target neuron"),
     ]  # fmt: skip
     figure.legend(handles=handles, loc="lower center", ncol=3, frameon=False, fontsize=8)
     path = save_figure(figure, path)
-    plt.close(figure)
     return path

@@ -35,7 +35,7 @@ def plot_sweep(
     if not dirs:
         raise ValueError(f"{sweep_dir} holds no trials (no trials/*/config.json)")
     runs = load_runs(dirs)
-    written = [plot_networks(_training_contexts(dirs[0], runs[0].config), out_dir / "figure3.png")]
+    written = [plot_networks(training_contexts(dirs[0], runs[0].config), out_dir / "figure3.png")]
     by_arch = group_runs(runs, "arch")
     written.append(plot_training_curves(by_arch, out_dir / "figure4.png").path)
     written += write_results_table(by_arch, out_dir)
@@ -63,7 +63,7 @@ def plot_sweep(
     return written
 
 
-def _training_contexts(run_dir: Path, config: dict) -> ContextSet:
+def training_contexts(run_dir: Path, config: dict) -> ContextSet:
     """A trial's training set: its saved file, or (for results kept without it, such as
     docs/results/) regenerated from the config's seeds exactly as training made it."""
     if (run_dir / TRAIN_FILE).exists() or config.get("train_contexts") is not None:

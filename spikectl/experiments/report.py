@@ -19,12 +19,12 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from spikectl.experiments.figures import _pyplot, save_figure
+from spikectl.experiments.figures import save_figure, subplots
 from spikectl.experiments.stats import bootstrap_ci, iqm
+from spikectl.files import atomic_write_text
 from spikectl.training.checkpoint import (
     METRICS_FILE,
     RunDirError,
-    atomic_write_text,
     read_config,
     read_metrics,
 )
@@ -139,14 +139,13 @@ def _draw_curves(axis, curves: Mapping[Any, Curve], title: str, label_format: st
 
 def draw_training_curves(groups: Mapping[Any, Sequence[RunLike]], title: str = ""):
     """Figure 4 without saving: ``(figure, curves)``, the train panel left and the
-    test panel right (the caller closes the figure)."""
+    test panel right (a pyplot-free figure: nothing to close)."""
     groups = _resolve(groups)
     curves = {
         panel: {label: mean_curve(runs, f"{panel}_return") for label, runs in groups.items()}
         for panel in ("train", "test")
     }
-    plt = _pyplot()
-    figure, (left, right) = plt.subplots(1, 2, figsize=(11, 4), sharey=True)
+    figure, (left, right) = subplots(1, 2, figsize=(11, 4), sharey=True)
     _draw_curves(left, curves["train"], "training contexts", "{}")
     _draw_curves(right, curves["test"], "unseen test contexts", "{}")
     if title:
@@ -160,10 +159,8 @@ def plot_training_curves(
     """Figure 4: greedy return on the training (left) and unseen test (right) contexts
     against environment steps, one curve per group (e.g. architecture), mean ± standard
     deviation over its runs shaded, the do-nothing level 0.5 dotted."""
-    plt = _pyplot()
     figure, curves = draw_training_curves(groups, title)
     path = save_figure(figure, path)
-    plt.close(figure)
     return CurvePlot(path, curves)
 
 
@@ -171,8 +168,7 @@ def draw_test_curves_by_size(groups: Mapping[Any, Sequence[RunLike]], title: str
     """Figure 5 without saving: ``(figure, curves)``."""
     groups = _resolve(groups)
     curves = {"test": {size: mean_curve(runs, "test_return") for size, runs in groups.items()}}
-    plt = _pyplot()
-    figure, axis = plt.subplots(figsize=(6.4, 4.0))
+    figure, axis = subplots(figsize=(6.4, 4.0))
     _draw_curves(axis, curves["test"], title or "unseen test contexts", "{} training contexts")
     return figure, curves
 
@@ -183,10 +179,8 @@ def plot_test_curves_by_size(
     """Figure 5: return on the unseen test contexts against environment steps, one
     curve per training-set size (the group labels, e.g. ``group_runs(runs,
     "n_train")``), mean ± standard deviation over seeds shaded."""
-    plt = _pyplot()
     figure, curves = draw_test_curves_by_size(groups, title)
     path = save_figure(figure, path)
-    plt.close(figure)
     return CurvePlot(path, curves)
 
 

@@ -28,7 +28,8 @@ from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
-from spikectl.files import FileWriteError, atomic_write_text, make_dirs
+from spikectl.agents import ARCHITECTURES
+from spikectl.files import FileWriteError, make_dirs, write_json
 from spikectl.training.checkpoint import (
     CHECKPOINT_FILE,
     CONFIG_FILE,
@@ -43,7 +44,7 @@ TRIALS_DIR = "trials"
 GROUPS_DIR = "groups"
 
 PAPER_SWEEPS: dict[str, dict[str, Any]] = {
-    "fig4": {"base": "paper", "grid": {"arch": ["drqn", "ddrqn", "dmdrqn", "tdrqn"],
+    "fig4": {"base": "paper", "grid": {"arch": list(ARCHITECTURES),
                                        "seed": list(range(10))}},
     "fig5": {"base": "paper", "grid": {"arch": ["tdrqn"], "n_train": [10, 20, 40, 100],
                                        "seed": list(range(10))}},
@@ -262,7 +263,7 @@ def run_sweep(
             f"{sweep_dir} holds another sweep ({SWEEP_FILE} differs): choose another directory"
         )
     make_dirs(sweep_dir)
-    atomic_write_text(saved, json.dumps(sweep.to_dict(), indent=2) + "\n")
+    write_json(saved, sweep.to_dict())
     trials = sweep.trials()
     workers = max(1, min(workers or os.cpu_count() or 1, len(trials)))
     echo(f"{len(trials)} trials in {sweep_dir / TRIALS_DIR}, {workers} worker(s)")

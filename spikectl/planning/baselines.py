@@ -18,19 +18,19 @@ from pathlib import Path
 import numpy as np
 
 from spikectl.contexts import ContextSet
-from spikectl.extensions import CONTEXT_FIELDS, Extensions
-from spikectl.files import atomic_write_text
-from spikectl.params import NeuronParams
-from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, plan_episode
-from spikectl.planning.policy import IdentifyAndPlan
-from spikectl.rollout import (
+from spikectl.envs.rollout import (
     do_nothing_policy,
     make_random_policy,
     make_witness_policy,
     run_episodes,
 )
-from spikectl.simulator import DO_NOTHING
-from spikectl.vector_env import NeuronControlVectorEnv
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.files import atomic_write_text
+from spikectl.neuron.extensions import CONTEXT_FIELDS, Extensions
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING
+from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, plan_episode
+from spikectl.planning.policy import IdentifyAndPlan
 
 CONTROLLERS = ("do_nothing", "random", "identify_and_plan", "oracle", "witness")
 

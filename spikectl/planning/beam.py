@@ -1,8 +1,8 @@
 """Beam search over action sequences with the batched simulator (the planner's core).
 
 The planner never has its own copy of the dynamics: every candidate step is one call
-of :func:`spikectl.simulator.advance` on a batch of simulator states, one per
-(beam entry, action) pair. Two facts of the model (SPEC 1) make a beam search strong
+of :func:`spikectl.neuron.simulator.advance` on a batch of simulator states, one per
+(beam entry, action) pair. Two facts of the model (docs/model.md) make a beam search strong
 here:
 
 * an action at step t reaches the target no earlier than step t + 1 (the target is
@@ -20,9 +20,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spikectl.env_support import step_rewards
-from spikectl.params import NeuronParams
-from spikectl.simulator import SimulatorState, advance
+from spikectl.envs.env_support import step_rewards
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import SimulatorState, advance
 
 # Voltages are compared at this resolution (mV) when duplicate states are merged: far
 # below any difference the dynamics can act on, far above float round-off.
@@ -40,7 +40,7 @@ class PlanningModel:
 
     Attributes:
         weights: [K, n, n] int8 signs or float64 signed synaptic strengths in units of
-            w_in (what :func:`spikectl.simulator.advance` takes): K = 1 for a known
+            w_in (what :func:`spikectl.neuron.simulator.advance` takes): K = 1 for a known
             network, K > 1 for hypotheses about an uncertain one (planned on at once,
             ranked by the mean return over them).
         target: the neuron whose spikes are rewarded (a neuron index of the model).

@@ -25,7 +25,7 @@ import itertools
 
 import numpy as np
 
-from spikectl.contexts import EXCITATORY_PROBABILITY, connection_probability
+from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
 
 MAX_COLUMN_HYPOTHESES = 3**10
 """Largest number of hypotheses per column (n <= 11 neurons)."""

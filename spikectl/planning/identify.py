@@ -1,7 +1,7 @@
 """Identify the hidden connectivity from observed potentials (the model is public, G is not).
 
 With the paper's noise-free model, a neuron j that was not refractory at step t
-obeys, exactly (SPEC 1, docs/model.md):
+obeys, exactly (docs/model.md):
 
     V_obs,j(t) = V_j(t-1) - (V_j(t-1) - V_r) dt/(RC) + 40 mV [a_t = j]
                  + 20 mV * sum_i G[i, j] released_i(t-1)
@@ -27,16 +27,16 @@ from math import erfc as _erfc
 
 import numpy as np
 
-from spikectl.contexts import EXCITATORY_PROBABILITY, connection_probability
-from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING, SimulatorState
+from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING, SimulatorState
 
 erfc = np.vectorize(_erfc, otypes=[np.float64])
 
 # Residual noise (in units of w_in) assumed without measurement noise: float32
 # observations round potentials at ~1e-6 mV, so this is loose and still makes one
 # clean observation decisive against a prior variance of at most 0.3.
-_NOISE_FREE_SD = 0.01
+NOISE_FREE_SD = 0.01
 
 
 class ConnectivityEstimate:

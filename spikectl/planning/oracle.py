@@ -10,11 +10,12 @@ from __future__ import annotations
 
 import numpy as np
 
-from spikectl.contexts import Context, legal_actions
-from spikectl.env_support import step_rewards
-from spikectl.params import NeuronParams
+from spikectl.contexts import Context
+from spikectl.contexts.generation import legal_actions
+from spikectl.envs.env_support import step_rewards
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import SimulatorState, neuron_parameters, simulate
 from spikectl.planning.beam import PlanningModel, beam_search
-from spikectl.simulator import SimulatorState, neuron_parameters, simulate
 
 DEFAULT_ORACLE_WIDTH = 256
 """Beam width of :func:`plan_episode`: 1.000 on all 100 training networks (n = 8),

@@ -24,11 +24,11 @@ from typing import Any
 
 import numpy as np
 
-from spikectl.params import NeuronParams
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING, advance
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.discrete import DiscreteConnectivityEstimate
-from spikectl.planning.identify import _NOISE_FREE_SD, ConnectivityEstimate, ObservedState
-from spikectl.simulator import DO_NOTHING, advance
+from spikectl.planning.identify import NOISE_FREE_SD, ConnectivityEstimate, ObservedState
 
 IDENTIFICATIONS = ("gaussian", "discrete")
 """How the policy identifies G: a Gaussian posterior (ridge regression, any n) or the
@@ -133,7 +133,7 @@ class IdentifyAndPlan:
         leak = params.dt_ms / params.membrane_time_constant_ms
         # The residual differences two noisy observations, the older one shrunk by the leak.
         noise_sd = noise_mV * np.hypot(1.0, 1.0 - leak) / synaptic_mV
-        self._residual_sd = max(noise_sd, _NOISE_FREE_SD)
+        self._residual_sd = max(noise_sd, NOISE_FREE_SD)
         self.reset()
 
     def reset(self) -> None:
@@ -271,7 +271,7 @@ class IdentifyAndPlan:
 
     def vector_policy(self, num_envs: int):
         """A batched policy ``policy(observations, action_mask) -> actions`` for
-        :func:`spikectl.rollout.run_episodes`: one independent copy per environment."""
+        :func:`spikectl.envs.rollout.run_episodes`: one independent copy per environment."""
         copies = [
             IdentifyAndPlan(
                 self.params,

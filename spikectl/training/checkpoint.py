@@ -43,16 +43,14 @@ from spikectl.files import (
     atomic_write_text,
     describe_os_error,
     make_dirs,
+    write_json,
 )
 from spikectl.training.config import TrainConfig
 from spikectl.training.replay import EpisodeReplay
 
 __all__ = [
-    "FileWriteError",
     "RunDirError",
     "TrainingState",
-    "atomic_write_bytes",
-    "atomic_write_text",
     "load_checkpoint",
     "load_model_weights",
     "prepare_run_dir",
@@ -200,7 +198,7 @@ def prepare_run_dir(config: TrainConfig, run_dir: Path, resume: bool) -> bool:
         if read_config(run_dir) != config:
             raise RunDirError(f"the config does not match the run saved in {run_dir}")
         if has_checkpoint:
-            _remove_temporaries(run_dir)
+            remove_temporaries(run_dir)
             return True
         _clear_unstarted(run_dir)
         return False
@@ -220,7 +218,7 @@ def prepare_run_dir(config: TrainConfig, run_dir: Path, resume: bool) -> bool:
     if run_dir.exists() and any(p.name != LOCK_FILE for p in run_dir.iterdir()):
         raise RunDirError(f"{run_dir} is not empty and holds no spikectl run: choose another")
     make_dirs(run_dir)
-    atomic_write_text(config_path, json.dumps(config.to_dict(), indent=2) + "\n")
+    write_json(config_path, config.to_dict())
     return False
 
 
@@ -233,10 +231,10 @@ def _clear_unstarted(run_dir: Path) -> None:
             shutil.rmtree(path)
         else:
             path.unlink(missing_ok=True)
-    _remove_temporaries(run_dir)
+    remove_temporaries(run_dir)
 
 
-def _remove_temporaries(run_dir: Path) -> None:
+def remove_temporaries(run_dir: Path) -> None:
     """Remove the temporary files of writes a kill interrupted (we hold the lock, so no
     write of ours is under way)."""
     for temporary in run_dir.glob(".*.tmp"):
@@ -321,13 +319,14 @@ def _digest(value: Any, digest: Any) -> None:
         raise TypeError(f"cannot checksum a {type(value).__name__} (tensors and plain data only)")
 
 
-def _torch_bytes(payload: Any) -> bytes:
+def torch_bytes(payload: Any) -> bytes:
+    """``torch.save(payload)`` into bytes, for the atomic writer."""
     buffer = io.BytesIO()
     torch.save(payload, buffer)
     return buffer.getvalue()
 
 
-def _check_finite(tensors: Mapping[str, torch.Tensor], what: str) -> None:
+def check_finite(tensors: Mapping[str, torch.Tensor], what: str) -> None:
     """Refuse NaN or infinite floating-point values (a diverged run), naming one."""
     for name, tensor in tensors.items():
         if torch.is_tensor(tensor) and tensor.is_floating_point():
@@ -360,7 +359,7 @@ def _peek_header(path: Path) -> dict[str, Any]:
     return found
 
 
-def _load_torch_file(path: Path, what: str, map_location: str = "cpu") -> Any:
+def load_torch_file(path: Path, what: str, map_location: str = "cpu") -> Any:
     """``torch.load(path, weights_only=True)`` with every failure as one RunDirError
     line naming the file and the problem."""
     if path.is_dir():
@@ -379,12 +378,13 @@ def _load_torch_file(path: Path, what: str, map_location: str = "cpu") -> Any:
                 f"{path} is refused: it holds pickled Python objects that could run code "
                 f"when loaded (nothing in it was run); a {what} holds only tensors and data"
             ) from None
-        raise RunDirError(f"{path} is not a readable {what}: {_first_line(error)}") from None
+        raise RunDirError(f"{path} is not a readable {what}: {first_line(error)}") from None
     except Exception as error:  # torch raises many types for a damaged file
-        raise RunDirError(f"{path} is not a readable {what}: {_first_line(error)}") from None
+        raise RunDirError(f"{path} is not a readable {what}: {first_line(error)}") from None
 
 
-def _first_line(error: BaseException) -> str:
+def first_line(error: BaseException) -> str:
+    """An exception's first message line (its type name when it has no message)."""
     text = str(error).strip()
     return text.splitlines()[0] if text else type(error).__name__
 
@@ -406,8 +406,8 @@ def save_checkpoint(
     """
     from spikectl import __version__
 
-    _check_finite(online.state_dict(), f"the online network of {run_dir}")
-    _check_finite(target.state_dict(), f"the target network of {run_dir}")
+    check_finite(online.state_dict(), f"the online network of {run_dir}")
+    check_finite(target.state_dict(), f"the target network of {run_dir}")
     payload = {
         "format": CHECKPOINT_FORMAT,
         "format_version": CHECKPOINT_VERSION,
@@ -421,8 +421,8 @@ def save_checkpoint(
         **state_payload(state, replay),
     }
     payload["checksum"] = payload_checksum(payload)
-    atomic_write_bytes(run_dir / CHECKPOINT_FILE, _torch_bytes(payload))
-    atomic_write_text(run_dir / BASELINES_FILE, json.dumps(state.baselines, indent=2) + "\n")
+    atomic_write_bytes(run_dir / CHECKPOINT_FILE, torch_bytes(payload))
+    write_json(run_dir / BASELINES_FILE, state.baselines)
 
 
 def state_payload(state: TrainingState, replay: EpisodeReplay) -> dict[str, Any]:
@@ -488,7 +488,7 @@ def read_checkpoint(path: Path, map_location: str = "cpu") -> dict[str, Any]:
             f"{CHECKPOINT_VERSION}: resume it with the version that wrote it, or start the "
             "run again"
         )
-    payload = _load_torch_file(path, "spikectl checkpoint", map_location)
+    payload = load_torch_file(path, "spikectl checkpoint", map_location)
     if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
         raise RunDirError(f"{path} is not a spikectl checkpoint")
     if payload.get("format_version") != CHECKPOINT_VERSION:
@@ -534,8 +534,8 @@ def load_checkpoint(
             f"{path} was written for arch {payload['arch']!r} with another config than "
             f"{run_dir / CONFIG_FILE}"
         )
-    _check_finite(payload["online"], str(path))
-    _check_finite(payload["target"], str(path))
+    check_finite(payload["online"], str(path))
+    check_finite(payload["target"], str(path))
     try:
         online.load_state_dict(payload["online"])
         target.load_state_dict(payload["target"])
@@ -544,7 +544,7 @@ def load_checkpoint(
         optimizer.load_state_dict(payload["optimizer"])
         return restore_state(payload, replay)
     except (RuntimeError, ValueError, KeyError, TypeError) as error:
-        raise RunDirError(f"{path} does not fit this run: {_first_line(error)}") from None
+        raise RunDirError(f"{path} does not fit this run: {first_line(error)}") from None
 
 
 def save_model(run_dir: Path, network: torch.nn.Module) -> Path:
@@ -554,20 +554,20 @@ def save_model(run_dir: Path, network: torch.nn.Module) -> Path:
     Refuses NaN or infinite weights."""
     path = run_dir / MODEL_FILE
     weights = network.state_dict()
-    _check_finite(weights, f"the final network of {run_dir}")
+    check_finite(weights, f"the final network of {run_dir}")
     weights._metadata["spikectl"] = {
         "format": MODEL_FORMAT,
         "format_version": MODEL_VERSION,
         "checksum": payload_checksum(dict(weights)),
     }
-    atomic_write_bytes(path, _torch_bytes(weights))
+    atomic_write_bytes(path, torch_bytes(weights))
     return path
 
 
 def load_model_weights(path: Path) -> dict[str, torch.Tensor]:
     """The verified state dict of a model.pt: weights-only loaded, checksum checked,
     finite. Damage, foreign files and pickled objects are RunDirErrors."""
-    weights = _load_torch_file(path, "spikectl model", "cpu")
+    weights = load_torch_file(path, "spikectl model", "cpu")
     metadata = getattr(weights, "_metadata", None) or {}
     header = metadata.get("spikectl") if isinstance(metadata, Mapping) else None
     if not isinstance(weights, dict) or not isinstance(header, dict):
@@ -585,12 +585,12 @@ def load_model_weights(path: Path) -> dict[str, torch.Tensor]:
         raise RunDirError(f"{path} is damaged: it holds entries that are not tensors")
     if payload_checksum(dict(weights)) != header.get("checksum"):
         raise RunDirError(f"{path} is damaged: its checksum does not match its contents")
-    _check_finite(weights, str(path))
+    check_finite(weights, str(path))
     return weights
 
 
 def checkpoint_weights(path: Path) -> dict[str, torch.Tensor]:
     """The online network's verified weights from a checkpoint file."""
     weights = read_checkpoint(path)["online"]
-    _check_finite(weights, str(path))
+    check_finite(weights, str(path))
     return weights

@@ -22,17 +22,15 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-from spikectl.agents import AgentSizes
+from spikectl.agents import ARCHITECTURES, AgentSizes, Architecture
 from spikectl.contexts import MAX_EPISODE_LENGTH, MAX_N_NEURONS
-
-ARCHITECTURES = ("drqn", "ddrqn", "dmdrqn", "tdrqn")
 
 
 @dataclass(frozen=True)
 class TrainConfig:
     """Recurrent double Q-learning on generated contexts (paper Section 5, Table 2)."""
 
-    arch: Literal["drqn", "ddrqn", "dmdrqn", "tdrqn"] = "tdrqn"
+    arch: Architecture = "tdrqn"
     """Q-network architecture."""
     seed: int = 0
     """Seed of the network initialisation, exploration and replay sampling."""

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from spikectl.context_set import make_validation_set
 from spikectl.contexts import ContextSet, make_splits
+from spikectl.contexts.context_set import make_validation_set
 from spikectl.training.config import TrainConfig
 
 TRAIN_FILE = "train_contexts.npz"

@@ -1,4 +1,4 @@
-"""Recurrent double Q-learning over whole episodes (SPEC section 5, paper Appendix D).
+"""Recurrent double Q-learning over whole episodes (docs/training.md, paper Appendix D).
 
 ``train(config, run_dir)`` runs a whole training job and returns its metrics. One
 round: collect ``num_envs`` episodes at once through the vector environment with an
@@ -27,13 +27,15 @@ import torch.nn.functional as F
 
 from spikectl.agents import make_agent, make_voltage_predictor, masked_q
 from spikectl.agents.blocks import normalised_voltage, observation_batch
-from spikectl.rollout import (
+from spikectl.envs.env_support import random_legal_actions
+from spikectl.envs.rollout import (
     EpisodeBatch,
     do_nothing_policy,
     evaluate_policy,
     make_random_policy,
     run_episodes,
 )
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.training.checkpoint import (
     RunDirError,
     TrainingState,
@@ -46,7 +48,6 @@ from spikectl.training.checkpoint import (
 from spikectl.training.config import TrainConfig
 from spikectl.training.contexts import load_or_make_contexts
 from spikectl.training.replay import EpisodeBatchArrays, EpisodeReplay
-from spikectl.vector_env import NeuronControlVectorEnv
 
 METRIC_FIELDS = (
     "episode", "env_steps", "updates", "epsilon", "train_return", "test_return", "loss",
@@ -99,15 +100,15 @@ def explore(
     """Epsilon-greedy: greedy actions [S] with each replaced, with probability epsilon, by
     a random legal one (the draws every policy of a run makes, in this order)."""
     exploring = rng.random(greedy.shape[0]) < epsilon  # [S]
-    scores = rng.random(action_mask.shape)  # [S, n + 1]
-    scores[~action_mask] = -1.0
-    if explore_do_nothing is not None:
-        scores[:, 0] = -1.0  # a stimulation, unless the draw below says do nothing
-        random_actions = scores.argmax(axis=1) - 1
+    if explore_do_nothing is None:
+        random_actions = random_legal_actions(action_mask, rng)
+    else:
+        # A random stimulation, replaced by do nothing with probability explore_do_nothing.
+        stimulations = action_mask.copy()
+        stimulations[:, 0] = False
+        random_actions = random_legal_actions(stimulations, rng)
         nothing = rng.random(greedy.shape[0]) < explore_do_nothing
         random_actions[nothing] = -1
-    else:
-        random_actions = scores.argmax(axis=1) - 1
     return np.where(exploring, random_actions, greedy)
 
 
@@ -304,7 +305,7 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
     }
     targets = np.array([c.target for c in train_set], dtype=np.int64)
     patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
-    logger = _Logger(run_dir, config, state)
+    logger = RunLogger(run_dir, config, state)
     started = time.perf_counter() - state.wall_time_s
     # Process CPU time counts every thread: core-seconds, fair on a shared machine.
     started_cpu = time.process_time() - state.cpu_time_s
@@ -358,9 +359,9 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
                 state.aux_loss_sum += 0.0 if aux is None else aux.item()
                 state.loss_count += 1
         finished = state.episodes >= config.total_episodes
-        if finished or _crossed(before, state.episodes, config.eval_every_episodes):
+        if finished or crossed_multiple(before, state.episodes, config.eval_every_episodes):
             evaluate()
-        if finished or _crossed(before, state.episodes, config.checkpoint_every_episodes):
+        if finished or crossed_multiple(before, state.episodes, config.checkpoint_every_episodes):
             clock()
             save_checkpoint(run_dir, config, state, online, target, optimizer, replay, predictor)
     logger.finish(online, state)
@@ -381,7 +382,7 @@ def record_evaluation(
     returns: dict[str, float],
     with_aux: bool,
     run_dir: Path,
-    logger: _Logger,
+    logger: RunLogger,
 ) -> None:
     """Append one metrics.csv row (greedy ``returns`` per split, mean losses since the
     last row, both clocks), write it and log it; the loss sums start again."""
@@ -405,11 +406,13 @@ def record_evaluation(
     logger.log(row)
 
 
-def _crossed(before: int, after: int, every: int) -> bool:
+def crossed_multiple(before: int, after: int, every: int) -> bool:
+    """Whether a count went past a multiple of ``every`` going from ``before`` to ``after``
+    (a round of episodes may cross an evaluation or checkpoint point without landing on it)."""
     return after // every > before // every
 
 
-class _Logger:
+class RunLogger:
     """Progress bar and TensorBoard, both optional extras of a run (never its record)."""
 
     def __init__(self, run_dir: Path, config: TrainConfig, state: TrainingState) -> None:

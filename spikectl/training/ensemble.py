@@ -31,7 +31,13 @@ import torch
 
 from spikectl.agents import make_agent
 from spikectl.agents.stacked import StackedNetworks
-from spikectl.rollout import do_nothing_policy, evaluate_policy, make_random_policy, run_episodes
+from spikectl.envs.rollout import (
+    do_nothing_policy,
+    evaluate_policy,
+    make_random_policy,
+    run_episodes,
+)
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.training.checkpoint import (
     RunDirError,
     TrainingState,
@@ -42,11 +48,11 @@ from spikectl.training.checkpoint import (
 from spikectl.training.config import TrainConfig
 from spikectl.training.contexts import load_or_make_contexts
 from spikectl.training.dqn import (
-    _crossed,
-    _Logger,
+    RunLogger,
     batch_tensors,
     build_networks,
     build_predictor,
+    crossed_multiple,
     explore,
     greedy_returns,
     losses_on_tensors,
@@ -58,7 +64,6 @@ from spikectl.training.group_files import (
     save_group_checkpoint,
 )
 from spikectl.training.replay import EpisodeReplay
-from spikectl.vector_env import NeuronControlVectorEnv
 
 
 def seed_dirs(run_dir: str | Path, seeds: list[int]) -> list[Path]:
@@ -210,7 +215,7 @@ def _train_group(
     targets = np.array([c.target for c in train_set], dtype=np.int64)
     patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
     loggers = [
-        _Logger(d, dataclasses.replace(c, progress=c.progress and k == 0), s)
+        RunLogger(d, dataclasses.replace(c, progress=c.progress and k == 0), s)
         for k, (c, d, s) in enumerate(zip(configs, run_dirs, states, strict=True))
     ]
     started = time.perf_counter() - states[0].wall_time_s
@@ -291,9 +296,11 @@ def _train_group(
                     state.aux_loss_sum += aux_k
                     state.loss_count += 1
         finished = states[0].episodes >= config.total_episodes
-        if finished or _crossed(before, states[0].episodes, config.eval_every_episodes):
+        if finished or crossed_multiple(before, states[0].episodes, config.eval_every_episodes):
             evaluate()
-        if finished or _crossed(before, states[0].episodes, config.checkpoint_every_episodes):
+        if finished or crossed_multiple(
+            before, states[0].episodes, config.checkpoint_every_episodes
+        ):
             clock()
             save_group_checkpoint(
                 group_dir, configs, run_dirs, states, online, target, predictor, optimizer,

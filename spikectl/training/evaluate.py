@@ -13,7 +13,7 @@ import torch
 
 from spikectl.agents import make_agent
 from spikectl.contexts import ContextSet
-from spikectl.rollout import EpisodeBatch, do_nothing_policy, evaluate_policy
+from spikectl.envs.rollout import EpisodeBatch, do_nothing_policy, evaluate_policy
 from spikectl.training.checkpoint import (
     CHECKPOINT_FILE,
     MODEL_FILE,

@@ -15,24 +15,22 @@ import json
 import os
 from pathlib import Path
 
+from spikectl.files import atomic_write_bytes, make_dirs, write_json
 from spikectl.training.checkpoint import (
     CONFIG_FILE,
     LOCK_FILE,
     RunDirError,
     TrainingState,
-    _check_finite,
-    _first_line,
-    _load_torch_file,
-    _remove_temporaries,
-    _torch_bytes,
-    atomic_write_bytes,
-    atomic_write_text,
-    make_dirs,
+    check_finite,
+    first_line,
+    load_torch_file,
     payload_checksum,
     prepare_run_dir,
     read_config,
+    remove_temporaries,
     restore_state,
     state_payload,
+    torch_bytes,
 )
 from spikectl.training.config import TrainConfig
 
@@ -64,7 +62,7 @@ def _read_description(group_dir: Path) -> dict:
     try:
         return json.loads(path.read_text())
     except (OSError, json.JSONDecodeError, UnicodeDecodeError) as error:
-        raise RunDirError(f"{path} is not a valid seed-group file: {_first_line(error)}") from None
+        raise RunDirError(f"{path} is not a valid seed-group file: {first_line(error)}") from None
 
 
 def prepare_group(
@@ -96,8 +94,8 @@ def prepare_group(
                 raise RunDirError(f"the config in {run_dir} does not match its seed group")
             if (run_dir / "checkpoint.pt").exists():
                 raise RunDirError(f"{run_dir} holds a single run's checkpoint, not a group seed")
-            _remove_temporaries(run_dir)
-        _remove_temporaries(group_dir)
+            remove_temporaries(run_dir)
+        remove_temporaries(group_dir)
         return True
     if not has_file:
         members = {Path(d).resolve() for d in run_dirs}
@@ -111,7 +109,7 @@ def prepare_group(
         if (run_dir / "checkpoint.pt").exists() or (run_dir / "model.pt").exists():
             raise RunDirError(f"{run_dir} already holds a run: it cannot join a seed group")
     make_dirs(group_dir)
-    atomic_write_text(group_dir / GROUP_FILE, json.dumps(description, indent=2) + "\n")
+    write_json(group_dir / GROUP_FILE, description)
     return False
 
 
@@ -122,8 +120,8 @@ def save_group_checkpoint(
     networks holding NaN or infinite values (the previous checkpoint stays)."""
     from spikectl import __version__
 
-    _check_finite(online.stacked_state(), f"the online networks of {group_dir}")
-    _check_finite(target.stacked_state(), f"the target networks of {group_dir}")
+    check_finite(online.stacked_state(), f"the online networks of {group_dir}")
+    check_finite(target.stacked_state(), f"the target networks of {group_dir}")
     payload = {
         "format": GROUP_FORMAT,
         "format_version": GROUP_VERSION,
@@ -138,9 +136,9 @@ def save_group_checkpoint(
         ],
     }
     payload["checksum"] = payload_checksum(payload)
-    atomic_write_bytes(group_dir / GROUP_CHECKPOINT_FILE, _torch_bytes(payload))
+    atomic_write_bytes(group_dir / GROUP_CHECKPOINT_FILE, torch_bytes(payload))
     for state, run_dir in zip(states, run_dirs, strict=True):
-        atomic_write_text(run_dir / "baselines.json", json.dumps(state.baselines, indent=2) + "\n")
+        write_json(run_dir / "baselines.json", state.baselines)
 
 
 def load_group_checkpoint(
@@ -149,7 +147,7 @@ def load_group_checkpoint(
     """Restore a group saved by ``save_group_checkpoint``; refuse a damaged one, one of
     another format or configs, or one whose networks hold NaN or infinite values."""
     path = Path(group_dir) / GROUP_CHECKPOINT_FILE
-    payload = _load_torch_file(path, "spikectl seed-group checkpoint", configs[0].device)
+    payload = load_torch_file(path, "spikectl seed-group checkpoint", configs[0].device)
     if not isinstance(payload, dict) or payload.get("format") != GROUP_FORMAT:
         raise RunDirError(f"{path} is not a spikectl seed-group checkpoint")
     if payload.get("format_version") != GROUP_VERSION:
@@ -162,8 +160,8 @@ def load_group_checkpoint(
         raise RunDirError(f"{path} is damaged: its checksum does not match its contents")
     if payload["configs"] != [config.to_dict() for config in configs]:
         raise RunDirError(f"{path} was written for other configs than {group_dir / GROUP_FILE}")
-    _check_finite(payload["online"], str(path))
-    _check_finite(payload["target"], str(path))
+    check_finite(payload["online"], str(path))
+    check_finite(payload["target"], str(path))
     states = []
     try:
         online.load_stacked_state(payload["online"])
@@ -174,7 +172,7 @@ def load_group_checkpoint(
         for seed, replay in zip(payload["seeds"], replays, strict=True):
             states.append(restore_state(seed, replay))
     except (RuntimeError, ValueError, KeyError, TypeError) as error:
-        raise RunDirError(f"{path} does not fit this group: {_first_line(error)}") from None
+        raise RunDirError(f"{path} does not fit this group: {first_line(error)}") from None
     return states
 
 
@@ -187,6 +185,6 @@ def group_configs(group_dir: str | os.PathLike) -> tuple[list[TrainConfig], list
         run_dirs = [group_dir / relative for relative in description["run_dirs"]]
     except (KeyError, TypeError, ValueError) as error:
         raise RunDirError(
-            f"{group_dir / GROUP_FILE} is not a valid seed-group file: {_first_line(error)}"
+            f"{group_dir / GROUP_FILE} is not a valid seed-group file: {first_line(error)}"
         ) from None
     return configs, run_dirs

@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from spikectl.files import check_fits_in_memory
-from spikectl.simulator import DO_NOTHING
+from spikectl.neuron.simulator import DO_NOTHING
 
 
 @dataclass(frozen=True)

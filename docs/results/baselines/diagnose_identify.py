@@ -16,8 +16,8 @@ import numpy as np
 
 import spikectl.planning.policy as policy_module
 from spikectl import IdentifyAndPlan, make_splits
-from spikectl.env_support import step_rewards
-from spikectl.rollout import evaluate_policy
+from spikectl.envs.env_support import step_rewards
+from spikectl.envs.rollout import evaluate_policy
 
 STEP_BINS = (0, 5, 10, 20, 30, 60)
 

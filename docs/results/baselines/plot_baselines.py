@@ -16,7 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from spikectl.files import atomic_write_text
+from spikectl.experiments.figures import subplots
+from spikectl.files import atomic_write, atomic_write_text
 
 NOISE_MV = (0, 1, 2, 4)
 HIDDEN_FRACTIONS = ("0", "0.25")
@@ -75,12 +76,7 @@ def tdrqn_test_return(results: Path) -> tuple[float, float] | None:
 
 
 def plot(results: Path, out: Path) -> None:
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    figure, axes = plt.subplots(1, 2, figsize=(9, 3.6), sharey=True)
+    figure, axes = subplots(1, 2, figsize=(9, 3.6), sharey=True)
     for axis, fraction in zip(axes, HIDDEN_FRACTIONS, strict=True):
         paths = [results / f"curve_noise{sigma}_hidden{fraction}.csv" for sigma in NOISE_MV]
         present = [(sigma, path) for sigma, path in zip(NOISE_MV, paths, strict=True)
@@ -110,7 +106,7 @@ def plot(results: Path, out: Path) -> None:
     figure.legend(handles, labels, ncol=3, fontsize=8, loc="upper center")
     figure.tight_layout(rect=(0, 0, 1, 0.84))
     out.parent.mkdir(parents=True, exist_ok=True)
-    figure.savefig(out, dpi=120)
+    atomic_write(out, lambda handle: figure.savefig(handle, format="png", dpi=120))
     print(f"wrote {out}")
 
 

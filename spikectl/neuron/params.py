@@ -1,6 +1,6 @@
 """Parameters of the leaky integrate-and-fire model with short-term depression.
 
-The defaults are the paper's Table 1 as read by SPEC section 1. Units are in the
+The defaults are the paper's Table 1 as docs/model.md reads it. Units are in the
 field names: mV, ms, pA, pF and GOhm, chosen so that pA / pF = mV / ms and
 GOhm * pF = ms; in these units every default is exactly representable and the
 potential of a neuron at rest that receives one excitatory input is exactly
@@ -24,7 +24,7 @@ MAX_REFRACTORY_STEPS = 2**30
 
 @dataclass(frozen=True)
 class NeuronParams:
-    """Frozen, validated parameters of the neuron and synapse model (SPEC 1)."""
+    """Frozen, validated parameters of the neuron and synapse model (docs/model.md)."""
 
     v_rest_mV: float = -70.0
     """Resting and reset potential V_r."""

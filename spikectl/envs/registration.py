@@ -35,9 +35,9 @@ VARIANTS: dict[str, dict[str, Any]] = {
 def register_envs() -> None:
     """Register ``spikectl/NeuronControl-v0`` and its :data:`VARIANTS`; idempotent.
 
-    ``gymnasium.make(ENV_ID, **kwargs)`` builds :class:`spikectl.env.NeuronControlEnv`;
+    ``gymnasium.make(ENV_ID, **kwargs)`` builds :class:`spikectl.envs.env.NeuronControlEnv`;
     ``gymnasium.make_vec(ENV_ID, num_envs=...)`` builds the batched
-    :class:`spikectl.vector_env.NeuronControlVectorEnv` by default (Gymnasium prefers a
+    :class:`spikectl.envs.vector_env.NeuronControlVectorEnv` by default (Gymnasium prefers a
     registered vector entry point when ``vectorization_mode`` is None), and a
     ``SyncVectorEnv`` of single environments with ``vectorization_mode="sync"``. The
     variants are the same classes with the keyword arguments of :data:`VARIANTS`
@@ -49,7 +49,7 @@ def register_envs() -> None:
             continue
         gymnasium.register(
             id=env_id,
-            entry_point="spikectl.env:NeuronControlEnv",
-            vector_entry_point="spikectl.vector_env:NeuronControlVectorEnv",
+            entry_point="spikectl.envs.env:NeuronControlEnv",
+            vector_entry_point="spikectl.envs.vector_env:NeuronControlVectorEnv",
             kwargs=kwargs,
         )

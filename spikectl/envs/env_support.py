@@ -1,9 +1,9 @@
-"""What the single and the vector environment share (SPEC 3).
+"""What the single and the vector environment share (docs/environment.md).
 
 Resolving the ``contexts`` / ``extensions`` arguments to a :class:`ContextSet` and the
-effective :class:`~spikectl.extensions.Extensions`, the per-context lookup tables
+effective :class:`~spikectl.neuron.extensions.Extensions`, the per-context lookup tables
 (:class:`ContextTables`), the reward formula (:func:`step_rewards`), the spaces and the
-action checks. Everything here is importable from ``spikectl.env`` as well.
+action checks.
 """
 
 from __future__ import annotations
@@ -19,9 +19,10 @@ import numpy as np
 from gymnasium import spaces
 
 from spikectl.contexts import Context, ContextSet, make_splits
-from spikectl.extensions import CONTEXT_FIELDS, Extensions
-from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING, neuron_parameters
+from spikectl.contexts.generation import is_int
+from spikectl.neuron.extensions import CONTEXT_FIELDS, Extensions
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING, neuron_parameters
 
 MAX_REWARD = 0.5
 """R_max: the return of an episode's correct spikes, and separately of its correct silences."""
@@ -37,7 +38,7 @@ def step_rewards(patterns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Reward of each step [..., N] if the target spikes, and if it stays silent.
 
     With m spikes in a pattern of N steps: R_max / m for a wanted spike,
-    R_max / (N - m) for a wanted silence, 0 otherwise (SPEC 3).
+    R_max / (N - m) for a wanted silence, 0 otherwise (docs/environment.md).
     """
     wanted = np.asarray(patterns).astype(bool)
     episode_length = wanted.shape[-1]
@@ -47,6 +48,19 @@ def step_rewards(patterns: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     reward_if_spike = np.where(wanted, MAX_REWARD / m, 0.0)
     reward_if_silent = np.where(wanted, 0.0, MAX_REWARD / (episode_length - m))
     return reward_if_spike, reward_if_silent
+
+
+def random_legal_actions(action_mask: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """One uniformly random legal action per row: the library's only random-action sampler.
+
+    ``action_mask`` is bool [S, n + 1] (column a + 1 = action a, as in ``info["action_mask"]``);
+    returns int64 [S] in -1..n-1, -1 (do nothing) for a row with nothing legal. Draws exactly
+    ``rng.random(action_mask.shape)``, so a seed gives the same actions everywhere.
+    """
+    legal = np.asarray(action_mask, dtype=bool)
+    scores = rng.random(legal.shape)  # [S, n + 1]
+    scores[~legal] = -1.0
+    return scores.argmax(axis=1).astype(np.int64) + DO_NOTHING  # [S]
 
 
 @dataclass(frozen=True, eq=False)
@@ -246,7 +260,8 @@ def as_action(action: Any) -> int:
 
 
 def observation_space(n_neurons: int, episode_length: int) -> spaces.Dict:
-    """The observation space of one environment (SPEC 3); the connectivity is not in it."""
+    """The observation space of one environment (docs/environment.md); the connectivity is
+    not in it."""
     return spaces.Dict(
         {
             "voltage": spaces.Box(-np.inf, np.inf, (n_neurons,), np.float32),
@@ -256,11 +271,6 @@ def observation_space(n_neurons: int, episode_length: int) -> spaces.Dict:
             "last_action": spaces.Discrete(n_neurons + 1, start=DO_NOTHING),
         }
     )
-
-
-def is_int(value: Any) -> bool:
-    """True for Python and NumPy integers, False for booleans (which Python calls ints)."""
-    return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
 class LegalActionSpace(spaces.Discrete):
@@ -278,6 +288,6 @@ class LegalActionSpace(spaces.Discrete):
     def sample(
         self, mask: np.ndarray | None = None, probability: np.ndarray | None = None
     ) -> np.int64:
-        if mask is None and probability is None:
-            mask = self.legal_mask
-        return super().sample(mask=mask, probability=probability)
+        if mask is not None or probability is not None:
+            return super().sample(mask=mask, probability=probability)
+        return random_legal_actions(self.legal_mask[None], self.np_random)[0]

@@ -1,14 +1,15 @@
-"""Procedurally generated contexts (SPEC section 2): topology, target neuron, pattern.
+"""Procedurally generated contexts (docs/model.md): topology, target neuron, pattern.
 
 A context is the hidden connectivity of one network, the neuron to control and the
 spike pattern it must produce, plus the *witness*: an action sequence that produces
 that pattern from rest, which proves the maximum return is reachable. With the
-context-level extensions (``spikectl.extensions``) a context also fixes which neurons
-are hidden and the per-neuron parameters of heterogeneous neurons.
+context-level extensions (``spikectl.neuron.extensions``) a context also fixes which
+neurons are hidden and the per-neuron parameters of heterogeneous neurons.
 
 Generation is a set of pure module-level functions of a ``numpy.random.Generator``;
-:class:`ContextSet` and :func:`make_splits` (in ``spikectl.context_set``, importable
-from here) hold sequences of contexts and save them to ``.npz`` files.
+:class:`~spikectl.contexts.context_set.ContextSet` and
+:func:`~spikectl.contexts.context_set.make_splits` hold sequences of contexts and save
+them to ``.npz`` files; this module does not import them.
 """
 
 from __future__ import annotations
@@ -19,13 +20,9 @@ from typing import Any
 
 import numpy as np
 
-# The file format moved to spikectl.context_files; these names stay importable here.
-from spikectl.context_files import FORMAT_NAME as FORMAT_NAME
-from spikectl.context_files import FORMAT_VERSION as FORMAT_VERSION
-from spikectl.context_files import ContextFileError as ContextFileError
-from spikectl.extensions import Extensions, Heterogeneity, draw_heterogeneity, draw_hidden
-from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING, as_weight_batch, simulate
+from spikectl.neuron.extensions import Extensions, Heterogeneity, draw_heterogeneity, draw_hidden
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING, as_weight_batch, simulate
 
 EXCITATORY_PROBABILITY = 0.8
 """Probability that a neuron is excitatory (Dale's law: all its outgoing edges are +1)."""
@@ -63,7 +60,7 @@ def generate_topology(n_neurons: int, rng: np.random.Generator) -> np.ndarray:
     applies to all of its outgoing edges; each ordered pair i != j is connected
     independently with the probability of its distance band.
     """
-    _check_n_neurons(n_neurons)
+    check_n_neurons(n_neurons)
     index = np.arange(n_neurons)
     distance = np.abs(index[:, None] - index[None, :])  # [n, n]
     connected = rng.random((n_neurons, n_neurons)) < connection_probability(distance)
@@ -156,7 +153,7 @@ def generate_context(
     parameters are drawn after the target and before the pattern; without them no
     extra random number is drawn, so the paper's contexts are unchanged.
     """
-    _check_episode_length(episode_length)
+    check_episode_length(episode_length)
     extensions = Extensions.coerce(extensions)
     hidden_count = extensions.hidden_count(n_neurons)
     extended = hidden_count > 0 or extensions.heterogeneous
@@ -351,7 +348,7 @@ def make_context(
 ) -> Context:
     """Bring your own connectome: build a validated context from a connectivity matrix.
 
-    Whatever is not given is generated as in SPEC 2 from ``seed``: the target
+    Whatever is not given is generated as in docs/model.md from ``seed``: the target
     (uniform among neurons with an excitatory input) and the pattern with its
     witness (random legal actions from rest, never a ``hidden`` neuron). A given
     witness must reproduce the given pattern under ``params`` and ``heterogeneity``;
@@ -369,7 +366,7 @@ def make_context(
     if pattern is None:
         if witness is not None:
             raise ValueError("a witness without a pattern: pass the pattern it produces")
-        _check_episode_length(episode_length)
+        check_episode_length(episode_length)
         if hidden is not None and target in np.asarray(hidden):
             raise ValueError(f"the target neuron {target} cannot be hidden")
         pattern, witness = generate_pattern(
@@ -395,20 +392,21 @@ def _check_target(target: int, n_neurons: int) -> None:
         raise ValueError(f"target {target} is not a neuron index in 0..{n_neurons - 1}")
 
 
-def _is_int(value: Any) -> bool:
+def is_int(value: Any) -> bool:
+    """True for Python and NumPy integers, False for booleans (which Python calls ints)."""
     return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
-def _check_n_neurons(n_neurons: int) -> int:
-    if not _is_int(n_neurons) or not 2 <= n_neurons <= MAX_N_NEURONS:
+def check_n_neurons(n_neurons: int) -> int:
+    if not is_int(n_neurons) or not 2 <= n_neurons <= MAX_N_NEURONS:
         raise ValueError(
             f"n_neurons must be an integer in 2..{MAX_N_NEURONS} (MAX_N_NEURONS), got {n_neurons!r}"
         )
     return int(n_neurons)
 
 
-def _check_episode_length(episode_length: int) -> int:
-    if not _is_int(episode_length) or not 2 <= episode_length <= MAX_EPISODE_LENGTH:
+def check_episode_length(episode_length: int) -> int:
+    if not is_int(episode_length) or not 2 <= episode_length <= MAX_EPISODE_LENGTH:
         raise ValueError(
             f"episode_length must be an integer in 2..{MAX_EPISODE_LENGTH} "
             f"(MAX_EPISODE_LENGTH), got {episode_length!r}"
@@ -416,24 +414,14 @@ def _check_episode_length(episode_length: int) -> int:
     return int(episode_length)
 
 
-def _check_size(size: int, name: str = "size") -> int:
-    if not _is_int(size) or size < 1:
+def check_size(size: int, name: str = "size") -> int:
+    if not is_int(size) or size < 1:
         raise ValueError(f"{name} must be a positive integer, got {size!r}")
     return int(size)
 
 
-def _check_seed(seed: Any, name: str = "seed") -> int:
+def check_seed(seed: Any, name: str = "seed") -> int:
     """A generation seed: a non-negative Python or NumPy integer."""
-    if not _is_int(seed) or seed < 0:
+    if not is_int(seed) or seed < 0:
         raise ValueError(f"{name} must be a non-negative integer, got {seed!r}")
     return int(seed)
-
-
-def __getattr__(name: str) -> Any:
-    # ContextSet and make_splits live in spikectl.context_set (which imports this
-    # module); they stay importable from here, where they have always been.
-    if name in ("ContextSet", "make_splits"):
-        from spikectl import context_set
-
-        return getattr(context_set, name)
-    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")

@@ -1,8 +1,8 @@
-"""The Gymnasium environment of SPEC section 3: make one neuron spike a target pattern.
+"""The Gymnasium environment (docs/environment.md): make one neuron spike a target pattern.
 
 What the vector environment shares with :class:`NeuronControlEnv` (the context
 tables, the reward formula, the spaces and the argument checks) lives in
-``spikectl.env_support`` and is importable from here too.
+``spikectl.envs.env_support``.
 """
 
 from __future__ import annotations
@@ -15,49 +15,25 @@ import gymnasium as gym
 import numpy as np
 from gymnasium.error import ResetNeeded
 
-from spikectl import render as rendering
 from spikectl.contexts import Context, ContextSet
-from spikectl.env_support import (
-    DEFAULT_EPISODE_LENGTH,
-    DEFAULT_N_NEURONS,
-    MAX_REWARD,
+from spikectl.envs import render as rendering
+from spikectl.envs.env_support import (
     RENDER_FPS,
     RENDER_MODES,
-    SPLITS,
     ContextTables,
     LegalActionSpace,
     as_action,
     check_context,
     check_context_index,
-    is_int,
     observation_space,
     resolve_contexts,
     resolve_extensions,
-    step_rewards,
 )
-from spikectl.extensions import EnvironmentEffects, Extensions
-from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING, SimulatorState, advance
+from spikectl.neuron.extensions import EnvironmentEffects, Extensions
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance
 
-__all__ = [
-    "DEFAULT_EPISODE_LENGTH",
-    "DEFAULT_N_NEURONS",
-    "MAX_REWARD",
-    "RENDER_FPS",
-    "RENDER_MODES",
-    "SPLITS",
-    "ContextTables",
-    "LegalActionSpace",
-    "NeuronControlEnv",
-    "as_action",
-    "check_context",
-    "check_context_index",
-    "is_int",
-    "observation_space",
-    "resolve_contexts",
-    "resolve_extensions",
-    "step_rewards",
-]
+__all__ = ["NeuronControlEnv"]
 
 
 class NeuronControlEnv(gym.Env[dict[str, Any], int]):
@@ -65,7 +41,7 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     ## Description
 
     Closed-loop control of a simulated network of leaky integrate-and-fire neurons
-    with short-term synaptic depression (SPEC 1). In each episode a *context* fixes the
+    with short-term synaptic depression (docs/model.md). In each episode a *context* fixes the
     hidden signed connectivity, a target neuron and a binary target pattern of N steps;
     the agent stimulates one (non-target) neuron per step, or none, so that the target
     spikes exactly when the pattern says. Every context carries a witness action sequence
@@ -124,9 +100,9 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     | `n_train`, `n_test`   | 100, 100  | sizes of the generated sets (`make_splits`)      |
     | `context_seed`        | 0         | seed of the generated sets                       |
     | `params`              | `None`    | `NeuronParams`; None: the context set's          |
-    | `allow_target_action` | `False`   | make stimulating the target legal (SPEC 6)       |
+    | `allow_target_action` | `False`   | make stimulating the target legal (an extension) |
     | `render_mode`         | `None`    | `"ansi"` or `"rgb_array"`                        |
-    | `extensions`          | `None`    | `Extensions` or a dict of its fields (SPEC 6)    |
+    | `extensions`          | `None`    | `Extensions` or a dict of its fields             |
 
     `extensions` (docs/extensions.md) switches on measurement noise, photobleaching,
     stochastic release, background activity and the target as an action; its
@@ -153,7 +129,7 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     ```
 
     ## Version History
-    * v0: Initial version (SPEC sections 1-3); extensions (SPEC 6) off by default.
+    * v0: Initial version; the extensions (docs/extensions.md) off by default.
     """
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}

@@ -1,7 +1,7 @@
 """The batched environment as a Stable-Baselines3 ``VecEnv`` (needs the ``[sb3]`` extra).
 
 Build it with :func:`spikectl.wrappers.sb3_vec_env`. It steps every environment of a
-:class:`~spikectl.vector_env.NeuronControlVectorEnv` in one call, in the spaces of
+:class:`~spikectl.envs.vector_env.NeuronControlVectorEnv` in one call, in the spaces of
 :func:`spikectl.wrappers.sb3_compatible`, and follows SB3's conventions: an environment
 that ends is reset within the same ``step`` (its last observation is in
 ``info["terminal_observation"]``), seeds and options given with ``seed()`` /
@@ -22,10 +22,10 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices
 
-from spikectl.vector_env import NeuronControlVectorEnv
-from spikectl.wrappers import (
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.wrappers.sb3_spaces import (
     DO_NOTHING,
-    ILLEGAL_ACTIONS,
+    check_illegal_action,
     observation_for,
     to_env_action,
 )
@@ -57,10 +57,7 @@ class SB3VecEnv(VecEnv):
                 "sb3_vec_env wraps a spikectl NeuronControlVectorEnv (or gymnasium.make_vec of "
                 f"a spikectl id), got {type(vector_env).__name__}"
             )
-        if illegal_action not in ILLEGAL_ACTIONS:
-            raise ValueError(
-                f"illegal_action must be one of {ILLEGAL_ACTIONS}, got {illegal_action!r}"
-            )
+        check_illegal_action(illegal_action)
         self.vector_env = vector_env
         self.illegal_action = illegal_action
         self.observation_codec = observation_for(vector_env, flatten)

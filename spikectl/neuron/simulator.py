@@ -1,13 +1,13 @@
-"""The batched simulator of SPEC section 1: LIF neurons with short-term depression.
+"""The batched simulator (docs/model.md): LIF neurons with short-term depression.
 
 There is one implementation of the dynamics, the Numba kernel ``_advance_kernel`` in
-``spikectl.kernel``. It moves a batch of independent networks forward by any number of
+``spikectl.neuron.kernel``. It moves a batch of independent networks forward by any number of
 1 ms steps and writes what an observer sees. ``simulate`` runs whole action sequences
 through it; ``advance`` runs one step (or a few) of a :class:`SimulatorState` and is
 what the environments call. With ``NUMBA_DISABLE_JIT=1`` the same code runs as plain
 Python.
 
-Order inside step t, given action a_t (SPEC 1):
+Order inside step t, given action a_t (docs/model.md):
 
 1. I_syn,j = w_in * sum_i G[i, j] * released_i(t-1)      (one-step synaptic delay)
 2. I_ext,j = w_e if a_t == j else 0
@@ -25,15 +25,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spikectl.kernel import (
-    _SINCE_RELEASE_CAP,
+from spikectl.neuron.kernel import (
     PARALLEL_MIN_BATCH,
     PARALLEL_MIN_WORK,
-    _advance_parallel,
-    _advance_serial,
+    SINCE_RELEASE_CAP,
+    advance_parallel,
+    advance_serial,
     kernel_constants,
 )
-from spikectl.params import NeuronParams
+from spikectl.neuron.params import NeuronParams
 
 __all__ = [
     "DO_NOTHING",
@@ -80,7 +80,7 @@ class SimulatorState:
         """Put the networks selected by the [B] mask ``which`` back at rest."""
         self.voltage_mV[which] = params.v_rest_mV
         self.refractory_left[which] = 0
-        self.steps_since_release[which] = _SINCE_RELEASE_CAP
+        self.steps_since_release[which] = SINCE_RELEASE_CAP
         self.released[which] = False
 
     def copy(self) -> SimulatorState:
@@ -146,7 +146,7 @@ def advance(
     batch, steps = actions.shape
     work = batch * steps * weights.shape[-1]
     threaded = batch >= PARALLEL_MIN_BATCH and work >= PARALLEL_MIN_WORK
-    kernel = _advance_parallel if threaded else _advance_serial
+    kernel = advance_parallel if threaded else advance_serial
     kernel(
         weights,
         actions,

@@ -1,4 +1,4 @@
-"""Extensions of the paper's environment (SPEC 6; paper Section 5.1 and the Discussion).
+"""Extensions of the paper's environment (docs/extensions.md; paper Section 5.1 and the Discussion).
 
 The paper's environment leaves out "non-observable neurons, neurons with different
 dynamics, background noise, photobleaching effects, and stochastic activity
@@ -28,7 +28,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from spikectl.params import NeuronParams
+from spikectl.neuron.params import NeuronParams
 
 CONTEXT_FIELDS = (
     "hidden_neurons",

@@ -14,9 +14,10 @@ from dataclasses import dataclass
 import numpy as np
 
 from spikectl.contexts import ContextSet
-from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING
-from spikectl.vector_env import NeuronControlVectorEnv
+from spikectl.envs.env_support import random_legal_actions
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING
 
 Policy = Callable[[dict[str, np.ndarray], np.ndarray], np.ndarray]
 
@@ -54,9 +55,7 @@ def make_random_policy(seed: int) -> Policy:
     rng = np.random.default_rng(seed)
 
     def random_policy(observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
-        scores = rng.random(action_mask.shape)  # [S, n + 1]
-        scores[~action_mask] = -1.0
-        return scores.argmax(axis=1) + DO_NOTHING
+        return random_legal_actions(action_mask, rng)
 
     return random_policy
 

@@ -1,12 +1,13 @@
-"""The one implementation of the step (SPEC 1): a Numba kernel over a batch of networks.
+"""The one implementation of the step (docs/model.md): a Numba kernel over a batch of networks.
 
 ``_advance_kernel`` moves a batch of independent networks forward by any number of
 1 ms steps and writes what an observer sees; it is compiled twice from the same source
 (serially and with threads over the batch). The extensions (heterogeneous neurons,
 stochastic release, extra input) are optional arguments of the same kernel: None
 prunes their branches at compile time, so the paper's model does the paper's
-arithmetic and nothing more. ``spikectl.simulator`` is the interface (``advance``, ``simulate``);
-with ``NUMBA_DISABLE_JIT=1`` the same code runs as plain Python.
+arithmetic and nothing more. ``spikectl.neuron.simulator`` is the interface
+(``advance``, ``simulate``); with ``NUMBA_DISABLE_JIT=1`` the same code runs as plain
+Python.
 """
 
 from __future__ import annotations
@@ -14,7 +15,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from spikectl.params import NeuronParams
+from spikectl.neuron.params import NeuronParams
 
 # A call is split over threads only when it has at least this many networks and this
 # much work (networks x steps x neurons). Below, thread start-up costs more than it
@@ -26,7 +27,7 @@ PARALLEL_MIN_WORK = 2**18
 
 # steps_since_release saturates here, far beyond any release interval but below
 # NEVER_RELEASES, so "no release yet" (t_r = -inf) stays ready to release.
-_SINCE_RELEASE_CAP = 2**30
+SINCE_RELEASE_CAP = 2**30
 
 
 def _advance_kernel(
@@ -87,13 +88,13 @@ def _advance_kernel(
                 # (t_r = -inf: p_r), decided before the loop below so that it stays free
                 # of calls.
                 for j in range(n):
-                    since = min(since_b[j] + 1, _SINCE_RELEASE_CAP)
+                    since = min(since_b[j] + 1, SINCE_RELEASE_CAP)
                     probability = release_scale * (1.0 - np.exp(-since * recovery_per_step))
                     may_release[j] = release_uniforms[b, t, j] < probability
             action = actions[b, t]
             for j in range(n):
                 since = since_b[j]
-                if since < _SINCE_RELEASE_CAP:
+                if since < SINCE_RELEASE_CAP:
                     since += 1
                 spiked = False
                 if refractory_b[j] > 0:
@@ -138,8 +139,8 @@ def _advance_kernel(
 # and with threads over the batch for large ones. Both give identical results.
 # The parallel build is not cached: loaded from Numba's cache it ran at half speed
 # (numba 0.68, measured with benchmarks/bench_simulator.py).
-_advance_serial = numba.njit(cache=True, nogil=True)(_advance_kernel)
-_advance_parallel = numba.njit(nogil=True, parallel=True)(_advance_kernel)
+advance_serial = numba.njit(cache=True, nogil=True)(_advance_kernel)
+advance_parallel = numba.njit(nogil=True, parallel=True)(_advance_kernel)
 
 
 # The constants of the kernel, per NeuronParams object: computing them costs more than

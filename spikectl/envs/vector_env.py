@@ -1,6 +1,6 @@
-"""The batched twin of :class:`~spikectl.env.NeuronControlEnv`: all networks in one call.
+"""The batched twin of :class:`~spikectl.envs.env.NeuronControlEnv`: all networks in one call.
 
-``step`` advances every sub-environment with a single :func:`spikectl.simulator.advance`
+``step`` advances every sub-environment with a single :func:`spikectl.neuron.simulator.advance`
 on a [num_envs, n, n] weight batch; rewards, observations, infos and autoresets are
 array operations. It behaves exactly like a ``gymnasium.vector.SyncVectorEnv`` of single
 environments (same seeds, same contexts, same autoreset), only faster.
@@ -20,22 +20,23 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from spikectl import render as rendering
 from spikectl.contexts import Context, ContextSet
-from spikectl.env_support import (
+from spikectl.contexts.generation import is_int
+from spikectl.envs import render as rendering
+from spikectl.envs.env_support import (
     RENDER_FPS,
     RENDER_MODES,
     ContextTables,
     check_context,
     check_context_index,
-    is_int,
     observation_space,
+    random_legal_actions,
     resolve_contexts,
     resolve_extensions,
 )
-from spikectl.extensions import EnvironmentEffects, Extensions
-from spikectl.params import NeuronParams
-from spikectl.simulator import DO_NOTHING, SimulatorState, advance, uniform_neuron_parameters
+from spikectl.neuron.extensions import EnvironmentEffects, Extensions
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance, uniform_neuron_parameters
 
 
 class LegalActionBatchSpace(spaces.MultiDiscrete):
@@ -54,14 +55,11 @@ class LegalActionBatchSpace(spaces.MultiDiscrete):
     def sample(self, mask: tuple | None = None, probability: tuple | None = None) -> np.ndarray:
         if mask is not None or probability is not None:
             return super().sample(mask=mask, probability=probability)
-        counts = self.legal.sum(axis=1)
-        choice = (self.np_random.random(counts.shape) * counts).astype(np.int64)
-        legal_first = np.argsort(~self.legal, axis=1, kind="stable")
-        return (legal_first[np.arange(counts.size), choice] + DO_NOTHING).astype(self.dtype)
+        return random_legal_actions(self.legal, self.np_random).astype(self.dtype)
 
 
 class NeuronControlVectorEnv(VectorEnv):
-    """``num_envs`` copies of :class:`~spikectl.env.NeuronControlEnv` stepped as one batch.
+    """``num_envs`` copies of :class:`~spikectl.envs.env.NeuronControlEnv` stepped as one batch.
 
     Takes ``num_envs`` plus the single environment's arguments; spaces are the single
     ones batched. Actions: int array [num_envs]. Infos: ``action_mask`` [num_envs, n + 1],

@@ -1,9 +1,9 @@
-"""Context sets (SPEC 2): sequences of contexts, their splits, files and checksums.
+"""Context sets (docs/model.md): sequences of contexts, their splits, files and checksums.
 
 :class:`ContextSet` holds contexts of one shape with the parameters (and context-level
 extensions) they were made with, and saves to / loads from one ``.npz`` file
-(``spikectl.context_files``). :func:`make_splits` draws the paper's training and test
-sets with no topology shared within or across them. Both are also importable from
+(``spikectl.contexts.file_format``). :func:`make_splits` draws the paper's training and
+test sets with no topology shared within or across them. Both are also importable from
 ``spikectl.contexts`` and from ``spikectl``.
 """
 
@@ -18,18 +18,18 @@ from typing import Any, overload
 
 import numpy as np
 
-from spikectl.context_files import ContextFileError, read_npz, write_npz
-from spikectl.contexts import (
+from spikectl.contexts.file_format import ContextFileError, read_npz, write_npz
+from spikectl.contexts.generation import (
     MAX_TOPOLOGY_ATTEMPTS,
     Context,
-    _check_episode_length,
-    _check_n_neurons,
-    _check_seed,
-    _check_size,
+    check_episode_length,
+    check_n_neurons,
+    check_seed,
+    check_size,
     generate_context,
 )
-from spikectl.extensions import Extensions, Heterogeneity
-from spikectl.params import NeuronParams
+from spikectl.neuron.extensions import Extensions, Heterogeneity
+from spikectl.neuron.params import NeuronParams
 
 
 class ContextSet(Sequence[Context]):
@@ -85,8 +85,8 @@ class ContextSet(Sequence[Context]):
         ``generate(100, seed=s)``. Context-level ``extensions`` (hidden neurons,
         heterogeneous neurons) are drawn with each context.
         """
-        size = _check_size(size)
-        seed = _check_seed(seed)
+        size = check_size(size)
+        seed = check_seed(seed)
         extensions = Extensions.coerce(extensions).context_part()
         contexts = _generate_unique(size, n_neurons, episode_length, seed, params, extensions)
         return cls(contexts, params, seed, extensions)
@@ -201,7 +201,7 @@ class ContextSet(Sequence[Context]):
         """Write the set to one ``.npz`` file, atomically (a crash never leaves half a file).
 
         Sets without extensions are written as format version 1, as before; sets with
-        context-level extensions as version 2 (``spikectl.context_files``).
+        context-level extensions as version 2 (``spikectl.contexts.file_format``).
         """
         path = Path(path)
         if path.suffix != ".npz":
@@ -279,9 +279,9 @@ def make_splits(
     it does not depend on ``n_train`` (beyond skipping, with vanishing probability,
     a topology the training set already holds).
     """
-    n_train = _check_size(n_train, "n_train")
-    n_test = _check_size(n_test, "n_test")
-    seed = _check_seed(seed)
+    n_train = check_size(n_train, "n_train")
+    n_test = check_size(n_test, "n_test")
+    seed = check_seed(seed)
     if isinstance(n_val, bool) or not isinstance(n_val, int | np.integer) or n_val < 0:
         raise ValueError(f"n_val must be a non-negative integer, got {n_val!r}")
     extensions = Extensions.coerce(extensions).context_part()
@@ -313,8 +313,8 @@ def make_validation_set(
 ) -> ContextSet:
     """A validation set with no topology shared with itself or with any set in ``exclude``
     (the training and test sets), from a generator stream of its own (``VALIDATION_STREAM``)."""
-    n_val = _check_size(n_val, "n_val")
-    seed = _check_seed(seed)
+    n_val = check_size(n_val, "n_val")
+    seed = check_seed(seed)
     extensions = Extensions.coerce(extensions).context_part()
     taken = {context.weights.tobytes() for contexts in exclude for context in contexts}
     validation = _generate_unique(
@@ -333,8 +333,8 @@ def _generate_unique(
     extensions: Extensions | None = None,
     exclude: set[bytes] = frozenset(),
 ) -> list[Context]:
-    n_neurons = _check_n_neurons(n_neurons)
-    episode_length = _check_episode_length(episode_length)
+    n_neurons = check_n_neurons(n_neurons)
+    episode_length = check_episode_length(episode_length)
     if params is not None and not isinstance(params, NeuronParams):
         raise TypeError(f"params must be a NeuronParams or None, got {type(params).__name__}")
     rng = np.random.default_rng(seed)

@@ -1,0 +1,11 @@
+"""The environments: the single and the batched Gymnasium environment, rendering,
+registration and rollouts of policies on the batched one.
+
+Built on ``spikectl.neuron`` and ``spikectl.contexts``.
+"""
+
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.registration import ENV_ID, register_envs
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+
+__all__ = ["ENV_ID", "NeuronControlEnv", "NeuronControlVectorEnv", "register_envs"]
