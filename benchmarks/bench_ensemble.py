@@ -36,7 +36,7 @@ from spikectl.training.config import QUICK
 
 
 def train_flags(rounds: int, updates_per_round: int) -> list[str]:
-    steps = rounds * QUICK.num_envs * QUICK.episode_length
+    steps = rounds * QUICK.train.num_envs * QUICK.env.episode_length
     never = str(10**9)
     return ["train", "--preset", "quick", "--total-env-steps", str(steps),
             "--updates-per-round", str(updates_per_round), "--eval-every-episodes", never,
@@ -70,7 +70,7 @@ def micro(seeds: list[int], repeats: int) -> None:
 
     torch.set_num_threads(1)
     config, rng = QUICK, np.random.default_rng(0)
-    n, N, E = config.n_neurons, config.episode_length, 64
+    n, N, E = config.env.n_neurons, config.env.episode_length, 64
     replay = EpisodeReplay(E, n, N)
     replay.add((rng.random((E, N + 1, n)) * 25 - 70).astype(np.float32),
                rng.integers(-1, n, (E, N)), rng.random((E, N)).astype(np.float32),
@@ -89,14 +89,14 @@ def micro(seeds: list[int], repeats: int) -> None:
     online, target = build_networks(config)
     predictor = build_predictor(config, online)
     params = list(online.parameters()) + list(predictor.parameters())
-    adam = torch.optim.Adam(params, lr=config.learning_rate)
+    adam = torch.optim.Adam(params, lr=config.train.learning_rate)
 
     def single_update() -> None:
-        td, aux = training_losses(online, target, replay.sample(config.batch_size, rng), config,
-                                  predictor)  # fmt: skip
+        batch = replay.sample(config.train.batch_size, rng)
+        td, aux = training_losses(online, target, batch, config, predictor)
         adam.zero_grad()
-        (td + config.aux_voltage_weight * aux).backward()
-        torch.nn.utils.clip_grad_norm_(params, config.max_grad_norm)
+        (td + config.train.aux_voltage_weight * aux).backward()
+        torch.nn.utils.clip_grad_norm_(params, config.train.max_grad_norm)
         adam.step()
 
     def observation(lead: tuple[int, ...]) -> dict[str, torch.Tensor]:
@@ -119,7 +119,6 @@ def micro(seeds: list[int], repeats: int) -> None:
 
 def stacked_timings(K: int, replay, rng, observation, timed, repeats: int) -> tuple[float, float]:
     """Milliseconds of one update and one acting step of K stacked quick-size seeds."""
-    import dataclasses
 
     import torch
 
@@ -133,12 +132,12 @@ def stacked_timings(K: int, replay, rng, observation, timed, repeats: int) -> tu
     from spikectl.training.ensemble import clip_grad_norm_per_seed, stack_seeds
 
     config = QUICK
-    pairs = [build_networks(dataclasses.replace(config, seed=s)) for s in range(K)]
+    pairs = [build_networks(config.with_changes(seed=s)) for s in range(K)]
     stacked = StackedNetworks([pair[0] for pair in pairs])
     targets = StackedNetworks([pair[1] for pair in pairs], trainable=False)
     heads = StackedNetworks([build_predictor(config, pair[0]) for pair in pairs])
     trained = stacked.parameters() + heads.parameters()
-    adam = torch.optim.Adam(trained, lr=config.learning_rate)
+    adam = torch.optim.Adam(trained, lr=config.train.learning_rate)
 
     def seed_losses(online_params, target_params, head_params, tensors):
         return losses_on_tensors(stacked.bound(online_params), targets.bound(target_params),
@@ -147,17 +146,17 @@ def stacked_timings(K: int, replay, rng, observation, timed, repeats: int) -> tu
     batched = torch.func.vmap(seed_losses)
 
     def update() -> None:
-        seeds_tensors = [batch_tensors(replay.sample(config.batch_size, rng), "cpu")
+        seeds_tensors = [batch_tensors(replay.sample(config.train.batch_size, rng), "cpu")
                          for _ in range(K)]  # fmt: skip
         tensors = stack_seeds(seeds_tensors)
         td, aux = batched(stacked.params, targets.params, heads.params, tensors)
         adam.zero_grad()
-        (td + config.aux_voltage_weight * aux).sum().backward()
-        clip_grad_norm_per_seed(trained, config.max_grad_norm)
+        (td + config.train.aux_voltage_weight * aux).sum().backward()
+        clip_grad_norm_per_seed(trained, config.train.max_grad_norm)
         adam.step()
 
     obs = observation((K, 16))
-    state = pairs[0][0].initial_state(16, config.n_neurons)
+    state = pairs[0][0].initial_state(16, config.env.n_neurons)
     state = tuple(s.expand(K, *s.shape).clone() for s in state)
     with torch.no_grad():
         step = timed(lambda: stacked.call("step", obs, state), 10 * repeats)
@@ -168,7 +167,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[2, 5, 10], help="values of K")
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--updates-per-round", type=int, default=QUICK.updates_per_round)
+    parser.add_argument("--updates-per-round", type=int, default=QUICK.train.updates_per_round)
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--cores", type=int, default=2, help="separate processes at once")
     parser.add_argument("--repeats", type=int, default=1)
@@ -181,9 +180,9 @@ def main() -> None:
     if args.quick:
         args.seeds, args.rounds, args.updates_per_round = [2], 1, 4
     flags = train_flags(args.rounds, args.updates_per_round)
-    steps = args.rounds * QUICK.num_envs * QUICK.episode_length
+    steps = args.rounds * QUICK.train.num_envs * QUICK.env.episode_length
     updates = args.rounds * args.updates_per_round
-    print(f"quick preset, {args.rounds} round(s) x {QUICK.num_envs} episodes, "
+    print(f"quick preset, {args.rounds} round(s) x {QUICK.train.num_envs} episodes, "
           f"{updates} updates per seed; separate runs {args.cores} at a time")  # fmt: skip
     print(f"{'K':>3} {'how':<22}{'wall s':>9}{'env steps/s':>13}{'updates/s':>11}{'ratio':>7}")
     for K in args.seeds:
