@@ -104,7 +104,11 @@ class EnvConfig:
         for name, kind in (("params", NeuronParams), ("extensions", Extensions)):
             if not isinstance(getattr(self, name), kind):
                 raise ValueError(f"{name} must be a {kind.__name__}, got {getattr(self, name)!r}")
-        self.extensions.hidden_count(self.n_neurons)  # at least 2 observable neurons
+        try:
+            self.extensions.hidden_count(self.n_neurons)  # at least 2 observable neurons
+        except ValueError as error:
+            name = "hidden_neurons" if self.extensions.hidden_neurons else "hidden_fraction"
+            raise ValueError(f"extensions.{name}: {error}") from None
 
     @property
     def n_observed(self) -> int:

@@ -101,6 +101,11 @@ def evaluate_run(
     config = read_config(run_dir)
     if contexts is not None:
         sets = {Path(contexts).name: ContextSet.load(contexts)}
+        if sets[Path(contexts).name].params != config.env.params:
+            raise ValueError(
+                f"{contexts} was made with other NeuronParams than the run's environment "
+                f"({run_dir / 'config.json'}): the agent would play another model"
+            )
     else:
         sets = {
             "train": ContextSet.load(run_dir / TRAIN_FILE),
