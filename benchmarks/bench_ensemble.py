@@ -38,7 +38,7 @@ from spikectl.training.config import QUICK
 def train_flags(rounds: int, updates_per_round: int) -> list[str]:
     steps = rounds * QUICK.train.num_envs * QUICK.env.episode_length
     never = str(10**9)
-    return ["train", "--preset", "quick", "--total-env-steps", str(steps),
+    return ["train", "quick", "--total-env-steps", str(steps),
             "--updates-per-round", str(updates_per_round), "--eval-every-episodes", never,
             "--checkpoint-every-episodes", never, "--no-progress"]  # fmt: skip
 

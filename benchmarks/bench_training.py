@@ -129,7 +129,7 @@ def main() -> None:
     )
     print("|---|---:|---:|---:|---:|---:|")
     for arch in args.archs:
-        config = PAPER.with_changes(arch=arch, sizes=PRESETS[args.sizes].sizes)
+        config = PAPER.with_changes(arch=arch, sizes=PRESETS[args.sizes].agent.sizes)
         replay = filled_replay(config, train_set, rng)
         trainer_s, bare_s = time_updates(config, replay, args.updates, rng)
         rate = collection_rate(config, train_set, 64, args.episodes, rng)

@@ -167,7 +167,7 @@ def main() -> None:
     )  # fmt: skip
     eval_env = NeuronControlVectorEnv(len(train_set), contexts=train_set)
     results["greedy evaluation of 100 contexts"] = median_ms(
-        lambda: greedy_returns(online, eval_env, "cpu"), max(args.repeats // 5, 3)
+        lambda: greedy_returns(online, eval_env, "cpu", seed=0), max(args.repeats // 5, 3)
     )
 
     whole = results["whole update"]
