@@ -84,6 +84,8 @@ def test_sweep_files_name_fields_flat_dotted_or_nested():
     })  # fmt: skip
     noise = {name: config.env.extensions.observation_noise_mV for name, config in variants.trials()}
     assert set(noise.values()) == {1.0} and len(noise) == 2
+    # One directory per trial: the ids' "/" does not nest them.
+    assert "env.id=spikectl_NeuronControlNoisy-v0-env.extensions.observation_noise_mV=1.0" in noise
     # The committed results' sweep files (flat names, grids over arch) still load.
     for path in sorted(Path("docs/results").glob("*/sweep*.json")):
         assert load_sweep_file(path).trials()

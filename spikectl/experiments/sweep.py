@@ -90,7 +90,13 @@ class Sweep:
         for values in itertools.product(*(self.grid[name] for name in names)):
             changes = dict(zip(names, values, strict=True))
             config = self.base.with_changes({**changes, "train.progress": False})
-            label = "-".join(f"{name}={value}" for name, value in changes.items()) or "base"
+            # A value's "/" (an environment id) would nest directories: "_" instead.
+            label = (
+                "-".join(
+                    f"{name}={str(value).replace('/', '_')}" for name, value in changes.items()
+                )
+                or "base"
+            )
             trials.append((label, config))
         return trials
 
