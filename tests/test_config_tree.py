@@ -194,3 +194,44 @@ def test_a_seed_group_trains_on_the_variant_and_its_seeds_evaluate_alike(tmp_pat
         assert read_config(run) == config.with_seed(seed)
         results = {result.name: result.mean for result in evaluate_run(run)}
         assert results["test"] == rows[-1]["test_return"]
+
+
+def flat_config(config: Experiment) -> dict:
+    """The config.json a run got before the tree: one flat dict, the agent's voltage
+    normalisation in its sizes."""
+    values = config.to_dict()
+    env = {k: v for k, v in values["env"].items() if k not in ("id", "params", "extensions")}
+    sizes = {**values["agent"]["sizes"], "v_rest_mV": -70.0, "v_threshold_mV": -50.0}
+    return {**values["train"], **env, "arch": values["agent"]["arch"], "sizes": sizes}
+
+
+def test_a_run_written_before_the_tree_resumes_exactly(tmp_path, monkeypatch):
+    import spikectl.training.dqn as dqn
+    from spikectl.training.checkpoint import payload_checksum
+
+    config = SMOKE.with_changes(total_env_steps=4 * 8 * 20, eval_every_episodes=8,
+                                checkpoint_every_episodes=16)  # fmt: skip
+    whole = train(config, tmp_path / "whole")
+    save = dqn.save_checkpoint
+
+    def save_then_stop(*args, **kwargs):
+        save(*args, **kwargs)
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(dqn, "save_checkpoint", save_then_stop)
+    run = tmp_path / "old"
+    with pytest.raises(KeyboardInterrupt):
+        train(config, run)
+    monkeypatch.setattr(dqn, "save_checkpoint", save)
+    # Rewrite its config.json and its checkpoint's config as spikectl wrote them before.
+    (run / "config.json").write_text(json.dumps(flat_config(config), indent=2))
+    payload = torch.load(run / "checkpoint.pt", weights_only=True)
+    del payload["checksum"]
+    payload["config"] = flat_config(config)
+    payload["checksum"] = payload_checksum(payload)
+    torch.save(payload, run / "checkpoint.pt")
+    assert read_config(run) == config
+    main(["train", "--resume", str(run)])
+    assert [row["test_return"] for row in read_metrics(run)] == [
+        row["test_return"] for row in whole
+    ]
