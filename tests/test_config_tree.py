@@ -108,6 +108,8 @@ def cli_error(argv, capsys) -> str:
      (["--env", NOISY, "--extensions.observation-noise-mV", "-1"],
       "--extensions.observation-noise-mV must be >= 0"),
      (["--extensions.hidden-fraction", "0.9"], "--extensions.hidden-fraction: 5 hidden neurons"),
+     (["--env", NOISY, "--extensions.observation-noise-mV", "0"],
+      "--env: spikectl/NeuronControlNoisy-v0 sets extensions.observation_noise_mV = 2.0"),
      (["--preset", "smoke"], "--preset: the preset is a subcommand now")],
 )  # fmt: skip
 def test_bad_environment_flags_are_one_line_errors(flags, named, tmp_path, capsys):

@@ -238,6 +238,12 @@ def test_changes_name_fields_by_path_nested_or_flat():
     assert noisy.with_changes({"env.id": "spikectl/NeuronControl-v0"}) == SMOKE
     big = SMOKE.with_changes({"env.id": "spikectl/NeuronControl32-v0"})
     assert big.env.n_neurons == 32 and big.env.extensions == Extensions()
+    # The id alone would record a variant the run does not train on: refused.
+    with pytest.raises(ValueError, match="sets extensions.observation_noise_mV = 2.0, but"):
+        EnvConfig(id="spikectl/NeuronControlNoisy-v0")
+    assert EnvConfig().with_variant("spikectl/NeuronControlNoisy-v0").extensions == Extensions(
+        observation_noise_mV=2.0
+    )
     with pytest.raises(ValueError, match="unknown environment id 'spikectl/Nope-v0'"):
         SMOKE.with_changes({"env.id": "spikectl/Nope-v0"})
     with pytest.raises(ValueError, match="not a spikectl environment"):

@@ -104,11 +104,35 @@ class EnvConfig:
         for name, kind in (("params", NeuronParams), ("extensions", Extensions)):
             if not isinstance(getattr(self, name), kind):
                 raise ValueError(f"{name} must be a {kind.__name__}, got {getattr(self, name)!r}")
+        self._check_variant(variant_kwargs(self.id))
         try:
             self.extensions.hidden_count(self.n_neurons)  # at least 2 observable neurons
         except ValueError as error:
             name = "hidden_neurons" if self.extensions.hidden_neurons else "hidden_fraction"
             raise ValueError(f"extensions.{name}: {error}") from None
+
+    def _check_variant(self, kwargs: Mapping[str, Any]) -> None:
+        """Refuse a setting the variant changes that is still the base environment's:
+        ``EnvConfig(id=variant)`` alone would otherwise train without the variant."""
+        fields = {f.name: f.default for f in dataclasses.fields(EnvConfig)}
+        base = {"n_neurons": fields["n_neurons"], "episode_length": fields["episode_length"],
+                **{f"params.{k}": v for k, v in NeuronParams().to_dict().items()},
+                **{f"extensions.{k}": v for k, v in Extensions().to_dict().items()}}  # fmt: skip
+        wanted = {name: kwargs[name] for name in ("n_neurons", "episode_length") if name in kwargs}
+        wanted.update({f"params.{k}": v for k, v in _as_dict(kwargs.get("params")).items()})
+        wanted.update({f"extensions.{k}": v for k, v in _as_dict(kwargs.get("extensions")).items()})
+        if "allow_target_action" in kwargs:
+            wanted["extensions.allow_target_action"] = kwargs["allow_target_action"]
+        for name, value in wanted.items():
+            section, _, field_name = name.rpartition(".")
+            mine = getattr(getattr(self, section) if section else self, field_name)
+            if mine == base[name] and mine != value:
+                raise ValueError(
+                    f"env: {self.id} sets {name} = {value!r}, but this config has the base "
+                    f"environment's {mine!r}: take the variant's settings with "
+                    f"EnvConfig.with_variant / with_changes({{'env.id': ...}}), or use "
+                    f"{ENV_ID} to leave that setting at the paper's"
+                )
 
     @property
     def n_observed(self) -> int:
