@@ -32,7 +32,7 @@ import tempfile
 import time
 from pathlib import Path
 
-from spikectl.training.config import QUICK
+from spikectl.training.presets import QUICK
 
 
 def train_flags(rounds: int, updates_per_round: int) -> list[str]:

@@ -25,7 +25,6 @@ import torch.nn.functional as F
 
 from spikectl.contexts import make_splits
 from spikectl.rollout import run_episodes
-from spikectl.training.config import PAPER, PRESETS
 from spikectl.training.dqn import (
     EpsilonGreedyPolicy,
     build_networks,
@@ -33,6 +32,7 @@ from spikectl.training.dqn import (
     soft_update,
     td_loss,
 )
+from spikectl.training.presets import PAPER, PRESETS
 from spikectl.training.replay import EpisodeReplay
 from spikectl.vector_env import NeuronControlVectorEnv
 

@@ -28,7 +28,6 @@ import torch.nn.functional as F
 from spikectl.agents.blocks import long_indices, per_neuron_features
 from spikectl.contexts import make_splits
 from spikectl.rollout import run_episodes
-from spikectl.training.config import PRESETS
 from spikectl.training.dqn import (
     EpsilonGreedyPolicy,
     build_networks,
@@ -38,6 +37,7 @@ from spikectl.training.dqn import (
     soft_update,
     training_losses,
 )
+from spikectl.training.presets import PRESETS
 from spikectl.training.replay import EpisodeReplay
 from spikectl.vector_env import NeuronControlVectorEnv
 

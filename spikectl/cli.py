@@ -24,14 +24,8 @@ from spikectl.extensions import Extensions
 from spikectl.files import FileWriteError, make_dirs, write_json
 from spikectl.params import NeuronParams
 from spikectl.training.checkpoint import RunDirError
-from spikectl.training.config import (
-    PRESET_HELP,
-    PRESETS,
-    AgentConfig,
-    EnvConfig,
-    Experiment,
-    TrainConfig,
-)
+from spikectl.training.config import AgentConfig, EnvConfig, Experiment, TrainConfig
+from spikectl.training.presets import PRESET_HELP, PRESETS
 
 USER_ERRORS = (ValueError, FileNotFoundError, FileWriteError, RunDirError, SweepError)
 """What the commands raise for bad input or a bad file system: reported in one line with

@@ -13,9 +13,10 @@ from spikectl import ContextSet, NeuronParams
 from spikectl.agents.blocks import per_neuron_features
 from spikectl.cli import main
 from spikectl.training.checkpoint import read_checkpoint, read_config, read_metrics
-from spikectl.training.config import SMOKE, Experiment
+from spikectl.training.config import Experiment
 from spikectl.training.dqn import build_networks, train
 from spikectl.training.evaluate import evaluate_run, load_agent
+from spikectl.training.presets import SMOKE
 
 NOISY = "spikectl/NeuronControlNoisy-v0"
 SHORT = SMOKE.with_changes(total_env_steps=2 * 8 * 20, eval_every_episodes=8,

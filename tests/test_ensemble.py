@@ -19,9 +19,9 @@ from torch import nn
 from spikectl.agents import make_agent
 from spikectl.agents.stacked import StackableLSTM, StackedNetworks
 from spikectl.training.checkpoint import RunDirError, load_model_weights, read_metrics
-from spikectl.training.config import SMOKE
 from spikectl.training.dqn import build_networks, train
 from spikectl.training.ensemble import clip_grad_norm_per_seed, train_group, train_seeds
+from spikectl.training.presets import SMOKE
 
 TIMES = ("wall_time_s", "cpu_time_s")
 TINY = SMOKE.with_changes(total_env_steps=24 * 20 * 8, eval_every_episodes=64,

@@ -23,8 +23,8 @@ from spikectl.experiments.report import (
 )
 from spikectl.experiments.stats import bootstrap_ci
 from spikectl.training.checkpoint import write_metrics
-from spikectl.training.config import SMOKE
 from spikectl.training.dqn import METRIC_FIELDS
+from spikectl.training.presets import SMOKE
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 STEPS = (800, 1600, 2400)

@@ -10,8 +10,9 @@ import torch
 from spikectl import ContextSet, make_splits
 from spikectl.agents import make_agent, make_voltage_predictor
 from spikectl.training.checkpoint import read_metrics
-from spikectl.training.config import PRESETS, SMOKE, Experiment, TrainConfig
+from spikectl.training.config import Experiment, TrainConfig
 from spikectl.training.dqn import n_step_targets, td_loss, train, training_losses
+from spikectl.training.presets import PRESETS, SMOKE
 from spikectl.training.replay import EpisodeBatchArrays
 
 

@@ -41,8 +41,9 @@ from spikectl.training.checkpoint import (
     run_lock,
     save_model,
 )
-from spikectl.training.config import SMOKE, EnvConfig
+from spikectl.training.config import EnvConfig
 from spikectl.training.dqn import train
+from spikectl.training.presets import SMOKE
 from spikectl.vector_env import NeuronControlVectorEnv
 
 TINY = SMOKE.with_changes(

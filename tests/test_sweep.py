@@ -16,8 +16,8 @@ from spikectl.experiments.sweep import (
     trial_dirs,
 )
 from spikectl.training.checkpoint import read_metrics
-from spikectl.training.config import SMOKE
 from spikectl.training.dqn import train
+from spikectl.training.presets import SMOKE
 
 TINY = SMOKE.with_changes(total_env_steps=8 * 20 * 4, eval_every_episodes=16,
                            checkpoint_every_episodes=16)  # fmt: skip

@@ -16,8 +16,9 @@ from spikectl.extensions import Extensions
 from spikectl.files import FileWriteError
 from spikectl.params import NeuronParams
 from spikectl.training.checkpoint import RunDirError, atomic_write_bytes, read_metrics
-from spikectl.training.config import PRESETS, QUICK, SMOKE, EnvConfig, Experiment
+from spikectl.training.config import EnvConfig, Experiment
 from spikectl.training.dqn import td_loss, train
+from spikectl.training.presets import PRESETS, QUICK, SMOKE
 from spikectl.training.replay import EpisodeBatchArrays, EpisodeReplay
 
 

@@ -39,7 +39,8 @@ from spikectl.training.checkpoint import (
     RunDirError,
     load_model_weights,
 )
-from spikectl.training.config import PRESETS, Experiment, field_value
+from spikectl.training.config import Experiment, field_value
+from spikectl.training.presets import PRESETS
 
 SWEEP_FILE = "sweep.json"
 TRIALS_DIR = "trials"

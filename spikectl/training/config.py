@@ -18,11 +18,8 @@ sweep, plot, seed groups) reads it back (:meth:`Experiment.from_dict`, which als
 the flat configs of runs saved before the tree). The agent's voltage normalisation is
 the environment's ``params`` (V_r and V_th), never a second copy.
 
-Presets are plain instances:
-
-- ``paper``: Table 2 exactly (1 M environment steps, batches of 5 episodes, ...);
-- ``quick``: the README's main job, under 15 minutes on one CPU core;
-- ``smoke``: seconds, for tests.
+The presets (paper, quick, smoke) are instances of the tree, in
+``spikectl.training.presets``.
 
 How often a batch is drawn is not in the paper. This project's reading: episodes are
 collected ``num_envs`` at a time (one round); after each round, ``updates_per_round``
@@ -47,10 +44,9 @@ from spikectl.contexts import MAX_EPISODE_LENGTH, MAX_N_NEURONS
 from spikectl.extensions import Extensions
 from spikectl.params import NeuronParams
 from spikectl.registration import ENV_ID
+from spikectl.training.variants import flat_settings, split_settings, variant_settings
 
 ARCHITECTURES = ("drqn", "ddrqn", "dmdrqn", "tdrqn")
-ENV_KWARGS = ("n_neurons", "episode_length", "params", "extensions", "allow_target_action")
-"""Keyword arguments of a registered variant that the trainer's environment takes over."""
 
 
 def _check_int(name: str, value: Any, low: int, high: int | None = None, what: str = "") -> None:
@@ -104,32 +100,26 @@ class EnvConfig:
         for name, kind in (("params", NeuronParams), ("extensions", Extensions)):
             if not isinstance(getattr(self, name), kind):
                 raise ValueError(f"{name} must be a {kind.__name__}, got {getattr(self, name)!r}")
-        self._check_variant(variant_kwargs(self.id))
+        self._check_variant()
         try:
             self.extensions.hidden_count(self.n_neurons)  # at least 2 observable neurons
         except ValueError as error:
             name = "hidden_neurons" if self.extensions.hidden_neurons else "hidden_fraction"
             raise ValueError(f"extensions.{name}: {error}") from None
 
-    def _check_variant(self, kwargs: Mapping[str, Any]) -> None:
+    def _settings(self) -> dict[str, Any]:
+        sizes = {"n_neurons": self.n_neurons, "episode_length": self.episode_length}
+        return flat_settings(sizes, self.params, self.extensions)
+
+    def _check_variant(self) -> None:
         """Refuse a setting the variant changes that is still the base environment's:
         ``EnvConfig(id=variant)`` alone would otherwise train without the variant."""
-        fields = {f.name: f.default for f in dataclasses.fields(EnvConfig)}
-        base = {"n_neurons": fields["n_neurons"], "episode_length": fields["episode_length"],
-                **{f"params.{k}": v for k, v in NeuronParams().to_dict().items()},
-                **{f"extensions.{k}": v for k, v in Extensions().to_dict().items()}}  # fmt: skip
-        wanted = {name: kwargs[name] for name in ("n_neurons", "episode_length") if name in kwargs}
-        wanted.update({f"params.{k}": v for k, v in _as_dict(kwargs.get("params")).items()})
-        wanted.update({f"extensions.{k}": v for k, v in _as_dict(kwargs.get("extensions")).items()})
-        if "allow_target_action" in kwargs:
-            wanted["extensions.allow_target_action"] = kwargs["allow_target_action"]
-        for name, value in wanted.items():
-            section, _, field_name = name.rpartition(".")
-            mine = getattr(getattr(self, section) if section else self, field_name)
-            if mine == base[name] and mine != value:
+        base, mine = _base_settings(), self._settings()
+        for name, value in variant_settings(self.id).items():
+            if mine[name] == base[name] != value:
                 raise ValueError(
                     f"env: {self.id} sets {name} = {value!r}, but this config has the base "
-                    f"environment's {mine!r}: take the variant's settings with "
+                    f"environment's {mine[name]!r}: take the variant's settings with "
                     f"EnvConfig.with_variant / with_changes({{'env.id': ...}}), or use "
                     f"{ENV_ID} to leave that setting at the paper's"
                 )
@@ -141,60 +131,19 @@ class EnvConfig:
 
     def with_variant(self, env_id: str) -> EnvConfig:
         """This config on the registered variant ``env_id``: what the current id's variant
-        set goes back to the base environment's, then ``env_id``'s keyword arguments
-        (n_neurons, episode_length, single params and extensions fields) apply; all
-        else (set sizes, seeds, the preset's episode length, ...) stays."""
-        default = EnvConfig()
-        values = {"n_neurons": self.n_neurons, "episode_length": self.episode_length}
-        params, extensions = self.params.to_dict(), self.extensions.to_dict()
-        for kwargs, reset in ((variant_kwargs(self.id), True), (variant_kwargs(env_id), False)):
-            for name in ("n_neurons", "episode_length"):
-                if name in kwargs:
-                    values[name] = getattr(default, name) if reset else kwargs[name]
-            for target, base, given in (
-                (params, default.params.to_dict(), _as_dict(kwargs.get("params"))),
-                (extensions, default.extensions.to_dict(), _as_dict(kwargs.get("extensions"))),
-            ):
-                for name, value in given.items():
-                    target[name] = base[name] if reset else value
-            if "allow_target_action" in kwargs:
-                extensions["allow_target_action"] = (
-                    default.extensions.allow_target_action if reset
-                    else kwargs["allow_target_action"]
-                )  # fmt: skip
-        return dataclasses.replace(
-            self, id=env_id, params=NeuronParams.from_dict(params),
-            extensions=Extensions.from_dict(extensions), **values,
-        )  # fmt: skip
+        set goes back to the base environment's, then ``env_id``'s settings (n_neurons,
+        episode_length, single params and extensions fields) apply; all else (set sizes,
+        seeds, a preset's episode length, ...) stays."""
+        base, settings = _base_settings(), self._settings()
+        settings.update({name: base[name] for name in variant_settings(self.id)})
+        settings.update(variant_settings(env_id))
+        return dataclasses.replace(self, id=env_id, **split_settings(settings))
 
 
-def _as_dict(value: Any) -> dict[str, Any]:
-    if value is None:
-        return {}
-    if isinstance(value, (NeuronParams, Extensions)):
-        return value.to_dict()
-    return dict(value)
-
-
-def variant_kwargs(env_id: str) -> dict[str, Any]:
-    """The keyword arguments a registered spikectl environment id is made with; a clear
-    error for an unknown id, another library's environment or arguments the trainer
-    cannot take over."""
-    import gymnasium
-
-    import spikectl  # noqa: F401  (registers the ids)
-
-    if not isinstance(env_id, str) or env_id not in gymnasium.registry:
-        ours = sorted(name for name in gymnasium.registry if name.startswith("spikectl/"))
-        raise ValueError(f"env: unknown environment id {env_id!r}; registered: {', '.join(ours)}")
-    spec = gymnasium.spec(env_id)
-    if not str(spec.entry_point).startswith("spikectl."):
-        raise ValueError(f"env: {env_id!r} is not a spikectl environment ({spec.entry_point})")
-    kwargs = dict(spec.kwargs)
-    unknown = sorted(set(kwargs) - set(ENV_KWARGS))
-    if unknown:
-        raise ValueError(f"env: {env_id!r} sets {unknown}, which the trainer does not take over")
-    return kwargs
+def _base_settings() -> dict[str, Any]:
+    """The base environment's value of every setting a variant may change."""
+    fields = {f.name: f.default for f in dataclasses.fields(EnvConfig)}
+    return flat_settings(fields, NeuronParams(), Extensions())
 
 
 @dataclass(frozen=True)
@@ -522,81 +471,3 @@ def _legacy_normalisation(sizes: dict[str, Any], params: NeuronParams) -> None:
                     f"{getattr(params, name)}: the agent's input is normalised with the "
                     "environment's params now, so this run cannot be rebuilt as it was"
                 )
-
-
-PAPER = Experiment()
-
-QUICK = Experiment(
-    agent=AgentConfig(
-        sizes=AgentSizes(
-            lstm_hidden=64,
-            attn_width=64,
-            attn_ff=128,
-            tdrqn_head_hidden=(128, 64),
-            ff_hidden=256,
-            head_hidden=(256, 128, 64),
-            target_voltage_in_input=True,
-        ),
-    ),
-    train=TrainConfig(
-        total_env_steps=264_000,
-        num_envs=16,
-        updates_per_round=32,
-        batch_size=8,
-        buffer_size=40_000,
-        learning_starts=16,
-        learning_rate=2e-3,
-        gamma=0.9,
-        tau=0.05,
-        n_step=3,
-        aux_voltage_weight=1.0,
-        explore_do_nothing=0.75,
-        eval_every_episodes=400,
-        checkpoint_every_episodes=800,
-        torch_threads=1,
-    ),
-)
-"""The README's main job: ~14 minutes on one core of the project's 2-core machine
-(docs/training.md, "Learning fast"): 4 400 episodes, 8 800 updates of 8 episodes,
-n-step targets, the auxiliary next-voltage loss, the target's voltage in each neuron's
-input, do-nothing-biased exploration, gamma 0.9, lr 2e-3, half-width networks, one Torch
-thread."""
-
-SMOKE = Experiment(
-    env=EnvConfig(episode_length=20, n_neurons=5, n_train=6, n_test=6, n_val=6),
-    agent=AgentConfig(
-        sizes=AgentSizes(
-            lstm_hidden=16,
-            target_embed=4,
-            pattern_embed=4,
-            ff_hidden=32,
-            head_hidden=(32,),
-            tdrqn_head_hidden=(32,),
-            attn_width=16,
-            attn_ff=32,
-            value_hidden=(16,),
-        ),
-    ),
-    train=TrainConfig(
-        total_env_steps=40 * 20 * 8,
-        num_envs=8,
-        updates_per_round=2,
-        batch_size=4,
-        buffer_size=200,
-        learning_starts=8,
-        learning_rate=1e-3,
-        eval_every_episodes=80,
-        checkpoint_every_episodes=80,
-        torch_threads=1,
-        progress=False,
-    ),
-)
-"""Seconds on one core: 5-neuron networks, 20-step episodes, tiny networks (tests)."""
-
-PRESETS: dict[str, Experiment] = {"paper": PAPER, "quick": QUICK, "smoke": SMOKE}
-PRESET_HELP: dict[str, str] = {
-    "paper": "Table 2 exactly: 1 M environment steps, the paper's network sizes (days on a CPU).",
-    "quick": "The main job: n-step targets, auxiliary loss, half-width networks (~15 min, 1 core).",
-    "smoke": "Seconds: 5-neuron networks, 20-step episodes, tiny networks (for tests).",
-}
-"""One line per preset, for ``spikectl train --help``."""
