@@ -74,6 +74,9 @@ def test_load_and_group_runs(runs):
     assert list(groups) == ["drqn", "tdrqn"]
     assert [len(group) for group in groups.values()] == [2, 4]
     assert group_runs(runs, "agent.arch") == groups  # the tree's dotted name, or the flat one
+    pairs = group_runs(runs, ("arch", "env.id"))
+    assert list(pairs) == [("drqn", "spikectl/NeuronControl-v0"),
+                           ("tdrqn", "spikectl/NeuronControl-v0")]  # fmt: skip
 
 
 def test_results_table_numbers(runs, tmp_path):

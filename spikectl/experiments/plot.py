@@ -37,6 +37,12 @@ def plot_sweep(
     runs = load_runs(dirs)
     written = [plot_networks(_training_contexts(dirs[0], runs[0].config), out_dir / "figure3.png")]
     by_arch = group_runs(runs, "arch")
+    if len({field_value(run.config, "env.id") for run in runs}) > 1:
+        # A sweep over environment variants: one group per architecture and variant.
+        by_arch = {
+            f"{arch} on {env_id.rpartition('/')[2]}": group
+            for (arch, env_id), group in group_runs(runs, ("arch", "env.id")).items()
+        }
     written.append(plot_training_curves(by_arch, out_dir / "figure4.png").path)
     written += write_results_table(by_arch, out_dir)
     tdrqn = [run for run in runs if field_value(run.config, "agent.arch") == "tdrqn"]

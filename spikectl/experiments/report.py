@@ -60,12 +60,17 @@ def load_runs(run_dirs: Iterable[str | os.PathLike]) -> list[Run]:
     return runs
 
 
-def group_runs(runs: Iterable[Run], key: str = "arch") -> dict[Any, list[Run]]:
+def group_runs(runs: Iterable[Run], key: str | tuple[str, ...] = "arch") -> dict[Any, list[Run]]:
     """Group runs by a config field, in sorted order: a dotted path (``"agent.arch"``,
-    ``"env.n_train"``) or a field's flat name (``"arch"``, ``"n_train"``)."""
+    ``"env.n_train"``) or a field's flat name (``"arch"``, ``"n_train"``); a tuple of
+    them groups by their values together (tuples as keys)."""
     groups: dict[Any, list[Run]] = {}
     for run in runs:
-        groups.setdefault(field_value(run.config, key), []).append(run)
+        if isinstance(key, tuple):
+            value = tuple(field_value(run.config, name) for name in key)
+        else:
+            value = field_value(run.config, key)
+        groups.setdefault(value, []).append(run)
     return dict(sorted(groups.items()))
 
 
