@@ -35,13 +35,13 @@ import tempfile
 import time
 from pathlib import Path
 
-from spikectl.training.config import PRESETS, QUICK
+from spikectl.training.presets import PRESETS, QUICK
 
 
 def train_flags(rounds: int, updates_per_round: int) -> list[str]:
-    steps = rounds * QUICK.num_envs * QUICK.episode_length
+    steps = rounds * QUICK.train.num_envs * QUICK.env.episode_length
     never = str(10**9)
-    return ["train", "--preset", "quick", "--total-env-steps", str(steps),
+    return ["train", "quick", "--total-env-steps", str(steps),
             "--updates-per-round", str(updates_per_round), "--eval-every-episodes", never,
             "--checkpoint-every-episodes", never, "--no-progress"]  # fmt: skip
 
@@ -65,8 +65,6 @@ def run_processes(commands: list[list[str]], cores: int) -> float:
 
 def micro(seeds: list[int], repeats: int, preset: str, device: str) -> None:
     """Milliseconds per update and per acting step: K stacked seeds against K plain."""
-    import dataclasses
-
     import numpy as np
     import torch
 
@@ -74,9 +72,9 @@ def micro(seeds: list[int], repeats: int, preset: str, device: str) -> None:
     from spikectl.training.replay import EpisodeReplay
 
     torch.set_num_threads(1)
-    config = dataclasses.replace(PRESETS[preset], device=device)
+    config = PRESETS[preset].with_changes(device=device)
     rng = np.random.default_rng(0)
-    n, N, E = config.n_neurons, config.episode_length, 64
+    n, N, E = config.env.n_neurons, config.env.episode_length, 64
     replay = EpisodeReplay(E, n, N)
     replay.add((rng.random((E, N + 1, n)) * 25 - 70).astype(np.float32),
                rng.integers(-1, n, (E, N)), rng.random((E, N)).astype(np.float32),
@@ -84,7 +82,7 @@ def micro(seeds: list[int], repeats: int, preset: str, device: str) -> None:
                np.ones((E, n + 1), dtype=bool))  # fmt: skip
 
     def sync() -> None:
-        if config.device.startswith("cuda"):
+        if config.train.device.startswith("cuda"):
             torch.cuda.synchronize()
 
     def timed(step, count: int) -> float:
@@ -101,28 +99,28 @@ def micro(seeds: list[int], repeats: int, preset: str, device: str) -> None:
     online, target = build_networks(config)
     predictor = build_predictor(config, online)
     params = list(online.parameters()) + (list(predictor.parameters()) if predictor else [])
-    adam = torch.optim.Adam(params, lr=config.learning_rate)
+    adam = torch.optim.Adam(params, lr=config.train.learning_rate)
 
     def single_update() -> None:
-        td, aux = training_losses(online, target, replay.sample(config.batch_size, rng), config,
-                                  predictor)  # fmt: skip
+        batch = replay.sample(config.train.batch_size, rng)
+        td, aux = training_losses(online, target, batch, config, predictor)
         adam.zero_grad()
-        (td if aux is None else td + config.aux_voltage_weight * aux).backward()
-        torch.nn.utils.clip_grad_norm_(params, config.max_grad_norm)
+        (td if aux is None else td + config.train.aux_voltage_weight * aux).backward()
+        torch.nn.utils.clip_grad_norm_(params, config.train.max_grad_norm)
         adam.step()
 
     def observation(lead: tuple[int, ...]) -> dict[str, torch.Tensor]:
         tensors = {"voltage": torch.rand(*lead, n) * 25 - 70, "target": torch.zeros(lead).long(),
                    "pattern": torch.ones(*lead, N), "step": torch.zeros(lead).long(),
                    "last_action": torch.full(lead, -1)}  # fmt: skip
-        return {key: value.to(config.device) for key, value in tensors.items()}
+        return {key: value.to(config.train.device) for key, value in tensors.items()}
 
     single_obs = observation((16,))
     with torch.no_grad():
         single_step = timed(lambda: online.step(single_obs, None), 10 * repeats)
     single = timed(single_update, 5 * repeats)
-    print(f"{preset} sizes on {device}, batch {config.batch_size} episodes of {N} steps, "
-          f"{n} neurons, {config.arch}")  # fmt: skip
+    print(f"{preset} sizes on {device}, batch {config.train.batch_size} episodes of {N} steps, "
+          f"{n} neurons, {config.agent.arch}")  # fmt: skip
     print(f"one plain network: update {single:.0f} ms, acting step {single_step:.1f} ms")
     print(f"{'K':>3}{'update ms':>11}{'per seed':>10}{'vs K plain':>12}"
           f"{'step ms':>9}{'vs K plain':>12}")  # fmt: skip
@@ -136,7 +134,6 @@ def stacked_timings(
     config, K: int, replay, rng, observation, timed, repeats: int
 ) -> tuple[float, float]:
     """Milliseconds of one update and one acting step of K stacked seeds of ``config``."""
-    import dataclasses
 
     import torch
 
@@ -149,13 +146,13 @@ def stacked_timings(
     )
     from spikectl.training.ensemble import clip_grad_norm_per_seed, stack_seeds
 
-    pairs = [build_networks(dataclasses.replace(config, seed=s)) for s in range(K)]
+    pairs = [build_networks(config.with_changes(seed=s)) for s in range(K)]
     stacked = StackedNetworks([pair[0] for pair in pairs])
     targets = StackedNetworks([pair[1] for pair in pairs], trainable=False)
     predictors = [build_predictor(config, pair[0]) for pair in pairs]
     heads = None if predictors[0] is None else StackedNetworks(predictors)
     trained = stacked.parameters() + (heads.parameters() if heads else [])
-    adam = torch.optim.Adam(trained, lr=config.learning_rate)
+    adam = torch.optim.Adam(trained, lr=config.train.learning_rate)
 
     def seed_losses(online_params, target_params, head_params, tensors):
         td, aux = losses_on_tensors(
@@ -167,17 +164,18 @@ def stacked_timings(
     batched = torch.func.vmap(seed_losses, in_dims=(0, 0, 0 if heads else None, 0))
 
     def update() -> None:
-        seeds_tensors = [batch_tensors(replay.sample(config.batch_size, rng), config.device)
+        device = config.train.device
+        seeds_tensors = [batch_tensors(replay.sample(config.train.batch_size, rng), device)
                          for _ in range(K)]  # fmt: skip
         tensors = stack_seeds(seeds_tensors)
         td, aux = batched(stacked.params, targets.params, heads.params if heads else None, tensors)
         adam.zero_grad()
-        (td + config.aux_voltage_weight * aux).sum().backward()
-        clip_grad_norm_per_seed(trained, config.max_grad_norm)
+        (td + config.train.aux_voltage_weight * aux).sum().backward()
+        clip_grad_norm_per_seed(trained, config.train.max_grad_norm)
         adam.step()
 
     obs = observation((K, 16))
-    state = pairs[0][0].initial_state(16, config.n_neurons, device=config.device)
+    state = pairs[0][0].initial_state(16, config.env.n_neurons, device=config.train.device)
     state = tuple(s.expand(K, *s.shape).clone() for s in state)
     with torch.no_grad():
         step = timed(lambda: stacked.call("step", obs, state), 10 * repeats)
@@ -188,7 +186,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[2, 5, 10], help="values of K")
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--updates-per-round", type=int, default=QUICK.updates_per_round)
+    parser.add_argument("--updates-per-round", type=int, default=QUICK.train.updates_per_round)
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--cores", type=int, default=2, help="separate processes at once")
     parser.add_argument("--repeats", type=int, default=1)
@@ -203,9 +201,9 @@ def main() -> None:
     if args.quick:
         args.seeds, args.rounds, args.updates_per_round = [2], 1, 4
     flags = train_flags(args.rounds, args.updates_per_round)
-    steps = args.rounds * QUICK.num_envs * QUICK.episode_length
+    steps = args.rounds * QUICK.train.num_envs * QUICK.env.episode_length
     updates = args.rounds * args.updates_per_round
-    print(f"quick preset, {args.rounds} round(s) x {QUICK.num_envs} episodes, "
+    print(f"quick preset, {args.rounds} round(s) x {QUICK.train.num_envs} episodes, "
           f"{updates} updates per seed; separate runs {args.cores} at a time")  # fmt: skip
     print(f"{'K':>3} {'how':<22}{'wall s':>9}{'env steps/s':>13}{'updates/s':>11}{'ratio':>7}")
     for K in args.seeds:

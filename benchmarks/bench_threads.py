@@ -29,7 +29,7 @@ def run_job(threads: int, steps: int) -> float:
     """Wall seconds of one training job in a fresh process."""
     with tempfile.TemporaryDirectory() as run_dir:
         command = [
-            sys.executable, "-m", "spikectl.cli", "train", "--preset", "quick",
+            sys.executable, "-m", "spikectl.cli", "train", "quick",
             "--total-env-steps", str(steps), "--torch-threads", str(threads),
             "--eval-every-episodes", str(10**6), "--checkpoint-every-episodes", str(10**6),
             "--n-val", "0", "--no-progress", "--run-dir", f"{run_dir}/run",

@@ -17,7 +17,6 @@ Also reports how long one ``paper`` run (1 M steps) would take from these number
 from __future__ import annotations
 
 import argparse
-import dataclasses
 import time
 
 import numpy as np
@@ -28,7 +27,6 @@ from spikectl.agents import ARCHITECTURES
 from spikectl.contexts import make_splits
 from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
-from spikectl.training.config import PAPER, PRESETS
 from spikectl.training.dqn import (
     EpsilonGreedyPolicy,
     build_networks,
@@ -36,6 +34,7 @@ from spikectl.training.dqn import (
     soft_update,
     td_loss,
 )
+from spikectl.training.presets import PAPER, PRESETS
 from spikectl.training.replay import EpisodeReplay
 
 
@@ -43,7 +42,9 @@ def filled_replay(config, train_set, rng) -> EpisodeReplay:
     """A buffer with 64 random-policy episodes of the training set."""
     online, _ = build_networks(config)
     env = NeuronControlVectorEnv(64, contexts=train_set)
-    replay = EpisodeReplay(config.buffer_size, config.n_neurons, config.episode_length)
+    replay = EpisodeReplay(
+        config.train.buffer_size, config.env.n_neurons, config.env.episode_length
+    )
     contexts = rng.integers(len(train_set), size=64)
     episodes = run_episodes(env, contexts, EpsilonGreedyPolicy(online, 1.0, rng, "cpu"))
     targets = np.array([train_set[i].target for i in contexts])
@@ -56,21 +57,21 @@ def filled_replay(config, train_set, rng) -> EpisodeReplay:
 def time_updates(config, replay, updates: int, rng) -> tuple[float, float]:
     """Median seconds of (trainer update, bare update)."""
     online, target = build_networks(config)
-    optimizer = torch.optim.Adam(online.parameters(), lr=config.learning_rate)
+    optimizer = torch.optim.Adam(online.parameters(), lr=config.train.learning_rate)
     bare_online, bare_target = build_networks(config)
-    bare_optimizer = torch.optim.Adam(bare_online.parameters(), lr=config.learning_rate)
-    fixed = replay.sample(config.batch_size, rng)
+    bare_optimizer = torch.optim.Adam(bare_online.parameters(), lr=config.train.learning_rate)
+    fixed = replay.sample(config.train.batch_size, rng)
     obs_seq = sequence_observations(fixed, "cpu")
     index = torch.as_tensor(fixed.actions + 1)[..., None]  # [B, N, 1]
     td_target = torch.as_tensor(fixed.rewards)  # any fixed target: the cost is the same
 
     def trainer_update() -> None:
-        loss = td_loss(online, target, replay.sample(config.batch_size, rng), config)
+        loss = td_loss(online, target, replay.sample(config.train.batch_size, rng), config)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        torch.nn.utils.clip_grad_norm_(online.parameters(), config.max_grad_norm)
+        torch.nn.utils.clip_grad_norm_(online.parameters(), config.train.max_grad_norm)
         optimizer.step()
-        soft_update(target, online, config.tau)
+        soft_update(target, online, config.train.tau)
 
     def bare_update() -> None:
         q_values, _ = bare_online(obs_seq)
@@ -105,7 +106,7 @@ def collection_rate(config, train_set, num_envs: int, episodes: int, rng) -> flo
         start = time.perf_counter()
         run_episodes(env, contexts, EpsilonGreedyPolicy(online, 0.5, rng, "cpu"))
         if repeat:
-            rates.append(num_envs * config.episode_length / (time.perf_counter() - start))
+            rates.append(num_envs * config.env.episode_length / (time.perf_counter() - start))
     return float(np.median(rates))
 
 
@@ -129,14 +130,15 @@ def main() -> None:
     )
     print("|---|---:|---:|---:|---:|---:|")
     for arch in args.archs:
-        config = dataclasses.replace(PAPER, arch=arch, sizes=PRESETS[args.sizes].sizes)
+        config = PAPER.with_changes(arch=arch, sizes=PRESETS[args.sizes].agent.sizes)
         replay = filled_replay(config, train_set, rng)
         trainer_s, bare_s = time_updates(config, replay, args.updates, rng)
         rate = collection_rate(config, train_set, 64, args.episodes, rng)
-        paper_rate = collection_rate(config, train_set, config.num_envs, args.episodes, rng)
-        rounds = config.total_episodes // config.num_envs
+        paper_rate = collection_rate(config, train_set, config.train.num_envs, args.episodes, rng)
+        rounds = config.total_episodes // config.train.num_envs
         paper_hours = (
-            rounds * config.updates_per_round * trainer_s + config.total_env_steps / paper_rate
+            rounds * config.train.updates_per_round * trainer_s
+            + config.train.total_env_steps / paper_rate
         ) / 3600
         print(f"| {arch} | {trainer_s * 1e3:.1f} | {bare_s * 1e3:.1f} | {trainer_s / bare_s:.2f} "
               f"| {rate:,.0f} | {paper_hours:.1f} |", flush=True)  # fmt: skip

@@ -29,7 +29,6 @@ from spikectl.agents.blocks import long_indices, per_neuron_features
 from spikectl.contexts import make_splits
 from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
-from spikectl.training.config import PRESETS
 from spikectl.training.dqn import (
     EpsilonGreedyPolicy,
     build_networks,
@@ -39,6 +38,7 @@ from spikectl.training.dqn import (
     soft_update,
     training_losses,
 )
+from spikectl.training.presets import PRESETS
 from spikectl.training.replay import EpisodeReplay
 
 
@@ -75,15 +75,15 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     config = PRESETS[args.preset]
-    if config.arch != "tdrqn":
+    if config.agent.arch != "tdrqn":
         raise SystemExit("this profile is written for TDRQN")
     rng = np.random.default_rng(0)
-    train_set, _ = make_splits(100, 1, config.n_neurons, config.episode_length)
+    train_set, _ = make_splits(100, 1, config.env.n_neurons, config.env.episode_length)
     online, target = build_networks(config)
     predictor = build_predictor(config, online)
     trained = [*online.parameters(), *(predictor.parameters() if predictor else [])]
-    optimizer = torch.optim.Adam(trained, lr=config.learning_rate)
-    replay = EpisodeReplay(256, config.n_neurons, config.episode_length)
+    optimizer = torch.optim.Adam(trained, lr=config.train.learning_rate)
+    replay = EpisodeReplay(256, config.env.n_neurons, config.env.episode_length)
     env = NeuronControlVectorEnv(64, contexts=train_set)
     contexts = rng.integers(len(train_set), size=64)
     episodes = run_episodes(env, contexts, EpsilonGreedyPolicy(online, 1.0, rng, "cpu"))
@@ -93,26 +93,26 @@ def main() -> None:
                episodes.action_mask)  # fmt: skip
 
     def update() -> None:
-        batch = replay.sample(config.batch_size, rng)
+        batch = replay.sample(config.train.batch_size, rng)
         td, aux = training_losses(online, target, batch, config, predictor)
-        loss = td if aux is None else td + config.aux_voltage_weight * aux
+        loss = td if aux is None else td + config.train.aux_voltage_weight * aux
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        torch.nn.utils.clip_grad_norm_(trained, config.max_grad_norm)
+        torch.nn.utils.clip_grad_norm_(trained, config.train.max_grad_norm)
         optimizer.step()
-        soft_update(target, online, config.tau)
+        soft_update(target, online, config.train.tau)
 
-    batch = replay.sample(config.batch_size, rng)
+    batch = replay.sample(config.train.batch_size, rng)
     obs = sequence_observations(batch, "cpu")
     indexed = long_indices(obs)
     sizes = online.sizes
-    n = config.n_neurons
+    n = config.env.n_neurons
     features = per_neuron_features(
-        indexed, v_rest_mV=sizes.v_rest_mV, v_threshold_mV=sizes.v_threshold_mV,
+        indexed, v_rest_mV=online.v_rest_mV, v_threshold_mV=online.v_threshold_mV,
         with_target=sizes.target_in_input, dtype=torch.float32,
         with_target_voltage=sizes.target_voltage_in_input,
     )  # fmt: skip
-    state = online.initial_state(config.batch_size, n)
+    state = online.initial_state(config.train.batch_size, n)
     lstm_out = online.lstm(features, state)[0].detach().requires_grad_()
     mixed = online.mixer(lstm_out).detach()
     head_in = torch.cat([mixed, online.context(indexed, n)], -1).detach().requires_grad_()
@@ -126,7 +126,7 @@ def main() -> None:
 
     parts = {
         "replay sample + input tensors": lambda: sequence_observations(
-            replay.sample(config.batch_size, rng), "cpu"
+            replay.sample(config.train.batch_size, rng), "cpu"
         ),
         "per-neuron LSTM, forward + backward": forward_backward(
             lambda: online.lstm(features, state)
@@ -150,28 +150,29 @@ def main() -> None:
         results[name] = median_ms(function, args.repeats)
     update()
     results["gradient clip"] = median_ms(
-        lambda: torch.nn.utils.clip_grad_norm_(trained, config.max_grad_norm),
+        lambda: torch.nn.utils.clip_grad_norm_(trained, config.train.max_grad_norm),
         args.repeats,
     )
     results["Adam step"] = median_ms(optimizer.step, args.repeats)
     results["soft target update"] = median_ms(
-        lambda: soft_update(target, online, config.tau), args.repeats
+        lambda: soft_update(target, online, config.train.tau), args.repeats
     )
-    collect_env = NeuronControlVectorEnv(config.num_envs, contexts=train_set)
-    results[f"collection round ({config.num_envs} episodes, epsilon 0.5)"] = median_ms(
+    collect_env = NeuronControlVectorEnv(config.train.num_envs, contexts=train_set)
+    results[f"collection round ({config.train.num_envs} episodes, epsilon 0.5)"] = median_ms(
         lambda: run_episodes(
-            collect_env, rng.integers(len(train_set), size=config.num_envs),
+            collect_env, rng.integers(len(train_set), size=config.train.num_envs),
             EpsilonGreedyPolicy(online, 0.5, rng, "cpu"),
         ),
         max(args.repeats // 5, 3),
     )  # fmt: skip
     eval_env = NeuronControlVectorEnv(len(train_set), contexts=train_set)
     results["greedy evaluation of 100 contexts"] = median_ms(
-        lambda: greedy_returns(online, eval_env, "cpu"), max(args.repeats // 5, 3)
+        lambda: greedy_returns(online, eval_env, "cpu", seed=0), max(args.repeats // 5, 3)
     )
 
     whole = results["whole update"]
-    shape = f"{config.batch_size} episodes x {config.episode_length + 1} steps x {n} neurons"
+    length = config.env.episode_length
+    shape = f"{config.train.batch_size} episodes x {length + 1} steps x {n} neurons"
     print(f"torch {torch.__version__}, {torch.get_num_threads()} thread(s), {args.preset} "
           f"preset, batch {shape}")  # fmt: skip
     print("| part | median (ms) | share of one update |")

@@ -21,8 +21,11 @@ from spikectl.agents import AgentSizes
 from spikectl.contexts import ContextSet, make_splits
 from spikectl.experiments.sweep import SweepError
 from spikectl.files import FileWriteError, make_dirs, write_json
+from spikectl.neuron.extensions import Extensions
+from spikectl.neuron.params import NeuronParams
 from spikectl.training.checkpoint import RunDirError
-from spikectl.training.config import PRESETS, TrainConfig
+from spikectl.training.config import AgentConfig, EnvConfig, Experiment, TrainConfig
+from spikectl.training.presets import PRESET_HELP, PRESETS
 
 USER_ERRORS = (ValueError, FileNotFoundError, FileWriteError, RunDirError, SweepError)
 """What the commands raise for bad input or a bad file system: reported in one line with
@@ -154,11 +157,11 @@ def contexts(config: ContextsConfig) -> None:
 
 @dataclass(frozen=True)
 class TrainCommand:
-    """Train an agent (``--preset`` picks the defaults every other flag overrides)."""
+    """Train an agent: the preset's settings, then every flag's."""
 
-    config: Annotated[TrainConfig, tyro.conf.arg(name="")]
-    preset: Literal["paper", "quick", "smoke"] = "quick"
-    """paper: Table 2 exactly; quick: the main job, under 15 min on one core; smoke: seconds."""
+    config: Annotated[Experiment, tyro.conf.arg(name="")]
+    preset: tyro.conf.Suppress[str] = "quick"
+    """The preset the defaults come from (the subcommand)."""
     run_dir: Path | None = None
     """Run directory (default runs/ARCH-PRESET-seedSEED); must be new unless resuming."""
     resume: Path | None = None
@@ -190,7 +193,9 @@ def train(command: TrainCommand) -> None:
         config = read_config(run_dir)
     else:
         config = command.config
-        run_dir = command.run_dir or Path(f"runs/{config.arch}-{command.preset}-seed{config.seed}")
+        run_dir = command.run_dir or Path(
+            f"runs/{config.agent.arch}-{command.preset}-seed{config.train.seed}"
+        )
     print(f"run directory: {run_dir}")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
@@ -201,7 +206,7 @@ def train(command: TrainCommand) -> None:
     baselines = json.loads((run_dir / "baselines.json").read_text())
     curve = plot_learning_curve(
         metrics, baselines, run_dir / "learning_curve.png",
-        title=f"{config.arch.upper()}, {final['env_steps']:,} steps",
+        title=f"{config.agent.arch.upper()}, {final['env_steps']:,} steps",
     )  # fmt: skip
     validation = (
         ""
@@ -209,7 +214,10 @@ def train(command: TrainCommand) -> None:
         else (f"  (validation {final['val_return']:.3f})")
     )
     print(f"{'':<14}{'train':>8}{'test':>8}")
-    print(f"{config.arch:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}{validation}")
+    print(
+        f"{config.agent.arch:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}"
+        f"{validation}"
+    )
     for name in ("do_nothing", "random"):
         row = baselines[name]
         print(f"{name.replace('_', '-'):<14}{row['train']:>8.3f}{row['test']:>8.3f}")
@@ -217,7 +225,7 @@ def train(command: TrainCommand) -> None:
     print(
         f"{final['env_steps']:,} environment steps, {final['updates']:,} updates, "
         f"{minutes:.1f} wall minutes ({core_minutes:.1f} core minutes) on "
-        f"{config.torch_threads or torch_threads()} thread(s)"
+        f"{config.train.torch_threads or torch_threads()} thread(s)"
     )
     print(f"wrote {run_dir / 'model.pt'}, {run_dir / 'metrics.csv'} and {curve}")
 
@@ -240,8 +248,10 @@ def train_group_command(command: TrainCommand) -> None:
         if not seeds:
             raise ValueError("--seeds needs at least one seed")
         label = "-".join(str(seed) for seed in seeds)
-        group_dir = command.run_dir or Path(f"runs/{config.arch}-{command.preset}-seeds{label}")
-        configs = [dataclasses.replace(config, seed=seed) for seed in seeds]
+        group_dir = command.run_dir or Path(
+            f"runs/{config.agent.arch}-{command.preset}-seeds{label}"
+        )
+        configs = [config.with_seed(seed) for seed in seeds]
         run_dirs = seed_dirs(group_dir, seeds)
         print(f"seed group: {group_dir} ({len(seeds)} seeds in one process)")
         with warnings.catch_warnings(record=True) as caught:
@@ -252,7 +262,7 @@ def train_group_command(command: TrainCommand) -> None:
     print(f"{'seed':<14}{'train':>8}{'test':>8}")
     for config, rows in zip(configs, metrics, strict=True):
         final = rows[-1]
-        print(f"{config.seed:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}")
+        print(f"{config.train.seed:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}")
     final = metrics[0][-1]
     print(
         f"{len(configs)} x {final['env_steps']:,} environment steps, {final['updates']:,} "
@@ -327,7 +337,9 @@ def sweep(command: SweepCommand) -> None:
     if command.seeds is not None:
         description["grid"]["seed"] = list(command.seeds)
     if command.total_env_steps is not None:
-        description["overrides"] = {"total_env_steps": command.total_env_steps}
+        description["overrides"] = {
+            **description.get("overrides", {}), "train.total_env_steps": command.total_env_steps,
+        }  # fmt: skip
     run_sweep(
         Sweep.from_dict(description), command.sweep_dir, command.workers or None,
         backend=command.backend, address=command.address, group_seeds=command.group_seeds,
@@ -437,19 +449,57 @@ COMMANDS = {
 }
 
 
+TRAIN_HELP = """Train an agent: spikectl train [PRESET] [FLAGS]. The defaults shown are
+the {name} preset's: {help}
+
+The preset (paper, quick or smoke; quick when none is given) sets every default, and
+the flags override them: `spikectl train paper --help` shows the paper's. --env picks
+a registered environment (spikectl/NeuronControlNoisy-v0, ...) whose settings become
+the defaults of --n-neurons, --params.* and --extensions.*."""
+
+
+def _train_presets(env_id: str | None = None) -> Any:
+    """The presets as tyro subcommands, each with its settings as defaults (on the
+    registered environment ``env_id`` when given)."""
+    choices = []
+    for name, experiment in PRESETS.items():
+        if env_id is not None:
+            experiment = dataclasses.replace(experiment, env=experiment.env.with_variant(env_id))
+        default = TrainCommand(config=experiment, preset=name)
+        description = TRAIN_HELP.format(name=name, help=PRESET_HELP[name])
+        choices.append(
+            Annotated[TrainCommand, tyro.conf.subcommand(name, default=default,
+                                                         description=description)]
+        )  # fmt: skip
+    return Union[tuple(choices)]  # noqa: UP007
+
+
 def _parse_train(argv: list[str]) -> TrainCommand:
-    """Two passes: the preset sets the defaults, then every flag overrides them."""
-    import argparse
+    """The presets are tyro subcommands; without one, ``quick``. A registered --env
+    other than the default changes the defaults, so the flags are parsed again on that
+    environment: every flag given still overrides the variant's settings."""
+    if "--preset" in argv or any(arg.startswith("--preset=") for arg in argv):
+        raise ValueError(
+            "--preset: the preset is a subcommand now: spikectl train paper|quick|smoke [FLAGS]"
+        )
+    if not argv or argv[0] not in PRESETS:
+        argv = ["quick", *argv]
+    kwargs = {"args": argv, "prog": "spikectl train", "command": "train"}
+    command = _cli(_train_presets(), default=_quick(), **kwargs)
+    env_id = command.config.env.id
+    if env_id != PRESETS[command.preset].env.id:
+        command = _cli(_train_presets(env_id), default=_quick(env_id), **kwargs)
+    return command
 
-    peek = argparse.ArgumentParser(add_help=False)
-    peek.add_argument("--preset", choices=sorted(PRESETS), default="quick")
-    known, _ = peek.parse_known_args(argv)
-    default = TrainCommand(config=PRESETS[known.preset], preset=known.preset)
-    return _cli(TrainCommand, args=argv, default=default, prog="spikectl train",
-                description=TrainCommand.__doc__)  # fmt: skip
+
+def _quick(env_id: str | None = None) -> TrainCommand:
+    experiment = PRESETS["quick"]
+    if env_id is not None:
+        experiment = dataclasses.replace(experiment, env=experiment.env.with_variant(env_id))
+    return TrainCommand(config=experiment, preset="quick")
 
 
-def _cli(*args: Any, **kwargs: Any) -> Any:
+def _cli(*args: Any, command: str | None = None, **kwargs: Any) -> Any:
     """``tyro.cli``, with its framed parse errors turned into our one-line form."""
     captured = io.StringIO()
     reported = False
@@ -460,7 +510,7 @@ def _cli(*args: Any, **kwargs: Any) -> Any:
         line = parse_error_line(captured.getvalue()) if exit.code not in (0, None) else None
         if line is None:
             raise
-        print(f"spikectl: error: {flag_message(line)}", file=sys.stderr)
+        print(f"spikectl: error: {flag_message(line, command)}", file=sys.stderr)
         reported = True
         raise SystemExit(2) from None
     finally:
@@ -527,30 +577,41 @@ def main(argv: list[str] | None = None) -> None:
         )
         run(command)
     except USER_ERRORS as error:
-        print(f"spikectl: error: {flag_message(str(error))}", file=sys.stderr)
+        command = argv[0] if argv else None
+        print(f"spikectl: error: {flag_message(str(error), command)}", file=sys.stderr)
         raise SystemExit(2) from error
 
 
-def _flag_names() -> dict[str, str]:
+def _flag_names(command: str | None = None) -> dict[str, str]:
     """Field names of the commands' configs (as validation messages name them) and their
-    command-line flags."""
+    command-line flags; for ``train``, the model's and the extensions' fields are the
+    --params.* and --extensions.* flags."""
     names = {}
-    for config_type in (TrainConfig, *(config for _, config in COMMANDS.values())):
+    for config_type in (EnvConfig, AgentConfig, TrainConfig,
+                        *(config for _, config in COMMANDS.values())):  # fmt: skip
         for field in dataclasses.fields(config_type):
             names[field.name] = "--" + field.name.replace("_", "-")
-    for field in dataclasses.fields(AgentSizes):
-        flag = "--sizes." + field.name.replace("_", "-")
-        names[f"AgentSizes.{field.name}"] = names[f"sizes.{field.name}"] = flag
+    names["id"] = names["env"] = "--env"
+    nested = [("sizes", AgentSizes)]
+    if command == "train":
+        nested += [("params", NeuronParams), ("extensions", Extensions)]
+    for prefix, kind in nested:
+        for field in dataclasses.fields(kind):
+            flag = f"--{prefix}." + field.name.replace("_", "-")
+            names[f"{kind.__name__}.{field.name}"] = names[f"{prefix}.{field.name}"] = flag
+            if prefix != "sizes":
+                names[field.name] = flag
     return names
 
 
-def flag_message(message: str) -> str:
+def flag_message(message: str, command: str | None = None) -> str:
     """The message on one line, with a leading field name replaced by its flag
-    (``gamma must lie in [0, 1]`` -> ``--gamma must lie in [0, 1]``)."""
+    (``gamma must lie in [0, 1]`` -> ``--gamma must lie in [0, 1]``) in ``command``."""
     message = " ".join(message.split())
-    match = re.match(r"(?:NeuronParams\.|Extensions\.)?([A-Za-z_][\w.]*)", message)
+    names = _flag_names(command)
+    match = re.match(r"(NeuronParams\.|Extensions\.)?([A-Za-z_][\w.]*)", message)
     if match:
-        flag = _flag_names().get(match.group(1))
+        flag = names.get((match.group(1) or "") + match.group(2)) or names.get(match.group(2))
         if flag is not None:
             message = flag + message[match.end() :]
     return message

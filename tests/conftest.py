@@ -76,12 +76,10 @@ def easy_network_config(tmp_path):
     """A smoke-sized DRQN config on one easy 3-neuron network (stimulating neuron 0 fires
     the target one step later), tested on another: training must clearly beat doing
     nothing on it. The context files are saved under ``tmp_path``."""
-    import dataclasses
-
     import numpy as np
 
     from spikectl import ContextSet, make_context
-    from spikectl.training.config import SMOKE
+    from spikectl.training.presets import SMOKE
 
     weights = np.zeros((3, 3), dtype=np.int8)
     weights[0, 2] = 1
@@ -92,8 +90,8 @@ def easy_network_config(tmp_path):
                          episode_length=12)  # fmt: skip
     ContextSet([easy]).save(tmp_path / "train.npz")
     ContextSet([other]).save(tmp_path / "test.npz")
-    return dataclasses.replace(
-        SMOKE, arch="drqn", n_neurons=3, episode_length=12, total_env_steps=12 * 8 * 50,
+    return SMOKE.with_changes(
+        arch="drqn", n_neurons=3, episode_length=12, total_env_steps=12 * 8 * 50,
         train_contexts=tmp_path / "train.npz", test_contexts=tmp_path / "test.npz",
         updates_per_round=16, learning_rate=3e-3, eval_every_episodes=160,
         checkpoint_every_episodes=400, epsilon_anneal_fraction=0.3, gamma=0.9,

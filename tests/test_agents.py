@@ -319,8 +319,8 @@ def _features(net: torch.nn.Module, obs: dict[str, torch.Tensor]) -> torch.Tenso
     s = net.sizes
     return per_neuron_features(
         obs,
-        v_rest_mV=s.v_rest_mV,
-        v_threshold_mV=s.v_threshold_mV,
+        v_rest_mV=net.v_rest_mV,
+        v_threshold_mV=net.v_threshold_mV,
         with_target=s.target_in_input,
         dtype=torch.float32,
     )

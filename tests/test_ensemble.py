@@ -4,7 +4,6 @@ and the CLI."""
 
 from __future__ import annotations
 
-import dataclasses
 import json
 import os
 import signal
@@ -19,12 +18,12 @@ from torch import nn
 from spikectl.agents import ARCHITECTURES, make_agent
 from spikectl.agents.stacked import StackableLSTM, StackedNetworks
 from spikectl.training.checkpoint import RunDirError, load_model_weights, read_metrics
-from spikectl.training.config import SMOKE
 from spikectl.training.dqn import build_networks, train
 from spikectl.training.ensemble import clip_grad_norm_per_seed, train_group, train_seeds
+from spikectl.training.presets import SMOKE
 
 TIMES = ("wall_time_s", "cpu_time_s")
-TINY = dataclasses.replace(SMOKE, total_env_steps=24 * 20 * 8, eval_every_episodes=64,
+TINY = SMOKE.with_changes(total_env_steps=24 * 20 * 8, eval_every_episodes=64,
                            checkpoint_every_episodes=64)  # fmt: skip
 """Three rounds of smoke-sized training: seconds."""
 
@@ -74,9 +73,9 @@ def test_stackable_lstm_equals_nn_lstm_and_shares_its_parameters():
 
 @pytest.mark.parametrize("arch", ARCHITECTURES)
 def test_stacked_networks_compute_each_seeds_network(arch):
-    networks = [build_networks(dataclasses.replace(SMOKE, arch=arch, seed=s))[0] for s in range(3)]
+    networks = [build_networks(SMOKE.with_changes(arch=arch, seed=s))[0] for s in range(3)]
     stacked = StackedNetworks(networks)
-    obs = observation(3, 2, 5, SMOKE.n_neurons, SMOKE.episode_length)
+    obs = observation(3, 2, 5, SMOKE.env.n_neurons, SMOKE.env.episode_length)
     q_values, _ = stacked.call("forward", obs)  # [K, B, T, n+1]
     for k, network in enumerate(networks):
         # Each seed's slice is exactly the plain network's state dict (model.pt layout).
@@ -87,7 +86,7 @@ def test_stacked_networks_compute_each_seeds_network(arch):
         torch.testing.assert_close(q_values[k], expected, rtol=1e-5, atol=1e-6)
     # The step forward batches the same way, with the hidden state per seed.
     step_obs = {key: value[:, :, 0] for key, value in obs.items()}
-    state = networks[0].initial_state(2, SMOKE.n_neurons)
+    state = networks[0].initial_state(2, SMOKE.env.n_neurons)
     state = tuple(s.expand(3, *s.shape).clone() for s in state)
     q_step, _ = stacked.call("step", step_obs, state)
     torch.testing.assert_close(q_step, q_values[:, :, 0], rtol=1e-5, atol=1e-6)
@@ -123,19 +122,21 @@ def test_a_seed_does_not_depend_on_the_seeds_beside_it(tmp_path):
     assert same_weights(tmp_path / "a/seed=0/model.pt", tmp_path / "b/seed=0/model.pt")
     # Each seed's directory is a run directory of today's layout.
     run = tmp_path / "a/seed=1"
-    assert json.loads((run / "config.json").read_text())["seed"] == 1
+    assert json.loads((run / "config.json").read_text())["train"]["seed"] == 1
     assert comparable(read_metrics(run)) == comparable(first[1])
     assert {"baselines.json", "model.pt", "tensorboard", "train_contexts.npz"} <= {
         p.name for p in run.iterdir()
     }
-    network = make_agent(TINY.arch, TINY.n_neurons, TINY.episode_length, TINY.sizes)
+    network = make_agent(
+        TINY.agent.arch, TINY.env.n_neurons, TINY.env.episode_length, TINY.agent.sizes
+    )
     network.load_state_dict(load_model_weights(run / "model.pt"))  # strict: today's names
 
 
 def test_a_group_of_one_follows_the_single_run_up_to_rounding(tmp_path):
     """The same draws and data as a single run; the numbers differ only by float rounding
     (nn.LSTM's fused kernel against the written-out LSTM), measured here."""
-    config = dataclasses.replace(TINY, seed=3)
+    config = TINY.with_changes(seed=3)
     (group,) = train_seeds(config, [3], tmp_path / "group")
     single = train(config, tmp_path / "single")
     assert [row["episode"] for row in group] == [row["episode"] for row in single]
@@ -152,14 +153,14 @@ def test_a_group_of_one_follows_the_single_run_up_to_rounding(tmp_path):
 def test_group_refuses_bad_groups_and_directories(tmp_path):
     with pytest.raises(ValueError, match="differ only in seed"):
         train_group(
-            [TINY, dataclasses.replace(TINY, seed=1, gamma=0.5)],
+            [TINY, TINY.with_changes(seed=1, gamma=0.5)],
             [tmp_path / "a", tmp_path / "b"], tmp_path / "g",
         )  # fmt: skip
     with pytest.raises(ValueError, match="distinct"):
         train_seeds(TINY, [1, 1], tmp_path / "g")
     with pytest.raises(ValueError, match="at least one"):
         train_seeds(TINY, [], tmp_path / "g")
-    single = dataclasses.replace(TINY, total_env_steps=8 * 20)
+    single = TINY.with_changes(total_env_steps=8 * 20)
     train(single, tmp_path / "g/seed=0")
     with pytest.raises(RunDirError, match="already holds a run"):
         train_seeds(single, [0, 1], tmp_path / "g")
@@ -170,7 +171,7 @@ def test_group_refuses_bad_groups_and_directories(tmp_path):
 def test_group_resume_after_sigkill_is_exact_and_seeds_evaluate(tmp_path, run_cli, wait_until):
     """SIGKILL a group after its first checkpoint, resume it: every seed's metrics and
     weights equal an uninterrupted group's; each model.pt evaluates with the CLI."""
-    flags = ("train", "--preset", "smoke", "--seeds", "0", "1", "--n-step", "3",
+    flags = ("train", "smoke", "--seeds", "0", "1", "--n-step", "3",
              "--aux-voltage-weight", "1.0", "--explore-do-nothing", "0.75",
              "--total-env-steps", str(20 * 8 * 24),
              "--checkpoint-every-episodes", "64")  # fmt: skip
@@ -207,7 +208,7 @@ def test_group_resume_after_sigkill_is_exact_and_seeds_evaluate(tmp_path, run_cl
 
 @pytest.mark.parametrize("arch", ["drqn", "ddrqn", "dmdrqn"])
 def test_every_architecture_trains_in_a_group(tmp_path, arch):
-    config = dataclasses.replace(TINY, arch=arch, total_env_steps=4 * 20 * 8)
+    config = TINY.with_changes(arch=arch, total_env_steps=4 * 20 * 8)
     metrics = train_seeds(config, [0, 1], tmp_path / arch)
     assert metrics[0][-1]["updates"] == metrics[1][-1]["updates"] > 0
     assert np.isfinite([row["loss"] for row in metrics[0][1:]]).all()
@@ -218,19 +219,21 @@ def test_every_architecture_trains_in_a_group(tmp_path, arch):
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
 def test_group_trains_on_cuda_and_matches_the_cpu_group_at_the_start(tmp_path):
-    cuda = train_seeds(dataclasses.replace(TINY, device="cuda"), [0, 1], tmp_path / "cuda")
+    cuda = train_seeds(TINY.with_changes(device="cuda"), [0, 1], tmp_path / "cuda")
     cpu = train_seeds(TINY, [0, 1], tmp_path / "cpu")
     for on_gpu, on_cpu in zip(cuda, cpu, strict=True):
         assert on_gpu[0]["train_return"] == on_cpu[0]["train_return"]
         assert on_gpu[1]["loss"] == pytest.approx(on_cpu[1]["loss"], rel=1e-3)
-    network = make_agent(TINY.arch, TINY.n_neurons, TINY.episode_length, TINY.sizes)
+    network = make_agent(
+        TINY.agent.arch, TINY.env.n_neurons, TINY.env.episode_length, TINY.agent.sizes
+    )
     network.load_state_dict(load_model_weights(tmp_path / "cuda/seed=1/model.pt"))
 
 
 def test_sweep_groups_trials_that_differ_only_in_seed(tmp_path):
     from spikectl.experiments.sweep import Sweep, run_sweep, trial_dirs
 
-    short = dataclasses.replace(TINY, total_env_steps=4 * 20 * 8, eval_every_episodes=16)
+    short = TINY.with_changes(total_env_steps=4 * 20 * 8, eval_every_episodes=16)
     sweep = Sweep(short, {"arch": ["drqn", "tdrqn"], "seed": [0, 1]})
     results = run_sweep(sweep, tmp_path / "s", workers=2, echo=lambda line: None,
                         group_seeds=True)  # fmt: skip
@@ -238,7 +241,7 @@ def test_sweep_groups_trials_that_differ_only_in_seed(tmp_path):
     assert len(trial_dirs(tmp_path / "s")) == 4
     assert sorted(p.name for p in (tmp_path / "s/groups").iterdir()) == ["arch=drqn", "arch=tdrqn"]
     # A trial's result equals the same group trained in this process.
-    configs = [dataclasses.replace(c, torch_threads=1) for _, c in sweep.trials()[2:]]
+    configs = [c.with_changes(torch_threads=1) for _, c in sweep.trials()[2:]]
     direct = train_group(configs, [tmp_path / "d0", tmp_path / "d1"], tmp_path / "d")
     pooled = read_metrics(tmp_path / "s/trials/arch=tdrqn-seed=1")
     assert comparable(pooled) == comparable(direct[1])
@@ -252,7 +255,7 @@ def test_ray_runs_seed_groups_like_the_local_pool(tmp_path):
     pytest.importorskip("ray")
     from spikectl.experiments.sweep import Sweep, run_sweep
 
-    short = dataclasses.replace(TINY, total_env_steps=4 * 20 * 8, eval_every_episodes=16)
+    short = TINY.with_changes(total_env_steps=4 * 20 * 8, eval_every_episodes=16)
     sweep = Sweep(short, {"seed": [0, 1]})
     run_sweep(sweep, tmp_path / "local", workers=1, echo=lambda line: None, group_seeds=True)
     results = run_sweep(sweep, tmp_path / "ray", workers=1, backend="ray",

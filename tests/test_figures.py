@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import csv
-import dataclasses
 import json
 
 import numpy as np
@@ -24,8 +23,8 @@ from spikectl.experiments.report import (
 )
 from spikectl.experiments.stats import bootstrap_ci
 from spikectl.training.checkpoint import write_metrics
-from spikectl.training.config import SMOKE
 from spikectl.training.dqn import METRIC_FIELDS
+from spikectl.training.presets import SMOKE
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 STEPS = (800, 1600, 2400)
@@ -41,7 +40,7 @@ RETURNS = {
 
 
 def make_run(root, arch, seed, train, test, steps=STEPS, n_train=6):
-    config = dataclasses.replace(SMOKE, arch=arch, seed=seed, n_train=n_train)
+    config = SMOKE.with_changes(arch=arch, seed=seed, n_train=n_train)
     run_dir = root / f"{arch}-n{n_train}-s{seed}"
     run_dir.mkdir(parents=True)
     (run_dir / "config.json").write_text(json.dumps(config.to_dict(), indent=2))
@@ -69,11 +68,15 @@ def assert_png(path):
 def test_load_and_group_runs(runs):
     assert len(runs) == 6
     config, metrics = runs[0]
-    assert config["arch"] == "tdrqn" and config["seed"] == 0
+    assert config["agent"]["arch"] == "tdrqn" and config["train"]["seed"] == 0
     assert [row["env_steps"] for row in metrics] == list(STEPS)
     groups = group_runs(runs, "arch")
     assert list(groups) == ["drqn", "tdrqn"]
     assert [len(group) for group in groups.values()] == [2, 4]
+    assert group_runs(runs, "agent.arch") == groups  # the tree's dotted name, or the flat one
+    pairs = group_runs(runs, ("arch", "env.id"))
+    assert list(pairs) == [("drqn", "spikectl/NeuronControl-v0"),
+                           ("tdrqn", "spikectl/NeuronControl-v0")]  # fmt: skip
 
 
 def test_results_table_numbers(runs, tmp_path):

@@ -3,8 +3,6 @@ split, and the quick preset's settings."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import numpy as np
 import pytest
 import torch
@@ -12,8 +10,9 @@ import torch
 from spikectl import ContextSet, make_splits
 from spikectl.agents import ARCHITECTURES, make_agent, make_voltage_predictor
 from spikectl.training.checkpoint import read_metrics
-from spikectl.training.config import PRESETS, SMOKE, TrainConfig
+from spikectl.training.config import Experiment, TrainConfig
 from spikectl.training.dqn import n_step_targets, td_loss, train, training_losses
+from spikectl.training.presets import PRESETS, SMOKE
 from spikectl.training.replay import EpisodeBatchArrays
 
 
@@ -61,10 +60,10 @@ def episode_batch(n: int, length: int, seed: int) -> EpisodeBatchArrays:
 
 @pytest.mark.parametrize("arch", ARCHITECTURES)
 def test_auxiliary_loss_reads_the_encoder_and_leaves_the_td_loss_unchanged(arch):
-    config = dataclasses.replace(SMOKE, arch=arch, aux_voltage_weight=1.0)
+    config = SMOKE.with_changes(arch=arch, aux_voltage_weight=1.0)
     torch.manual_seed(0)
-    online = make_agent(arch, 5, 20, config.sizes)
-    target = make_agent(arch, 5, 20, config.sizes)
+    online = make_agent(arch, 5, 20, config.agent.sizes)
+    target = make_agent(arch, 5, 20, config.agent.sizes)
     predictor = make_voltage_predictor(online)
     batch = episode_batch(5, 20, seed=1)
     td, aux = training_losses(online, target, batch, config, predictor)
@@ -102,9 +101,9 @@ def test_auxiliary_predictor_learns_a_hidden_synapse():
         patterns=np.zeros((64, 20), np.int8),
         action_masks=np.tile([True, True, False], (64, 1)),
     )
-    config = dataclasses.replace(SMOKE, n_neurons=2, aux_voltage_weight=1.0)
+    config = SMOKE.with_changes(n_neurons=2, aux_voltage_weight=1.0)
     torch.manual_seed(0)
-    online = make_agent("tdrqn", 2, 20, config.sizes)
+    online = make_agent("tdrqn", 2, 20, config.agent.sizes)
     predictor = make_voltage_predictor(online)
     optimizer = torch.optim.Adam([*online.parameters(), *predictor.parameters()], lr=3e-3)
     for _ in range(300):
@@ -131,32 +130,32 @@ def test_validation_split_is_disjoint_and_leaves_train_and_test_unchanged():
 
 
 def test_trainer_evaluates_on_the_validation_set(tmp_path):
-    config = dataclasses.replace(SMOKE, n_step=3, aux_voltage_weight=0.5)
+    config = SMOKE.with_changes(n_step=3, aux_voltage_weight=0.5)
     metrics = train(config, tmp_path / "run")
     validation = ContextSet.load(tmp_path / "run" / "val_contexts.npz")
-    assert len(validation) == config.n_val
+    assert len(validation) == config.env.n_val
     rows = read_metrics(tmp_path / "run")
     assert all(0.0 <= row["val_return"] <= 1.0 for row in rows)
     assert np.isnan(rows[0]["aux_loss"]) and rows[-1]["aux_loss"] > 0
     assert [row["val_return"] for row in metrics] == [row["val_return"] for row in rows]
-    no_val = train(dataclasses.replace(SMOKE, n_val=0), tmp_path / "no-val")
+    no_val = train(SMOKE.with_changes(n_val=0), tmp_path / "no-val")
     assert np.isnan(no_val[-1]["val_return"])
     assert not (tmp_path / "no-val" / "val_contexts.npz").exists()
 
 
 def test_new_mechanisms_are_off_in_the_paper_preset_and_validated():
     paper = PRESETS["paper"]
-    assert paper.n_step == 1 and paper.aux_voltage_weight == 0.0
+    assert paper.train.n_step == 1 and paper.train.aux_voltage_weight == 0.0
     with pytest.raises(ValueError, match="n_step"):
         TrainConfig(n_step=0)
     with pytest.raises(ValueError, match="n_step"):
-        TrainConfig(n_step=61)
+        paper.with_changes(n_step=61)
     with pytest.raises(ValueError, match="aux_voltage_weight"):
         TrainConfig(aux_voltage_weight=float("inf"))
-    # Runs saved before the validation split existed load with none.
-    saved = paper.to_dict()
-    del saved["n_val"]
-    assert TrainConfig.from_dict(saved).n_val == 0
+    # Runs saved before the validation split existed (flat configs) load with none.
+    saved = {**paper.train.__dict__, **paper.to_dict()["env"], **paper.to_dict()["agent"]}
+    del saved["n_val"], saved["id"], saved["params"], saved["extensions"]
+    assert Experiment.from_dict(saved).env.n_val == 0
 
 
 def test_target_voltage_feature_is_the_targets_normalised_voltage():
@@ -179,7 +178,7 @@ def test_target_voltage_feature_is_the_targets_normalised_voltage():
 
 @pytest.mark.parametrize("arch", ["ddrqn", "tdrqn"])
 def test_target_voltage_feature_keeps_the_networks_equivariant(arch):
-    net = make_agent(arch, 6, 9, SMOKE.sizes, target_voltage_in_input=True).double()
+    net = make_agent(arch, 6, 9, SMOKE.agent.sizes, target_voltage_in_input=True).double()
     generator = torch.Generator().manual_seed(0)
     obs = {
         "voltage": -70 + 30 * torch.rand(2, 5, 6, generator=generator, dtype=torch.float64),

@@ -7,7 +7,6 @@ lost data or code run from a file. docs/reliability.md counts the cases by class
 
 from __future__ import annotations
 
-import dataclasses
 import errno
 import io
 import json
@@ -43,13 +42,14 @@ from spikectl.training.checkpoint import (
     run_lock,
     save_model,
 )
-from spikectl.training.config import SMOKE, TrainConfig
+from spikectl.training.config import EnvConfig
 from spikectl.training.dqn import train
+from spikectl.training.presets import SMOKE
 
-TINY = dataclasses.replace(
-    SMOKE, total_env_steps=8 * 20 * 2, checkpoint_every_episodes=8, eval_every_episodes=8
+TINY = SMOKE.with_changes(
+    total_env_steps=8 * 20 * 2, checkpoint_every_episodes=8, eval_every_episodes=8
 )
-TINY_FLAGS = ["--preset", "smoke", "--total-env-steps", "320", "--checkpoint-every-episodes",
+TINY_FLAGS = ["smoke", "--total-env-steps", "320", "--checkpoint-every-episodes",
               "8", "--eval-every-episodes", "8"]  # fmt: skip
 
 
@@ -336,7 +336,7 @@ def test_a_nan_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, m
     monkeypatch.setattr(dqn, "training_losses", loss_that_diverges)
     run = tmp_path / "run"
     with pytest.raises(RunDirError, match="training loss became nan.*diverged"):
-        train(dataclasses.replace(TINY, total_env_steps=8 * 20 * 4), run)
+        train(TINY.with_changes(total_env_steps=8 * 20 * 4), run)
     assert not (run / "model.pt").exists()
     payload = read_checkpoint(run / "checkpoint.pt")  # the last good one, intact
     assert payload["updates"] == 2
@@ -345,7 +345,7 @@ def test_a_nan_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, m
 
 def test_a_run_without_updates_says_so(tmp_path, capsys):
     with pytest.warns(RuntimeWarning, match="no gradient update"):
-        train(dataclasses.replace(TINY, learning_starts=10_000, buffer_size=10_000),
+        train(TINY.with_changes(learning_starts=10_000, buffer_size=10_000),
               tmp_path / "api")  # fmt: skip
     main(["train", *TINY_FLAGS, "--updates-per-round", "0", "--run-dir", str(tmp_path / "cli")])
     assert "warning: the run" in capsys.readouterr().err
@@ -368,7 +368,7 @@ def test_network_size_is_limited_before_anything_is_allocated():
     for call in (
         lambda: ContextSet.generate(1, n_neurons=MAX_N_NEURONS + 1),
         lambda: NeuronControlEnv(n_neurons=40_000),
-        lambda: TrainConfig(n_neurons=40_000),
+        lambda: EnvConfig(n_neurons=40_000),
     ):
         with pytest.raises(ValueError, match=f"n_neurons must be .*{MAX_N_NEURONS}"):
             call()
@@ -394,7 +394,7 @@ def test_network_size_is_limited_before_anything_is_allocated():
      ("--device", "tpu")],
 )  # fmt: skip
 def test_every_train_config_error_names_its_flag(flag, value, tmp_path, capsys):
-    line = cli_error(["train", "--preset", "smoke", flag, value, "--run-dir",
+    line = cli_error(["train", "smoke", flag, value, "--run-dir",
                       str(tmp_path / "run")], capsys)  # fmt: skip
     assert flag in line
     assert not (tmp_path / "run").exists(), "a refused start left a directory behind"

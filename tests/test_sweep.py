@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+from pathlib import Path
 
 import pytest
 
@@ -15,10 +16,10 @@ from spikectl.experiments.sweep import (
     trial_dirs,
 )
 from spikectl.training.checkpoint import read_metrics
-from spikectl.training.config import SMOKE
 from spikectl.training.dqn import train
+from spikectl.training.presets import SMOKE
 
-TINY = dataclasses.replace(SMOKE, total_env_steps=8 * 20 * 4, eval_every_episodes=16,
+TINY = SMOKE.with_changes(total_env_steps=8 * 20 * 4, eval_every_episodes=16,
                            checkpoint_every_episodes=16)  # fmt: skip
 
 
@@ -27,17 +28,22 @@ def test_grid_expands_to_every_combination():
     trials = sweep.trials()
     assert [name for name, _ in trials][:2] == ["arch=drqn-seed=0", "arch=drqn-seed=1"]
     assert len(trials) == 6 and len({name for name, _ in trials}) == 6
-    assert {(c.arch, c.seed) for _, c in trials} == {
+    assert {(c.agent.arch, c.train.seed) for _, c in trials} == {
         (a, s) for a in ("drqn", "tdrqn") for s in (0, 1, 2)
     }
     fig5 = Sweep.from_dict(PAPER_SWEEPS["fig5"])
-    assert len(fig5.trials()) == 40 and {c.n_train for _, c in fig5.trials()} == {10, 20, 40, 100}
+    assert len(fig5.trials()) == 40
+    assert {c.env.n_train for _, c in fig5.trials()} == {10, 20, 40, 100}
     assert len(Sweep.from_dict(PAPER_SWEEPS["fig4"]).trials()) == 40
 
 
 def test_bad_sweeps_are_clear_errors(tmp_path):
-    with pytest.raises(ValueError, match="unknown TrainConfig field"):
+    with pytest.raises(ValueError, match="unknown config field 'learning_rat'"):
         Sweep(TINY, {"learning_rat": [1e-3]})
+    with pytest.raises(ValueError, match="unknown config field 'env.n_trian'"):
+        Sweep(TINY, {"env.n_trian": [3]})
+    with pytest.raises(ValueError, match="a group of fields"):
+        Sweep(TINY, {"env.params": [{}]})
     with pytest.raises(ValueError, match="non-empty list"):
         Sweep(TINY, {"seed": []})
     with pytest.raises(ValueError, match="unknown base preset"):
@@ -50,10 +56,39 @@ def test_bad_sweeps_are_clear_errors(tmp_path):
         json.dumps({"base": "smoke", "grid": {"seed": [0, 1]}, "overrides": {"n_train": 4}})
     )
     sweep = load_sweep_file(path)
-    assert sweep.base.n_train == 4 and len(sweep.trials()) == 2
+    assert sweep.base.env.n_train == 4 and len(sweep.trials()) == 2
     # A sizes override changes only the fields it names.
     one_field = Sweep.from_dict({"base": "smoke", "overrides": {"sizes": {"lstm_hidden": 7}}})
-    assert one_field.base.sizes == dataclasses.replace(SMOKE.sizes, lstm_hidden=7)
+    assert one_field.base.agent.sizes == dataclasses.replace(SMOKE.agent.sizes, lstm_hidden=7)
+
+
+def test_sweep_files_name_fields_flat_dotted_or_nested():
+    """Sweep files before the tree named fields flat; the tree's dotted paths and nested
+    objects say the same, and a grid may run over environment variants."""
+    flat = Sweep.from_dict({"base": "smoke",
+                            "overrides": {"n_train": 4, "sizes": {"lstm_hidden": 7}},
+                            "grid": {"seed": [0, 1], "arch": ["drqn"]}})  # fmt: skip
+    dotted = Sweep.from_dict({"base": "smoke",
+                              "overrides": {"env.n_train": 4, "agent.sizes.lstm_hidden": 7},
+                              "grid": {"train.seed": [0, 1], "agent.arch": ["drqn"]}})  # fmt: skip
+    nested = Sweep.from_dict({"base": "smoke",
+                              "overrides": {"env": {"n_train": 4},
+                                            "agent": {"sizes": {"lstm_hidden": 7}}},
+                              "grid": {"seed": [0, 1], "arch": ["drqn"]}})  # fmt: skip
+    assert flat.base == dotted.base == nested.base
+    assert [c for _, c in flat.trials()] == [c for _, c in dotted.trials()]
+    variants = Sweep.from_dict({
+        "base": "smoke",
+        "grid": {"env.id": ["spikectl/NeuronControl-v0", "spikectl/NeuronControlNoisy-v0"],
+                 "env.extensions.observation_noise_mV": [1.0]},
+    })  # fmt: skip
+    noise = {name: config.env.extensions.observation_noise_mV for name, config in variants.trials()}
+    assert set(noise.values()) == {1.0} and len(noise) == 2
+    # One directory per trial: the ids' "/" does not nest them.
+    assert "env.id=spikectl_NeuronControlNoisy-v0-env.extensions.observation_noise_mV=1.0" in noise
+    # The committed results' sweep files (flat names, grids over arch) still load.
+    for path in sorted(Path("docs/results").glob("*/sweep*.json")):
+        assert load_sweep_file(path).trials()
 
 
 def test_sweep_runs_skips_and_resumes(tmp_path):
@@ -64,7 +99,7 @@ def test_sweep_runs_skips_and_resumes(tmp_path):
     assert len(dirs) == 4
     # The pool's result equals training the same config in this process.
     name, config = sweep.trials()[3]
-    direct = train(dataclasses.replace(config, torch_threads=1), tmp_path / "direct")
+    direct = train(config.with_changes(torch_threads=1), tmp_path / "direct")
     pooled = read_metrics(tmp_path / "trials" / name)
     assert [r["test_return"] for r in pooled] == [r["test_return"] for r in direct]
     # Again: everything is done, nothing runs.
@@ -117,7 +152,7 @@ def test_figure3_contexts_are_regenerated_when_a_trial_kept_only_its_metrics(tmp
     from spikectl.training.contexts import TRAIN_FILE
 
     run_dir = tmp_path / "run"
-    config = dataclasses.replace(TINY, n_train=5, context_seed=3)
+    config = TINY.with_changes(n_train=5, context_seed=3)
     train(config, run_dir)
     saved = ContextSet.load(run_dir / TRAIN_FILE)
     (run_dir / TRAIN_FILE).unlink()  # as in docs/results/: config and metrics only

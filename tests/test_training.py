@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import dataclasses
 import errno
 import json
 import math
@@ -12,10 +11,14 @@ import pytest
 import torch
 
 from spikectl import ContextSet
+from spikectl.agents import AgentSizes
 from spikectl.files import FileWriteError, atomic_write_bytes
+from spikectl.neuron.extensions import Extensions
+from spikectl.neuron.params import NeuronParams
 from spikectl.training.checkpoint import RunDirError, read_metrics
-from spikectl.training.config import PRESETS, SMOKE, TrainConfig
+from spikectl.training.config import EnvConfig, Experiment
 from spikectl.training.dqn import td_loss, train
+from spikectl.training.presets import PRESETS, QUICK, SMOKE
 from spikectl.training.replay import EpisodeBatchArrays, EpisodeReplay
 
 
@@ -44,7 +47,7 @@ def test_double_q_target_on_a_hand_computed_two_step_episode():
         patterns=np.array([[0, 1]], dtype=np.int8),
         action_masks=np.array([[True, True, False]]),
     )
-    config = dataclasses.replace(SMOKE, gamma=0.9, n_neurons=2, episode_length=2)
+    config = SMOKE.with_changes(gamma=0.9, n_neurons=2, episode_length=2)
     loss = td_loss(online, target, batch, config)
     # Step 0 took action 0 (index 1): Q = 0.4. The online net's best legal action at
     # observation 1 is index 1 (0.3 > 0.2; the illegal 9.0 is masked), which the target
@@ -52,7 +55,7 @@ def test_double_q_target_on_a_hand_computed_two_step_episode():
     # Step 1 took do-nothing (index 0): Q = 0.2, terminal: y1 = 0.5.
     expected = ((0.4 - 0.7) ** 2 + (0.2 - 0.5) ** 2) / 2
     assert loss.item() == pytest.approx(expected, rel=1e-6)
-    huber = td_loss(online, target, batch, dataclasses.replace(config, loss="huber"))
+    huber = td_loss(online, target, batch, config.with_changes(loss="huber"))
     assert huber.item() == pytest.approx(0.5 * ((0.3) ** 2 + (0.3) ** 2) / 2, rel=1e-6)
     loss.backward()  # gradients reach the online table only through the taken actions
     assert online.table.grad[1, 2] == 0 and online.table.grad[0, 1] != 0
@@ -60,13 +63,13 @@ def test_double_q_target_on_a_hand_computed_two_step_episode():
 
 
 def test_epsilon_schedule():
-    config = dataclasses.replace(SMOKE, epsilon_start=1.0, epsilon_end=0.1)
+    config = SMOKE.with_changes(epsilon_start=1.0, epsilon_end=0.1)
     anneal = 0.25 * config.total_episodes
     assert config.epsilon(0) == 1.0
     assert config.epsilon(anneal / 2) == pytest.approx(0.55)
     assert config.epsilon(anneal) == pytest.approx(0.1)
     assert config.epsilon(config.total_episodes) == pytest.approx(0.1)
-    assert dataclasses.replace(config, epsilon_anneal_fraction=0.0).epsilon(0) == 0.1
+    assert config.with_changes(epsilon_anneal_fraction=0.0).epsilon(0) == 0.1
 
 
 def make_episodes(count: int, marker_start: int, n: int = 3, length: int = 4):
@@ -118,11 +121,11 @@ def test_two_runs_with_one_seed_are_bit_identical(tmp_path, comparable, assert_s
     second = train(SMOKE, tmp_path / "b")
     assert comparable(first) == comparable(second)
     assert_same_weights(tmp_path / "a" / "model.pt", tmp_path / "b" / "model.pt")
-    other = train(dataclasses.replace(SMOKE, seed=1), tmp_path / "c")
+    other = train(SMOKE.with_changes(seed=1), tmp_path / "c")
     assert comparable(other) != comparable(first)
     rows = read_metrics(tmp_path / "a")
     assert [row["episode"] for row in rows] == [0, 80, 160, 240, 320]
-    assert rows[-1]["env_steps"] == SMOKE.total_episodes * SMOKE.episode_length
+    assert rows[-1]["env_steps"] == SMOKE.total_episodes * SMOKE.env.episode_length
     assert math.isnan(rows[0]["loss"]) and rows[-1]["loss"] > 0
     for name in ("config.json", "baselines.json", "checkpoint.pt", "train_contexts.npz",
                  "test_contexts.npz", "tensorboard"):  # fmt: skip
@@ -132,11 +135,11 @@ def test_two_runs_with_one_seed_are_bit_identical(tmp_path, comparable, assert_s
 
 
 def test_a_run_dir_holding_another_run_is_refused(tmp_path):
-    train(dataclasses.replace(SMOKE, total_env_steps=8 * 20), tmp_path / "run")
+    train(SMOKE.with_changes(total_env_steps=8 * 20), tmp_path / "run")
     with pytest.raises(RunDirError, match="already holds a run"):
         train(SMOKE, tmp_path / "run")
     with pytest.raises(RunDirError, match="does not match"):
-        train(dataclasses.replace(SMOKE, seed=5), tmp_path / "run", resume=True)
+        train(SMOKE.with_changes(seed=5), tmp_path / "run", resume=True)
     (tmp_path / "other").mkdir()
     (tmp_path / "other" / "notes.txt").write_text("mine")
     with pytest.raises(RunDirError, match="not empty"):
@@ -147,11 +150,11 @@ def test_a_run_dir_holding_another_run_is_refused(tmp_path):
 
 def test_incompatible_checkpoint_is_refused(tmp_path):
     run = tmp_path / "run"
-    train(dataclasses.replace(SMOKE, total_env_steps=8 * 20), run)
+    train(SMOKE.with_changes(total_env_steps=8 * 20), run)
     checkpoint = torch.load(run / "checkpoint.pt", weights_only=False)
     checkpoint["format_version"] = 99
     torch.save(checkpoint, run / "checkpoint.pt")
-    config = dataclasses.replace(SMOKE, total_env_steps=8 * 20)
+    config = SMOKE.with_changes(total_env_steps=8 * 20)
     with pytest.raises(RunDirError, match="format 99"):
         train(config, run, resume=True)
     (run / "checkpoint.pt").write_bytes(b"garbage")
@@ -189,30 +192,81 @@ def test_full_disk_is_a_clear_error_and_keeps_the_old_file(tmp_path, monkeypatch
 )
 def test_bad_config_values(field, value, message):
     with pytest.raises(ValueError, match=message):
-        dataclasses.replace(SMOKE, **{field: value})
+        SMOKE.with_changes(**{field: value})
 
 
 def test_config_round_trips_through_json():
     for preset in PRESETS.values():
-        assert TrainConfig.from_dict(json.loads(json.dumps(preset.to_dict()))) == preset
+        assert Experiment.from_dict(json.loads(json.dumps(preset.to_dict()))) == preset
+    noisy = SMOKE.with_changes({"env.id": "spikectl/NeuronControlNoisy-v0",
+                                "env.params.capacitance_pF": 25.0})  # fmt: skip
+    assert Experiment.from_dict(json.loads(json.dumps(noisy.to_dict()))) == noisy
     with pytest.raises(ValueError, match="unknown TrainConfig field"):
-        TrainConfig.from_dict({"learning_rat": 1e-3})
+        Experiment.from_dict({"train": {"learning_rat": 1e-3}})
+    with pytest.raises(ValueError, match="unknown config field 'learning_rat'"):
+        Experiment.from_dict({"learning_rat": 1e-3})
+    with pytest.raises(ValueError, match="unknown NeuronParams field"):
+        Experiment.from_dict({"env": {"params": {"v_rest": -65.0}}})
+
+
+def test_a_config_before_the_tree_loads_into_it():
+    """config.json of runs written before the tree: flat fields, the agent's voltage
+    normalisation in its sizes, no n_val."""
+    flat = {**SMOKE.train.__dict__, "arch": "drqn", "n_neurons": 5, "episode_length": 20,
+            "n_train": 6, "n_test": 6, "context_seed": 0, "train_contexts": None,
+            "test_contexts": None,
+            "sizes": {**SMOKE.with_changes().to_dict()["agent"]["sizes"],
+                      "v_rest_mV": -70.0, "v_threshold_mV": -50.0}}  # fmt: skip
+    loaded = Experiment.from_dict(flat)
+    assert loaded == SMOKE.with_changes(arch="drqn", n_val=0)
+    with pytest.raises(ValueError, match="sizes.v_rest_mV = -65.0 differs from"):
+        Experiment.from_dict({**flat, "sizes": {"v_rest_mV": -65.0}})
+
+
+def test_changes_name_fields_by_path_nested_or_flat():
+    by_path = QUICK.with_changes({"env.n_train": 20, "agent.sizes.lstm_hidden": 32})
+    nested = QUICK.with_changes({"env": {"n_train": 20}, "agent": {"sizes": {"lstm_hidden": 32}}})
+    flat = QUICK.with_changes(n_train=20, sizes={"lstm_hidden": 32})
+    assert by_path == nested == flat
+    assert flat.env.n_train == 20 and flat.agent.sizes.lstm_hidden == 32
+    assert flat.agent.sizes.attn_width == QUICK.agent.sizes.attn_width  # the rest stays
+    # A variant's settings come first, then the changes given with it.
+    noisy = SMOKE.with_changes({"env.id": "spikectl/NeuronControlNoisy-v0"})
+    assert noisy.env.extensions.observation_noise_mV == 2.0 and noisy.env.n_neurons == 5
+    quiet = SMOKE.with_changes({"env.id": "spikectl/NeuronControlNoisy-v0",
+                                "env.extensions.observation_noise_mV": 0.5})  # fmt: skip
+    assert quiet.env.extensions.observation_noise_mV == 0.5
+    assert noisy.with_changes({"env.id": "spikectl/NeuronControl-v0"}) == SMOKE
+    big = SMOKE.with_changes({"env.id": "spikectl/NeuronControl32-v0"})
+    assert big.env.n_neurons == 32 and big.env.extensions == Extensions()
+    # The id alone would record a variant the run does not train on: refused.
+    with pytest.raises(ValueError, match="sets extensions.observation_noise_mV = 2.0, but"):
+        EnvConfig(id="spikectl/NeuronControlNoisy-v0")
+    assert EnvConfig().with_variant("spikectl/NeuronControlNoisy-v0").extensions == Extensions(
+        observation_noise_mV=2.0
+    )
+    with pytest.raises(ValueError, match="unknown environment id 'spikectl/Nope-v0'"):
+        SMOKE.with_changes({"env.id": "spikectl/Nope-v0"})
+    with pytest.raises(ValueError, match="not a spikectl environment"):
+        SMOKE.with_changes({"env.id": "CartPole-v1"})
 
 
 def test_paper_preset_is_table_2():
     paper = PRESETS["paper"]
-    assert (paper.total_env_steps, paper.episode_length, paper.buffer_size) == (
+    assert (paper.train.total_env_steps, paper.env.episode_length, paper.train.buffer_size) == (
         1_000_000,
         60,
         16_667,
     )
-    assert (paper.batch_size, paper.updates_per_round, paper.gamma, paper.tau) == (5, 10, 0.99, 0.1)
-    assert (paper.epsilon_start, paper.epsilon_end, paper.epsilon_anneal_fraction) == (
-        1.0,
-        0.05,
-        0.25,
-    )
-    assert paper.learning_rate == 5e-4 and paper.sizes.lstm_hidden == 128
+    algorithm = paper.train
+    assert (algorithm.batch_size, algorithm.updates_per_round, algorithm.gamma,
+            algorithm.tau) == (5, 10, 0.99, 0.1)  # fmt: skip
+    assert (algorithm.epsilon_start, algorithm.epsilon_end,
+            algorithm.epsilon_anneal_fraction) == (1.0, 0.05, 0.25)  # fmt: skip
+    # The paper's environment and Table 2's networks: every default of the tree.
+    assert paper == Experiment() and paper.env == EnvConfig() and paper.agent.sizes == AgentSizes()
+    assert paper.env.params == NeuronParams() and paper.env.extensions == Extensions()
+    assert paper.train.learning_rate == 5e-4 and paper.agent.sizes.lstm_hidden == 128
     assert paper.total_episodes == 16_665  # whole rounds of 5 episodes
 
 
@@ -244,10 +298,10 @@ def test_resume_after_sigkill_is_exact(
     import sys
 
     reference = tmp_path / "reference"
-    run_cli("train", "--preset", "smoke", *flags, "--run-dir", str(reference))
+    run_cli("train", "smoke", *flags, "--run-dir", str(reference))
     killed = tmp_path / "killed"
     process = subprocess.Popen(
-        [sys.executable, "-m", "spikectl.cli", "train", "--preset", "smoke", *flags,
+        [sys.executable, "-m", "spikectl.cli", "train", "smoke", *flags,
          "--run-dir", str(killed)],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )  # fmt: skip
@@ -272,7 +326,7 @@ def test_evaluate_reproduces_the_last_evaluation_exactly(tmp_path):
     on the run's own thread count whatever the caller's (then restored)."""
     from spikectl.training.evaluate import evaluate_run
 
-    config = dataclasses.replace(SMOKE, n_val=3)
+    config = SMOKE.with_changes(n_val=3)
     train(config, tmp_path / "run")
     final = read_metrics(tmp_path / "run")[-1]
     before = torch.get_num_threads()
@@ -288,7 +342,7 @@ def test_evaluate_reproduces_the_last_evaluation_exactly(tmp_path):
 
 def test_cli_train_then_evaluate(tmp_path, run_cli):
     run = tmp_path / "run"
-    out = run_cli("train", "--preset", "smoke", "--arch", "ddrqn", "--total-env-steps", "1600",
+    out = run_cli("train", "smoke", "--arch", "ddrqn", "--total-env-steps", "1600",
                   "--run-dir", str(run))  # fmt: skip
     assert "do-nothing" in out.stdout and (run / "learning_curve.png").exists()
     evaluated = run_cli("evaluate", str(run)).stdout
@@ -300,5 +354,5 @@ def test_cli_train_then_evaluate(tmp_path, run_cli):
         "over 4 contexts"
         in run_cli("evaluate", str(run), "--contexts", str(tmp_path / "mine.npz")).stdout
     )
-    again = run_cli("train", "--preset", "smoke", "--run-dir", str(run), check=False)
+    again = run_cli("train", "smoke", "--run-dir", str(run), check=False)
     assert again.returncode == 2 and "already holds a run" in again.stderr

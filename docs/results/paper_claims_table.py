@@ -8,9 +8,10 @@ networks (doing nothing; a random legal policy, mean ± sd over its 10 seeds; th
 identify-and-plan controller, no training): Figure 4 (the four architectures, 5 seeds
 each), the TDRQN design choices (this project's input and head against the
 paper-literal ones), and Figure 5 (TDRQN trained on 10, 20, 40 and 100 networks).
-Every trial is the quick preset (264 000 steps) on one Torch thread; wall minutes depend on what else ran on the machine, core minutes (process CPU
-time) do not, and are missing for runs made before spikectl logged CPU time. With a
-figure path, also draws Figure 5 (test return against steps, one curve per size).
+Every trial is the quick preset (264 000 steps) on one Torch thread; wall minutes
+depend on what else ran on the machine, core minutes (process CPU time) do not, and
+are missing for runs made before spikectl logged CPU time. With a figure path, also
+draws Figure 5 (test return against steps, one curve per size).
 """
 
 import csv

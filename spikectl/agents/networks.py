@@ -39,6 +39,7 @@ from spikectl.agents.blocks import (
     per_neuron_features,
     system_features,
 )
+from spikectl.neuron.params import NeuronParams
 
 Architecture = Literal["drqn", "ddrqn", "dmdrqn", "tdrqn"]
 """The architectures' names (the paper's order); :data:`AGENTS` maps them to classes."""
@@ -83,10 +84,6 @@ class AgentSizes:
     """Target indicator also in each neuron's LSTM input; False = paper-literal (only after)."""
     target_voltage_in_input: bool = False
     """The target's normalised voltage also in each neuron's LSTM input (not in the paper)."""
-    v_rest_mV: float = -70.0
-    """Resting potential V_r used to normalise the voltage input to (V - V_r) / (V_th - V_r)."""
-    v_threshold_mV: float = -50.0
-    """Threshold V_th used to normalise the voltage input (a visible spike maps to >= 1)."""
 
     def __post_init__(self) -> None:
         for field in fields(self):
@@ -115,11 +112,15 @@ class AgentSizes:
         for name in ("target_in_input", "target_voltage_in_input"):
             if not isinstance(getattr(self, name), bool):
                 raise ValueError(f"AgentSizes.{name} must be a bool, got {getattr(self, name)!r}")
-        if not self.v_threshold_mV > self.v_rest_mV:
-            raise ValueError(
-                f"AgentSizes.v_threshold_mV ({self.v_threshold_mV}) must be above "
-                f"AgentSizes.v_rest_mV ({self.v_rest_mV})"
-            )
+
+
+def voltage_range(params: NeuronParams | None) -> tuple[float, float]:
+    """(V_r, V_th) of the environment's model, which normalise the voltage input to
+    (V - V_r) / (V_th - V_r): rest maps to 0, a visible spike to >= 1."""
+    params = NeuronParams() if params is None else params
+    if not isinstance(params, NeuronParams):
+        raise TypeError(f"params must be a NeuronParams or None, got {type(params).__name__}")
+    return params.v_rest_mV, params.v_threshold_mV
 
 
 @runtime_checkable
@@ -202,8 +203,8 @@ def _per_neuron_lstm(
     s = net.sizes
     x = per_neuron_features(
         obs_seq,
-        v_rest_mV=s.v_rest_mV,
-        v_threshold_mV=s.v_threshold_mV,
+        v_rest_mV=net.v_rest_mV,
+        v_threshold_mV=net.v_threshold_mV,
         with_target=s.target_in_input,
         with_target_voltage=s.target_voltage_in_input,
         dtype=_param_dtype(net),
@@ -224,10 +225,17 @@ class DRQN(nn.Module):
 
     equivariant = False
 
-    def __init__(self, n_neurons: int, episode_length: int, sizes: AgentSizes | None = None):
+    def __init__(
+        self,
+        n_neurons: int,
+        episode_length: int,
+        sizes: AgentSizes | None = None,
+        params: NeuronParams | None = None,
+    ):
         super().__init__()
         _check_dims(n_neurons, episode_length, "DRQN")
         self.sizes = sizes = sizes or AgentSizes()
+        self.v_rest_mV, self.v_threshold_mV = voltage_range(params)
         self.n_neurons = n_neurons
         self.episode_length = episode_length
         self.lstm = nn.LSTM(2 * n_neurons + 1, sizes.lstm_hidden, batch_first=True)
@@ -269,11 +277,10 @@ class DRQN(nn.Module):
         if state is None:
             state = self.initial_state(B, n, device=obs_seq["voltage"].device)
         check_state(state, [(B, H), (B, H)], "DRQN.forward")
-        s = self.sizes
         x = system_features(
             obs_seq,
-            v_rest_mV=s.v_rest_mV,
-            v_threshold_mV=s.v_threshold_mV,
+            v_rest_mV=self.v_rest_mV,
+            v_threshold_mV=self.v_threshold_mV,
             dtype=_param_dtype(self),
         )  # [B, T, 2n+1]
         h0 = state[0].unsqueeze(0).contiguous()  # [1, B, H]
@@ -310,6 +317,7 @@ class PerNeuronQNetwork(nn.Module):
         n_neurons: int,
         episode_length: int,
         sizes: AgentSizes | None,
+        params: NeuronParams | None = None,
         *,
         mix_name: str,
         make_mix: Callable[[AgentSizes], nn.Module],
@@ -318,6 +326,7 @@ class PerNeuronQNetwork(nn.Module):
         super().__init__()
         _check_dims(n_neurons, episode_length, type(self).__name__)
         self.sizes = sizes = sizes or AgentSizes()
+        self.v_rest_mV, self.v_threshold_mV = voltage_range(params)
         self.n_neurons = n_neurons  # the n it was built for; it runs on any n
         self.episode_length = episode_length
         # Built in this order (LSTM, mix, context, head) so that a seed gives the
@@ -389,12 +398,19 @@ class DDRQN(PerNeuronQNetwork):
     neurons except the pooled do-nothing value. State (h, c), each [B, n, H].
     """
 
-    def __init__(self, n_neurons: int, episode_length: int, sizes: AgentSizes | None = None):
+    def __init__(
+        self,
+        n_neurons: int,
+        episode_length: int,
+        sizes: AgentSizes | None = None,
+        params: NeuronParams | None = None,
+    ):
         sizes = sizes or AgentSizes()
         super().__init__(
             n_neurons,
             episode_length,
             sizes,
+            params,
             mix_name="ff",
             make_mix=feed_forward_mix,
             head_hidden=sizes.head_hidden,
@@ -411,10 +427,17 @@ class DMDRQN(nn.Module):
 
     equivariant = False
 
-    def __init__(self, n_neurons: int, episode_length: int, sizes: AgentSizes | None = None):
+    def __init__(
+        self,
+        n_neurons: int,
+        episode_length: int,
+        sizes: AgentSizes | None = None,
+        params: NeuronParams | None = None,
+    ):
         super().__init__()
         _check_dims(n_neurons, episode_length, "DMDRQN")
         self.sizes = sizes = sizes or AgentSizes()
+        self.v_rest_mV, self.v_threshold_mV = voltage_range(params)
         self.n_neurons = n_neurons
         self.episode_length = episode_length
         self.lstm = PerNeuronLSTM(per_neuron_width(sizes), sizes.lstm_hidden)
@@ -470,12 +493,19 @@ class TDRQN(PerNeuronQNetwork):
     reaches the network only after the transformer. State (h, c), each [B, n, H].
     """
 
-    def __init__(self, n_neurons: int, episode_length: int, sizes: AgentSizes | None = None):
+    def __init__(
+        self,
+        n_neurons: int,
+        episode_length: int,
+        sizes: AgentSizes | None = None,
+        params: NeuronParams | None = None,
+    ):
         sizes = sizes or AgentSizes()
         super().__init__(
             n_neurons,
             episode_length,
             sizes,
+            params,
             mix_name="mixer",
             make_mix=attention_mix,
             head_hidden=sizes.tdrqn_head_hidden,
@@ -497,12 +527,15 @@ def make_agent(
     n_neurons: int,
     episode_length: int,
     sizes: AgentSizes | None = None,
+    params: NeuronParams | None = None,
     **overrides: object,
 ) -> nn.Module:
     """Build one of the four networks by name (drqn, ddrqn, dmdrqn, tdrqn).
 
     ``sizes`` defaults to Table 2 (:class:`AgentSizes`); keyword overrides replace
-    single fields, e.g. ``make_agent("tdrqn", 8, 60, lstm_hidden=64)``.
+    single fields, e.g. ``make_agent("tdrqn", 8, 60, lstm_hidden=64)``. ``params`` are
+    the environment's model parameters (default: Table 1): their V_r and V_th normalise
+    the voltage input.
     """
     key = name.lower() if isinstance(name, str) else name
     if key not in AGENTS:
@@ -512,7 +545,7 @@ def make_agent(
     if unknown:
         raise TypeError(f"make_agent: unknown size fields {unknown}; valid fields: {sorted(valid)}")
     sizes = replace(sizes or AgentSizes(), **overrides)
-    return AGENTS[key](n_neurons, episode_length, sizes)
+    return AGENTS[key](n_neurons, episode_length, sizes, params)
 
 
 def make_voltage_predictor(network: nn.Module) -> NextVoltagePredictor:

@@ -16,6 +16,7 @@ import numpy as np
 from spikectl.contexts import ContextSet
 from spikectl.envs.env_support import random_legal_actions
 from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING
 
@@ -106,10 +107,19 @@ def run_episodes(
 
 
 def evaluate_policy(
-    contexts: ContextSet, policy: Policy, params: NeuronParams | None = None
+    contexts: ContextSet,
+    policy: Policy,
+    params: NeuronParams | None = None,
+    extensions: Extensions | None = None,
+    seed: int | None = None,
 ) -> EpisodeBatch:
-    """One episode of ``policy`` on every context of a set, all in one batch."""
-    env = NeuronControlVectorEnv(num_envs=len(contexts), contexts=contexts, params=params)
+    """One episode of ``policy`` on every context of a set, all in one batch (with the
+    environment-level ``extensions``, whose draws start from ``seed``)."""
+    env = NeuronControlVectorEnv(
+        num_envs=len(contexts), contexts=contexts, params=params, extensions=extensions
+    )
+    if seed is not None:
+        env.reset(seed=seed)
     episodes = run_episodes(env, np.arange(len(contexts)), policy)
     env.close()
     return episodes

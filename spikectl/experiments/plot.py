@@ -19,7 +19,7 @@ from spikectl.experiments.report import (
     write_results_table,
 )
 from spikectl.experiments.sweep import trial_dirs
-from spikectl.training.config import TrainConfig
+from spikectl.training.config import Experiment, field_value
 from spikectl.training.contexts import TEST_FILE, TRAIN_FILE, generated_contexts
 
 
@@ -37,19 +37,28 @@ def plot_sweep(
     runs = load_runs(dirs)
     written = [plot_networks(training_contexts(dirs[0], runs[0].config), out_dir / "figure3.png")]
     by_arch = group_runs(runs, "arch")
+    if len({field_value(run.config, "env.id") for run in runs}) > 1:
+        # A sweep over environment variants: one group per architecture and variant.
+        by_arch = {
+            f"{arch} on {env_id.rpartition('/')[2]}": group
+            for (arch, env_id), group in group_runs(runs, ("arch", "env.id")).items()
+        }
     written.append(plot_training_curves(by_arch, out_dir / "figure4.png").path)
     written += write_results_table(by_arch, out_dir)
-    tdrqn = [run for run in runs if run.config["arch"] == "tdrqn"]
-    if len({run.config["n_train"] for run in tdrqn}) > 1:
+    tdrqn = [run for run in runs if field_value(run.config, "agent.arch") == "tdrqn"]
+    if len({field_value(run.config, "env.n_train") for run in tdrqn}) > 1:
         by_size = group_runs(tdrqn, "n_train")
         written.append(plot_test_curves_by_size(by_size, out_dir / "figure5.png").path)
         written += write_results_table(by_size, out_dir / "by_training_set_size")
     # The raster: a trained agent (TDRQN when there is one) on its first unseen network.
-    chosen = next((d for d, run in zip(dirs, runs, strict=True) if run.config["arch"] == "tdrqn"),
-                  dirs[0])  # fmt: skip
+    chosen, config = next(
+        ((d, run.config) for d, run in zip(dirs, runs, strict=True)
+         if field_value(run.config, "agent.arch") == "tdrqn"),
+        (dirs[0], runs[0].config),
+    )  # fmt: skip
     if (chosen / "model.pt").exists():
         test = ContextSet.load(chosen / TEST_FILE)
-        episodes = greedy_episodes(load_agent(chosen), test[:1])
+        episodes = greedy_episodes(load_agent(chosen), test[:1], Experiment.from_dict(config))
         written.append(
             plot_episode_raster(
                 test[0].pattern,
@@ -66,6 +75,6 @@ def plot_sweep(
 def training_contexts(run_dir: Path, config: dict) -> ContextSet:
     """A trial's training set: its saved file, or (for results kept without it, such as
     docs/results/) regenerated from the config's seeds exactly as training made it."""
-    if (run_dir / TRAIN_FILE).exists() or config.get("train_contexts") is not None:
+    if (run_dir / TRAIN_FILE).exists() or config["env"]["train_contexts"] is not None:
         return ContextSet.load(run_dir / TRAIN_FILE)
-    return generated_contexts(TrainConfig.from_dict(config))[0]
+    return generated_contexts(Experiment.from_dict(config))[0]

@@ -28,13 +28,15 @@ from spikectl.training.checkpoint import (
     read_config,
     read_metrics,
 )
+from spikectl.training.config import field_value
 
 DO_NOTHING_RETURN = 0.5
 """Return of never stimulating, on any context (docs/environment.md)."""
 
 
 class Run(NamedTuple):
-    """One saved run: its resolved config (a dict) and its metrics.csv rows."""
+    """One saved run: its resolved config (the nested dict of ``Experiment.to_dict``) and
+    its metrics.csv rows."""
 
     config: dict[str, Any]
     metrics: list[dict[str, float]]
@@ -58,11 +60,17 @@ def load_runs(run_dirs: Iterable[str | os.PathLike]) -> list[Run]:
     return runs
 
 
-def group_runs(runs: Iterable[Run], key: str = "arch") -> dict[Any, list[Run]]:
-    """Group runs by a config field (``"arch"``, ``"n_train"``, ...), in sorted order."""
+def group_runs(runs: Iterable[Run], key: str | tuple[str, ...] = "arch") -> dict[Any, list[Run]]:
+    """Group runs by a config field, in sorted order: a dotted path (``"agent.arch"``,
+    ``"env.n_train"``) or a field's flat name (``"arch"``, ``"n_train"``); a tuple of
+    them groups by their values together (tuples as keys)."""
     groups: dict[Any, list[Run]] = {}
     for run in runs:
-        groups.setdefault(run.config[key], []).append(run)
+        if isinstance(key, tuple):
+            value = tuple(field_value(run.config, name) for name in key)
+        else:
+            value = field_value(run.config, key)
+        groups.setdefault(value, []).append(run)
     return dict(sorted(groups.items()))
 
 
@@ -102,7 +110,7 @@ def mean_curve(runs: Sequence[Run], column: str) -> Curve:
         values = np.array([row[column] for row in run.metrics], dtype=float)
         keep = np.isfinite(values)
         if not keep.any():
-            raise ValueError(f"a run of {run.config.get('arch')} has no finite {column}")
+            raise ValueError(f"a run of {field_value(run.config, 'arch')} has no finite {column}")
         series.append((steps[keep], values[keep]))
     first = series[0][0]
     if all(np.array_equal(steps, first) for steps, _ in series):

@@ -1,8 +1,12 @@
 """Grids of independent, resumable training trials under one sweep directory.
 
-A sweep is a base ``TrainConfig`` and a grid: every combination of the listed values
+A sweep is a base ``Experiment`` and a grid: every combination of the listed values
 of some config fields (architecture, seed, training-set size, any other field) is one
-trial, trained in ``SWEEP_DIR/trials/NAME``. Running a sweep again skips finished
+trial, trained in ``SWEEP_DIR/trials/NAME``. Fields are named by their dotted path in
+the tree (``"env.n_train"``, ``"agent.arch"``, ``"env.extensions.observation_noise_mV"``)
+or, as in sweep files written before the tree, by their flat name (``"n_train"``,
+``"arch"``, ``"seed"``); overrides may also be nested objects (``{"env": {"n_train":
+20}}``). Running a sweep again skips finished
 trials (``model.pt`` present) and resumes interrupted ones exactly (the trainer's
 checkpoints), so a sweep can be stopped and restarted at any moment.
 
@@ -15,7 +19,6 @@ still in its own trial directory; the group's checkpoint lives in ``SWEEP_DIR/gr
 
 from __future__ import annotations
 
-import dataclasses
 import itertools
 import json
 import os
@@ -37,7 +40,8 @@ from spikectl.training.checkpoint import (
     RunDirError,
     load_model_weights,
 )
-from spikectl.training.config import PRESETS, TrainConfig
+from spikectl.training.config import Experiment, field_value
+from spikectl.training.presets import PRESETS
 
 SWEEP_FILE = "sweep.json"
 TRIALS_DIR = "trials"
@@ -65,26 +69,36 @@ class SweepError(RuntimeError):
 class Sweep:
     """A base config and a grid of field values; each combination is one trial."""
 
-    base: TrainConfig
+    base: Experiment
     grid: Mapping[str, Sequence[Any]]
 
     def __post_init__(self) -> None:
-        known = {field.name for field in dataclasses.fields(TrainConfig)}
-        unknown = sorted(set(self.grid) - known)
-        if unknown:
-            raise ValueError(f"sweep grid names unknown TrainConfig field(s): {unknown}")
+        base = self.base.to_dict()
+        for name in self.grid:
+            try:
+                value = field_value(base, name)
+            except ValueError:
+                raise ValueError(f"sweep grid names an unknown config field {name!r}") from None
+            if isinstance(value, dict):
+                raise ValueError(f"sweep grid field {name!r} is a group of fields: name one")
         for name, values in self.grid.items():
             if isinstance(values, (str, bytes)) or not isinstance(values, Sequence) or not values:
                 raise ValueError(f"sweep grid field {name!r} needs a non-empty list of values")
 
-    def trials(self) -> list[tuple[str, TrainConfig]]:
+    def trials(self) -> list[tuple[str, Experiment]]:
         """(name, config) of every trial, in grid order; names are unique and stable."""
         names = list(self.grid)
         trials = []
         for values in itertools.product(*(self.grid[name] for name in names)):
             changes = dict(zip(names, values, strict=True))
-            config = dataclasses.replace(self.base, progress=False, **changes)
-            label = "-".join(f"{name}={value}" for name, value in changes.items()) or "base"
+            config = self.base.with_changes({**changes, "train.progress": False})
+            # A value's "/" (an environment id) would nest directories: "_" instead.
+            label = (
+                "-".join(
+                    f"{name}={str(value).replace('/', '_')}" for name, value in changes.items()
+                )
+                or "base"
+            )
             trials.append((label, config))
         return trials
 
@@ -106,17 +120,15 @@ class Sweep:
                 raise ValueError(f"unknown base preset {base!r}; choose one of {sorted(PRESETS)}")
             base_config = PRESETS[base]
         else:
-            base_config = TrainConfig.from_dict(base)
+            base_config = Experiment.from_dict(base)
         overrides = values.get("overrides", {})
         grid = values.get("grid", {})
         for key, value in (("overrides", overrides), ("grid", grid)):
             if not isinstance(value, Mapping):
                 raise ValueError(f"the sweep's {key} must be a JSON object, got {value!r}")
         if overrides:
-            merged = base_config.to_dict()
-            # Size overrides change single fields of the base's sizes, not all of them.
-            merged["sizes"] = {**merged["sizes"], **overrides.pop("sizes", {})}
-            base_config = TrainConfig.from_dict({**merged, **overrides})
+            # Nested overrides (sizes, params, ...) change single fields, not all of them.
+            base_config = base_config.with_changes(overrides)
         unknown = sorted(set(values) - {"base", "overrides", "grid"})
         if unknown:
             raise ValueError(f"unknown sweep file key(s) {unknown}: use base, overrides, grid")
@@ -142,6 +154,16 @@ def _read_json(path: Path, what: str) -> Any:
         raise ValueError(f"{path} is not valid JSON: {error}") from error
 
 
+def _saved_sweep(path: Path) -> dict[str, Any]:
+    """A saved sweep.json in today's form (one written before the tree has a flat base)."""
+    try:
+        return json.loads(
+            json.dumps(Sweep.from_dict(_read_json(path, "sweep description")).to_dict())
+        )
+    except (ValueError, TypeError) as error:
+        raise ValueError(f"{path} is not a valid sweep description: {error}") from None
+
+
 def trial_status(run_dir: Path) -> str:
     """'done' (final weights written), 'interrupted' (has a checkpoint) or 'new'.
 
@@ -156,7 +178,7 @@ def trial_status(run_dir: Path) -> str:
     return "new"
 
 
-def run_trial(config: TrainConfig, run_dir: str | os.PathLike) -> dict[str, Any]:
+def run_trial(config: Experiment, run_dir: str | os.PathLike) -> dict[str, Any]:
     """Train one trial to the end: skip it if done, resume it if interrupted."""
     import torch
 
@@ -168,7 +190,7 @@ def run_trial(config: TrainConfig, run_dir: str | os.PathLike) -> dict[str, Any]
         return {"run_dir": str(run_dir), "status": "skipped (done)"}
     # A trial stopped before its first checkpoint starts again from step 0 (the trainer
     # does that under the run directory's lock, so two sweeps never clobber a trial).
-    torch.set_num_threads(config.torch_threads or 1)
+    torch.set_num_threads(config.train.torch_threads or 1)
     metrics = train(config, run_dir, resume=status == "interrupted")
     final = metrics[-1]
     return {
@@ -180,7 +202,7 @@ def run_trial(config: TrainConfig, run_dir: str | os.PathLike) -> dict[str, Any]
 
 
 def run_group_trial(
-    configs: list[TrainConfig], run_dirs: list[str | os.PathLike], group_dir: str | os.PathLike
+    configs: list[Experiment], run_dirs: list[str | os.PathLike], group_dir: str | os.PathLike
 ) -> list[dict[str, Any]]:
     """Train trials that differ only in seed as one seed group (one process, stacked
     networks); each trial keeps its own run directory. Resumes the group if interrupted."""
@@ -191,7 +213,7 @@ def run_group_trial(
 
     group_dir = Path(group_dir)
     resume = (group_dir / GROUP_CHECKPOINT_FILE).exists()
-    torch.set_num_threads(configs[0].torch_threads or 1)
+    torch.set_num_threads(configs[0].train.torch_threads or 1)
     metrics = train_group(configs, [Path(d) for d in run_dirs], group_dir, resume=resume)
     return [
         {
@@ -204,17 +226,17 @@ def run_group_trial(
     ]
 
 
-def seed_group_tasks(jobs: list[tuple[TrainConfig, Path]], sweep_dir: Path) -> list[tuple]:
+def seed_group_tasks(jobs: list[tuple[Experiment, Path]], sweep_dir: Path) -> list[tuple]:
     """(function, arguments, run_dir) tasks: trials that differ only in seed become one
     ``run_group_trial`` in ``SWEEP_DIR/groups/NAME``; trials already done or interrupted
     as single runs stay single ``run_trial`` tasks."""
-    groups: dict[TrainConfig, list[tuple[TrainConfig, Path]]] = {}
+    groups: dict[Experiment, list[tuple[Experiment, Path]]] = {}
     tasks = []
     for config, run_dir in jobs:
         if trial_status(run_dir) != "new":
             tasks.append((run_trial, (config, run_dir), run_dir))
         else:
-            groups.setdefault(dataclasses.replace(config, seed=0), []).append((config, run_dir))
+            groups.setdefault(config.with_seed(0), []).append((config, run_dir))
     for members in groups.values():
         if len(members) == 1:
             tasks.append((run_trial, members[0], members[0][1]))
@@ -258,7 +280,7 @@ def run_sweep(
         raise ValueError(f"{sweep_dir} is a file, not a sweep directory")
     saved = sweep_dir / SWEEP_FILE
     description = json.loads(json.dumps(sweep.to_dict()))  # tuples as JSON reads them back
-    if saved.exists() and _read_json(saved, "sweep description") != description:
+    if saved.exists() and _saved_sweep(saved) != description:
         raise ValueError(
             f"{sweep_dir} holds another sweep ({SWEEP_FILE} differs): choose another directory"
         )
@@ -270,7 +292,7 @@ def run_sweep(
     results = []
     # torch_threads=1: one core per trial, and results independent of the pool size.
     jobs = [
-        (dataclasses.replace(config, torch_threads=1), sweep_dir / TRIALS_DIR / name)
+        (config.with_changes({"train.torch_threads": 1}), sweep_dir / TRIALS_DIR / name)
         for name, config in trials
     ]
     if group_seeds:

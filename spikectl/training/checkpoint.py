@@ -45,7 +45,7 @@ from spikectl.files import (
     make_dirs,
     write_json,
 )
-from spikectl.training.config import TrainConfig
+from spikectl.training.config import Experiment
 from spikectl.training.replay import EpisodeReplay
 
 __all__ = [
@@ -172,21 +172,21 @@ def locked_run(train: Callable[..., Any]) -> Callable[..., Any]:
     lock for the whole run."""
 
     @functools.wraps(train)
-    def locked(config: TrainConfig, run_dir: str | os.PathLike, *args, **kwargs):
+    def locked(config: Experiment, run_dir: str | os.PathLike, *args, **kwargs):
         with run_lock(Path(run_dir)):
             return train(config, run_dir, *args, **kwargs)
 
     return locked
 
 
-def prepare_run_dir(config: TrainConfig, run_dir: Path, resume: bool) -> bool:
+def prepare_run_dir(config: Experiment, run_dir: Path, resume: bool) -> bool:
     """Create a new run directory, or check that ``run_dir`` holds this run to resume.
 
     Returns whether there is a checkpoint to resume from. A run that stopped before its
     first checkpoint (killed, out of disk, a bad file) is started again from step 0,
     whether it is given with ``resume`` or as a new run with the same config.
     """
-    check_device(config.device)
+    check_device(config.train.device)
     if run_dir.exists() and not run_dir.is_dir():
         raise RunDirError(f"{run_dir} is a file, not a run directory: choose another --run-dir")
     config_path = run_dir / CONFIG_FILE
@@ -241,7 +241,7 @@ def remove_temporaries(run_dir: Path) -> None:
         temporary.unlink(missing_ok=True)
 
 
-def read_config(run_dir: Path) -> TrainConfig:
+def read_config(run_dir: Path) -> Experiment:
     """The resolved config saved in a run directory."""
     path = Path(run_dir) / CONFIG_FILE
     try:
@@ -255,7 +255,7 @@ def read_config(run_dir: Path) -> TrainConfig:
     if not isinstance(values, dict):
         raise RunDirError(f"{path} is not a valid spikectl config: not a JSON object")
     try:
-        return TrainConfig.from_dict(values)
+        return Experiment.from_dict(values)
     except (TypeError, ValueError) as error:
         raise RunDirError(f"{path} is not a valid spikectl config: {error}") from error
 
@@ -391,7 +391,7 @@ def first_line(error: BaseException) -> str:
 
 def save_checkpoint(
     run_dir: Path,
-    config: TrainConfig,
+    config: Experiment,
     state: TrainingState,
     online: torch.nn.Module,
     target: torch.nn.Module,
@@ -412,7 +412,7 @@ def save_checkpoint(
         "format": CHECKPOINT_FORMAT,
         "format_version": CHECKPOINT_VERSION,
         "spikectl_version": __version__,
-        "arch": config.arch,
+        "arch": config.agent.arch,
         "config": config.to_dict(),
         "online": online.state_dict(),
         "target": target.state_dict(),
@@ -516,7 +516,7 @@ def read_checkpoint(path: Path, map_location: str = "cpu") -> dict[str, Any]:
 
 def load_checkpoint(
     run_dir: Path,
-    config: TrainConfig,
+    config: Experiment,
     online: torch.nn.Module,
     target: torch.nn.Module,
     optimizer: torch.optim.Optimizer,
@@ -528,8 +528,8 @@ def load_checkpoint(
     path = run_dir / CHECKPOINT_FILE
     if not path.exists():
         raise RunDirError(f"{run_dir} has no checkpoint yet")
-    payload = read_checkpoint(path, map_location=config.device)
-    if payload["arch"] != config.arch or payload["config"] != config.to_dict():
+    payload = read_checkpoint(path, map_location=config.train.device)
+    if payload["arch"] != config.agent.arch or saved_config(payload["config"]) != config:
         raise RunDirError(
             f"{path} was written for arch {payload['arch']!r} with another config than "
             f"{run_dir / CONFIG_FILE}"
@@ -545,6 +545,15 @@ def load_checkpoint(
         return restore_state(payload, replay)
     except (RuntimeError, ValueError, KeyError, TypeError) as error:
         raise RunDirError(f"{path} does not fit this run: {first_line(error)}") from None
+
+
+def saved_config(values: dict[str, Any]) -> Experiment | None:
+    """The config a checkpoint was written with (a flat one before the tree); None if
+    it cannot be read."""
+    try:
+        return Experiment.from_dict(values)
+    except (TypeError, ValueError):
+        return None
 
 
 def save_model(run_dir: Path, network: torch.nn.Module) -> Path:

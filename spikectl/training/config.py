@@ -1,11 +1,25 @@
-"""The trainer's typed configuration and its presets (SPEC section 5, paper Table 2).
+"""The typed configuration tree of a training run and its presets (SPEC 5, paper Table 2).
 
-``TrainConfig`` is a frozen dataclass; tyro turns it into the command line, one flag
-per field, with the docstrings below as help. Presets are plain instances:
+One tree is the single source of truth for a run: what it trains on, what it trains
+and how::
 
-- ``paper``: Table 2 exactly (1 M environment steps, batches of 5 episodes, ...);
-- ``quick``: the README's main job, under 15 minutes on one CPU core;
-- ``smoke``: seconds, for tests.
+    Experiment(
+        env=EnvConfig(id, n_neurons, episode_length, n_train, n_test, n_val, context_seed,
+                      train_contexts, test_contexts, params=NeuronParams(...),
+                      extensions=Extensions(...)),
+        agent=AgentConfig(arch, sizes=AgentSizes(...)),
+        train=TrainConfig(seed, total_env_steps, num_envs, ..., device, torch_threads),
+    )
+
+Every part is a frozen dataclass with a one-line docstring per field; tyro turns the
+tree into the command line (``spikectl train``), ``config.json`` stores it
+(:meth:`Experiment.to_dict`) and everything that rebuilds a run (resume, evaluate,
+sweep, plot, seed groups) reads it back (:meth:`Experiment.from_dict`, which also reads
+the flat configs of runs saved before the tree). The agent's voltage normalisation is
+the environment's ``params`` (V_r and V_th), never a second copy.
+
+The presets (paper, quick, smoke) are instances of the tree, in
+``spikectl.training.presets``.
 
 How often a batch is drawn is not in the paper. This project's reading: episodes are
 collected ``num_envs`` at a time (one round); after each round, ``updates_per_round``
@@ -18,25 +32,37 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Literal
+from typing import Annotated, Any, Literal
+
+import tyro
 
 from spikectl.agents import ARCHITECTURES, AgentSizes, Architecture
 from spikectl.contexts import MAX_EPISODE_LENGTH, MAX_N_NEURONS
+from spikectl.envs.registration import ENV_ID
+from spikectl.neuron.extensions import Extensions
+from spikectl.neuron.params import NeuronParams
+from spikectl.training.variants import flat_settings, split_settings, variant_settings
+
+
+def _check_int(name: str, value: Any, low: int, high: int | None = None, what: str = "") -> None:
+    if (
+        isinstance(value, bool)
+        or not isinstance(value, int)
+        or value < low
+        or (high is not None and value > high)
+    ):
+        raise ValueError(f"{name} must be {what}, got {value!r}")
 
 
 @dataclass(frozen=True)
-class TrainConfig:
-    """Recurrent double Q-learning on generated contexts (paper Section 5, Table 2)."""
+class EnvConfig:
+    """What the agent trains on: a registered environment, its context sets, its model."""
 
-    arch: Architecture = "tdrqn"
-    """Q-network architecture."""
-    seed: int = 0
-    """Seed of the network initialisation, exploration and replay sampling."""
-    total_env_steps: int = 1_000_000
-    """Environment steps to train for (episodes = total_env_steps / episode_length)."""
-
+    id: Annotated[str, tyro.conf.arg(name="env")] = ENV_ID
+    """Registered environment id; its n_neurons, params and extensions are the defaults."""
     n_neurons: int = 8
     """Neurons per network."""
     episode_length: int = 60
@@ -53,7 +79,95 @@ class TrainConfig:
     """A saved ContextSet to train on instead of generated contexts."""
     test_contexts: Path | None = None
     """A saved ContextSet to evaluate on instead of generated contexts."""
+    params: NeuronParams = field(default_factory=NeuronParams)
+    """Neuron and synapse model (Table 1); V_r and V_th also normalise the agent's input."""
+    extensions: Extensions = field(default_factory=Extensions)
+    """Extensions of the paper's environment (docs/extensions.md); all off by default."""
 
+    def __post_init__(self) -> None:
+        if not isinstance(self.id, str):
+            raise ValueError(f"env must be a registered environment id, got {self.id!r}")
+        _check_int("n_neurons", self.n_neurons, 2, MAX_N_NEURONS,
+                   f"an integer in 2..{MAX_N_NEURONS} (MAX_N_NEURONS)")  # fmt: skip
+        _check_int("episode_length", self.episode_length, 2, MAX_EPISODE_LENGTH,
+                   f"an integer in 2..{MAX_EPISODE_LENGTH} (MAX_EPISODE_LENGTH)")  # fmt: skip
+        for name in ("n_train", "n_test"):
+            _check_int(name, getattr(self, name), 1, what="a positive integer")
+        _check_int("n_val", self.n_val, 0, what="a non-negative integer")
+        _check_int("context_seed", self.context_seed, 0, 2**63 - 1, "an integer in 0..2**63 - 1")
+        for name, kind in (("params", NeuronParams), ("extensions", Extensions)):
+            if not isinstance(getattr(self, name), kind):
+                raise ValueError(f"{name} must be a {kind.__name__}, got {getattr(self, name)!r}")
+        self._check_variant()
+        try:
+            self.extensions.hidden_count(self.n_neurons)  # at least 2 observable neurons
+        except ValueError as error:
+            name = "hidden_neurons" if self.extensions.hidden_neurons else "hidden_fraction"
+            raise ValueError(f"extensions.{name}: {error}") from None
+
+    def _settings(self) -> dict[str, Any]:
+        sizes = {"n_neurons": self.n_neurons, "episode_length": self.episode_length}
+        return flat_settings(sizes, self.params, self.extensions)
+
+    def _check_variant(self) -> None:
+        """Refuse a setting the variant changes that is still the base environment's:
+        ``EnvConfig(id=variant)`` alone would otherwise train without the variant."""
+        base, mine = _base_settings(), self._settings()
+        for name, value in variant_settings(self.id).items():
+            if mine[name] == base[name] != value:
+                raise ValueError(
+                    f"env: {self.id} sets {name} = {value!r}, but this config has the base "
+                    f"environment's {mine[name]!r}: take the variant's settings with "
+                    f"EnvConfig.with_variant / with_changes({{'env.id': ...}}), or use "
+                    f"{ENV_ID} to leave that setting at the paper's"
+                )
+
+    @property
+    def n_observed(self) -> int:
+        """Neurons the agent observes and may stimulate (all but the hidden ones)."""
+        return self.n_neurons - self.extensions.hidden_count(self.n_neurons)
+
+    def with_variant(self, env_id: str) -> EnvConfig:
+        """This config on the registered variant ``env_id``: what the current id's variant
+        set goes back to the base environment's, then ``env_id``'s settings (n_neurons,
+        episode_length, single params and extensions fields) apply; all else (set sizes,
+        seeds, a preset's episode length, ...) stays."""
+        base, settings = _base_settings(), self._settings()
+        settings.update({name: base[name] for name in variant_settings(self.id)})
+        settings.update(variant_settings(env_id))
+        return dataclasses.replace(self, id=env_id, **split_settings(settings))
+
+
+def _base_settings() -> dict[str, Any]:
+    """The base environment's value of every setting a variant may change."""
+    fields = {f.name: f.default for f in dataclasses.fields(EnvConfig)}
+    return flat_settings(fields, NeuronParams(), Extensions())
+
+
+@dataclass(frozen=True)
+class AgentConfig:
+    """The recurrent Q-network (paper Section 5.2)."""
+
+    arch: Architecture = "tdrqn"
+    """Q-network architecture."""
+    sizes: AgentSizes = field(default_factory=AgentSizes)
+    """Network sizes and input settings (the preset's, then these flags)."""
+
+    def __post_init__(self) -> None:
+        if self.arch not in ARCHITECTURES:
+            raise ValueError(f"arch must be one of {ARCHITECTURES}, got {self.arch!r}")
+        if not isinstance(self.sizes, AgentSizes):
+            raise ValueError(f"sizes must be an AgentSizes, got {self.sizes!r}")
+
+
+@dataclass(frozen=True)
+class TrainConfig:
+    """Recurrent double Q-learning on the environment's contexts (paper Section 5, Table 2)."""
+
+    seed: int = 0
+    """Seed of the network initialisation, exploration and replay sampling."""
+    total_env_steps: int = 1_000_000
+    """Environment steps to train for (episodes = total_env_steps / episode_length)."""
     num_envs: int = 5
     """Episodes collected in parallel per round (one vector-env batch)."""
     updates_per_round: int = 10
@@ -86,9 +200,6 @@ class TrainConfig:
     """Weight of the auxiliary loss predicting every neuron's next voltage (0 = off, paper)."""
     max_grad_norm: float = 10.0
     """Gradient-norm clip; 0 turns it off."""
-    sizes: AgentSizes = field(default_factory=AgentSizes)
-    """Network sizes: the preset's (Table 2's with --preset paper), then these flags."""
-
     eval_every_episodes: int = 500
     """Greedy evaluation on every training and test context every this many episodes."""
     checkpoint_every_episodes: int = 500
@@ -102,38 +213,23 @@ class TrainConfig:
     """Show a progress bar."""
 
     def __post_init__(self) -> None:
-        positive = (
-            "total_env_steps", "n_neurons", "episode_length", "n_train", "n_test", "num_envs",
-            "batch_size", "buffer_size", "eval_every_episodes", "checkpoint_every_episodes",
-        )  # fmt: skip
+        positive = ("total_env_steps", "num_envs", "batch_size", "buffer_size",
+                    "eval_every_episodes", "checkpoint_every_episodes", "n_step")  # fmt: skip
         for name in positive:
+            _check_int(name, getattr(self, name), 1, what="a positive integer")
+        for name in ("updates_per_round", "learning_starts", "torch_threads"):
+            _check_int(name, getattr(self, name), 0, what="a non-negative integer")
+        _check_int("seed", self.seed, 0, 2**63 - 1, "an integer in 0..2**63 - 1")
+        for name in ("learning_rate", "gamma", "tau", "epsilon_start", "epsilon_end",
+                     "epsilon_anneal_fraction", "max_grad_norm", "aux_voltage_weight"):  # fmt: skip
             value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if isinstance(self.n_step, bool) or not isinstance(self.n_step, int) or not (
-            1 <= self.n_step <= self.episode_length
-        ):
-            raise ValueError(
-                f"n_step must be an integer in [1, episode_length = {self.episode_length}], "
-                f"got {self.n_step!r}"
-            )
-        if not 0 <= self.aux_voltage_weight < math.inf:
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ValueError(f"{name} must be a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ValueError(f"{name} must be finite, got {value!r}")
+        if not self.aux_voltage_weight >= 0:
             raise ValueError(
                 f"aux_voltage_weight must be a finite number >= 0, got {self.aux_voltage_weight}"
-            )
-        for name in ("updates_per_round", "learning_starts", "torch_threads", "n_val"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or value < 0:
-                raise ValueError(f"{name} must be a non-negative integer, got {value!r}")
-        if self.arch not in ARCHITECTURES:
-            raise ValueError(f"arch must be one of {ARCHITECTURES}, got {self.arch!r}")
-        for name in ("n_neurons", "episode_length"):
-            if getattr(self, name) < 2:
-                raise ValueError(f"{name} must be >= 2, got {getattr(self, name)}")
-        if self.total_env_steps < self.episode_length * self.num_envs:
-            raise ValueError(
-                f"total_env_steps ({self.total_env_steps}) is less than one round of "
-                f"num_envs x episode_length ({self.num_envs * self.episode_length})"
             )
         if not self.learning_rate > 0:
             raise ValueError(f"learning_rate must be > 0, got {self.learning_rate}")
@@ -154,140 +250,222 @@ class TrainConfig:
             raise ValueError(f"max_grad_norm must be >= 0, got {self.max_grad_norm}")
         if self.batch_size > self.buffer_size:
             raise ValueError("batch_size cannot exceed buffer_size")
-        self._check_ranges()
-
-    def _check_ranges(self) -> None:
-        """Seeds, sizes and rates that would wrap, allocate without bound or poison a run."""
-        for name in ("seed", "context_seed"):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or not 0 <= value < 2**63:
-                raise ValueError(f"{name} must be an integer in 0..2**63 - 1, got {value!r}")
-        if self.n_neurons > MAX_N_NEURONS:
-            raise ValueError(
-                f"n_neurons must be at most {MAX_N_NEURONS} (MAX_N_NEURONS), got {self.n_neurons}"
-            )
-        if self.episode_length > MAX_EPISODE_LENGTH:
-            raise ValueError(
-                f"episode_length must be at most {MAX_EPISODE_LENGTH}, got {self.episode_length}"
-            )
-        for name in ("learning_rate", "gamma", "tau", "epsilon_start", "epsilon_end",
-                     "epsilon_anneal_fraction", "max_grad_norm"):  # fmt: skip
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, (int, float)):
-                raise ValueError(f"{name} must be a number, got {value!r}")
-            if not math.isfinite(value):
-                raise ValueError(f"{name} must be finite, got {value!r}")
         if not isinstance(self.device, str) or not self.device:
             raise ValueError(f"device must be a string such as cpu or cuda, got {self.device!r}")
+
+
+@dataclass(frozen=True)
+class Experiment:
+    """One training run: the environment, the agent and the training algorithm."""
+
+    env: Annotated[EnvConfig, tyro.conf.arg(name="")] = field(default_factory=EnvConfig)
+    """What the agent trains on."""
+    agent: Annotated[AgentConfig, tyro.conf.arg(name="")] = field(default_factory=AgentConfig)
+    """The Q-network."""
+    train: Annotated[TrainConfig, tyro.conf.arg(name="")] = field(default_factory=TrainConfig)
+    """The training algorithm."""
+
+    def __post_init__(self) -> None:
+        for name, kind in (("env", EnvConfig), ("agent", AgentConfig), ("train", TrainConfig)):
+            if not isinstance(getattr(self, name), kind):
+                raise ValueError(f"{name} must be a {kind.__name__}, got {getattr(self, name)!r}")
+        length, train = self.env.episode_length, self.train
+        if train.n_step > length:
+            raise ValueError(
+                f"n_step must be an integer in [1, episode_length = {length}], got {train.n_step!r}"
+            )
+        if train.total_env_steps < length * train.num_envs:
+            raise ValueError(
+                f"total_env_steps ({train.total_env_steps}) is less than one round of "
+                f"num_envs x episode_length ({train.num_envs * length})"
+            )
 
     @property
     def total_episodes(self) -> int:
         """Whole rounds of num_envs episodes that fit in total_env_steps."""
-        rounds = self.total_env_steps // (self.episode_length * self.num_envs)
-        return rounds * self.num_envs
+        rounds = self.train.total_env_steps // (self.env.episode_length * self.train.num_envs)
+        return rounds * self.train.num_envs
 
     def epsilon(self, episode: int) -> float:
         """Exploration rate for an episode: linear from start to end, then constant."""
-        anneal = self.epsilon_anneal_fraction * self.total_episodes
+        train = self.train
+        anneal = train.epsilon_anneal_fraction * self.total_episodes
         if anneal <= 0:
-            return self.epsilon_end
+            return train.epsilon_end
         fraction = min(episode / anneal, 1.0)
-        return self.epsilon_start + fraction * (self.epsilon_end - self.epsilon_start)
+        return train.epsilon_start + fraction * (train.epsilon_end - train.epsilon_start)
+
+    def with_seed(self, seed: int) -> Experiment:
+        """The same experiment with another training seed."""
+        return dataclasses.replace(self, train=dataclasses.replace(self.train, seed=seed))
 
     def to_dict(self) -> dict[str, Any]:
-        """JSON-ready dict (paths as strings, sizes nested)."""
+        """JSON-ready nested dict: {"env": {..., "params": {...}, "extensions": {...}},
+        "agent": {"arch": ..., "sizes": {...}}, "train": {...}} (paths as strings)."""
         values = dataclasses.asdict(self)
-        for key, value in values.items():
-            if isinstance(value, Path):
-                values[key] = str(value)
+        for name in ("train_contexts", "test_contexts"):
+            if values["env"][name] is not None:
+                values["env"][name] = str(values["env"][name])
+        values["agent"]["sizes"] = {
+            key: list(value) if isinstance(value, tuple) else value
+            for key, value in values["agent"]["sizes"].items()
+        }
         return values
 
     @classmethod
-    def from_dict(cls, values: dict[str, Any]) -> TrainConfig:
-        """Inverse of :meth:`to_dict`; unknown fields are an error."""
-        values = dict(values)
-        # Runs saved before the validation split existed had none.
-        values.setdefault("n_val", 0)
-        known = {f.name for f in dataclasses.fields(cls)}
-        unknown = sorted(set(values) - known)
+    def from_dict(cls, values: Mapping[str, Any]) -> Experiment:
+        """Inverse of :meth:`to_dict`; also reads the flat config of a run saved before
+        the tree (see :func:`nest`). Unknown fields are an error."""
+        nested = nest(values)
+        if isinstance(values, Mapping) and not any(key in SECTIONS for key in values):
+            # A flat config of a run saved before the validation split existed had none.
+            nested.setdefault("env", {}).setdefault("n_val", 0)
+        unknown = sorted(set(nested) - {"env", "agent", "train"})
         if unknown:
-            raise ValueError(f"unknown TrainConfig field(s): {', '.join(unknown)}")
-        sizes = dict(values.pop("sizes", {}))
-        size_fields = {f.name: f for f in dataclasses.fields(AgentSizes)}
-        unknown_sizes = sorted(set(sizes) - set(size_fields))
-        if unknown_sizes:
-            raise ValueError(f"unknown AgentSizes field(s): {', '.join(unknown_sizes)}")
-        for name, value in sizes.items():
-            if isinstance(value, list):
-                sizes[name] = tuple(value)
+            raise ValueError(f"unknown Experiment field(s): {', '.join(unknown)}")
+        env = dict(nested.get("env", {}))
+        agent = dict(nested.get("agent", {}))
+        _check_fields(EnvConfig, env)
+        _check_fields(AgentConfig, agent)
+        _check_fields(TrainConfig, nested.get("train", {}))
+        env["params"] = NeuronParams.from_dict(env.get("params", {}))
+        env["extensions"] = Extensions.from_dict(env.get("extensions", {}))
         for name in ("train_contexts", "test_contexts"):
-            if values.get(name) is not None:
-                values[name] = Path(values[name])
-        return cls(sizes=AgentSizes(**sizes), **values)
+            if env.get(name) is not None:
+                env[name] = Path(env[name])
+        sizes = dict(agent.get("sizes", {}))
+        _legacy_normalisation(sizes, env["params"])
+        _check_fields(AgentSizes, sizes)
+        agent["sizes"] = AgentSizes(
+            **{key: tuple(value) if isinstance(value, list) else value
+               for key, value in sizes.items()}
+        )  # fmt: skip
+        return cls(EnvConfig(**env), AgentConfig(**agent), TrainConfig(**nested.get("train", {})))
+
+    def with_changes(
+        self, changes: Mapping[str, Any] | None = None, /, **fields: Any
+    ) -> Experiment:
+        """A copy with some fields changed: ``changes`` maps field paths to values, as
+        dotted names (``"env.n_train"``, ``"agent.sizes.lstm_hidden"``), nested dicts
+        (``{"env": {"n_train": 20}}``) or a field's own name where it is unique in the
+        tree, as in the flat config before the tree (``"n_train"``, ``"arch"``,
+        ``"sizes": {...}``); keyword arguments are the latter
+        (``with_changes(arch="drqn", seed=1)``). A changed ``env.id`` first takes its
+        variant's settings (:meth:`EnvConfig.with_variant`), then the other changes."""
+        leaves = _leaves(nest({**(changes or {}), **fields}))
+        base = self
+        env_id = leaves.pop(("env", "id"), None)
+        if env_id is not None:
+            base = dataclasses.replace(self, env=self.env.with_variant(env_id))
+        values = base.to_dict()
+        for path, value in leaves.items():
+            node = values
+            for key in path[:-1]:
+                if not isinstance(node.get(key), dict):
+                    raise ValueError(f"unknown config field {'.'.join(path)!r}")
+                node = node[key]
+            if path[-1] not in node:
+                raise ValueError(f"unknown config field {'.'.join(path)!r}")
+            node[path[-1]] = value
+        return Experiment.from_dict(values)
 
 
-PAPER = TrainConfig()
+LEGACY_FIELDS: dict[str, str] = {
+    **{name: "env" for name in ("n_neurons", "episode_length", "n_train", "n_test", "n_val",
+                                "context_seed", "train_contexts", "test_contexts")},
+    **{name: "agent" for name in ("arch", "sizes")},
+    **{f.name: "train" for f in dataclasses.fields(TrainConfig)},
+}  # fmt: skip
+"""Where each field of the flat config (before the tree) lives in the tree."""
+SECTIONS = ("env", "agent", "train")
 
-QUICK = TrainConfig(
-    total_env_steps=264_000,
-    num_envs=16,
-    updates_per_round=32,
-    batch_size=8,
-    buffer_size=40_000,
-    learning_starts=16,
-    learning_rate=2e-3,
-    gamma=0.9,
-    tau=0.05,
-    n_step=3,
-    aux_voltage_weight=1.0,
-    explore_do_nothing=0.75,
-    sizes=AgentSizes(
-        lstm_hidden=64,
-        attn_width=64,
-        attn_ff=128,
-        tdrqn_head_hidden=(128, 64),
-        ff_hidden=256,
-        head_hidden=(256, 128, 64),
-        target_voltage_in_input=True,
-    ),
-    eval_every_episodes=400,
-    checkpoint_every_episodes=800,
-    torch_threads=1,
-)
-"""The README's main job: ~14 minutes on one core of the project's 2-core machine
-(docs/training.md, "Learning fast"): 4 400 episodes, 8 800 updates of 8 episodes,
-n-step targets, the auxiliary next-voltage loss, the target's voltage in each neuron's
-input, do-nothing-biased exploration, gamma 0.9, lr 2e-3, half-width networks, one Torch
-thread."""
 
-SMOKE = TrainConfig(
-    total_env_steps=40 * 20 * 8,
-    episode_length=20,
-    n_neurons=5,
-    n_train=6,
-    n_test=6,
-    n_val=6,
-    num_envs=8,
-    updates_per_round=2,
-    batch_size=4,
-    buffer_size=200,
-    learning_starts=8,
-    learning_rate=1e-3,
-    sizes=AgentSizes(
-        lstm_hidden=16,
-        target_embed=4,
-        pattern_embed=4,
-        ff_hidden=32,
-        head_hidden=(32,),
-        tdrqn_head_hidden=(32,),
-        attn_width=16,
-        attn_ff=32,
-        value_hidden=(16,),
-    ),
-    eval_every_episodes=80,
-    checkpoint_every_episodes=80,
-    torch_threads=1,
-    progress=False,
-)
+def nest(values: Mapping[str, Any]) -> dict[str, Any]:
+    """A config dict in the tree's nested form: dotted keys (``"env.n_train"``) are
+    split, and the flat names of the config before the tree (``"n_train"``, ``"arch"``,
+    ``"seed"``) are put under their section; nested dicts are merged."""
+    if not isinstance(values, Mapping):
+        raise ValueError(f"a config is a JSON object, got {type(values).__name__}")
+    nested: dict[str, Any] = {}
+    for key, value in values.items():
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            value = dataclasses.asdict(value)  # a part of the tree: each of its fields
+        if not isinstance(key, str):
+            raise ValueError(f"config keys are strings, got {key!r}")
+        path = key.split(".")
+        if path[0] not in SECTIONS:
+            if path[0] not in LEGACY_FIELDS:
+                known = ", ".join(SECTIONS)
+                raise ValueError(f"unknown config field {key!r} (the tree's sections: {known})")
+            path = [LEGACY_FIELDS[path[0]], *path]
+        node = nested
+        for part in path[:-1]:
+            node = node.setdefault(part, {})
+            if not isinstance(node, dict):
+                raise ValueError(f"config field {key!r} conflicts with another one")
+        if isinstance(value, Mapping) and isinstance(node.get(path[-1]), dict):
+            node[path[-1]] = _merge(node[path[-1]], value)
+        else:
+            node[path[-1]] = dict(value) if isinstance(value, Mapping) else value
+    return nested
 
-PRESETS: dict[str, TrainConfig] = {"paper": PAPER, "quick": QUICK, "smoke": SMOKE}
+
+def field_value(values: Mapping[str, Any], key: str) -> Any:
+    """The value of a field in a nested config dict, named by its dotted path
+    (``"env.n_train"``) or by its flat name from before the tree (``"n_train"``)."""
+    path = key.split(".")
+    if path[0] not in SECTIONS:
+        if path[0] not in LEGACY_FIELDS:
+            raise ValueError(f"unknown config field {key!r}")
+        path = [LEGACY_FIELDS[path[0]], *path]
+    node: Any = values
+    for part in path:
+        if not isinstance(node, Mapping) or part not in node:
+            raise ValueError(f"unknown config field {key!r}")
+        node = node[part]
+    return node
+
+
+def _merge(first: Mapping[str, Any], second: Mapping[str, Any]) -> dict[str, Any]:
+    merged = dict(first)
+    for key, value in second.items():
+        if isinstance(value, Mapping) and isinstance(merged.get(key), Mapping):
+            merged[key] = _merge(merged[key], value)
+        else:
+            merged[key] = value
+    return merged
+
+
+def _leaves(nested: Mapping[str, Any], prefix: tuple[str, ...] = ()) -> dict[tuple, Any]:
+    """Field paths to values; a dict value is a set of field changes, not one value."""
+    leaves: dict[tuple, Any] = {}
+    for key, value in nested.items():
+        if isinstance(value, Mapping):
+            leaves.update(_leaves(value, (*prefix, key)))
+        else:
+            leaves[(*prefix, key)] = value
+    return leaves
+
+
+def _check_fields(kind: type, values: Mapping[str, Any]) -> None:
+    if not isinstance(values, Mapping):
+        raise ValueError(f"{kind.__name__} must be a JSON object, got {values!r}")
+    known = {f.name for f in dataclasses.fields(kind)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"unknown {kind.__name__} field(s): {', '.join(unknown)}")
+
+
+def _legacy_normalisation(sizes: dict[str, Any], params: NeuronParams) -> None:
+    """Configs saved before the tree had the agent's voltage normalisation in its sizes;
+    it is the environment's params now. Equal values are dropped; others cannot be
+    represented and are refused."""
+    for name in ("v_rest_mV", "v_threshold_mV"):
+        if name in sizes:
+            value = sizes.pop(name)
+            if value != getattr(params, name):
+                raise ValueError(
+                    f"sizes.{name} = {value} differs from the environment's params.{name} = "
+                    f"{getattr(params, name)}: the agent's input is normalised with the "
+                    "environment's params now, so this run cannot be rebuilt as it was"
+                )

@@ -1,64 +1,81 @@
-"""The context sets of a run (training, test and validation), kept in its run directory."""
+"""The context sets of a run (training, test and validation), kept in its run directory,
+and the environments that play them with the run's model and extensions."""
 
 from __future__ import annotations
 
 from pathlib import Path
 
+import numpy as np
+
 from spikectl.contexts import ContextSet, make_splits
 from spikectl.contexts.context_set import make_validation_set
-from spikectl.training.config import TrainConfig
+from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.training.config import Experiment
 
 TRAIN_FILE = "train_contexts.npz"
 TEST_FILE = "test_contexts.npz"
 VAL_FILE = "val_contexts.npz"
+COLLECT_STREAM = 2
+"""Seed stream of the collecting environment's own draws (noise, stochastic release, ...)."""
+EVAL_STREAM = 3
+"""Seed stream of the evaluation environments' own draws, the same at every evaluation."""
 
 
-def generated_contexts(config: TrainConfig) -> tuple[ContextSet, ContextSet]:
-    """The (train, test) sets the config's sizes and ``context_seed`` generate."""
+def generated_contexts(config: Experiment) -> tuple[ContextSet, ContextSet]:
+    """The (train, test) sets the config's sizes, ``context_seed``, params and
+    context-level extensions generate."""
+    env = config.env
     return make_splits(
-        config.n_train, config.n_test, config.n_neurons, config.episode_length,
-        config.context_seed,
+        env.n_train, env.n_test, env.n_neurons, env.episode_length, env.context_seed,
+        params=env.params, extensions=env.extensions,
     )  # fmt: skip
 
 
 def load_or_make_contexts(
-    config: TrainConfig, run_dir: Path
+    config: Experiment, run_dir: Path
 ) -> tuple[ContextSet, ContextSet, ContextSet | None]:
     """The run's (train, test, validation) sets: from the run directory when it has them
     (a resumed run), else from the config's files or generated, then saved into the run
     directory. The validation set (None when ``n_val`` is 0) is generated to share no
     topology with the training and test sets actually used."""
+    env = config.env
     paths = [run_dir / TRAIN_FILE, run_dir / TEST_FILE]
-    if config.n_val:
+    if env.n_val:
         paths.append(run_dir / VAL_FILE)
     if all(path.exists() for path in paths):
         train, test = ContextSet.load(paths[0]), ContextSet.load(paths[1])
-        validation = ContextSet.load(paths[2]) if config.n_val else None
+        validation = ContextSet.load(paths[2]) if env.n_val else None
     else:
-        train, test = generated_contexts(config)
-        if config.train_contexts is not None:
-            train = ContextSet.load(config.train_contexts)
-        if config.test_contexts is not None:
-            test = ContextSet.load(config.test_contexts)
+        train = ContextSet.load(env.train_contexts) if env.train_contexts is not None else None
+        test = ContextSet.load(env.test_contexts) if env.test_contexts is not None else None
+        for name, contexts in (("training", train), ("test", test)):
+            if contexts is not None:
+                check_model(contexts, config, name)
+        if train is None or test is None:
+            generated = generated_contexts(config)
+            train = generated[0] if train is None else train
+            test = generated[1] if test is None else test
         validation = None
-        if config.n_val:
+        if env.n_val:
             validation = make_validation_set(
-                config.n_val, (train, test), config.n_neurons, config.episode_length,
-                config.context_seed,
+                env.n_val, (train, test), env.n_neurons, env.episode_length, env.context_seed,
+                params=env.params, extensions=env.extensions,
             )  # fmt: skip
         for path, contexts in zip(paths, (train, test, validation), strict=False):
             contexts.save(path)
     sets = {"training": train, "test": test, "validation": validation}
     for name, contexts in sets.items():
         if contexts is not None and (contexts.n_neurons, contexts.episode_length) != (
-            config.n_neurons,
-            config.episode_length,
+            env.n_neurons,
+            env.episode_length,
         ):
             raise ValueError(
                 f"the {name} contexts have {contexts.n_neurons} neurons and episodes of "
-                f"{contexts.episode_length} steps; the config says {config.n_neurons} and "
-                f"{config.episode_length}"
+                f"{contexts.episode_length} steps; the config says {env.n_neurons} and "
+                f"{env.episode_length}"
             )
+        if contexts is not None:
+            check_model(contexts, config, name)
     for first, second in (("training", "test"), ("training", "validation"), ("test", "validation")):
         if sets[first] is None or sets[second] is None:
             continue
@@ -70,3 +87,41 @@ def load_or_make_contexts(
                 "disjoint"
             )
     return train, test, validation
+
+
+def check_model(contexts: ContextSet, config: Experiment, name: str) -> None:
+    """Refuse a context set made with other NeuronParams or context-level extensions than
+    the config's: the environment and the agent's input normalisation use the config's."""
+    env = config.env
+    if contexts.params != env.params:
+        mine, theirs = env.params.to_dict(), contexts.params.to_dict()
+        differ = ", ".join(
+            f"{key}={theirs[key]}" for key in theirs if theirs[key] != mine[key]
+        )  # fmt: skip
+        raise ValueError(
+            f"params: the {name} contexts were made with other NeuronParams ({differ}); "
+            "give the same values with --params.* (e.g. --params."
+            f"{next(k for k in theirs if theirs[k] != mine[k]).replace('_', '-')})"
+        )
+    if contexts.extensions != env.extensions.context_part():
+        raise ValueError(
+            f"extensions: the {name} contexts were made with context-level extensions "
+            f"{contexts.extensions.to_dict(only_changed=True)}, the config says "
+            f"{env.extensions.context_part().to_dict(only_changed=True)} (--extensions.*)"
+        )
+
+
+def make_env(config: Experiment, contexts: ContextSet, num_envs: int) -> NeuronControlVectorEnv:
+    """A vector environment on ``contexts`` with the config's params and extensions."""
+    return NeuronControlVectorEnv(
+        num_envs,
+        contexts=contexts,
+        params=config.env.params,
+        extensions=config.env.extensions.environment_part(),
+    )
+
+
+def stream_seed(config: Experiment, stream: int, *more: int) -> int:
+    """A seed for an environment's own draws, derived from the training seed."""
+    entropy = [config.train.seed, stream, *more]
+    return int(np.random.SeedSequence(entropy).generate_state(1, np.uint64)[0] >> 1)

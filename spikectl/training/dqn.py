@@ -45,8 +45,14 @@ from spikectl.training.checkpoint import (
     save_checkpoint,
     write_metrics,
 )
-from spikectl.training.config import TrainConfig
-from spikectl.training.contexts import load_or_make_contexts
+from spikectl.training.config import Experiment
+from spikectl.training.contexts import (
+    COLLECT_STREAM,
+    EVAL_STREAM,
+    load_or_make_contexts,
+    make_env,
+    stream_seed,
+)
 from spikectl.training.replay import EpisodeBatchArrays, EpisodeReplay
 
 METRIC_FIELDS = (
@@ -154,12 +160,13 @@ def training_losses(
     online: torch.nn.Module,
     target: torch.nn.Module,
     batch: EpisodeBatchArrays,
-    config: TrainConfig,
+    config: Experiment,
     predictor: torch.nn.Module | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor | None]:
     """The double-Q TD loss over every step of the sampled episodes and, with a
     ``predictor``, the auxiliary next-voltage loss (None without one)."""
-    return losses_on_tensors(online, target, batch_tensors(batch, config.device), config, predictor)
+    tensors = batch_tensors(batch, config.train.device)
+    return losses_on_tensors(online, target, tensors, config, predictor)
 
 
 def batch_tensors(batch: EpisodeBatchArrays, device: str) -> dict[str, torch.Tensor]:
@@ -176,7 +183,7 @@ def losses_on_tensors(
     online,
     target,
     tensors: dict,
-    config: TrainConfig,
+    config: Experiment,
     predictor=None,
 ) -> tuple[torch.Tensor, torch.Tensor | None]:
     """:func:`training_losses` on :func:`batch_tensors`' output; the networks may be
@@ -199,16 +206,17 @@ def losses_on_tensors(
         target_q_values, _ = target(obs_seq)  # [B, N+1, n+1]
         bootstrap = target_q_values.gather(2, best_actions[..., None]).squeeze(2)  # [B, N+1]
         bootstrap[:, -1] = 0.0  # observation N follows the terminal step
-        td_target = n_step_targets(rewards, bootstrap, config.gamma, config.n_step)  # [B, N]
-    if config.loss == "huber":
+        td_target = n_step_targets(
+            rewards, bootstrap, config.train.gamma, config.train.n_step
+        )  # [B, N]
+    if config.train.loss == "huber":
         td = F.smooth_l1_loss(q_taken, td_target)
     else:
         td = F.mse_loss(q_taken, td_target)
     if predictor is None:
         return td, None
-    sizes = online.sizes
     next_voltage = normalised_voltage(
-        obs_seq["voltage"][:, 1:], sizes.v_rest_mV, sizes.v_threshold_mV
+        obs_seq["voltage"][:, 1:], online.v_rest_mV, online.v_threshold_mV
     )  # [B, N, n]
     predicted = predictor(features[:, :-1], actions)  # [B, N, n]
     return td, F.mse_loss(predicted, next_voltage)
@@ -218,7 +226,7 @@ def td_loss(
     online: torch.nn.Module,
     target: torch.nn.Module,
     batch: EpisodeBatchArrays,
-    config: TrainConfig,
+    config: Experiment,
 ) -> torch.Tensor:
     """Double-Q TD loss over every step of the sampled episodes."""
     return training_losses(online, target, batch, config)[0]
@@ -231,40 +239,47 @@ def soft_update(target: torch.nn.Module, online: torch.nn.Module, tau: float) ->
         target_param.lerp_(online_param, tau)
 
 
-def greedy_returns(network: torch.nn.Module, env: NeuronControlVectorEnv, device: str) -> float:
-    """Mean greedy return over every context of the environment's set (one batch)."""
+def greedy_returns(
+    network: torch.nn.Module, env: NeuronControlVectorEnv, device: str, seed: int
+) -> float:
+    """Mean greedy return over every context of the environment's set (one batch); the
+    environment's own draws (noise, ...) start from ``seed`` every time."""
     network.eval()
     policy = EpsilonGreedyPolicy(network, 0.0, np.random.default_rng(0), device)
+    env.reset(seed=seed)
     episodes = run_episodes(env, np.arange(env.num_envs), policy)
     network.train()
     return float(episodes.returns.mean())
 
 
-def build_networks(config: TrainConfig) -> tuple[torch.nn.Module, torch.nn.Module]:
-    """Online and target networks, initialised from ``config.seed`` without touching
+def build_networks(config: Experiment) -> tuple[torch.nn.Module, torch.nn.Module]:
+    """Online and target networks, initialised from ``config.train.seed`` without touching
     Torch's global generator."""
     with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(config.seed)
-        online = make_agent(config.arch, config.n_neurons, config.episode_length, config.sizes)
-    online.to(config.device)
+        torch.manual_seed(config.train.seed)
+        online = make_agent(
+            config.agent.arch, config.env.n_observed, config.env.episode_length,
+            config.agent.sizes, params=config.env.params,
+        )  # fmt: skip
+    online.to(config.train.device)
     target = copy.deepcopy(online)
     target.requires_grad_(False)
     return online, target
 
 
-def build_predictor(config: TrainConfig, online: torch.nn.Module) -> torch.nn.Module | None:
+def build_predictor(config: Experiment, online: torch.nn.Module) -> torch.nn.Module | None:
     """The auxiliary next-voltage head when ``aux_voltage_weight > 0``, seeded from
-    ``config.seed`` on a stream of its own (the Q-network's initialisation is unchanged)."""
-    if config.aux_voltage_weight <= 0:
+    ``config.train.seed`` on a stream of its own (the Q-network's initialisation is unchanged)."""
+    if config.train.aux_voltage_weight <= 0:
         return None
     with torch.random.fork_rng(devices=[]):
-        torch.manual_seed(np.random.SeedSequence([config.seed, 1]).generate_state(1)[0])
+        torch.manual_seed(np.random.SeedSequence([config.train.seed, 1]).generate_state(1)[0])
         predictor = make_voltage_predictor(online)
-    return predictor.to(config.device)
+    return predictor.to(config.train.device)
 
 
 @locked_run
-def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> list[dict]:
+def train(config: Experiment, run_dir: str | Path, resume: bool = False) -> list[dict]:
     """Train an agent; returns the metrics rows (also in ``run_dir/metrics.csv``).
 
     ``resume=True`` continues the run saved in ``run_dir`` from its last checkpoint
@@ -274,36 +289,38 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
     """
     run_dir = Path(run_dir)
     resume = prepare_run_dir(config, run_dir, resume)
-    if config.torch_threads:
-        torch.set_num_threads(config.torch_threads)
+    if config.train.torch_threads:
+        torch.set_num_threads(config.train.torch_threads)
     train_set, test_set, val_set = load_or_make_contexts(config, run_dir)
     online, target = build_networks(config)
     predictor = build_predictor(config, online)
     trained = list(online.parameters()) + (list(predictor.parameters()) if predictor else [])
-    optimizer = torch.optim.Adam(trained, lr=config.learning_rate)
-    replay = EpisodeReplay(config.buffer_size, config.n_neurons, config.episode_length)
-    state = TrainingState(rng=np.random.default_rng(np.random.SeedSequence(config.seed)))
+    optimizer = torch.optim.Adam(trained, lr=config.train.learning_rate)
+    replay = EpisodeReplay(
+        config.train.buffer_size, config.env.n_observed, config.env.episode_length
+    )
+    state = TrainingState(rng=np.random.default_rng(np.random.SeedSequence(config.train.seed)))
     if resume:
         state = load_checkpoint(run_dir, config, online, target, optimizer, replay, predictor)
     else:
         state.baselines = {
             name: {
-                split: float(evaluate_policy(contexts, policy).returns.mean())
+                split: float(baseline_episodes(config, contexts, policy).returns.mean())
                 for split, contexts in (("train", train_set), ("test", test_set))
             }
             for name, policy in (
                 ("do_nothing", do_nothing_policy),
-                ("random", make_random_policy(config.seed)),
+                ("random", make_random_policy(config.train.seed)),
             )
         }
 
-    collect_env = NeuronControlVectorEnv(config.num_envs, contexts=train_set)
+    collect_env = make_env(config, train_set, config.train.num_envs)
     eval_envs = {
-        split: NeuronControlVectorEnv(len(contexts), contexts=contexts)
+        split: make_env(config, contexts, len(contexts))
         for split, contexts in (("train", train_set), ("test", test_set), ("val", val_set))
         if contexts is not None
     }
-    targets = np.array([c.target for c in train_set], dtype=np.int64)
+    targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
     patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
     logger = RunLogger(run_dir, config, state)
     started = time.perf_counter() - state.wall_time_s
@@ -317,17 +334,21 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
     def evaluate() -> None:
         clock()
         returns = {
-            split: greedy_returns(online, env, config.device) for split, env in eval_envs.items()
+            split: greedy_returns(online, env, config.train.device, eval_seed)
+            for split, env in eval_envs.items()
         }
         record_evaluation(state, config, returns, predictor is not None, run_dir, logger)
 
+    eval_seed = stream_seed(config, EVAL_STREAM)
     if not state.metrics:
         evaluate()
     while state.episodes < config.total_episodes:
         epsilon = config.epsilon(state.episodes)
-        contexts = state.rng.integers(len(train_set), size=config.num_envs)
+        # The environment's own draws are seeded per round, so a resumed run repeats them.
+        collect_env.reset(seed=stream_seed(config, COLLECT_STREAM, state.episodes))
+        contexts = state.rng.integers(len(train_set), size=config.train.num_envs)
         policy = EpsilonGreedyPolicy(
-            online, epsilon, state.rng, config.device, config.explore_do_nothing
+            online, epsilon, state.rng, config.train.device, config.train.explore_do_nothing
         )
         episodes: EpisodeBatch = run_episodes(collect_env, contexts, policy)
         replay.add(
@@ -335,13 +356,13 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
             patterns[contexts], episodes.action_mask,
         )  # fmt: skip
         before = state.episodes
-        state.episodes += config.num_envs
-        logger.progress(config.num_envs, epsilon, float(episodes.returns.mean()))
-        if len(replay) >= max(config.learning_starts, 1):
-            for _ in range(config.updates_per_round):
-                batch = replay.sample(config.batch_size, state.rng)
+        state.episodes += config.train.num_envs
+        logger.progress(config.train.num_envs, epsilon, float(episodes.returns.mean()))
+        if len(replay) >= max(config.train.learning_starts, 1):
+            for _ in range(config.train.updates_per_round):
+                batch = replay.sample(config.train.batch_size, state.rng)
                 td, aux = training_losses(online, target, batch, config, predictor)
-                loss = td if aux is None else td + config.aux_voltage_weight * aux
+                loss = td if aux is None else td + config.train.aux_voltage_weight * aux
                 if not torch.isfinite(loss):
                     raise RunDirError(
                         f"the training loss became {loss.item()} at update {state.updates + 1} "
@@ -350,25 +371,28 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
                     )
                 optimizer.zero_grad(set_to_none=True)
                 loss.backward()
-                if config.max_grad_norm > 0:
-                    torch.nn.utils.clip_grad_norm_(trained, config.max_grad_norm)
+                if config.train.max_grad_norm > 0:
+                    torch.nn.utils.clip_grad_norm_(trained, config.train.max_grad_norm)
                 optimizer.step()
-                soft_update(target, online, config.tau)
+                soft_update(target, online, config.train.tau)
                 state.updates += 1
                 state.loss_sum += td.item()
                 state.aux_loss_sum += 0.0 if aux is None else aux.item()
                 state.loss_count += 1
         finished = state.episodes >= config.total_episodes
-        if finished or crossed_multiple(before, state.episodes, config.eval_every_episodes):
+        if finished or crossed_multiple(before, state.episodes, config.train.eval_every_episodes):
             evaluate()
-        if finished or crossed_multiple(before, state.episodes, config.checkpoint_every_episodes):
+        if finished or crossed_multiple(
+            before, state.episodes, config.train.checkpoint_every_episodes
+        ):
             clock()
             save_checkpoint(run_dir, config, state, online, target, optimizer, replay, predictor)
     logger.finish(online, state)
     if state.updates == 0:
         warnings.warn(
             f"the run in {run_dir} made no gradient update (learning_starts="
-            f"{config.learning_starts}, updates_per_round={config.updates_per_round}, "
+            f"{config.train.learning_starts}, updates_per_round="
+            f"{config.train.updates_per_round}, "
             f"{config.total_episodes} episodes): model.pt is the untrained initial network",
             RuntimeWarning,
             stacklevel=2,
@@ -378,7 +402,7 @@ def train(config: TrainConfig, run_dir: str | Path, resume: bool = False) -> lis
 
 def record_evaluation(
     state: TrainingState,
-    config: TrainConfig,
+    config: Experiment,
     returns: dict[str, float],
     with_aux: bool,
     run_dir: Path,
@@ -389,7 +413,7 @@ def record_evaluation(
     n = state.loss_count
     row = {
         "episode": state.episodes,
-        "env_steps": state.episodes * config.episode_length,
+        "env_steps": state.episodes * config.env.episode_length,
         "updates": state.updates,
         "epsilon": config.epsilon(state.episodes),
         "train_return": float(returns["train"]),
@@ -406,6 +430,14 @@ def record_evaluation(
     logger.log(row)
 
 
+def baseline_episodes(config: Experiment, contexts, policy) -> EpisodeBatch:
+    """A reference policy's episodes on a set, in the run's environment."""
+    return evaluate_policy(
+        contexts, policy, config.env.params, config.env.extensions.environment_part(),
+        seed=stream_seed(config, EVAL_STREAM),
+    )  # fmt: skip
+
+
 def crossed_multiple(before: int, after: int, every: int) -> bool:
     """Whether a count went past a multiple of ``every`` going from ``before`` to ``after``
     (a round of episodes may cross an evaluation or checkpoint point without landing on it)."""
@@ -415,7 +447,7 @@ def crossed_multiple(before: int, after: int, every: int) -> bool:
 class RunLogger:
     """Progress bar and TensorBoard, both optional extras of a run (never its record)."""
 
-    def __init__(self, run_dir: Path, config: TrainConfig, state: TrainingState) -> None:
+    def __init__(self, run_dir: Path, config: Experiment, state: TrainingState) -> None:
         from torch.utils.tensorboard import SummaryWriter
         from tqdm.auto import tqdm
 
@@ -424,7 +456,8 @@ class RunLogger:
         self.writer = SummaryWriter(str(run_dir / "tensorboard"), purge_step=state.episodes)
         self.bar = tqdm(
             total=config.total_episodes, initial=state.episodes, unit="ep",
-            disable=not config.progress, dynamic_ncols=True, desc=config.arch, mininterval=1.0,
+            disable=not config.train.progress, dynamic_ncols=True, desc=config.agent.arch,
+            mininterval=1.0,
         )  # fmt: skip
         self.last = {}
 

@@ -31,13 +31,7 @@ import torch
 
 from spikectl.agents import make_agent
 from spikectl.agents.stacked import StackedNetworks
-from spikectl.envs.rollout import (
-    do_nothing_policy,
-    evaluate_policy,
-    make_random_policy,
-    run_episodes,
-)
-from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.envs.rollout import do_nothing_policy, make_random_policy, run_episodes
 from spikectl.training.checkpoint import (
     RunDirError,
     TrainingState,
@@ -45,10 +39,17 @@ from spikectl.training.checkpoint import (
     run_lock,
     save_model,
 )
-from spikectl.training.config import TrainConfig
-from spikectl.training.contexts import load_or_make_contexts
+from spikectl.training.config import Experiment
+from spikectl.training.contexts import (
+    COLLECT_STREAM,
+    EVAL_STREAM,
+    load_or_make_contexts,
+    make_env,
+    stream_seed,
+)
 from spikectl.training.dqn import (
     RunLogger,
+    baseline_episodes,
     batch_tensors,
     build_networks,
     build_predictor,
@@ -72,12 +73,12 @@ def seed_dirs(run_dir: str | Path, seeds: list[int]) -> list[Path]:
 
 
 def train_seeds(
-    config: TrainConfig, seeds: list[int], run_dir: str | Path, resume: bool = False
+    config: Experiment, seeds: list[int], run_dir: str | Path, resume: bool = False
 ) -> list[list[dict]]:
     """``config`` with each of ``seeds`` in one process: RUN_DIR/seed=S per seed."""
     if not seeds:
         raise ValueError("--seeds needs at least one seed")
-    configs = [dataclasses.replace(config, seed=seed) for seed in seeds]
+    configs = [config.with_seed(seed) for seed in seeds]
     return train_group(configs, seed_dirs(run_dir, list(seeds)), run_dir, resume)
 
 
@@ -85,7 +86,7 @@ class GroupPolicy:
     """Acts for K seeds at once: the sub-environments hold K blocks of E episodes, block k
     played by seed k's online network with seed k's epsilon and generator."""
 
-    def __init__(self, online: StackedNetworks, epsilon: float, rngs, config: TrainConfig):
+    def __init__(self, online: StackedNetworks, epsilon: float, rngs, config: Experiment):
         self.online, self.epsilon, self.rngs, self.config = online, epsilon, rngs, config
         self.state = None
 
@@ -97,13 +98,13 @@ class GroupPolicy:
                 np.asarray(observations[key]).astype(
                     np.float32 if key in ("voltage", "pattern") else np.int64, copy=False
                 ),
-                device=self.config.device,
+                device=self.config.train.device,
             ).unflatten(0, (K, -1))  # [K, E, ...]
             for key in ("voltage", "target", "pattern", "step", "last_action")
         }
         if self.state is None:
             E, n = obs["voltage"].shape[1:]
-            state = self.online.template.initial_state(E, n, device=self.config.device)
+            state = self.online.template.initial_state(E, n, device=self.config.train.device)
             self.state = tuple(s.expand(K, *s.shape).clone() for s in state)  # [K, E, ...]
         q_values, self.state = self.online.call("step", obs, self.state)  # [K, E, n+1]
         legal = torch.as_tensor(action_mask, device=q_values.device).unflatten(0, (K, -1))
@@ -113,32 +114,35 @@ class GroupPolicy:
         masks = action_mask.reshape(K, -1, action_mask.shape[-1])  # [K, E, n+1]
         return np.concatenate([
             explore(greedy[k], masks[k], self.epsilon, self.rngs[k],
-                    self.config.explore_do_nothing)
+                    self.config.train.explore_do_nothing)
             for k in range(K)
         ])  # fmt: skip
 
 
-def plain_networks(online: StackedNetworks, configs: list[TrainConfig]) -> list[torch.nn.Module]:
+def plain_networks(online: StackedNetworks, configs: list[Experiment]) -> list[torch.nn.Module]:
     """Each seed's online network as the plain module ``make_agent`` builds (nn.LSTM and
     all), holding that seed's current weights: what its model.pt will load into."""
     networks = []
     for k, config in enumerate(configs):
-        network = make_agent(config.arch, config.n_neurons, config.episode_length, config.sizes)
+        network = make_agent(
+            config.agent.arch, config.env.n_observed, config.env.episode_length,
+            config.agent.sizes, params=config.env.params,
+        )  # fmt: skip
         network.load_state_dict(online.state_dict(k))
-        networks.append(network.to(config.device))
+        networks.append(network.to(config.train.device))
     return networks
 
 
-def _check_group(configs: list[TrainConfig], run_dirs: list[Path]) -> None:
+def _check_group(configs: list[Experiment], run_dirs: list[Path]) -> None:
     if not configs:
         raise ValueError("a seed group needs at least one config")
     if len(configs) != len(run_dirs):
         raise ValueError(f"{len(configs)} configs but {len(run_dirs)} run directories")
-    first = dataclasses.replace(configs[0], seed=0)
+    first = configs[0].with_seed(0)
     for config in configs[1:]:
-        if dataclasses.replace(config, seed=0) != first:
+        if config.with_seed(0) != first:
             raise ValueError("the configs of a seed group may differ only in seed")
-    seeds = [config.seed for config in configs]
+    seeds = [config.train.seed for config in configs]
     if len(set(seeds)) != len(seeds):
         raise ValueError(f"the seeds of a group must be distinct, got {seeds}")
     if len({Path(d).resolve() for d in run_dirs}) != len(run_dirs):
@@ -146,7 +150,7 @@ def _check_group(configs: list[TrainConfig], run_dirs: list[Path]) -> None:
 
 
 def train_group(
-    configs: list[TrainConfig],
+    configs: list[Experiment],
     run_dirs: list[str | Path],
     group_dir: str | Path,
     resume: bool = False,
@@ -155,7 +159,7 @@ def train_group(
     run_dirs = [Path(d) for d in run_dirs]
     group_dir = Path(group_dir)
     _check_group(configs, run_dirs)
-    check_device(configs[0].device)
+    check_device(configs[0].train.device)
     with contextlib.ExitStack() as locks:
         locks.enter_context(run_lock(group_dir))
         for run_dir in run_dirs:
@@ -164,13 +168,13 @@ def train_group(
 
 
 def _train_group(
-    configs: list[TrainConfig], run_dirs: list[Path], group_dir: Path, resume: bool
+    configs: list[Experiment], run_dirs: list[Path], group_dir: Path, resume: bool
 ) -> list[list[dict]]:
     config = configs[0]  # the settings every seed shares
-    K, device = len(configs), config.device
+    K, device = len(configs), config.train.device
     resume = prepare_group(configs, run_dirs, group_dir, resume)
-    if config.torch_threads:
-        torch.set_num_threads(config.torch_threads)
+    if config.train.torch_threads:
+        torch.set_num_threads(config.train.torch_threads)
     sets = [load_or_make_contexts(c, d) for c, d in zip(configs, run_dirs, strict=True)]
     train_set, test_set, val_set = sets[0]
     checksums = {tuple(s.checksum() if s is not None else None for s in group) for group in sets}
@@ -183,11 +187,12 @@ def _train_group(
     predictors = [build_predictor(c, pair[0]) for c, pair in zip(configs, networks, strict=True)]
     predictor = None if predictors[0] is None else StackedNetworks(predictors)
     trained = online.parameters() + (predictor.parameters() if predictor else [])
-    optimizer = torch.optim.Adam(trained, lr=config.learning_rate)
+    optimizer = torch.optim.Adam(trained, lr=config.train.learning_rate)
     replays = [
-        EpisodeReplay(config.buffer_size, config.n_neurons, config.episode_length) for _ in configs
+        EpisodeReplay(config.train.buffer_size, config.env.n_observed, config.env.episode_length)
+        for _ in configs
     ]
-    states = [TrainingState(rng=np.random.default_rng(np.random.SeedSequence(c.seed)))
+    states = [TrainingState(rng=np.random.default_rng(np.random.SeedSequence(c.train.seed)))
               for c in configs]  # fmt: skip
     if resume:
         states = load_group_checkpoint(
@@ -197,25 +202,32 @@ def _train_group(
         for c, state in zip(configs, states, strict=True):
             state.baselines = {
                 name: {
-                    split: float(evaluate_policy(contexts, policy).returns.mean())
+                    split: float(baseline_episodes(c, contexts, policy).returns.mean())
                     for split, contexts in (("train", train_set), ("test", test_set))
                 }
                 for name, policy in (
-                    ("do_nothing", do_nothing_policy), ("random", make_random_policy(c.seed)),
+                    ("do_nothing", do_nothing_policy),
+                    ("random", make_random_policy(c.train.seed)),
                 )
             }  # fmt: skip
 
-    E = config.num_envs
-    collect_env = NeuronControlVectorEnv(K * E, contexts=train_set)
+    E = config.train.num_envs
+    collect_env = make_env(config, train_set, K * E)
     eval_envs = {
-        split: NeuronControlVectorEnv(len(contexts), contexts=contexts)
+        split: make_env(config, contexts, len(contexts))
         for split, contexts in (("train", train_set), ("test", test_set), ("val", val_set))
         if contexts is not None
     }
-    targets = np.array([c.target for c in train_set], dtype=np.int64)
+    targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
     patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
     loggers = [
-        RunLogger(d, dataclasses.replace(c, progress=c.progress and k == 0), s)
+        RunLogger(
+            d,
+            dataclasses.replace(
+                c, train=dataclasses.replace(c.train, progress=c.train.progress and k == 0)
+            ),
+            s,
+        )
         for k, (c, d, s) in enumerate(zip(configs, run_dirs, states, strict=True))
     ]
     started = time.perf_counter() - states[0].wall_time_s
@@ -232,7 +244,10 @@ def _train_group(
         # model.pt (and as a single run scores the same weights).
         networks = plain_networks(online, configs)
         returns = {
-            split: [greedy_returns(network, env, device) for network in networks]
+            split: [
+                greedy_returns(network, env, device, seed)
+                for network, seed in zip(networks, eval_seeds, strict=True)
+            ]
             for split, env in eval_envs.items()
         }
         for k, (state, run_dir) in enumerate(zip(states, run_dirs, strict=True)):
@@ -250,10 +265,16 @@ def _train_group(
 
     batched_losses = torch.func.vmap(seed_losses, in_dims=(0, 0, 0 if predictor else None, 0))
 
+    eval_seeds = [stream_seed(c, EVAL_STREAM) for c in configs]
     if not states[0].metrics:
         evaluate()
     while states[0].episodes < config.total_episodes:
         epsilon = config.epsilon(states[0].episodes)
+        # Seed k's block of sub-environments draws what its single run's would.
+        collect_env.reset(seed=[
+            stream_seed(c, COLLECT_STREAM, states[0].episodes) + i for c in configs
+            for i in range(E)
+        ])  # fmt: skip
         contexts = np.concatenate([s.rng.integers(len(train_set), size=E) for s in states])
         policy = GroupPolicy(online, epsilon, [s.rng for s in states], config)
         episodes = run_episodes(collect_env, contexts, policy)
@@ -267,10 +288,10 @@ def _train_group(
         for state in states:
             state.episodes += E
         loggers[0].progress(E, epsilon, float(episodes.returns.mean()))  # episodes per seed
-        if len(replays[0]) >= max(config.learning_starts, 1):
-            for _ in range(config.updates_per_round):
+        if len(replays[0]) >= max(config.train.learning_starts, 1):
+            for _ in range(config.train.updates_per_round):
                 seed_tensors = [
-                    batch_tensors(replay.sample(config.batch_size, state.rng), device)
+                    batch_tensors(replay.sample(config.train.batch_size, state.rng), device)
                     for replay, state in zip(replays, states, strict=True)
                 ]
                 tensors = stack_seeds(seed_tensors)  # every tensor [K, B, ...]
@@ -280,26 +301,28 @@ def _train_group(
                     predictor.params if predictor else None,
                     tensors,
                 )  # td, aux: [K]
-                losses = td if predictor is None else td + config.aux_voltage_weight * aux
+                losses = td if predictor is None else td + config.train.aux_voltage_weight * aux
                 _check_finite_losses(losses, states, run_dirs)
                 optimizer.zero_grad(set_to_none=True)
                 losses.sum().backward()  # seeds' gradients stay apart: d(sum)/d(loss_k) = 1
-                if config.max_grad_norm > 0:
-                    clip_grad_norm_per_seed(trained, config.max_grad_norm)
+                if config.train.max_grad_norm > 0:
+                    clip_grad_norm_per_seed(trained, config.train.max_grad_norm)
                 optimizer.step()
                 with torch.no_grad():
                     for name in target.names:
-                        target.params[name].lerp_(online.params[name], config.tau)
+                        target.params[name].lerp_(online.params[name], config.train.tau)
                 for state, td_k, aux_k in zip(states, td.tolist(), aux.tolist(), strict=True):
                     state.updates += 1
                     state.loss_sum += td_k
                     state.aux_loss_sum += aux_k
                     state.loss_count += 1
         finished = states[0].episodes >= config.total_episodes
-        if finished or crossed_multiple(before, states[0].episodes, config.eval_every_episodes):
+        if finished or crossed_multiple(
+            before, states[0].episodes, config.train.eval_every_episodes
+        ):
             evaluate()
         if finished or crossed_multiple(
-            before, states[0].episodes, config.checkpoint_every_episodes
+            before, states[0].episodes, config.train.checkpoint_every_episodes
         ):
             clock()
             save_group_checkpoint(
@@ -315,7 +338,8 @@ def _train_group(
     if states[0].updates == 0:
         warnings.warn(
             f"the seed group in {group_dir} made no gradient update (learning_starts="
-            f"{config.learning_starts}, updates_per_round={config.updates_per_round}, "
+            f"{config.train.learning_starts}, updates_per_round="
+            f"{config.train.updates_per_round}, "
             f"{config.total_episodes} episodes): each model.pt is the untrained initial network",
             RuntimeWarning,
             stacklevel=2,

@@ -22,8 +22,9 @@ from spikectl.training.checkpoint import (
     load_model_weights,
     read_config,
 )
+from spikectl.training.config import Experiment
 from spikectl.training.contexts import TEST_FILE, TRAIN_FILE, VAL_FILE
-from spikectl.training.dqn import EpsilonGreedyPolicy
+from spikectl.training.dqn import EpsilonGreedyPolicy, baseline_episodes
 
 
 @dataclass(frozen=True)
@@ -58,7 +59,10 @@ def load_agent(run_dir: str | os.PathLike, n_neurons: int | None = None) -> torc
     """
     run_dir = Path(run_dir)
     config = read_config(run_dir)
-    network = make_agent(config.arch, config.n_neurons, config.episode_length, config.sizes)
+    network = make_agent(
+        config.agent.arch, config.env.n_observed if n_neurons is None else n_neurons,
+        config.env.episode_length, config.agent.sizes, params=config.env.params,
+    )  # fmt: skip
     if (run_dir / MODEL_FILE).exists():
         weights = load_model_weights(run_dir / MODEL_FILE)
     elif (run_dir / CHECKPOINT_FILE).exists():
@@ -69,17 +73,23 @@ def load_agent(run_dir: str | os.PathLike, n_neurons: int | None = None) -> torc
         network.load_state_dict(weights)
     except RuntimeError as error:
         raise RunDirError(
-            f"the weights in {run_dir} do not fit a {config.arch} of the saved config: "
+            f"the weights in {run_dir} do not fit a {config.agent.arch} of the saved config: "
             f"{str(error).splitlines()[0]}"
         ) from error
     network.eval()
     return network
 
 
-def greedy_episodes(network: torch.nn.Module, contexts: ContextSet) -> EpisodeBatch:
-    """One greedy episode on every context of the set, in one batch."""
+def greedy_episodes(
+    network: torch.nn.Module, contexts: ContextSet, config: Experiment | None = None
+) -> EpisodeBatch:
+    """One greedy episode on every context of the set, in one batch; with a run's
+    ``config``, in the run's environment (its params, extensions and evaluation seed,
+    as its metrics.csv scored them)."""
     policy = EpsilonGreedyPolicy(network, 0.0, np.random.default_rng(0), "cpu")
-    return evaluate_policy(contexts, policy)
+    if config is None:
+        return evaluate_policy(contexts, policy)
+    return baseline_episodes(config, contexts, policy)
 
 
 def evaluate_run(
@@ -91,6 +101,11 @@ def evaluate_run(
     config = read_config(run_dir)
     if contexts is not None:
         sets = {Path(contexts).name: ContextSet.load(contexts)}
+        if sets[Path(contexts).name].params != config.env.params:
+            raise ValueError(
+                f"{contexts} was made with other NeuronParams than the run's environment "
+                f"({run_dir / 'config.json'}): the agent would play another model"
+            )
     else:
         sets = {
             "train": ContextSet.load(run_dir / TRAIN_FILE),
@@ -101,14 +116,14 @@ def evaluate_run(
     network = load_agent(run_dir)
     results = []
     for name, context_set in sets.items():
-        if context_set.episode_length != config.episode_length:
+        if context_set.episode_length != config.env.episode_length:
             raise ValueError(
                 f"{name}: episodes of {context_set.episode_length} steps; the agent was "
-                f"trained on {config.episode_length} (its pattern encoder has that width)"
+                f"trained on {config.env.episode_length} (its pattern encoder has that width)"
             )
-        with torch_threads(config.torch_threads):
-            episodes = greedy_episodes(network, context_set)
-        baseline = float(evaluate_policy(context_set, do_nothing_policy).returns.mean())
+        with torch_threads(config.train.torch_threads):
+            episodes = greedy_episodes(network, context_set, config)
+        baseline = float(baseline_episodes(config, context_set, do_nothing_policy).returns.mean())
         results.append(SplitResult(name, episodes.returns, baseline))
     return results
 

@@ -29,10 +29,11 @@ from spikectl.training.checkpoint import (
     read_config,
     remove_temporaries,
     restore_state,
+    saved_config,
     state_payload,
     torch_bytes,
 )
-from spikectl.training.config import TrainConfig
+from spikectl.training.config import Experiment
 
 GROUP_FILE = "group.json"
 GROUP_CHECKPOINT_FILE = "group_checkpoint.pt"
@@ -40,7 +41,7 @@ GROUP_FORMAT = "spikectl.group_checkpoint"
 GROUP_VERSION = 1
 
 
-def group_description(configs: list[TrainConfig], run_dirs: list[Path], group_dir: Path) -> dict:
+def group_description(configs: list[Experiment], run_dirs: list[Path], group_dir: Path) -> dict:
     """What group.json holds: the seeds' configs and run directories (relative to the
     group directory when inside it)."""
     return {
@@ -65,8 +66,19 @@ def _read_description(group_dir: Path) -> dict:
         raise RunDirError(f"{path} is not a valid seed-group file: {first_line(error)}") from None
 
 
+def _normalised(description: dict, group_dir: Path) -> dict:
+    """A saved group.json with its configs in today's form (flat ones before the tree)."""
+    try:
+        configs = [Experiment.from_dict(values).to_dict() for values in description["configs"]]
+    except (KeyError, TypeError, ValueError) as error:
+        raise RunDirError(
+            f"{group_dir / GROUP_FILE} is not a valid seed-group file: {first_line(error)}"
+        ) from None
+    return json.loads(json.dumps({**description, "configs": configs}))
+
+
 def prepare_group(
-    configs: list[TrainConfig], run_dirs: list[Path], group_dir: Path, resume: bool
+    configs: list[Experiment], run_dirs: list[Path], group_dir: Path, resume: bool
 ) -> bool:
     """Create the group and its seeds' run directories, or check that ``group_dir`` holds
     this group to resume. Returns whether there is a group checkpoint to resume from; a
@@ -74,7 +86,7 @@ def prepare_group(
     description = json.loads(json.dumps(group_description(configs, run_dirs, group_dir)))
     has_file = (group_dir / GROUP_FILE).exists()
     has_checkpoint = (group_dir / GROUP_CHECKPOINT_FILE).exists()
-    if has_file and _read_description(group_dir) != description:
+    if has_file and _normalised(_read_description(group_dir), group_dir) != description:
         raise RunDirError(
             f"{group_dir} holds another seed group (its {GROUP_FILE} has other configs or "
             "seeds): choose another --run-dir"
@@ -147,7 +159,7 @@ def load_group_checkpoint(
     """Restore a group saved by ``save_group_checkpoint``; refuse a damaged one, one of
     another format or configs, or one whose networks hold NaN or infinite values."""
     path = Path(group_dir) / GROUP_CHECKPOINT_FILE
-    payload = load_torch_file(path, "spikectl seed-group checkpoint", configs[0].device)
+    payload = load_torch_file(path, "spikectl seed-group checkpoint", configs[0].train.device)
     if not isinstance(payload, dict) or payload.get("format") != GROUP_FORMAT:
         raise RunDirError(f"{path} is not a spikectl seed-group checkpoint")
     if payload.get("format_version") != GROUP_VERSION:
@@ -158,7 +170,7 @@ def load_group_checkpoint(
     checksum = payload.pop("checksum", None)
     if payload_checksum(payload) != checksum:
         raise RunDirError(f"{path} is damaged: its checksum does not match its contents")
-    if payload["configs"] != [config.to_dict() for config in configs]:
+    if [saved_config(values) for values in payload["configs"]] != configs:
         raise RunDirError(f"{path} was written for other configs than {group_dir / GROUP_FILE}")
     check_finite(payload["online"], str(path))
     check_finite(payload["target"], str(path))
@@ -176,12 +188,12 @@ def load_group_checkpoint(
     return states
 
 
-def group_configs(group_dir: str | os.PathLike) -> tuple[list[TrainConfig], list[Path]]:
+def group_configs(group_dir: str | os.PathLike) -> tuple[list[Experiment], list[Path]]:
     """The seeds' configs and run directories saved in a group directory."""
     group_dir = Path(group_dir)
     description = read_group(group_dir)
     try:
-        configs = [TrainConfig.from_dict(values) for values in description["configs"]]
+        configs = [Experiment.from_dict(values) for values in description["configs"]]
         run_dirs = [group_dir / relative for relative in description["run_dirs"]]
     except (KeyError, TypeError, ValueError) as error:
         raise RunDirError(

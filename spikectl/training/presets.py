@@ -1,0 +1,89 @@
+"""The presets: instances of the configuration tree (``spikectl.training.config``).
+
+- ``paper``: Table 2 exactly (1 M environment steps, batches of 5 episodes, ...): every
+  default of the tree;
+- ``quick``: the README's main job, under 15 minutes on one CPU core;
+- ``smoke``: seconds, for tests.
+"""
+
+from __future__ import annotations
+
+from spikectl.agents import AgentSizes
+from spikectl.training.config import AgentConfig, EnvConfig, Experiment, TrainConfig
+
+PAPER = Experiment()
+
+QUICK = Experiment(
+    agent=AgentConfig(
+        sizes=AgentSizes(
+            lstm_hidden=64,
+            attn_width=64,
+            attn_ff=128,
+            tdrqn_head_hidden=(128, 64),
+            ff_hidden=256,
+            head_hidden=(256, 128, 64),
+            target_voltage_in_input=True,
+        ),
+    ),
+    train=TrainConfig(
+        total_env_steps=264_000,
+        num_envs=16,
+        updates_per_round=32,
+        batch_size=8,
+        buffer_size=40_000,
+        learning_starts=16,
+        learning_rate=2e-3,
+        gamma=0.9,
+        tau=0.05,
+        n_step=3,
+        aux_voltage_weight=1.0,
+        explore_do_nothing=0.75,
+        eval_every_episodes=400,
+        checkpoint_every_episodes=800,
+        torch_threads=1,
+    ),
+)
+"""The README's main job: ~14 minutes on one core of the project's 2-core machine
+(docs/training.md, "Learning fast"): 4 400 episodes, 8 800 updates of 8 episodes,
+n-step targets, the auxiliary next-voltage loss, the target's voltage in each neuron's
+input, do-nothing-biased exploration, gamma 0.9, lr 2e-3, half-width networks, one Torch
+thread."""
+
+SMOKE = Experiment(
+    env=EnvConfig(episode_length=20, n_neurons=5, n_train=6, n_test=6, n_val=6),
+    agent=AgentConfig(
+        sizes=AgentSizes(
+            lstm_hidden=16,
+            target_embed=4,
+            pattern_embed=4,
+            ff_hidden=32,
+            head_hidden=(32,),
+            tdrqn_head_hidden=(32,),
+            attn_width=16,
+            attn_ff=32,
+            value_hidden=(16,),
+        ),
+    ),
+    train=TrainConfig(
+        total_env_steps=40 * 20 * 8,
+        num_envs=8,
+        updates_per_round=2,
+        batch_size=4,
+        buffer_size=200,
+        learning_starts=8,
+        learning_rate=1e-3,
+        eval_every_episodes=80,
+        checkpoint_every_episodes=80,
+        torch_threads=1,
+        progress=False,
+    ),
+)
+"""Seconds on one core: 5-neuron networks, 20-step episodes, tiny networks (tests)."""
+
+PRESETS: dict[str, Experiment] = {"paper": PAPER, "quick": QUICK, "smoke": SMOKE}
+PRESET_HELP: dict[str, str] = {
+    "paper": "Table 2 exactly: 1 M environment steps, the paper's network sizes (days on a CPU).",
+    "quick": "The main job: n-step targets, auxiliary loss, half-width networks (~15 min, 1 core).",
+    "smoke": "Seconds: 5-neuron networks, 20-step episodes, tiny networks (for tests).",
+}
+"""One line per preset, for ``spikectl train --help``."""
