@@ -31,12 +31,20 @@ from spikectl.params import NeuronParams
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.discrete import DiscreteConnectivityEstimate
 from spikectl.planning.identify import _NOISE_FREE_SD, ConnectivityEstimate, ObservedState
-from spikectl.planning.qmdp import context_likelihood, expected_returns, synapse_entropy
+from spikectl.planning.qmdp import qmdp_action
 from spikectl.simulator import DO_NOTHING, advance
 
 IDENTIFICATIONS = ("gaussian", "discrete")
 """How the policy identifies G: a Gaussian posterior (ridge regression, any n) or the
 exact posterior over {-1, 0, +1} (n <= 11)."""
+
+# The constructor's arguments besides ``params``, each kept as an attribute of that name
+# (what :meth:`IdentifyAndPlan.vector_policy` copies).
+_SETTINGS = (
+    "width", "horizon", "known_sd", "noise_mV", "hypotheses", "seed", "probe",
+    "identification", "plan_on", "spike_margin_sd", "gamble_networks",
+    "gamble_information", "gamble_horizon", "gamble_width", "gamble_candidates",
+)  # fmt: skip
 
 
 class IdentifyAndPlan:
@@ -303,34 +311,18 @@ class IdentifyAndPlan:
         return int(np.argmax(score))
 
     def _gamble(self, known, target, mask, pattern, step) -> int:
-        """The action of highest expected return over networks drawn from the estimate
-        (QMDP), plus ``gamble_information`` times the entropy of the stimulated ready
-        neuron's unknown synapse onto the target; ties go to the probe, then to the
-        first candidate (do nothing)."""
-        uniforms = tuple(draws[: self.gamble_networks] for draws in self._uniforms)
-        networks = self.estimate.sample(self.known_sd, *uniforms)  # [K, n, n]
-        legal = (np.flatnonzero(mask) + DO_NOTHING).astype(np.int64)  # do nothing first
-        likelihood = context_likelihood(networks, target, pattern, legal.shape[0])
-        if not likelihood.sum() > 0:
-            likelihood = np.ones(networks.shape[0])  # the estimate contradicts the context
+        """The action of highest expected return over K networks drawn from the
+        estimate, plus the information bonus (:func:`qmdp_action`)."""
         probe = self._probe(known, target, mask, count=False)
-        candidates = legal
-        if legal.shape[0] > self.gamble_candidates:
-            excites = self.estimate.excitation_probability(target, self.known_sd)
-            neurons = legal[1:][np.argsort(-excites[legal[1:]], kind="stable")]
-            keep = dict.fromkeys([DO_NOTHING, probe, *neurons.tolist()])
-            candidates = np.array(list(keep)[: self.gamble_candidates], dtype=np.int64)
-        values = expected_returns(
-            networks, likelihood, self._tracker.state, candidates, legal, pattern, step,
-            self.gamble_horizon, self.gamble_width, target, self.params,
+        uniforms = (draws[: self.gamble_networks] for draws in self._uniforms)
+        action = qmdp_action(
+            self.estimate.sample(self.known_sd, *uniforms),
+            self.estimate.excitation_probability(target, self.known_sd), self._tracker.state,
+            self._ready(), known[:, target], probe, (np.flatnonzero(mask) + DO_NOTHING),
+            pattern, step, target, self.params, horizon=self.gamble_horizon,
+            width=self.gamble_width, information=self.gamble_information,
+            max_candidates=self.gamble_candidates,
         )  # fmt: skip
-        entropy = synapse_entropy(networks[:, :, target], likelihood)  # [n]
-        neuron = np.maximum(candidates, 0)
-        teaches = (candidates != DO_NOTHING) & self._ready()[neuron] & ~known[neuron, target]
-        values = values + self.gamble_information * np.where(teaches, entropy[neuron], 0.0)
-        probe_value = values[np.flatnonzero(candidates == probe)[0]]
-        best = int(candidates[np.argmax(values)])
-        action = probe if probe_value >= values.max() - 1e-12 else best
         self.probes += action != DO_NOTHING
         self.gambles += 1
         return action
@@ -347,25 +339,9 @@ class IdentifyAndPlan:
     def vector_policy(self, num_envs: int):
         """A batched policy ``policy(observations, action_mask) -> actions`` for
         :func:`spikectl.rollout.run_episodes`: one independent copy per environment."""
+        settings = {name: getattr(self, name) for name in _SETTINGS}
         copies = [
-            IdentifyAndPlan(
-                self.params,
-                self.width,
-                self.horizon,
-                self.known_sd,
-                self.noise_mV,
-                hypotheses=self.hypotheses,
-                seed=self.seed + index,
-                probe=self.probe,
-                identification=self.identification,
-                plan_on=self.plan_on,
-                spike_margin_sd=self.spike_margin_sd,
-                gamble_networks=self.gamble_networks,
-                gamble_information=self.gamble_information,
-                gamble_horizon=self.gamble_horizon,
-                gamble_width=self.gamble_width,
-                gamble_candidates=self.gamble_candidates,
-            )  # fmt: skip
+            IdentifyAndPlan(self.params, **{**settings, "seed": self.seed + index})
             for index in range(num_envs)
         ]
 

@@ -202,3 +202,61 @@ def synapse_entropy(columns: np.ndarray, network_weights: np.ndarray) -> np.ndar
         share = share_of @ (columns == value)  # [n]
         entropy -= share * np.log(np.where(share > 0, share, 1.0))
     return entropy
+
+
+def qmdp_action(
+    networks: np.ndarray,
+    excitation: np.ndarray,
+    state: SimulatorState,
+    ready: np.ndarray,
+    known_target_synapse: np.ndarray,
+    probe: int,
+    legal: np.ndarray,
+    pattern: np.ndarray,
+    step: int,
+    target: int,
+    params: NeuronParams,
+    horizon: int,
+    width: int,
+    information: float,
+    max_candidates: int,
+) -> int:
+    """The legal action of highest Q (:func:`expected_returns`, the networks weighted by
+    :func:`context_likelihood`) plus ``information`` times the entropy of the stimulated
+    neuron's synapse onto the target, where that neuron is ready and the synapse
+    unknown. Ties go to ``probe``, then to do nothing.
+
+    Args:
+        networks: [K, n, n] int8 networks drawn from the estimate.
+        excitation: [n] P(neuron excites the target), to pick the candidates when more
+            than ``max_candidates`` actions are legal (do nothing, the probe and the
+            likeliest excitatory inputs are valued).
+        state: the current simulator state (batch of one).
+        ready: [n] bool, neurons that release if they spike now.
+        known_target_synapse: [n] bool, synapses onto the target the estimate knows.
+        probe: the action the probing rule would take (a legal action).
+        legal: int64 [A] legal actions, do nothing (-1) first.
+        pattern, step, target, params: the episode, the current step, the target, the model.
+        horizon, width: of each continuation (:func:`expected_returns`).
+        information: the bonus per nat.
+        max_candidates: at most this many actions are valued.
+    """
+    legal = np.asarray(legal, dtype=np.int64)
+    likelihood = context_likelihood(networks, target, pattern, legal.shape[0])
+    if not likelihood.sum() > 0:
+        likelihood = np.ones(networks.shape[0])  # the estimate contradicts the context
+    candidates = legal
+    if legal.shape[0] > max_candidates:
+        neurons = legal[1:][np.argsort(-excitation[legal[1:]], kind="stable")]
+        keep = dict.fromkeys([int(legal[0]), probe, *neurons.tolist()])
+        candidates = np.array(list(keep)[:max_candidates], dtype=np.int64)
+    values = expected_returns(networks, likelihood, state, candidates, legal, pattern, step,
+                              horizon, width, target, params)  # fmt: skip
+    entropy = synapse_entropy(networks[:, :, target], likelihood)  # [n]
+    neuron = np.maximum(candidates, 0)
+    teaches = (candidates >= 0) & ready[neuron] & ~known_target_synapse[neuron]
+    values = values + information * np.where(teaches, entropy[neuron], 0.0)
+    probe_value = values[np.flatnonzero(candidates == probe)[0]]
+    if probe_value >= values.max() - 1e-12:
+        return int(probe)
+    return int(candidates[np.argmax(values)])
