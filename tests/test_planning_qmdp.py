@@ -3,6 +3,7 @@ continuation search against the planner's, and the policy option."""
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 import pytest
 
@@ -141,3 +142,29 @@ def test_gamble_values_a_subset_of_actions_on_larger_networks():
     episodes = evaluate_policy(train, vector)
     assert sum(copy.gambles for copy in vector.copies) > 0
     assert np.all((episodes.returns >= 0) & (episodes.returns <= 1 + 1e-12))
+
+
+@pytest.mark.parametrize(
+    ("env_id", "extensions"),
+    [("spikectl/NeuronControlPartial-v0", None),
+     ("spikectl/NeuronControl-v0", {"observation_noise_mV": 2.0, "stochastic_release": True})],
+)  # fmt: skip
+def test_gamble_never_takes_an_illegal_action_under_extensions(env_id, extensions):
+    # Hidden neurons and noise break what the drawn networks assume; the choice must
+    # still be one of the legal actions (the environment raises otherwise).
+    kwargs = {} if extensions is None else {"extensions": extensions}
+    env = gym.make(env_id, n_train=3, n_test=3, **kwargs)
+    noise = env.unwrapped.extensions.observation_noise_mV
+    policy = IdentifyAndPlan(noise_mV=noise, width=8, gamble_networks=4, gamble_width=2,
+                             gamble_horizon=4)  # fmt: skip
+    gambles = 0
+    for episode in range(2):
+        observation, info = env.reset(seed=episode)
+        policy.reset()
+        terminated = False
+        while not terminated:
+            action = policy.act(observation, info)
+            assert info["action_mask"][action + 1]
+            observation, _, terminated, _, info = env.step(action)
+        gambles += policy.gambles
+    assert gambles > 0
