@@ -98,7 +98,7 @@ def _committed_target_spike(model: PlanningModel, state: SimulatorState) -> np.n
     return (next_voltage >= threshold) & (state.refractory_left[:, target] == 0)
 
 
-def _state_rows(
+def state_signature_rows(
     state: SimulatorState, release_interval: int, hypotheses: int, entries: int
 ) -> np.ndarray:
     """[entries, K * 4n] float64 rows, equal exactly for beam entries the dynamics
@@ -134,7 +134,7 @@ def _first_of_each(rows: np.ndarray) -> np.ndarray:
     return np.sort(first)
 
 
-def _take(state: SimulatorState, rows: np.ndarray) -> SimulatorState:
+def take_states(state: SimulatorState, rows: np.ndarray) -> SimulatorState:
     return SimulatorState(
         state.voltage_mV[rows], state.refractory_left[rows],
         state.steps_since_release[rows], state.released[rows],
@@ -189,7 +189,7 @@ def beam_search(
     resting = model.params.v_rest_mV
     # States are stored hypothesis-major: row h * size + e is beam entry e under
     # hypothesis h, so each hypothesis is one contiguous block for the kernel.
-    beam = _take(start, np.zeros(k, dtype=np.int64))  # [K * 1, n]
+    beam = take_states(start, np.zeros(k, dtype=np.int64))  # [K * 1, n]
     score = np.zeros(1)
     parents, choices, step_rewards_kept = [], [], []
     for t in range(start_step, end):
@@ -197,7 +197,7 @@ def beam_search(
         n_children = size * n_actions
         rows = np.repeat(np.arange(size), n_actions)  # [size * A]
         state_rows = (np.arange(k)[:, None] * size + rows[None, :]).ravel()  # [K * size * A]
-        children = _take(beam, state_rows)
+        children = take_states(beam, state_rows)
         child_actions = np.tile(actions, size)  # [size * A]
         voltage = np.empty((k * n_children, 1, n))
         spikes = np.empty((k * n_children, 1, n), dtype=bool)
@@ -219,9 +219,9 @@ def beam_search(
         depolarisation = np.clip(children.voltage_mV[:, model.target] - resting, -20.0, 20.0)
         ranking += _TIE_BREAK * depolarisation.reshape(k, n_children).mean(axis=0)
         order = np.argsort(-ranking, kind="stable")
-        rows_ordered = _state_rows(children, interval, k, n_children)[order]  # [C, K * 4n]
+        rows_ordered = state_signature_rows(children, interval, k, n_children)[order]  # [C, K * 4n]
         kept = order[_first_of_each(rows_ordered)][:width]
-        beam = _take(children, (np.arange(k)[:, None] * n_children + kept[None, :]).ravel())
+        beam = take_states(children, (np.arange(k)[:, None] * n_children + kept[None, :]).ravel())
         score = child_score[kept]
         parents.append(rows[kept])
         choices.append(child_actions[kept])

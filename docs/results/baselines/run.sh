@@ -21,5 +21,7 @@ spikectl baselines --split test --env spikectl/NeuronControl32-v0 --identify-wid
   --out $out/test_n32.csv | tee $out/test_n32.txt
 # Why identify-and-plan loses to the oracle (validation networks, not the test set)
 python $out/diagnose_identify.py | tee $out/diagnose_identify_n8.txt
+python $out/diagnose_identify.py --n-neurons 32 --size 20 --skip-first-action \
+  | tee $out/diagnose_identify_n32.txt
 # Tables and figure from the CSVs above
 python $out/plot_baselines.py $out docs/images/baselines.png

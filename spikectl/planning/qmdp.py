@@ -1,0 +1,262 @@
+"""Choose an action by its expected return over networks that the evidence allows (QMDP).
+
+Identify-and-plan plans on one estimate of the connectivity. Early in an episode that
+estimate knows little, and a wanted target spike needs a *gamble*: stimulate the
+neuron that most probably excites the target. This module values each candidate
+action a at step t by its expected return over K networks G_k drawn from the
+posterior, each continued by the best plan *for that network*:
+
+    Q(a) = sum_k w_k [ r_k(t, a) + max over continuations of the return of G_k ] / sum_k w_k
+
+the QMDP approximation (Littman, Cassandra & Kaelbling 1995): it assumes the network
+is known after this step, so it values what an action does, not what it teaches.
+The continuations are found by :func:`best_returns`, a beam search run for all
+(network, first action) pairs at once, each with its own beam.
+
+The weights w_k are what the evidence the Gaussian estimate does not use says about
+G_k (:func:`context_likelihood`): the environment drew the target uniformly among the
+neurons with an excitatory input, and drew the pattern from uniformly random actions,
+so a spike wanted at step 1 means the first random action was an excitatory input of
+the target.
+
+QMDP alone never pays to learn (every network counts as known after one step), so
+the policy adds :func:`synapse_entropy`, what a probe would teach about the target's
+inputs, times a small weight.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from spikectl.envs.env_support import step_rewards
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import SimulatorState, advance
+from spikectl.planning.beam import state_signature_rows, take_states
+
+# Weight of the target's depolarisation (mV) in the ranking: breaks ties only (as in beam).
+_TIE_BREAK = 1e-6
+_PROJECTION_SEED = 20261122
+
+
+def best_returns(
+    weights: np.ndarray,
+    start: SimulatorState,
+    pattern: np.ndarray,
+    start_step: int,
+    horizon: int,
+    width: int,
+    actions: np.ndarray,
+    target: int,
+    params: NeuronParams,
+) -> np.ndarray:
+    """[P] the best return over steps start_step .. start_step + horizon - 1 found for
+    each of P independent problems (problem p: network ``weights[p]`` from row p of
+    ``start``), by a beam of ``width`` distinct states per problem.
+
+    Args:
+        weights: [P, n, n] int8 or float64 signed weights in units of w_in.
+        start: the P start states (advanced copies are made; ``start`` is not changed).
+        pattern: [N] bool target pattern of the episode.
+        start_step: the first step searched.
+        horizon: steps searched (cut at the episode's end); 0 returns zeros.
+        width: states kept per problem and step.
+        actions: int64 [A] legal simulator actions, do nothing (-1) first.
+        target: the rewarded neuron.
+        params: the neuron parameters.
+    """
+    problems = weights.shape[0]
+    pattern = np.asarray(pattern, dtype=bool)
+    end = min(pattern.shape[0], start_step + horizon)
+    if end <= start_step:
+        return np.zeros(problems)
+    reward_if_spike, reward_if_silent = step_rewards(pattern)
+    n, n_actions = weights.shape[-1], actions.shape[0]
+    interval = min(params.min_release_interval_steps, 2**30)
+    leak = params.dt_ms / params.membrane_time_constant_ms
+    synaptic_step = params.dt_ms * params.synaptic_current_pA / params.capacitance_pF
+    threshold = params.v_threshold_mV - params.threshold_tolerance_mV
+    target_columns = weights[:, :, target].astype(np.float64)  # [P, n]
+    projection = np.random.default_rng(_PROJECTION_SEED).standard_normal(4 * n)
+    beam = take_states(start, np.arange(problems))
+    problem = np.arange(problems)  # [E] the problem of each beam entry, ascending
+    score = np.zeros(problems)
+    for t in range(start_step, end):
+        rows = np.repeat(np.arange(problem.shape[0]), n_actions)  # [C]
+        children = take_states(beam, rows)
+        child_problem = problem[rows]  # [C]
+        voltage = np.empty((rows.shape[0], 1, n))
+        spikes = np.empty((rows.shape[0], 1, n), dtype=bool)
+        child_actions = np.ascontiguousarray(np.tile(actions, problem.shape[0])[:, None])
+        advance(children, np.ascontiguousarray(weights[child_problem]), child_actions,
+                params, voltage, spikes)  # fmt: skip
+        spiked = spikes[:, 0, target]
+        child_score = score[rows] + np.where(spiked, reward_if_spike[t], reward_if_silent[t])
+        ranking = child_score.copy()
+        if t + 1 < end:
+            # The target's next step is committed now (its input takes one step).
+            drive = synaptic_step * np.einsum(
+                "cn,cn->c", children.released.astype(np.float64), target_columns[child_problem]
+            )  # [C]
+            before = children.voltage_mV[:, target]
+            committed = (before - (before - params.v_rest_mV) * leak + drive >= threshold) & (
+                children.refractory_left[:, target] == 0
+            )
+            ranking += np.where(committed, reward_if_spike[t + 1], reward_if_silent[t + 1])
+        depolarisation = children.voltage_mV[:, target] - params.v_rest_mV
+        ranking += _TIE_BREAK * np.clip(depolarisation, -20.0, 20.0)
+        # Problem-major, best first; then the first of each (problem, state) and at
+        # most ``width`` per problem.
+        order = np.lexsort((-ranking, child_problem))
+        hashed = (state_signature_rows(children, interval, 1, rows.shape[0]) @ projection)[order]
+        ordered_problem = child_problem[order]
+        by_state = np.lexsort((np.arange(order.shape[0]), hashed, ordered_problem))
+        first = np.ones(by_state.shape[0], dtype=bool)
+        first[1:] = (np.diff(ordered_problem[by_state]) != 0) | (np.diff(hashed[by_state]) != 0)
+        distinct = np.sort(by_state[first])  # positions in ``order``
+        kept_problem = ordered_problem[distinct]
+        rank = np.arange(distinct.shape[0]) - np.searchsorted(kept_problem, kept_problem)
+        kept = order[distinct[rank < width]]
+        beam, problem, score = take_states(children, kept), child_problem[kept], child_score[kept]
+    best = np.full(problems, -np.inf)
+    np.maximum.at(best, problem, score)
+    return best
+
+
+def expected_returns(
+    networks: np.ndarray,
+    network_weights: np.ndarray,
+    state: SimulatorState,
+    candidates: np.ndarray,
+    actions: np.ndarray,
+    pattern: np.ndarray,
+    step: int,
+    horizon: int,
+    width: int,
+    target: int,
+    params: NeuronParams,
+) -> np.ndarray:
+    """[A0] Q(a) for each candidate action: the w-weighted mean over the K networks of
+    the reward of ``step`` after a plus the best return of the next ``horizon - 1``
+    steps on that network.
+
+    Args:
+        networks: [K, n, n] int8 networks drawn from the posterior.
+        network_weights: [K] non-negative importance weights (not all 0).
+        state: the current simulator state (batch of one), before ``step``.
+        candidates: int64 [A0] the actions to value (legal ones).
+        actions: int64 [A] the legal actions of the continuations, do nothing first.
+        pattern, step, target, params: the episode, the current step, the target, the model.
+        horizon: steps valued, this one included (>= 1).
+        width: beam width of each continuation.
+    """
+    k, n_candidates = networks.shape[0], candidates.shape[0]
+    if horizon < 1:
+        raise ValueError(f"horizon must be >= 1, got {horizon}")
+    total = float(np.sum(network_weights))
+    if not total > 0:
+        raise ValueError("network_weights must have a positive sum")
+    weights = np.ascontiguousarray(np.repeat(networks, n_candidates, axis=0))  # [K * A0, n, n]
+    start = take_states(state, np.zeros(k * n_candidates, dtype=np.int64))
+    n = networks.shape[-1]
+    voltage = np.empty((k * n_candidates, 1, n))
+    spikes = np.empty((k * n_candidates, 1, n), dtype=bool)
+    first = np.ascontiguousarray(np.tile(candidates, k)[:, None])  # [K * A0, 1]
+    advance(start, weights, first, params, voltage, spikes)
+    reward_if_spike, reward_if_silent = step_rewards(np.asarray(pattern, dtype=bool))
+    values = np.where(spikes[:, 0, target], reward_if_spike[step], reward_if_silent[step])
+    values = values + best_returns(
+        weights, start, pattern, step + 1, horizon - 1, width, actions, target, params
+    )
+    return (network_weights / total) @ values.reshape(k, n_candidates)  # [A0]
+
+
+def context_likelihood(networks: np.ndarray, target: int, pattern: np.ndarray,
+                       n_actions: int) -> np.ndarray:  # fmt: skip
+    """[K] P(target, pattern[1] | G_k) up to a constant: what the context generator's
+    draws say about each network.
+
+    The generator (spikectl.contexts.generate_context) draws the target uniformly among
+    the neurons with an excitatory input (probability 1 / |candidates| if the target is
+    one, else 0) and the pattern from ``n_actions`` uniformly random legal actions from
+    rest; the target spikes at step 1 exactly when the first of them is one of its
+    excitatory inputs (probability e / n_actions with e of them).
+    """
+    excitatory = networks > 0  # [K, n, n]
+    candidates = excitatory.any(axis=1).sum(axis=1)  # [K]
+    inputs = excitatory[:, :, target].sum(axis=1)  # [K]
+    chosen = np.where(inputs > 0, 1.0 / np.maximum(candidates, 1), 0.0)
+    first_spike = inputs / n_actions if pattern[1] else 1.0 - inputs / n_actions
+    return chosen * first_spike
+
+
+def synapse_entropy(columns: np.ndarray, network_weights: np.ndarray) -> np.ndarray:
+    """[n] the entropy (nats) of each synapse i -> target over the K weighted networks.
+
+    Args:
+        columns: [K, n] the target's column of each network, in {-1, 0, +1}.
+        network_weights: [K] non-negative weights (not all 0).
+    """
+    share_of = network_weights / np.sum(network_weights)  # [K]
+    entropy = np.zeros(columns.shape[1])
+    for value in (-1, 0, 1):
+        share = share_of @ (columns == value)  # [n]
+        entropy -= share * np.log(np.where(share > 0, share, 1.0))
+    return entropy
+
+
+def qmdp_action(
+    networks: np.ndarray,
+    excitation: np.ndarray,
+    state: SimulatorState,
+    ready: np.ndarray,
+    known_target_synapse: np.ndarray,
+    probe: int,
+    legal: np.ndarray,
+    pattern: np.ndarray,
+    step: int,
+    target: int,
+    params: NeuronParams,
+    horizon: int,
+    width: int,
+    information: float,
+    max_candidates: int,
+) -> int:
+    """The legal action of highest Q (:func:`expected_returns`, the networks weighted by
+    :func:`context_likelihood`) plus ``information`` times the entropy of the stimulated
+    neuron's synapse onto the target, where that neuron is ready and the synapse
+    unknown. Ties go to ``probe``, then to do nothing.
+
+    Args:
+        networks: [K, n, n] int8 networks drawn from the estimate.
+        excitation: [n] P(neuron excites the target), to pick the candidates when more
+            than ``max_candidates`` actions are legal (do nothing, the probe and the
+            likeliest excitatory inputs are valued).
+        state: the current simulator state (batch of one).
+        ready: [n] bool, neurons that release if they spike now.
+        known_target_synapse: [n] bool, synapses onto the target the estimate knows.
+        probe: the action the probing rule would take (a legal action).
+        legal: int64 [A] legal actions, do nothing (-1) first.
+        pattern, step, target, params: the episode, the current step, the target, the model.
+        horizon, width: of each continuation (:func:`expected_returns`).
+        information: the bonus per nat.
+        max_candidates: at most this many actions are valued.
+    """
+    legal = np.asarray(legal, dtype=np.int64)
+    likelihood = context_likelihood(networks, target, pattern, legal.shape[0])
+    if not likelihood.sum() > 0:
+        likelihood = np.ones(networks.shape[0])  # the estimate contradicts the context
+    candidates = legal
+    if legal.shape[0] > max_candidates:
+        neurons = legal[1:][np.argsort(-excitation[legal[1:]], kind="stable")]
+        keep = dict.fromkeys([int(legal[0]), probe, *neurons.tolist()])
+        candidates = np.array(list(keep)[:max_candidates], dtype=np.int64)
+    values = expected_returns(networks, likelihood, state, candidates, legal, pattern, step,
+                              horizon, width, target, params)  # fmt: skip
+    entropy = synapse_entropy(networks[:, :, target], likelihood)  # [n]
+    neuron = np.maximum(candidates, 0)
+    teaches = (candidates >= 0) & ready[neuron] & ~known_target_synapse[neuron]
+    values = values + information * np.where(teaches, entropy[neuron], 0.0)
+    probe_value = values[np.flatnonzero(candidates == probe)[0]]
+    if probe_value >= values.max() - 1e-12:
+        return int(probe)
+    return int(candidates[np.argmax(values)])
