@@ -476,8 +476,9 @@ def _train_presets(env_id: str | None = None) -> Any:
 
 def _parse_train(argv: list[str]) -> TrainCommand:
     """The presets are tyro subcommands; without one, ``quick``. A registered --env
-    other than the default changes the defaults, so the flags are parsed again on that
-    environment: every flag given still overrides the variant's settings."""
+    other than the default changes the defaults, so the presets are built on that
+    environment before the flags are parsed: every flag given still overrides the
+    variant's settings (and a config never holds a variant id with the base settings)."""
     if "--preset" in argv or any(arg.startswith("--preset=") for arg in argv):
         raise ValueError(
             "--preset: the preset is a subcommand now: spikectl train paper|quick|smoke [FLAGS]"
@@ -485,11 +486,19 @@ def _parse_train(argv: list[str]) -> TrainCommand:
     if not argv or argv[0] not in PRESETS:
         argv = ["quick", *argv]
     kwargs = {"args": argv, "prog": "spikectl train", "command": "train"}
-    command = _cli(_train_presets(), default=_quick(), **kwargs)
-    env_id = command.config.env.id
-    if env_id != PRESETS[command.preset].env.id:
-        command = _cli(_train_presets(env_id), default=_quick(env_id), **kwargs)
-    return command
+    env_id = _env_flag(argv)
+    return _cli(_train_presets(env_id), default=_quick(env_id), **kwargs)
+
+
+def _env_flag(argv: list[str]) -> str | None:
+    """The value of ``--env ID`` / ``--env=ID`` (the last one given), or None."""
+    env_id = None
+    for index, arg in enumerate(argv):
+        if arg == "--env" and index + 1 < len(argv):
+            env_id = argv[index + 1]
+        elif arg.startswith("--env="):
+            env_id = arg.split("=", 1)[1]
+    return env_id
 
 
 def _quick(env_id: str | None = None) -> TrainCommand:

@@ -147,6 +147,16 @@ def test_cli_trains_a_variant_with_flags_over_its_settings(tmp_path, capsys):
     assert "over 6 contexts" in capsys.readouterr().out
 
 
+@pytest.mark.parametrize("env_flags", [["--env", NOISY], [f"--env={NOISY}"]])
+def test_cli_trains_a_variant_on_its_own_settings(env_flags, tmp_path):
+    """--env alone takes every setting of the variant (here its 2 mV noise)."""
+    run = tmp_path / "run"
+    main(["train", "smoke", *env_flags, "--total-env-steps", "320", "--run-dir", str(run)])
+    config = read_config(run)
+    assert config.env.id == NOISY and config.env.n_neurons == 5
+    assert config.env.extensions.observation_noise_mV == 2.0
+
+
 def test_train_help_shows_the_defaults_it_describes(capsys):
     with pytest.raises(SystemExit):
         main(["train", "--help"])
