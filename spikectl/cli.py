@@ -329,6 +329,14 @@ def sweep(command: SweepCommand) -> None:
         raise ValueError(f"--workers must be >= 0 (0: one per CPU core), got {command.workers}")
     if command.config is not None:
         description = load_sweep_file(command.config).to_dict()
+        if command.base is not None:
+            # --base swaps the preset under the file's own overrides, which stay.
+            description = json.loads(command.config.read_text())
+            if not isinstance(description.get("base", "quick"), str):
+                raise ValueError(
+                    f"--base: {command.config} holds a whole base config, not a preset name; "
+                    "edit its base or drop --base"
+                )
     else:
         description = dict(PAPER_SWEEPS[command.preset])
     description = {**description, "grid": dict(description["grid"])}

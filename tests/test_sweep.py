@@ -131,6 +131,28 @@ def test_sweep_command_line(tmp_path, capsys):
     assert "exactly one of --preset" in capsys.readouterr().err
 
 
+def test_base_flag_keeps_the_sweep_files_overrides(tmp_path, capsys):
+    """--base swaps the preset under a sweep file; the file's overrides still apply."""
+    from spikectl.cli import main
+
+    path = tmp_path / "sweep.json"
+    description = {
+        "base": "paper",
+        "overrides": {"n_train": 7, "total_env_steps": 8 * 20 * 2},
+        "grid": {"seed": [0]},
+    }
+    path.write_text(json.dumps(description))
+    args = ["sweep", "--config", str(path), "--base", "smoke", "--workers", "1"]
+    main([*args, "--sweep-dir", str(tmp_path / "s")])
+    config = json.loads((tmp_path / "s/trials/seed=0/config.json").read_text())
+    assert config["env"]["n_train"] == 7  # the override
+    assert config["env"]["n_neurons"] == SMOKE.env.n_neurons  # the new base
+    path.write_text(json.dumps({**description, "base": SMOKE.to_dict()}))
+    with pytest.raises(SystemExit):
+        main([*args, "--sweep-dir", str(tmp_path / "t")])
+    assert "holds a whole base config" in capsys.readouterr().err
+
+
 def test_plot_a_sweep(tmp_path, capsys):
     from spikectl.cli import main
 
