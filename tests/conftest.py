@@ -96,3 +96,20 @@ def easy_network_config(tmp_path):
         updates_per_round=16, learning_rate=3e-3, eval_every_episodes=160,
         checkpoint_every_episodes=400, epsilon_anneal_fraction=0.3, gamma=0.9,
     )  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def splits():
+    """Small train/test context sets (20 + 20 networks, context seed 0) for the planners."""
+    from spikectl.contexts import make_splits
+
+    return make_splits(20, 20, seed=0)
+
+
+def spike_pattern(length: int, spikes: list[int]):
+    """A boolean target pattern of ``length`` steps, True at ``spikes``."""
+    import numpy as np
+
+    pattern = np.zeros(length, dtype=bool)
+    pattern[spikes] = True
+    return pattern

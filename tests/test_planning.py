@@ -7,25 +7,14 @@ import csv
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import spike_pattern
 
 import spikectl
-from spikectl import IdentifyAndPlan, NeuronParams, make_context, make_splits, plan_episode
+from spikectl import IdentifyAndPlan, NeuronParams, make_context, plan_episode
 from spikectl.cli import main
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.planning import ConnectivityEstimate, DiscreteConnectivityEstimate, ObservedState
 from spikectl.planning.baselines import run_baselines
-
-
-@pytest.fixture(scope="module")
-def splits():
-    return make_splits(20, 20, seed=0)
-
-
-def _pattern(length: int, spikes: list[int]) -> np.ndarray:
-    pattern = np.zeros(length, dtype=bool)
-    pattern[spikes] = True
-    return pattern
-
 
 # -- the oracle planner on hand-built networks
 
@@ -34,7 +23,7 @@ def test_planner_hits_a_pattern_through_one_synapse():
     # 0 -> 1 excitatory; 1 must spike at 1, 7 and 13: stimulate 0 one step before each
     # (0 is ready again after 5 steps).
     context = make_context(np.array([[0, 1], [0, 0]]), target=1,
-                           pattern=_pattern(20, [1, 7, 13]))  # fmt: skip
+                           pattern=spike_pattern(20, [1, 7, 13]))  # fmt: skip
     actions, ret = plan_episode(context)
     assert ret == pytest.approx(1.0, abs=1e-12)
     assert np.flatnonzero(actions >= 0).tolist() == [0, 6, 12]
@@ -47,7 +36,7 @@ def test_planner_uses_a_two_synapse_chain_and_a_second_input():
     # the two spikes must come through the chain from 0 (stimulated two steps early).
     weights = np.zeros((4, 4), dtype=int)
     weights[0, 1] = weights[1, 2] = weights[3, 2] = 1
-    context = make_context(weights, target=2, pattern=_pattern(12, [2, 4]),
+    context = make_context(weights, target=2, pattern=spike_pattern(12, [2, 4]),
                            hidden=np.array([1]))  # fmt: skip
     actions, ret = plan_episode(context, width=16)
     assert ret == pytest.approx(1.0, abs=1e-12)
@@ -225,7 +214,7 @@ def test_beam_search_ranks_by_the_mean_over_hypotheses():
     second[2, 1] = 1
     params = NeuronParams()
     model = PlanningModel(np.stack([first, second]), 1, np.array([-1, 0, 2]), params)
-    pattern = _pattern(4, [1])
+    pattern = spike_pattern(4, [1])
     plan = beam_search(model, SimulatorState.at_rest(1, 3, params), pattern, 0, 8)
     assert plan.actions[0] in (0, 2)
     assert plan.rewards[1] == pytest.approx(0.5 / 2)  # hit under one of two hypotheses

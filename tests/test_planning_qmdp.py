@@ -6,6 +6,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import spike_pattern
 
 from spikectl import IdentifyAndPlan, NeuronParams, make_splits
 from spikectl.contexts.generation import legal_actions
@@ -20,17 +21,6 @@ from spikectl.planning.qmdp import (
 )
 
 PARAMS = NeuronParams()
-
-
-@pytest.fixture(scope="module")
-def splits():
-    return make_splits(20, 20, seed=0)
-
-
-def _pattern(length: int, spikes: list[int]) -> np.ndarray:
-    pattern = np.zeros(length, dtype=bool)
-    pattern[spikes] = True
-    return pattern
 
 
 @pytest.mark.parametrize(("width", "horizon"), [(8, 10), (32, 60)])
@@ -73,7 +63,7 @@ def test_expected_returns_by_hand():
     networks = np.zeros((2, 3, 3), dtype=np.int8)
     networks[0, 0, 2] = 1
     networks[1, 1, 2] = 1
-    pattern = _pattern(4, [1])
+    pattern = spike_pattern(4, [1])
     actions = np.array([-1, 0, 1], dtype=np.int64)
     values = expected_returns(
         networks, np.array([3.0, 1.0]), SimulatorState.at_rest(1, 3, PARAMS), actions,
@@ -104,9 +94,9 @@ def test_context_likelihood_by_hand():
     networks[0, 0, 2] = networks[0, 1, 2] = networks[0, 3, 0] = 1
     networks[1, 0, 2] = -1
     networks[1, 1, 3] = 1
-    spike_at_1 = context_likelihood(networks, 2, _pattern(10, [1]), n_actions=4)
+    spike_at_1 = context_likelihood(networks, 2, spike_pattern(10, [1]), n_actions=4)
     assert np.allclose(spike_at_1, [0.5 * 2 / 4, 0.0])
-    no_spike_at_1 = context_likelihood(networks, 2, _pattern(10, [3]), n_actions=4)
+    no_spike_at_1 = context_likelihood(networks, 2, spike_pattern(10, [3]), n_actions=4)
     assert np.allclose(no_spike_at_1, [0.5 * (1 - 2 / 4), 0.0])
 
 
