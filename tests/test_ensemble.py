@@ -24,8 +24,8 @@ from spikectl.training.presets import SMOKE
 
 TIMES = ("wall_time_s", "cpu_time_s")
 TINY = SMOKE.with_changes(total_env_steps=24 * 20 * 8, eval_every_episodes=64,
-                           checkpoint_every_episodes=64)  # fmt: skip
-"""Three rounds of smoke-sized training: seconds."""
+                           checkpoint_every_episodes=64, learning_rate_end_fraction=0.5)  # fmt: skip
+"""Three rounds of smoke-sized training (seconds), with a decaying learning rate."""
 
 
 def comparable(rows: list[dict]) -> list[dict]:

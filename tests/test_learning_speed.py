@@ -220,3 +220,31 @@ def test_do_nothing_biased_exploration(do_nothing):
         assert counts.min() > 0.8 * counts.max()  # uniform over the legal stimulations
     with pytest.raises(ValueError, match="explore_do_nothing"):
         TrainConfig(explore_do_nothing=1.5)
+
+
+def test_learning_rate_decays_linearly_and_needs_no_scheduler_state(tmp_path):
+    from spikectl.training.checkpoint import read_checkpoint
+
+    config = SMOKE.with_changes(learning_rate=1e-3, learning_rate_end_fraction=0.25)
+    episodes = config.total_episodes
+    assert config.learning_rate(0) == 1e-3
+    assert config.learning_rate(episodes // 2) == pytest.approx(0.625e-3)
+    assert config.learning_rate(episodes) == pytest.approx(0.25e-3)
+    assert config.learning_rate(2 * episodes) == pytest.approx(0.25e-3)  # no overshoot
+    # The default is the paper's constant rate, exactly.
+    assert SMOKE.learning_rate(episodes) == SMOKE.train.learning_rate
+    assert PRESETS["paper"].train.learning_rate_end_fraction == 1.0
+
+    decayed = train(config, tmp_path / "decayed")
+    # The last round's updates ran at the rate of the episode count before that round.
+    saved = read_checkpoint(tmp_path / "decayed" / "checkpoint.pt")
+    last_round = episodes - config.train.num_envs
+    assert {group["lr"] for group in saved["optimizer"]["param_groups"]} == {
+        config.learning_rate(last_round)
+    }
+    constant = train(config.with_changes(learning_rate_end_fraction=1.0), tmp_path / "constant")
+    assert decayed[0]["train_return"] == constant[0]["train_return"]  # before any update
+    assert decayed[-1]["loss"] != constant[-1]["loss"]
+    for bad in (1.5, -0.1, float("nan")):
+        with pytest.raises(ValueError, match="learning_rate_end_fraction"):
+            TrainConfig(learning_rate_end_fraction=bad)

@@ -278,7 +278,8 @@ def test_learnability_on_one_easy_network(tmp_path, easy_network_config):
 
 
 LEARN_FAST_FLAGS = ("--n-step", "3", "--aux-voltage-weight", "1.0", "--explore-do-nothing",
-                    "0.75", "--sizes.target-voltage-in-input")  # fmt: skip
+                    "0.75", "--learning-rate-end-fraction", "0.1",
+                    "--sizes.target-voltage-in-input")  # fmt: skip
 
 
 @pytest.mark.parametrize("flags", [(), LEARN_FAST_FLAGS], ids=["paper", "learn-fast"])

@@ -179,7 +179,10 @@ class TrainConfig:
     learning_starts: int = 5
     """Episodes in the buffer before the first update."""
     learning_rate: float = 5e-4
-    """Adam learning rate."""
+    """Adam learning rate (at the start of training)."""
+    learning_rate_end_fraction: float = 1.0
+    """Learning rate at the last episode as a fraction of learning_rate, reached by linear
+    decay over the run (1 = constant, the paper; 0 = decay to zero)."""
     gamma: float = 0.99
     """Discount factor."""
     tau: float = 0.1
@@ -221,7 +224,8 @@ class TrainConfig:
             _check_int(name, getattr(self, name), 0, what="a non-negative integer")
         _check_int("seed", self.seed, 0, 2**63 - 1, "an integer in 0..2**63 - 1")
         for name in ("learning_rate", "gamma", "tau", "epsilon_start", "epsilon_end",
-                     "epsilon_anneal_fraction", "max_grad_norm", "aux_voltage_weight"):  # fmt: skip
+                     "epsilon_anneal_fraction", "max_grad_norm", "aux_voltage_weight",
+                     "learning_rate_end_fraction"):  # fmt: skip
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ValueError(f"{name} must be a number, got {value!r}")
@@ -237,7 +241,8 @@ class TrainConfig:
             raise ValueError(f"gamma must lie in [0, 1], got {self.gamma}")
         if not 0 < self.tau <= 1:
             raise ValueError(f"tau must lie in (0, 1], got {self.tau}")
-        for name in ("epsilon_start", "epsilon_end", "epsilon_anneal_fraction"):
+        for name in ("epsilon_start", "epsilon_end", "epsilon_anneal_fraction",
+                     "learning_rate_end_fraction"):  # fmt: skip
             if not 0 <= getattr(self, name) <= 1:
                 raise ValueError(f"{name} must lie in [0, 1], got {getattr(self, name)}")
         if self.explore_do_nothing is not None and not 0 <= self.explore_do_nothing <= 1:
@@ -294,6 +299,13 @@ class Experiment:
             return train.epsilon_end
         fraction = min(episode / anneal, 1.0)
         return train.epsilon_start + fraction * (train.epsilon_end - train.epsilon_start)
+
+    def learning_rate(self, episode: int) -> float:
+        """Adam's learning rate for the updates after the round that ends at ``episode``:
+        linear from learning_rate to learning_rate x learning_rate_end_fraction."""
+        train = self.train
+        fraction = min(episode / self.total_episodes, 1.0)
+        return train.learning_rate * (1.0 + fraction * (train.learning_rate_end_fraction - 1.0))
 
     def with_seed(self, seed: int) -> Experiment:
         """The same experiment with another training seed."""

@@ -278,6 +278,13 @@ def build_predictor(config: Experiment, online: torch.nn.Module) -> torch.nn.Mod
     return predictor.to(config.train.device)
 
 
+def set_learning_rate(optimizer: torch.optim.Optimizer, learning_rate: float) -> None:
+    """Set every parameter group's learning rate (the schedule is a pure function of the
+    episode count, so a resumed run needs no scheduler state)."""
+    for group in optimizer.param_groups:
+        group["lr"] = learning_rate
+
+
 @locked_run
 def train(config: Experiment, run_dir: str | Path, resume: bool = False) -> list[dict]:
     """Train an agent; returns the metrics rows (also in ``run_dir/metrics.csv``).
@@ -359,6 +366,7 @@ def train(config: Experiment, run_dir: str | Path, resume: bool = False) -> list
         state.episodes += config.train.num_envs
         logger.progress(config.train.num_envs, epsilon, float(episodes.returns.mean()))
         if len(replay) >= max(config.train.learning_starts, 1):
+            set_learning_rate(optimizer, config.learning_rate(before))
             for _ in range(config.train.updates_per_round):
                 batch = replay.sample(config.train.batch_size, state.rng)
                 td, aux = training_losses(online, target, batch, config, predictor)

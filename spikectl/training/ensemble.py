@@ -58,6 +58,7 @@ from spikectl.training.dqn import (
     greedy_returns,
     losses_on_tensors,
     record_evaluation,
+    set_learning_rate,
 )
 from spikectl.training.group_files import (
     load_group_checkpoint,
@@ -289,6 +290,7 @@ def _train_group(
             state.episodes += E
         loggers[0].progress(E, epsilon, float(episodes.returns.mean()))  # episodes per seed
         if len(replays[0]) >= max(config.train.learning_starts, 1):
+            set_learning_rate(optimizer, config.learning_rate(before))
             for _ in range(config.train.updates_per_round):
                 seed_tensors = [
                     batch_tensors(replay.sample(config.train.batch_size, state.rng), device)
