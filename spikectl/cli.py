@@ -316,7 +316,7 @@ class SweepCommand:
     address: str | None = None
     """Ray cluster address (ray backend); a local Ray instance when not given."""
     group_seeds: bool = False
-    """Train the trials that differ only in seed as one batched process per group."""
+    """Train the trials that differ only in seed and n_train as one batched process per group."""
 
 
 def sweep(command: SweepCommand) -> None:

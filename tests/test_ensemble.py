@@ -15,6 +15,7 @@ import pytest
 import torch
 from torch import nn
 
+from spikectl import ContextSet
 from spikectl.agents import ARCHITECTURES, make_agent
 from spikectl.agents.stacked import StackableLSTM, StackedNetworks
 from spikectl.training.checkpoint import RunDirError, load_model_weights, read_metrics
@@ -24,7 +25,8 @@ from spikectl.training.presets import SMOKE
 
 TIMES = ("wall_time_s", "cpu_time_s")
 TINY = SMOKE.with_changes(total_env_steps=24 * 20 * 8, eval_every_episodes=64,
-                           checkpoint_every_episodes=64, learning_rate_end_fraction=0.5)  # fmt: skip
+                          checkpoint_every_episodes=64,
+                          learning_rate_end_fraction=0.5)  # fmt: skip
 """Three rounds of smoke-sized training (seconds), with a decaying learning rate."""
 
 
@@ -150,8 +152,53 @@ def test_a_group_of_one_follows_the_single_run_up_to_rounding(tmp_path):
     assert group[1]["aux_loss"] == pytest.approx(single[1]["aux_loss"], rel=1e-4, nan_ok=True)
 
 
+def test_a_group_trains_each_seed_on_its_own_training_set(tmp_path):
+    """Figure 5's training-set sizes in one group: each seed collects on, and is scored
+    on, its own training set, shares the test set, and does not depend on its neighbours."""
+    small, large = TINY.with_changes(n_train=3), TINY
+    first = train_group([small, large], [tmp_path / "a/small", tmp_path / "a/large"],
+                        tmp_path / "a")  # fmt: skip
+    second = train_group([small, large.with_changes(seed=1)],
+                         [tmp_path / "b/small", tmp_path / "b/large"], tmp_path / "b")  # fmt: skip
+    assert comparable(first[0]) == comparable(second[0])
+    assert same_weights(tmp_path / "a/small/model.pt", tmp_path / "b/small/model.pt")
+    assert comparable(first[1]) != comparable(second[1])
+    sets = {
+        name: [ContextSet.load(tmp_path / "a" / name / f"{split}_contexts.npz")
+               for split in ("train", "test")]
+        for name in ("small", "large")
+    }  # fmt: skip
+    assert [len(sets["small"][0]), len(sets["large"][0])] == [3, 6]
+    assert sets["small"][1] == sets["large"][1]  # the same unseen networks
+    # The small seed is the run of its own config: the same training set, baselines and
+    # first round's episodes (losses to float rounding) as a single run.
+    single = train(small, tmp_path / "single")
+    assert sets["small"][0] == ContextSet.load(tmp_path / "single/train_contexts.npz")
+    assert json.loads((tmp_path / "a/small/baselines.json").read_text()) == json.loads(
+        (tmp_path / "single/baselines.json").read_text()
+    )
+    assert first[0][0] | dict.fromkeys(TIMES) == single[0] | dict.fromkeys(TIMES)
+    assert first[0][1]["loss"] == pytest.approx(single[1]["loss"], rel=1e-4)
+
+
+def test_sweep_puts_training_set_sizes_in_one_group(tmp_path):
+    from spikectl.experiments.sweep import Sweep, seed_group_tasks
+
+    sweep = Sweep(TINY, {"n_train": [3, 6], "seed": [0, 1]})
+    jobs = [(config, tmp_path / "trials" / name) for name, config in sweep.trials()]
+    ((function, (configs, run_dirs, group_dir), _),) = seed_group_tasks(jobs, tmp_path)
+    assert function.__name__ == "run_group_trial" and group_dir.name == "base"
+    assert [(c.env.n_train, c.train.seed) for c in configs] == [(3, 0), (3, 1), (6, 0), (6, 1)]
+    mixed = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "n_train": [3, 6], "seed": [0]})
+    jobs = [(config, tmp_path / "trials" / name) for name, config in mixed.trials()]
+    assert sorted(task[1][2].name for task in seed_group_tasks(jobs, tmp_path)) == [
+        "arch=drqn",
+        "arch=tdrqn",
+    ]
+
+
 def test_group_refuses_bad_groups_and_directories(tmp_path):
-    with pytest.raises(ValueError, match="differ only in seed"):
+    with pytest.raises(ValueError, match="differ only in seed and n_train"):
         train_group(
             [TINY, TINY.with_changes(seed=1, gamma=0.5)],
             [tmp_path / "a", tmp_path / "b"], tmp_path / "g",

@@ -13,8 +13,9 @@ checkpoints), so a sweep can be stopped and restarted at any moment.
 Trials run in a local process pool (one worker per core by default); each trial uses
 one Torch thread so that workers do not fight over cores and so that a trial's result
 does not depend on how many ran beside it. With ``group_seeds`` the trials that differ
-only in seed run as one seed group per process (``spikectl.training.ensemble``), each
-still in its own trial directory; the group's checkpoint lives in ``SWEEP_DIR/groups/``.
+only in seed and training-set size run as one seed group per process
+(``spikectl.training.ensemble``), each still in its own trial directory; the group's
+checkpoint lives in ``SWEEP_DIR/groups/``.
 """
 
 from __future__ import annotations
@@ -204,7 +205,7 @@ def run_trial(config: Experiment, run_dir: str | os.PathLike) -> dict[str, Any]:
 def run_group_trial(
     configs: list[Experiment], run_dirs: list[str | os.PathLike], group_dir: str | os.PathLike
 ) -> list[dict[str, Any]]:
-    """Train trials that differ only in seed as one seed group (one process, stacked
+    """Train trials that differ only in seed and n_train as one seed group (one process, stacked
     networks); each trial keeps its own run directory. Resumes the group if interrupted."""
     import torch
 
@@ -227,24 +228,30 @@ def run_group_trial(
 
 
 def seed_group_tasks(jobs: list[tuple[Experiment, Path]], sweep_dir: Path) -> list[tuple]:
-    """(function, arguments, run_dir) tasks: trials that differ only in seed become one
-    ``run_group_trial`` in ``SWEEP_DIR/groups/NAME``; trials already done or interrupted
-    as single runs stay single ``run_trial`` tasks."""
+    """(function, arguments, run_dir) tasks: trials that differ only in seed and
+    training-set size (``ensemble.group_key``) become one ``run_group_trial`` in
+    ``SWEEP_DIR/groups/NAME``; trials already done or interrupted as single runs stay
+    single ``run_trial`` tasks."""
+    from spikectl.training.ensemble import group_key
+
     groups: dict[Experiment, list[tuple[Experiment, Path]]] = {}
     tasks = []
     for config, run_dir in jobs:
         if trial_status(run_dir) != "new":
             tasks.append((run_trial, (config, run_dir), run_dir))
         else:
-            groups.setdefault(config.with_seed(0), []).append((config, run_dir))
+            groups.setdefault(group_key(config), []).append((config, run_dir))
     for members in groups.values():
         if len(members) == 1:
             tasks.append((run_trial, members[0], members[0][1]))
             continue
+        varying = ("seed=",) if len({c.env.n_train for c, _ in members}) == 1 else (
+            "seed=", "n_train=")  # fmt: skip
         name = (
-            "-".join(part for part in members[0][1].name.split("-") if not part.startswith("seed="))
+            "-".join(part for part in members[0][1].name.split("-")
+                     if not part.startswith(varying))
             or "base"
-        )
+        )  # fmt: skip
         group_dir = sweep_dir / GROUPS_DIR / name
         configs = [config for config, _ in members]
         run_dirs = [run_dir for _, run_dir in members]
@@ -267,7 +274,7 @@ def run_sweep(
     ``backend="ray"``: Ray tasks of one CPU each on the cluster at ``address`` (a local
     Ray instance when None); ``sweep_dir`` must then be on storage every node sees.
     Each trial's result is the same whichever backend ran it. ``group_seeds``: trials
-    that differ only in seed train as one seed group per process (``run_group_trial``).
+    that differ only in seed and n_train train as one seed group per process (``run_group_trial``).
     """
     if backend not in ("local", "ray"):
         raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")

@@ -31,7 +31,9 @@ import torch
 
 from spikectl.agents import make_agent
 from spikectl.agents.stacked import StackedNetworks
+from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import do_nothing_policy, make_random_policy, run_episodes
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.training.checkpoint import (
     RunDirError,
     TrainingState,
@@ -66,6 +68,17 @@ from spikectl.training.group_files import (
     save_group_checkpoint,
 )
 from spikectl.training.replay import EpisodeReplay
+
+SPLITS = ("train", "test", "val")
+"""The evaluation splits, in the order ``load_or_make_contexts`` returns their sets."""
+
+
+def group_key(config: Experiment) -> Experiment:
+    """What the members of one seed group share: the config up to its seed and its
+    training-set size (a group trains each seed on its own training set, so Figure 5's
+    sizes can share one group)."""
+    shared = config.with_seed(0)
+    return dataclasses.replace(shared, env=dataclasses.replace(shared.env, n_train=1))
 
 
 def seed_dirs(run_dir: str | Path, seeds: list[int]) -> list[Path]:
@@ -139,13 +152,19 @@ def _check_group(configs: list[Experiment], run_dirs: list[Path]) -> None:
         raise ValueError("a seed group needs at least one config")
     if len(configs) != len(run_dirs):
         raise ValueError(f"{len(configs)} configs but {len(run_dirs)} run directories")
-    first = configs[0].with_seed(0)
+    first = group_key(configs[0])
     for config in configs[1:]:
-        if config.with_seed(0) != first:
-            raise ValueError("the configs of a seed group may differ only in seed")
-    seeds = [config.train.seed for config in configs]
-    if len(set(seeds)) != len(seeds):
-        raise ValueError(f"the seeds of a group must be distinct, got {seeds}")
+        if group_key(config) != first:
+            raise ValueError(
+                "the configs of a seed group may differ only in seed and n_train "
+                "(the size of the training set)"
+            )
+    members = [(config.train.seed, config.env.n_train) for config in configs]
+    if len(set(members)) != len(members):
+        raise ValueError(
+            f"the seeds of a group must be distinct (per training-set size), got "
+            f"{[seed for seed, _ in members]}"
+        )
     if len({Path(d).resolve() for d in run_dirs}) != len(run_dirs):
         raise ValueError("the seeds of a group need distinct run directories")
 
@@ -177,10 +196,17 @@ def _train_group(
     if config.train.torch_threads:
         torch.set_num_threads(config.train.torch_threads)
     sets = [load_or_make_contexts(c, d) for c, d in zip(configs, run_dirs, strict=True)]
-    train_set, test_set, val_set = sets[0]
-    checksums = {tuple(s.checksum() if s is not None else None for s in group) for group in sets}
-    if len(checksums) != 1:
-        raise RunDirError("the seeds of a group must train and test on the same context sets")
+    # Every seed collects on its own training set: the collection environment holds the
+    # distinct training sets one after another, seed k's indices offset into its block.
+    distinct: dict[str, ContextSet] = {}
+    for train_set, _, _ in sets:
+        distinct.setdefault(train_set.checksum(), train_set)
+    starts = dict(zip(distinct, np.cumsum([0] + [len(c) for c in distinct.values()]), strict=False))
+    offsets = [int(starts[train_set.checksum()]) for train_set, _, _ in sets]
+    all_train = ContextSet(
+        [context for contexts in distinct.values() for context in contexts],
+        params=sets[0][0].params, extensions=sets[0][0].extensions,
+    )  # fmt: skip
 
     networks = [build_networks(c) for c in configs]
     online = StackedNetworks([pair[0] for pair in networks])
@@ -200,7 +226,7 @@ def _train_group(
             group_dir, configs, online, target, predictor, optimizer, replays
         )
     else:
-        for c, state in zip(configs, states, strict=True):
+        for c, state, (train_set, test_set, _) in zip(configs, states, sets, strict=True):
             state.baselines = {
                 name: {
                     split: float(baseline_episodes(c, contexts, policy).returns.mean())
@@ -213,14 +239,15 @@ def _train_group(
             }  # fmt: skip
 
     E = config.train.num_envs
-    collect_env = make_env(config, train_set, K * E)
-    eval_envs = {
-        split: make_env(config, contexts, len(contexts))
-        for split, contexts in (("train", train_set), ("test", test_set), ("val", val_set))
-        if contexts is not None
-    }
-    targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
-    patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
+    collect_env = make_env(config, all_train, K * E)
+    # One evaluation environment per distinct set; seed k scores on its own sets.
+    eval_envs: dict[str, dict[str, NeuronControlVectorEnv]] = {}
+    for seed_sets in sets:
+        for split, contexts in zip(SPLITS, seed_sets, strict=True):
+            if contexts is not None and contexts.checksum() not in eval_envs.setdefault(split, {}):
+                eval_envs[split][contexts.checksum()] = make_env(config, contexts, len(contexts))
+    targets = np.array([c.observed_target for c in all_train], dtype=np.int64)
+    patterns = np.stack([c.pattern for c in all_train]).astype(np.int8)
     loggers = [
         RunLogger(
             d,
@@ -246,10 +273,15 @@ def _train_group(
         networks = plain_networks(online, configs)
         returns = {
             split: [
-                greedy_returns(network, env, device, seed)
-                for network, seed in zip(networks, eval_seeds, strict=True)
+                greedy_returns(network, envs[contexts.checksum()], device, seed)
+                for network, seed, contexts in zip(
+                    networks,
+                    eval_seeds,
+                    [seed_sets[SPLITS.index(split)] for seed_sets in sets],
+                    strict=True,
+                )
             ]
-            for split, env in eval_envs.items()
+            for split, envs in eval_envs.items()
         }
         for k, (state, run_dir) in enumerate(zip(states, run_dirs, strict=True)):
             seed_returns = {split: values[k] for split, values in returns.items()}
@@ -276,7 +308,10 @@ def _train_group(
             stream_seed(c, COLLECT_STREAM, states[0].episodes) + i for c in configs
             for i in range(E)
         ])  # fmt: skip
-        contexts = np.concatenate([s.rng.integers(len(train_set), size=E) for s in states])
+        contexts = np.concatenate([
+            offset + state.rng.integers(len(seed_sets[0]), size=E)
+            for offset, state, seed_sets in zip(offsets, states, sets, strict=True)
+        ])  # fmt: skip  # [K*E], indices into all_train
         policy = GroupPolicy(online, epsilon, [s.rng for s in states], config)
         episodes = run_episodes(collect_env, contexts, policy)
         for k, replay in enumerate(replays):
