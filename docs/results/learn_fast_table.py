@@ -33,12 +33,19 @@ def mean_sd(values) -> str:
     return f"{np.nanmean(values):.3f} ± {np.nanstd(values):.3f}"
 
 
+def core_minutes(row) -> float:
+    """Process CPU minutes; runs made before CPU time was logged ran one per core, so
+    their wall minutes are their core minutes."""
+    seconds = row.get("cpu_time_s", math.nan)
+    return (row["wall_time_s"] if math.isnan(seconds) else seconds) / 60
+
+
 def before_after(groups) -> str:
     lines = [
         f"| run | seeds | final test return | seeds reaching {THRESHOLD} | env steps to "
-        f"{THRESHOLD} | updates to {THRESHOLD} | wall minutes to {THRESHOLD} | wall minutes "
-        "in all |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        f"{THRESHOLD} | updates to {THRESHOLD} | wall minutes to {THRESHOLD} | core minutes "
+        f"to {THRESHOLD} | wall minutes in all | core minutes in all |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     for label, runs in groups.items():
         hits = [first_reaching(run.metrics) for run in runs]
@@ -50,11 +57,16 @@ def before_after(groups) -> str:
             values = [hit[key] * scale for hit in reached]
             return f"{np.median(values):,.0f} ({min(values):,.0f}–{max(values):,.0f})"
 
+        for hit in reached:  # runs before CPU time was logged ran one per core
+            if math.isnan(hit.get("cpu_time_s", math.nan)):
+                hit["cpu_time_s"] = hit["wall_time_s"]
         minutes = [run.metrics[-1]["wall_time_s"] / 60 for run in runs]
+        core = [core_minutes(run.metrics[-1]) for run in runs]
         lines.append(
             f"| {label} | {len(runs)} | {mean_sd([r.metrics[-1]['test_return'] for r in runs])} "
             f"| {len(reached)} of {len(runs)} | {spread('env_steps')} | {spread('updates')} "
-            f"| {spread('wall_time_s', 1 / 60)} | {np.mean(minutes):.1f} |"
+            f"| {spread('wall_time_s', 1 / 60)} | {spread('cpu_time_s', 1 / 60)} "
+            f"| {np.mean(minutes):.1f} | {np.mean(core):.1f} |"
         )
     return "\n".join(lines) + "\n"
 
@@ -70,10 +82,11 @@ def ablation(groups) -> str:
         test = [row["test_return"] for row in finals]
         interval = bootstrap_ci(np.array(test), iqm, 2000, 0.95, 0)
         minutes = np.mean([row["wall_time_s"] / 60 for row in finals])
+        core = np.mean([core_minutes(row) for row in finals])
         val = [row.get("val_return", math.nan) for row in finals]
         lines.append(
             f"| {label} | {len(runs)} | {finals[0]['updates']:,.0f} | {minutes:.1f} "
-            f"| {minutes:.1f} | {mean_sd([row['train_return'] for row in finals])} "
+            f"| {core:.1f} | {mean_sd([row['train_return'] for row in finals])} "
             f"| {mean_sd(val)} | {mean_sd(test)} "
             f"| {interval.estimate:.3f} [{interval.low:.3f}, {interval.high:.3f}] |"
         )
@@ -127,14 +140,25 @@ def main() -> None:
         "old quick, 2 updates/episode (1 M steps)": load_runs(
             trial_dirs(results / "tdrqn-paper-update-ratio")
         ),
-        "new quick preset": load_runs(new_quick),
+        "quick preset of 2026-11-22 (dueling head, constant lr)": load_runs(new_quick),
+        "quick preset (pooled head, lr decay)": load_runs(
+            trial_dirs(results / "learn-fast-pooled-decay")
+        ),
     }
     print(before_after(before))
     old_quick = before["old quick preset (0.625 updates/episode, 1 M steps)"]
     groups = {
         "old quick preset (reference)": old_quick,
-        "new quick preset (all mechanisms)": load_runs(new_quick),
+        "quick preset of 2026-11-22 (all mechanisms)": load_runs(new_quick),
+        "+ pooled do-nothing head": load_runs(trial_dirs(results / "tdrqn-pooled-head")),
+        "+ pooled head + lr decay to 0.1 (quick preset)": load_runs(
+            trial_dirs(results / "learn-fast-pooled-decay")
+        ),
     }
+    if trial_dirs(results / "learn-fast-pooled-decay-lr3e-3"):
+        groups["+ pooled head + lr 3e-3 decaying to 0.05"] = load_runs(
+            trial_dirs(results / "learn-fast-pooled-decay-lr3e-3")
+        )
     for sweep in sorted(results.glob("learn-fast-without-*")):
         if trial_dirs(sweep):
             label = sweep.name.removeprefix("learn-fast-").replace("-", " ")

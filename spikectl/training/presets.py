@@ -23,6 +23,7 @@ QUICK = Experiment(
             ff_hidden=256,
             head_hidden=(256, 128, 64),
             target_voltage_in_input=True,
+            do_nothing_head="pooled",
         ),
     ),
     train=TrainConfig(
@@ -33,6 +34,7 @@ QUICK = Experiment(
         buffer_size=40_000,
         learning_starts=16,
         learning_rate=2e-3,
+        learning_rate_end_fraction=0.1,
         gamma=0.9,
         tau=0.05,
         n_step=3,
@@ -46,8 +48,10 @@ QUICK = Experiment(
 """The README's main job: ~14 minutes on one core of the project's 2-core machine
 (docs/training.md, "Learning fast"): 4 400 episodes, 8 800 updates of 8 episodes,
 n-step targets, the auxiliary next-voltage loss, the target's voltage in each neuron's
-input, do-nothing-biased exploration, gamma 0.9, lr 2e-3, half-width networks, one Torch
-thread."""
+input, a pooled do-nothing head, do-nothing-biased exploration, gamma 0.9, lr 2e-3
+decaying linearly to 2e-4, half-width networks, one Torch thread. Until 2026-11-23 the
+preset had the dueling do-nothing head and a constant lr (docs/results sweep files made
+with it pin both)."""
 
 SMOKE = Experiment(
     env=EnvConfig(episode_length=20, n_neurons=5, n_train=6, n_test=6, n_val=6),
