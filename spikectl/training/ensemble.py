@@ -1,9 +1,11 @@
 """K seeds of one configuration trained in one process, as one batched computation.
 
 ``train_group(configs, run_dirs, group_dir)`` trains K independent agents whose configs
-differ only in ``seed``: the online, target and auxiliary networks of all seeds are
-stacked along a leading seed dimension (``spikectl.agents.stacked``) and every forward,
-backward and optimiser step serves all K at once. Each seed keeps what a run of its own
+differ only in ``seed`` and ``n_train`` (each seed collects on its own training set,
+held in one collection environment as consecutive blocks): the online, target and
+auxiliary networks of all seeds are stacked along a leading seed dimension
+(``spikectl.agents.stacked``) and every forward, backward and optimiser step serves all
+K at once. Each seed keeps what a run of its own
 has: its replay buffer, its generator (the very stream ``dqn.train`` with that seed
 draws from, in the same order), its epsilon schedule, its target network and auxiliary
 head, its own gradient-norm clip and Adam moments (Adam is elementwise, so one Adam on
