@@ -159,6 +159,10 @@ def main() -> None:
         groups["+ pooled head + lr 3e-3 decaying to 0.05"] = load_runs(
             trial_dirs(results / "learn-fast-pooled-decay-lr3e-3")
         )
+    if trial_dirs(results / "learn-fast-eps01"):
+        groups["quick preset with epsilon annealed over 10% (candidate)"] = load_runs(
+            trial_dirs(results / "learn-fast-eps01")
+        )
     for sweep in sorted(results.glob("learn-fast-without-*")):
         if trial_dirs(sweep):
             label = sweep.name.removeprefix("learn-fast-").replace("-", " ")
