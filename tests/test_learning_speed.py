@@ -243,7 +243,8 @@ def test_learning_rate_decays_linearly_and_needs_no_scheduler_state(tmp_path):
         config.learning_rate(last_round)
     }
     constant = train(config.with_changes(learning_rate_end_fraction=1.0), tmp_path / "constant")
-    assert decayed[0]["train_return"] == constant[0]["train_return"]  # before any update
+    saved = read_checkpoint(tmp_path / "constant" / "checkpoint.pt")
+    assert {group["lr"] for group in saved["optimizer"]["param_groups"]} == {1e-3}
     assert decayed[-1]["loss"] != constant[-1]["loss"]
     for bad in (1.5, -0.1, float("nan")):
         with pytest.raises(ValueError, match="learning_rate_end_fraction"):

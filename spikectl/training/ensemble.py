@@ -198,16 +198,19 @@ def _train_group(
     if config.train.torch_threads:
         torch.set_num_threads(config.train.torch_threads)
     sets = [load_or_make_contexts(c, d) for c, d in zip(configs, run_dirs, strict=True)]
+    checksums = [[c.checksum() if c is not None else None for c in seed_sets] for seed_sets in sets]
     # Every seed collects on its own training set: the collection environment holds the
     # distinct training sets one after another, seed k's indices offset into its block.
-    distinct: dict[str, ContextSet] = {}
-    for train_set, _, _ in sets:
-        distinct.setdefault(train_set.checksum(), train_set)
-    starts = dict(zip(distinct, np.cumsum([0] + [len(c) for c in distinct.values()]), strict=False))
-    offsets = [int(starts[train_set.checksum()]) for train_set, _, _ in sets]
+    block_start: dict[str, int] = {}
+    blocks: list[ContextSet] = []
+    for (train_set, _, _), (train_sum, _, _) in zip(sets, checksums, strict=True):
+        if train_sum not in block_start:
+            block_start[train_sum] = sum(len(block) for block in blocks)
+            blocks.append(train_set)
+    offsets = [block_start[train_sum] for train_sum, _, _ in checksums]
     all_train = ContextSet(
-        [context for contexts in distinct.values() for context in contexts],
-        params=sets[0][0].params, extensions=sets[0][0].extensions,
+        [context for block in blocks for context in block],
+        params=blocks[0].params, extensions=blocks[0].extensions,
     )  # fmt: skip
 
     networks = [build_networks(c) for c in configs]
@@ -243,11 +246,16 @@ def _train_group(
     E = config.train.num_envs
     collect_env = make_env(config, all_train, K * E)
     # One evaluation environment per distinct set; seed k scores on its own sets.
-    eval_envs: dict[str, dict[str, NeuronControlVectorEnv]] = {}
-    for seed_sets in sets:
-        for split, contexts in zip(SPLITS, seed_sets, strict=True):
-            if contexts is not None and contexts.checksum() not in eval_envs.setdefault(split, {}):
-                eval_envs[split][contexts.checksum()] = make_env(config, contexts, len(contexts))
+    envs_by_checksum: dict[str, NeuronControlVectorEnv] = {}
+    seed_eval_envs: list[dict[str, NeuronControlVectorEnv]] = []  # [K] {split: env}
+    for seed_sets, seed_sums in zip(sets, checksums, strict=True):
+        for contexts, key in zip(seed_sets, seed_sums, strict=True):
+            if contexts is not None and key not in envs_by_checksum:
+                envs_by_checksum[key] = make_env(config, contexts, len(contexts))
+        seed_eval_envs.append({
+            split: envs_by_checksum[key]
+            for split, key in zip(SPLITS, seed_sums, strict=True) if key is not None
+        })  # fmt: skip
     targets = np.array([c.observed_target for c in all_train], dtype=np.int64)
     patterns = np.stack([c.pattern for c in all_train]).astype(np.int8)
     loggers = [
@@ -275,15 +283,10 @@ def _train_group(
         networks = plain_networks(online, configs)
         returns = {
             split: [
-                greedy_returns(network, envs[contexts.checksum()], device, seed)
-                for network, seed, contexts in zip(
-                    networks,
-                    eval_seeds,
-                    [seed_sets[SPLITS.index(split)] for seed_sets in sets],
-                    strict=True,
-                )
+                greedy_returns(network, envs[split], device, seed)
+                for network, seed, envs in zip(networks, eval_seeds, seed_eval_envs, strict=True)
             ]
-            for split, envs in eval_envs.items()
+            for split in seed_eval_envs[0]
         }
         for k, (state, run_dir) in enumerate(zip(states, run_dirs, strict=True)):
             seed_returns = {split: values[k] for split, values in returns.items()}
