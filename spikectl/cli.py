@@ -180,6 +180,7 @@ def train(command: TrainCommand) -> None:
     """Train (or resume), then print train/test returns against the baselines."""
     from spikectl.experiments.figures import plot_learning_curve
     from spikectl.training.checkpoint import read_config
+    from spikectl.training.dqn import best_on_validation
     from spikectl.training.dqn import train as run_training
     from spikectl.training.group_files import GROUP_FILE
 
@@ -221,6 +222,13 @@ def train(command: TrainCommand) -> None:
     for name in ("do_nothing", "random"):
         row = baselines[name]
         print(f"{name.replace('_', '-'):<14}{row['train']:>8.3f}{row['test']:>8.3f}")
+    best = best_on_validation(metrics)
+    if best is not None:
+        print(
+            f"{'best on val.':<14}{best['train_return']:>8.3f}{best['test_return']:>8.3f}"
+            f"  (validation {best['val_return']:.3f}, episode {best['episode']:,}: "
+            "best_model.pt)"
+        )
     minutes, core_minutes = final["wall_time_s"] / 60, final["cpu_time_s"] / 60
     print(
         f"{final['env_steps']:,} environment steps, {final['updates']:,} updates, "
@@ -233,6 +241,7 @@ def train(command: TrainCommand) -> None:
 def train_group_command(command: TrainCommand) -> None:
     """``spikectl train --seeds ...`` (or ``--resume`` of a group): one batched process,
     then each seed's final train/test return."""
+    from spikectl.training.dqn import best_on_validation
     from spikectl.training.ensemble import seed_dirs, train_group, train_seeds
     from spikectl.training.group_files import group_configs
 
@@ -259,10 +268,18 @@ def train_group_command(command: TrainCommand) -> None:
             metrics = train_seeds(config, seeds, group_dir)
     for warning in caught:
         print(f"spikectl: warning: {warning.message}", file=sys.stderr)
-    print(f"{'seed':<14}{'train':>8}{'test':>8}")
+    print(f"{'seed':<14}{'train':>8}{'test':>8}   best on validation: train, test (episode)")
     for config, rows in zip(configs, metrics, strict=True):
-        final = rows[-1]
-        print(f"{config.train.seed:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}")
+        final, best = rows[-1], best_on_validation(rows)
+        chosen = (
+            ""
+            if best is None
+            else f"   {best['train_return']:.3f}, {best['test_return']:.3f} ({best['episode']:,})"
+        )
+        print(
+            f"{config.train.seed:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}"
+            f"{chosen}"
+        )
     final = metrics[0][-1]
     print(
         f"{len(configs)} x {final['env_steps']:,} environment steps, {final['updates']:,} "
@@ -280,13 +297,15 @@ class EvaluateCommand:
     """The run directory of a trained agent."""
     contexts: Path | None = None
     """A saved ContextSet (.npz) to evaluate on instead of the run's train/test sets."""
+    model: Literal["final", "best"] = "final"
+    """Which weights: the final model.pt, or best_model.pt (best validation return)."""
 
 
 def evaluate(command: EvaluateCommand) -> None:
     """Print the agent's mean greedy return per split, with its standard error."""
     from spikectl.training.evaluate import evaluate_run
 
-    for result in evaluate_run(command.run_dir, command.contexts):
+    for result in evaluate_run(command.run_dir, command.contexts, command.model):
         print(
             f"{result.name:<24}{result.mean:.3f} +- {result.standard_error:.3f} "
             f"over {result.returns.size} contexts (do nothing {result.do_nothing:.3f})"

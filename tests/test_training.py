@@ -320,6 +320,7 @@ def test_resume_after_sigkill_is_exact(
     assert "train" in resumed.stdout
     assert comparable(read_metrics(killed)) == comparable(read_metrics(reference))
     assert_same_weights(killed / "model.pt", reference / "model.pt")
+    assert_same_weights(killed / "best_model.pt", reference / "best_model.pt")
 
 
 def test_evaluate_reproduces_the_last_evaluation_exactly(tmp_path):

@@ -3,9 +3,11 @@
 A run directory holds ``config.json`` (the resolved config), the two context sets,
 ``metrics.csv``, ``baselines.json``, ``checkpoint.pt`` (everything needed to resume:
 online and target networks, optimiser, replay buffer, the generator's state, counters,
-metrics so far), ``tensorboard/`` and, at the end, ``model.pt`` (the online network's
-state dict). Every file is written atomically (``spikectl.files``), so a crash or a
-full disk at any moment leaves the previous version intact.
+metrics so far), ``tensorboard/``, ``best_model.pt`` (the network of the evaluation with
+the highest validation return so far, for runs with a validation set) and, at the end,
+``model.pt`` (the online network's final state dict). Every file is written atomically
+(``spikectl.files``), so a crash or a full disk at any moment leaves the previous
+version intact.
 
 ``checkpoint.pt`` and ``model.pt`` load with ``torch.load(..., weights_only=True)``:
 they hold tensors and plain data only (dicts, lists, numbers, strings), never pickled
@@ -52,6 +54,7 @@ __all__ = [
     "RunDirError",
     "TrainingState",
     "load_checkpoint",
+    "forget_best_model_after",
     "load_model_weights",
     "prepare_run_dir",
     "read_config",
@@ -70,12 +73,13 @@ MODEL_VERSION = 1
 CONFIG_FILE = "config.json"
 CHECKPOINT_FILE = "checkpoint.pt"
 MODEL_FILE = "model.pt"
+BEST_MODEL_FILE = "best_model.pt"
 METRICS_FILE = "metrics.csv"
 BASELINES_FILE = "baselines.json"
 LOCK_FILE = ".spikectl.lock"
 UNSTARTED_LEFTOVERS = (
     METRICS_FILE, BASELINES_FILE, "train_contexts.npz", "test_contexts.npz", "tensorboard",
-    "learning_curve.png",
+    "learning_curve.png", BEST_MODEL_FILE,
 )  # fmt: skip
 """What a run that stopped before its first checkpoint may have written besides its
 config; a restart from step 0 removes it."""
@@ -556,21 +560,53 @@ def saved_config(values: dict[str, Any]) -> Experiment | None:
         return None
 
 
-def save_model(run_dir: Path, network: torch.nn.Module) -> Path:
-    """The final weights: a plain state dict, loadable with ``torch.load(path,
-    weights_only=True)`` and ``load_state_dict``. Its ``_metadata["spikectl"]`` entry
-    (which ``load_state_dict`` ignores) holds the format and the checksum of the weights.
+def save_model(
+    run_dir: Path,
+    network: torch.nn.Module,
+    file_name: str = MODEL_FILE,
+    episode: int | None = None,
+) -> Path:
+    """A network's weights (the final ones by default): a plain state dict, loadable with
+    ``torch.load(path, weights_only=True)`` and ``load_state_dict``. Its
+    ``_metadata["spikectl"]`` entry (which ``load_state_dict`` ignores) holds the format,
+    the checksum of the weights and, if given, the ``episode`` they were taken at.
     Refuses NaN or infinite weights."""
-    path = run_dir / MODEL_FILE
+    path = run_dir / file_name
     weights = network.state_dict()
-    check_finite(weights, f"the final network of {run_dir}")
-    weights._metadata["spikectl"] = {
+    check_finite(weights, f"the network saved as {path}")
+    header = {
         "format": MODEL_FORMAT,
         "format_version": MODEL_VERSION,
         "checksum": payload_checksum(dict(weights)),
     }
+    if episode is not None:
+        header["episode"] = int(episode)
+    weights._metadata["spikectl"] = header
     atomic_write_bytes(path, torch_bytes(weights))
     return path
+
+
+def model_episode(path: Path) -> int | None:
+    """The episode a saved model was taken at (None if the file does not record one)."""
+    weights = load_model_weights(path)
+    episode = weights._metadata["spikectl"].get("episode")
+    return episode if isinstance(episode, int) and not isinstance(episode, bool) else None
+
+
+def forget_best_model_after(run_dir: Path, episode: int) -> None:
+    """Remove a ``best_model.pt`` taken after ``episode`` (a run killed after its last
+    checkpoint may have written one): the resumed run writes it again when it gets
+    there, so the file always belongs to the evaluations in metrics.csv. A damaged
+    file is removed too, for the same reason."""
+    path = run_dir / BEST_MODEL_FILE
+    if not path.exists():
+        return
+    try:
+        taken_at = model_episode(path)
+    except RunDirError:
+        taken_at = None
+    if taken_at is None or taken_at > episode:
+        path.unlink()
 
 
 def load_model_weights(path: Path) -> dict[str, torch.Tensor]:

@@ -37,12 +37,15 @@ from spikectl.envs.rollout import (
 )
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.training.checkpoint import (
+    BEST_MODEL_FILE,
     RunDirError,
     TrainingState,
+    forget_best_model_after,
     load_checkpoint,
     locked_run,
     prepare_run_dir,
     save_checkpoint,
+    save_model,
     write_metrics,
 )
 from spikectl.training.config import Experiment
@@ -309,6 +312,7 @@ def train(config: Experiment, run_dir: str | Path, resume: bool = False) -> list
     state = TrainingState(rng=np.random.default_rng(np.random.SeedSequence(config.train.seed)))
     if resume:
         state = load_checkpoint(run_dir, config, online, target, optimizer, replay, predictor)
+        forget_best_model_after(run_dir, state.episodes)
     else:
         state.baselines = {
             name: {
@@ -344,7 +348,7 @@ def train(config: Experiment, run_dir: str | Path, resume: bool = False) -> list
             split: greedy_returns(online, env, config.train.device, eval_seed)
             for split, env in eval_envs.items()
         }
-        record_evaluation(state, config, returns, predictor is not None, run_dir, logger)
+        record_evaluation(state, config, returns, predictor, run_dir, logger, online)
 
     eval_seed = stream_seed(config, EVAL_STREAM)
     if not state.metrics:
@@ -412,12 +416,15 @@ def record_evaluation(
     state: TrainingState,
     config: Experiment,
     returns: dict[str, float],
-    with_aux: bool,
+    predictor: torch.nn.Module | None,
     run_dir: Path,
     logger: RunLogger,
+    network: torch.nn.Module,
 ) -> None:
     """Append one metrics.csv row (greedy ``returns`` per split, mean losses since the
-    last row, both clocks), write it and log it; the loss sums start again."""
+    last row, both clocks), write it and log it; the loss sums start again. When the
+    validation return beats every earlier one, ``network`` is saved as best_model.pt
+    (model selection on the validation set, never on the test set)."""
     n = state.loss_count
     row = {
         "episode": state.episodes,
@@ -429,13 +436,22 @@ def record_evaluation(
         "loss": state.loss_sum / n if n else math.nan,
         "wall_time_s": state.wall_time_s,
         "val_return": float(returns["val"]) if "val" in returns else math.nan,
-        "aux_loss": state.aux_loss_sum / n if n and with_aux else math.nan,
+        "aux_loss": state.aux_loss_sum / n if n and predictor is not None else math.nan,
         "cpu_time_s": state.cpu_time_s,
     }
     state.loss_sum, state.aux_loss_sum, state.loss_count = 0.0, 0.0, 0
     state.metrics.append(row)
     write_metrics(run_dir, state.metrics, METRIC_FIELDS)
     logger.log(row)
+    if best_on_validation(state.metrics) is row:
+        save_model(run_dir, network, BEST_MODEL_FILE, episode=state.episodes)
+
+
+def best_on_validation(metrics: list[dict]) -> dict | None:
+    """The metrics row with the highest validation return (the earliest of equal ones),
+    or None for a run without a validation set: the evaluation best_model.pt was taken at."""
+    scored = [row for row in metrics if not math.isnan(row.get("val_return", math.nan))]
+    return max(scored, key=lambda row: row["val_return"], default=None)
 
 
 def baseline_episodes(config: Experiment, contexts, policy) -> EpisodeBatch:
@@ -484,8 +500,6 @@ class RunLogger:
         self.last = {"train": f"{row['train_return']:.3f}", "test": f"{row['test_return']:.3f}"}
 
     def finish(self, online: torch.nn.Module, state: TrainingState) -> None:
-        from spikectl.training.checkpoint import save_model
-
         self.bar.close()
         self.writer.close()
         save_model(self.run_dir, online)

@@ -40,6 +40,7 @@ from spikectl.training.checkpoint import (
     RunDirError,
     TrainingState,
     check_device,
+    forget_best_model_after,
     run_lock,
     save_model,
 )
@@ -230,6 +231,8 @@ def _train_group(
         states = load_group_checkpoint(
             group_dir, configs, online, target, predictor, optimizer, replays
         )
+        for state, run_dir in zip(states, run_dirs, strict=True):
+            forget_best_model_after(run_dir, state.episodes)
     else:
         for c, state, (train_set, test_set, _) in zip(configs, states, sets, strict=True):
             state.baselines = {
@@ -291,7 +294,7 @@ def _train_group(
         for k, (state, run_dir) in enumerate(zip(states, run_dirs, strict=True)):
             seed_returns = {split: values[k] for split, values in returns.items()}
             record_evaluation(
-                state, config, seed_returns, predictor is not None, run_dir, loggers[k]
+                state, config, seed_returns, predictor, run_dir, loggers[k], networks[k]
             )
 
     def seed_losses(online_params, target_params, predictor_params, tensors):

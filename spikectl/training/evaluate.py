@@ -15,6 +15,7 @@ from spikectl.agents import make_agent
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch, do_nothing_policy, evaluate_policy
 from spikectl.training.checkpoint import (
+    BEST_MODEL_FILE,
     CHECKPOINT_FILE,
     MODEL_FILE,
     RunDirError,
@@ -49,21 +50,39 @@ class SplitResult:
         return float(self.returns.std(ddof=1) / np.sqrt(self.returns.size))
 
 
-def load_agent(run_dir: str | os.PathLike, n_neurons: int | None = None) -> torch.nn.Module:
-    """The trained online network of a run (model.pt, else the last checkpoint), on CPU.
+MODEL_CHOICES = ("final", "best")
+"""Which weights of a run to load: ``final`` (model.pt, else the last checkpoint) or
+``best`` (best_model.pt, the evaluation with the highest validation return)."""
+
+
+def load_agent(
+    run_dir: str | os.PathLike, n_neurons: int | None = None, model: str = "final"
+) -> torch.nn.Module:
+    """The trained online network of a run, on CPU: ``model="final"`` loads model.pt
+    (else the last checkpoint), ``model="best"`` loads best_model.pt (the network of the
+    evaluation with the highest validation return).
 
     Both files load weights-only with their checksums verified; a damaged, foreign or
     crafted file, or weights holding NaN or infinite values, is a RunDirError.
     ``n_neurons`` builds the network for another network size (per-neuron architectures
     only; DRQN and DMDRQN refuse it when they run).
     """
+    if model not in MODEL_CHOICES:
+        raise ValueError(f"model must be one of {MODEL_CHOICES}, got {model!r}")
     run_dir = Path(run_dir)
     config = read_config(run_dir)
     network = make_agent(
         config.agent.arch, config.env.n_observed if n_neurons is None else n_neurons,
         config.env.episode_length, config.agent.sizes, params=config.env.params,
     )  # fmt: skip
-    if (run_dir / MODEL_FILE).exists():
+    if model == "best":
+        if not (run_dir / BEST_MODEL_FILE).exists():
+            raise RunDirError(
+                f"{run_dir} holds no {BEST_MODEL_FILE}: runs save one only when they have a "
+                "validation set (n_val > 0), from their first evaluation on"
+            )
+        weights = load_model_weights(run_dir / BEST_MODEL_FILE)
+    elif (run_dir / MODEL_FILE).exists():
         weights = load_model_weights(run_dir / MODEL_FILE)
     elif (run_dir / CHECKPOINT_FILE).exists():
         weights = checkpoint_weights(run_dir / CHECKPOINT_FILE)
@@ -93,10 +112,12 @@ def greedy_episodes(
 
 
 def evaluate_run(
-    run_dir: str | os.PathLike, contexts: str | os.PathLike | None = None
+    run_dir: str | os.PathLike,
+    contexts: str | os.PathLike | None = None,
+    model: str = "final",
 ) -> list[SplitResult]:
-    """Greedy returns of a run's agent on its training, test (and validation) sets, or on
-    ``contexts``."""
+    """Greedy returns of a run's agent (``model``: "final" or "best", see
+    :func:`load_agent`) on its training, test (and validation) sets, or on ``contexts``."""
     run_dir = Path(run_dir)
     config = read_config(run_dir)
     if contexts is not None:
@@ -113,7 +134,7 @@ def evaluate_run(
         }
         if (run_dir / VAL_FILE).exists():
             sets["validation"] = ContextSet.load(run_dir / VAL_FILE)
-    network = load_agent(run_dir)
+    network = load_agent(run_dir, model=model)
     results = []
     for name, context_set in sets.items():
         if context_set.episode_length != config.env.episode_length:

@@ -1,0 +1,85 @@
+"""best_model.pt: model selection on the validation set (never on the test set)."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from spikectl.training.checkpoint import (
+    BEST_MODEL_FILE,
+    RunDirError,
+    forget_best_model_after,
+    model_episode,
+    read_metrics,
+    save_model,
+)
+from spikectl.training.dqn import best_on_validation, train
+from spikectl.training.evaluate import evaluate_run, load_agent
+from spikectl.training.presets import SMOKE
+
+
+def rows(*val_returns: float) -> list[dict]:
+    return [{"episode": 10 * k, "val_return": v} for k, v in enumerate(val_returns)]
+
+
+def test_best_row_is_the_earliest_highest_validation_return():
+    metrics = rows(0.5, 0.7, 0.6, 0.7, math.nan)
+    assert best_on_validation(metrics) is metrics[1]
+    assert best_on_validation(rows(math.nan, math.nan)) is None
+    assert best_on_validation([]) is None
+
+
+def test_best_model_is_the_best_validation_evaluation_exactly(tmp_path):
+    """best_model.pt holds the weights of the evaluation with the highest validation
+    return: scoring it again gives that row's train, test and validation returns."""
+    config = SMOKE.with_changes(n_val=4, learning_rate=3e-3)
+    metrics = train(config, tmp_path / "run")
+    best = best_on_validation(metrics)
+    path = tmp_path / "run" / BEST_MODEL_FILE
+    assert model_episode(path) == best["episode"]
+    scored = {result.name: result.mean for result in evaluate_run(tmp_path / "run", model="best")}
+    assert scored == {"train": best["train_return"], "test": best["test_return"],
+                      "validation": best["val_return"]}  # fmt: skip
+    # The row it came from is not the last one in this run, so the two files differ.
+    assert best is not metrics[-1]
+    final = load_agent(tmp_path / "run").state_dict()
+    chosen = load_agent(tmp_path / "run", model="best").state_dict()
+    assert any(not torch.equal(final[name], chosen[name]) for name in final)
+
+
+def test_runs_without_a_validation_set_keep_no_best_model(tmp_path):
+    train(SMOKE.with_changes(n_val=0, total_env_steps=8 * 20 * 8), tmp_path / "run")
+    assert not (tmp_path / "run" / BEST_MODEL_FILE).exists()
+    with pytest.raises(RunDirError, match="no best_model.pt.*validation set"):
+        load_agent(tmp_path / "run", model="best")
+    with pytest.raises(ValueError, match="model must be one of"):
+        load_agent(tmp_path / "run", model="latest")
+
+
+def test_a_resumed_run_forgets_a_best_model_taken_after_its_checkpoint(tmp_path):
+    network = torch.nn.Linear(2, 2)
+    save_model(tmp_path, network, BEST_MODEL_FILE, episode=160)
+    forget_best_model_after(tmp_path, 160)
+    assert model_episode(tmp_path / BEST_MODEL_FILE) == 160  # taken at the checkpoint: kept
+    forget_best_model_after(tmp_path, 80)
+    assert not (tmp_path / BEST_MODEL_FILE).exists()  # taken after it: gone
+    (tmp_path / BEST_MODEL_FILE).write_bytes(b"damaged")
+    forget_best_model_after(tmp_path, 80)
+    assert not (tmp_path / BEST_MODEL_FILE).exists()
+    forget_best_model_after(tmp_path, 80)  # nothing to forget is fine
+
+
+def test_each_seed_of_a_group_keeps_its_own_best_model(tmp_path):
+    from spikectl.training.ensemble import train_seeds
+
+    config = SMOKE.with_changes(n_val=4, total_env_steps=24 * 20 * 8)
+    metrics = train_seeds(config, [0, 1], tmp_path / "group")
+    for seed, seed_metrics in zip([0, 1], metrics, strict=True):
+        run_dir = tmp_path / "group" / f"seed={seed}"
+        best = best_on_validation(read_metrics(run_dir))
+        assert best["episode"] == best_on_validation(seed_metrics)["episode"]
+        assert model_episode(run_dir / BEST_MODEL_FILE) == best["episode"]
+        scored = {r.name: r.mean for r in evaluate_run(run_dir, model="best")}
+        assert scored["validation"] == best["val_return"]
