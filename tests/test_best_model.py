@@ -83,3 +83,18 @@ def test_each_seed_of_a_group_keeps_its_own_best_model(tmp_path):
         assert model_episode(run_dir / BEST_MODEL_FILE) == best["episode"]
         scored = {r.name: r.mean for r in evaluate_run(run_dir, model="best")}
         assert scored["validation"] == best["val_return"]
+
+
+def test_cli_prints_and_evaluates_the_selected_network(tmp_path, run_cli):
+    run = tmp_path / "run"
+    out = run_cli("train", "smoke", "--total-env-steps", "3200", "--run-dir", str(run)).stdout
+    best = best_on_validation(read_metrics(run))
+    assert f"best on val.     {best['train_return']:.3f}   {best['test_return']:.3f}" in out
+    assert f"validation {best['val_return']:.3f}, episode {int(best['episode']):,}" in out
+    evaluated = run_cli("evaluate", str(run), "--model", "best").stdout
+    assert f"validation              {best['val_return']:.3f} +-" in evaluated
+    data = (run / BEST_MODEL_FILE).read_bytes()
+    (run / BEST_MODEL_FILE).write_bytes(data[: len(data) // 2])  # a truncated copy
+    damaged = run_cli("evaluate", str(run), "--model", "best", check=False)
+    assert damaged.returncode == 2 and "best_model.pt" in damaged.stderr
+    assert "Traceback" not in damaged.stderr
