@@ -11,9 +11,12 @@ parts can be read as shares of it.
 
 Also compares, in the same run: a bfloat16 autocast of the transformer and a
 transformer layer written out with ``scaled_dot_product_attention`` against
-``nn.TransformerEncoderLayer`` (the candidates for a cheaper update).
+``nn.TransformerEncoderLayer`` (the candidates for a cheaper update); with
+``--compile``, a whole update whose loss is ``torch.compile``d against the eager one
+(the compile time printed apart, the steps interleaved).
 
     python benchmarks/bench_update_profile.py [--preset quick] [--threads 1] [--repeats 30]
+                                              [--compile]
 """
 
 from __future__ import annotations
@@ -31,9 +34,11 @@ from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.training.dqn import (
     EpsilonGreedyPolicy,
+    batch_tensors,
     build_networks,
     build_predictor,
     greedy_returns,
+    losses_on_tensors,
     sequence_observations,
     soft_update,
     training_losses,
@@ -51,6 +56,18 @@ def median_ms(function, repeats: int) -> float:
         function()
         times.append(time.perf_counter() - start)
     return float(np.median(times)) * 1e3
+
+
+def interleaved_medians_ms(candidates: dict, repeats: int) -> dict[str, float]:
+    """Median time of each function, the candidates run in turn so that a noisy
+    neighbour slows them alike."""
+    times = {name: [] for name in candidates}
+    for _ in range(repeats):
+        for name, function in candidates.items():
+            start = time.perf_counter()
+            function()
+            times[name].append(time.perf_counter() - start)
+    return {name: float(np.median(values)) * 1e3 for name, values in times.items()}
 
 
 def written_out_layer(x: torch.Tensor, layer: torch.nn.TransformerEncoderLayer) -> torch.Tensor:
@@ -72,6 +89,7 @@ def main() -> None:
     parser.add_argument("--preset", choices=sorted(PRESETS), default="quick")
     parser.add_argument("--threads", type=int, default=1)
     parser.add_argument("--repeats", type=int, default=30)
+    parser.add_argument("--compile", action="store_true", help="also time a torch.compile'd loss")
     args = parser.parse_args()
     torch.set_num_threads(args.threads)
     config = PRESETS[args.preset]
@@ -204,18 +222,50 @@ def main() -> None:
         f"written out, SDPA (max |diff| {difference:.1e})": forward_backward(written_out),
         "bfloat16 autocast": forward_backward(autocast_bf16),
     }
-    times = {name: [] for name in candidates}
-    for _ in range(args.repeats):  # interleaved
-        for name, function in candidates.items():
-            start = time.perf_counter()
-            function()
-            times[name].append(time.perf_counter() - start)
-    reference = float(np.median(times["nn.TransformerEncoderLayer (today)"]))
+    medians = interleaved_medians_ms(candidates, args.repeats)
+    reference = medians["nn.TransformerEncoderLayer (today)"]
     print("| transformer | median (ms) | ratio to today |")
     print("|---|---:|---:|")
-    for name, values in times.items():
-        value = float(np.median(values))
-        print(f"| {name} | {value * 1e3:.2f} | {value / reference:.2f} |")
+    for name, value in medians.items():
+        print(f"| {name} | {value:.2f} | {value / reference:.2f} |")
+    if args.compile:
+        compare_compiled_update(online, target, predictor, trained, optimizer, replay, rng,
+                                config, args.repeats)  # fmt: skip
+
+
+def compare_compiled_update(
+    online, target, predictor, trained, optimizer, replay, rng, config, repeats
+) -> None:
+    """A whole update with the loss compiled by ``torch.compile`` against the eager one."""
+
+    def loss_of(tensors: dict) -> torch.Tensor:
+        td, aux = losses_on_tensors(online, target, tensors, config, predictor)
+        return td if aux is None else td + config.train.aux_voltage_weight * aux
+
+    def update_with(loss_function):
+        def run() -> None:
+            batch = replay.sample(config.train.batch_size, rng)
+            loss = loss_function(batch_tensors(batch, "cpu"))
+            optimizer.zero_grad(set_to_none=True)
+            loss.backward()
+            torch.nn.utils.clip_grad_norm_(trained, config.train.max_grad_norm)
+            optimizer.step()
+            soft_update(target, online, config.train.tau)
+
+        return run
+
+    compiled = update_with(torch.compile(loss_of, dynamic=False))
+    start = time.perf_counter()
+    for _ in range(3):  # the first calls compile (and recompile for the no-grad pass)
+        compiled()
+    print(f"\ntorch.compile: first 3 updates took {time.perf_counter() - start:.1f} s")
+    medians = interleaved_medians_ms(
+        {"eager update": update_with(loss_of), "compiled loss": compiled}, repeats
+    )
+    print("| update | median (ms) | ratio to eager |")
+    print("|---|---:|---:|")
+    for name, value in medians.items():
+        print(f"| {name} | {value:.2f} | {value / medians['eager update']:.2f} |")
 
 
 if __name__ == "__main__":
