@@ -2,11 +2,13 @@
 
     python docs/results/learn_fast_table.py docs/results
 
-Prints two markdown tables: the before/after table (environment steps, gradient
-updates and wall minutes until the unseen-test return first reaches 0.70) and the
-ablation table (final train / validation / test return, mean ± sd over seeds and the
-test IQM with its 95% stratified-bootstrap interval, wall and core minutes). Every
-trial ran on one Torch thread, two trials at a time on the project's 2-core machine.
+Prints the pilots' table and three markdown tables: the before/after table
+(environment steps, gradient updates and wall minutes until the unseen-test return
+first reaches 0.70), the ablation table (final train / validation / test return,
+mean ± sd over seeds and the test IQM with its 95% stratified-bootstrap interval, wall
+and core minutes) and the model-selection table (the final network against
+best_model.pt, the evaluation with the highest validation return). Every trial ran
+on one Torch thread, two trials at a time on the project's 2-core machine.
 """
 
 import math
@@ -18,6 +20,7 @@ import numpy as np
 from spikectl.experiments.report import load_runs
 from spikectl.experiments.stats import bootstrap_ci, iqm
 from spikectl.experiments.sweep import trial_dirs
+from spikectl.training.dqn import best_on_validation
 
 THRESHOLD = 0.70
 
@@ -93,6 +96,32 @@ def ablation(groups) -> str:
     return "\n".join(lines) + "\n"
 
 
+def selection(groups) -> str:
+    """Final network against the one selected on the validation set (best_model.pt)."""
+    lines = [
+        "| settings | seeds | final: validation | final: test | selected: validation "
+        "| selected: test | selected: test IQM [95% CI] | selected: lowest test seed "
+        "| selected at episode |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    for label, runs in groups.items():
+        finals = [run.metrics[-1] for run in runs]
+        chosen = [best_on_validation(run.metrics) for run in runs]
+        if any(row is None for row in chosen):
+            continue  # runs made before the validation split existed
+        test = np.array([row["test_return"] for row in chosen])
+        episodes = ", ".join(f"{int(row['episode']):,}" for row in chosen)
+        interval = bootstrap_ci(test, iqm, 2000, 0.95, 0)
+        lines.append(
+            f"| {label} | {len(runs)} | {mean_sd([row['val_return'] for row in finals])} "
+            f"| {mean_sd([row['test_return'] for row in finals])} "
+            f"| {mean_sd([row['val_return'] for row in chosen])} | {mean_sd(test)} "
+            f"| {interval.estimate:.3f} [{interval.low:.3f}, {interval.high:.3f}] "
+            f"| {test.min():.3f} | {episodes} |"
+        )
+    return "\n".join(lines) + "\n"
+
+
 PILOTS = {
     "A-g09": "2 updates/episode, 240 k steps, gamma 0.9",
     "B-g099": "A with gamma 0.99 (stopped early)",
@@ -163,11 +192,33 @@ def main() -> None:
         groups["quick preset with epsilon annealed over 10% (candidate)"] = load_runs(
             trial_dirs(results / "learn-fast-eps01")
         )
+    half_width = {
+        "quick preset at quarter width, 3 updates/episode (candidate)": [
+            "learn-fast-half-width-3upe"
+        ],
+        "quick preset at quarter width, 4 updates/episode (candidate)": [
+            "learn-fast-half-width-4upe",
+            "learn-fast-half-width-4upe-seeds3-4",
+        ],
+    }
+    for label, folders in half_width.items():
+        dirs = [d for folder in folders for d in trial_dirs(results / folder)]
+        if dirs:
+            groups[label] = load_runs(dirs)
+    removed = {  # ablations of today's preset; the others are of the preset of 2026-11-22
+        "learn-fast-without-n-step": "quick preset with 1-step targets (no 3-step)",
+        "learn-fast-without-sparse-exploration": "quick preset with uniform exploration",
+    }
     for sweep in sorted(results.glob("learn-fast-without-*")):
         if trial_dirs(sweep):
             label = sweep.name.removeprefix("learn-fast-").replace("-", " ")
+            if sweep.name in removed:
+                label = removed[sweep.name]
+            else:
+                label = f"preset of 2026-11-22 {label}"
             groups[label] = load_runs(trial_dirs(sweep))
     print(ablation(groups))
+    print(selection(groups))
 
 
 if __name__ == "__main__":
