@@ -348,7 +348,7 @@ def train(config: Experiment, run_dir: str | Path, resume: bool = False) -> list
             split: greedy_returns(online, env, config.train.device, eval_seed)
             for split, env in eval_envs.items()
         }
-        record_evaluation(state, config, returns, predictor, run_dir, logger, online)
+        record_evaluation(state, config, returns, predictor is not None, run_dir, logger, online)
 
     eval_seed = stream_seed(config, EVAL_STREAM)
     if not state.metrics:
@@ -416,7 +416,7 @@ def record_evaluation(
     state: TrainingState,
     config: Experiment,
     returns: dict[str, float],
-    predictor: torch.nn.Module | None,
+    with_aux: bool,
     run_dir: Path,
     logger: RunLogger,
     network: torch.nn.Module,
@@ -436,7 +436,7 @@ def record_evaluation(
         "loss": state.loss_sum / n if n else math.nan,
         "wall_time_s": state.wall_time_s,
         "val_return": float(returns["val"]) if "val" in returns else math.nan,
-        "aux_loss": state.aux_loss_sum / n if n and predictor is not None else math.nan,
+        "aux_loss": state.aux_loss_sum / n if n and with_aux else math.nan,
         "cpu_time_s": state.cpu_time_s,
     }
     state.loss_sum, state.aux_loss_sum, state.loss_count = 0.0, 0.0, 0

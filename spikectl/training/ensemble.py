@@ -294,7 +294,7 @@ def _train_group(
         for k, (state, run_dir) in enumerate(zip(states, run_dirs, strict=True)):
             seed_returns = {split: values[k] for split, values in returns.items()}
             record_evaluation(
-                state, config, seed_returns, predictor, run_dir, loggers[k], networks[k]
+                state, config, seed_returns, predictor is not None, run_dir, loggers[k], networks[k]
             )
 
     def seed_losses(online_params, target_params, predictor_params, tensors):
