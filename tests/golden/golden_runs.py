@@ -1,0 +1,109 @@
+"""The golden runs: what the trainer produced before the one-loop refactor (issue 22).
+
+``python tests/golden/golden_runs.py`` trains each run below through the command line
+and writes ``golden.json``: every metrics.csv column but the clocks, and a digest of
+every saved network. tests/test_golden.py trains them again and must find the same.
+
+The record was made once, on the commit before the refactor; it is bit-exact only on the
+CPU kind and PyTorch it names (``machine``), and the test says so instead of comparing
+elsewhere. Seed groups are recorded as the seeds trained alone: since the refactor a seed
+trained in a group gives exactly the metrics and weights of that seed alone.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import platform
+import subprocess
+import sys
+from pathlib import Path
+
+import torch
+
+GOLDEN_FILE = Path(__file__).with_name("golden.json")
+
+QUICK_PREFIX = (
+    "train", "quick", "--n-train", "20", "--n-test", "10", "--n-val", "10",
+    "--total-env-steps", str(16 * 60 * 6), "--eval-every-episodes", "32",
+    "--checkpoint-every-episodes", "32", "--no-progress",
+)  # fmt: skip
+"""The quick preset with every option it has (n-step, auxiliary loss, pooled head,
+learning-rate decay, sparse exploration) over 6 rounds on small sets."""
+
+RUNS: dict[str, tuple[str, ...]] = {
+    "quick-prefix": QUICK_PREFIX,
+    "smoke-seed0": ("train", "smoke"),
+    "smoke-seed1": ("train", "smoke", "--seed", "1"),
+}
+SAVED_MODELS = ("model.pt", "best_model.pt")
+
+
+def machine() -> dict[str, str]:
+    """What bit-exactness depends on: the CPU's model and features, PyTorch, NumPy."""
+    import numpy
+
+    cpu = {"model": platform.processor(), "flags": ""}
+    try:
+        text = Path("/proc/cpuinfo").read_text()
+        for line in text.splitlines():
+            key, _, value = line.partition(":")
+            if key.strip() == "model name":
+                cpu["model"] = value.strip()
+            if key.strip() == "flags":
+                cpu["flags"] = hashlib.sha256(value.strip().encode()).hexdigest()[:16]
+                break
+    except OSError:
+        pass
+    return {"cpu": cpu["model"], "cpu_flags": cpu["flags"], "torch": torch.__version__,
+            "numpy": numpy.__version__}  # fmt: skip
+
+
+def weights_digest(path: Path) -> str:
+    """SHA-256 over a saved state dict's names, dtypes, shapes and bytes, in name order."""
+    weights = torch.load(path, weights_only=True)
+    digest = hashlib.sha256()
+    for name in sorted(weights):
+        tensor = weights[name].contiguous()
+        digest.update(f"{name}{tensor.dtype}{tuple(tensor.shape)}".encode())
+        digest.update(tensor.reshape(-1).view(torch.uint8).numpy().tobytes())
+    return digest.hexdigest()
+
+
+def record(run_dir: Path) -> dict:
+    """A run directory's metrics without the clocks (floats as repr) and model digests."""
+    import csv
+
+    with open(run_dir / "metrics.csv", newline="") as handle:
+        rows = [
+            {key: value for key, value in row.items() if key not in ("wall_time_s", "cpu_time_s")}
+            for row in csv.DictReader(handle)
+        ]
+    return {
+        "metrics": rows,
+        "models": {name: weights_digest(run_dir / name) for name in SAVED_MODELS
+                   if (run_dir / name).exists()},  # fmt: skip
+    }
+
+
+def train(args: tuple[str, ...], run_dir: Path) -> None:
+    subprocess.run(
+        [sys.executable, "-m", "spikectl.cli", *args, "--run-dir", str(run_dir)],
+        check=True, capture_output=True, text=True,
+    )  # fmt: skip
+
+
+def main() -> None:
+    import tempfile
+
+    with tempfile.TemporaryDirectory() as scratch:
+        runs = {}
+        for name, args in RUNS.items():
+            train(args, Path(scratch) / name)
+            runs[name] = record(Path(scratch) / name)
+    GOLDEN_FILE.write_text(json.dumps({"machine": machine(), "runs": runs}, indent=1) + "\n")
+    print(f"wrote {GOLDEN_FILE}")
+
+
+if __name__ == "__main__":
+    main()
