@@ -1,32 +1,25 @@
 """Recurrent Q-networks of the paper (Section 5.2): DRQN, DDRQN, DMDRQN, TDRQN.
 
 Build one with :func:`make_agent`; see docs/agents.md for the architectures, the
-input featurisation and the observation contract. Importing builds nothing.
+input featurisation, the observation contract and which module holds what. Importing
+builds nothing.
 """
 
-from spikectl.agents.blocks import (
-    OBS_KEYS,
-    greedy_action,
-    masked_q,
-    observation_batch,
-    shift_pattern,
-)
+from spikectl.agents.features import shift_pattern
+from spikectl.agents.heads import greedy_action, masked_q
 from spikectl.agents.networks import (
     AGENTS,
-    ARCHITECTURES,
-    DDRQN,
-    DMDRQN,
-    DRQN,
-    TDRQN,
-    AgentSizes,
-    Architecture,
-    RecurrentQNetwork,
     count_parameters,
     make_agent,
     make_voltage_predictor,
     parameter_counts,
     reset_state,
 )
+from spikectl.agents.observation import OBS_KEYS, observation_batch
+from spikectl.agents.per_neuron_networks import DDRQN, TDRQN
+from spikectl.agents.recurrent import RecurrentQNetwork
+from spikectl.agents.sizes import ARCHITECTURES, AgentSizes, Architecture
+from spikectl.agents.system_networks import DMDRQN, DRQN
 
 __all__ = [
     "AGENTS",

@@ -1,0 +1,84 @@
+"""Featurisation: pure functions from observation tensors to the networks' inputs.
+
+Shapes in comments use n = neurons, N = episode length (= pattern length) and
+F = per-neuron input features; ``...`` is any leading shape (``[B]`` or ``[B, T]``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import torch
+import torch.nn.functional as F
+
+
+def normalised_voltage(
+    voltage: torch.Tensor, v_rest_mV: float, v_threshold_mV: float
+) -> torch.Tensor:
+    """(V - V_r) / (V_th - V_r): 0 at rest, 1 at threshold (a visible spike is >= 1)."""
+    return (voltage - v_rest_mV) / (v_threshold_mV - v_rest_mV)
+
+
+def neuron_indicator(index: torch.Tensor, n: int, dtype: torch.dtype) -> torch.Tensor:
+    """[...] integer → [..., n] with 1 where the neuron is ``index`` (-1 gives all zeros)."""
+    neurons = torch.arange(n, device=index.device)  # [n]
+    return (index.unsqueeze(-1) == neurons).to(dtype)  # [..., n]
+
+
+def action_one_hot(last_action: torch.Tensor, n: int, dtype: torch.dtype) -> torch.Tensor:
+    """[...] action in -1..n-1 → [..., n+1] one-hot in Q-vector order (index = action + 1)."""
+    return F.one_hot(last_action + 1, n + 1).to(dtype)  # [..., n+1]
+
+
+def shift_pattern(pattern: torch.Tensor, step: torch.Tensor, dtype: torch.dtype) -> torch.Tensor:
+    """Shift the pattern so step t comes first, pad with -1 to length N (paper App. C).
+
+    pattern [..., N] (0/1), step [...] in 0..N → [..., N] equal to
+    ``pattern[t:N]`` followed by ``t`` entries of -1 (all -1 at t = N).
+    """
+    N = pattern.shape[-1]
+    index = step.unsqueeze(-1) + torch.arange(N, device=step.device)  # [..., N]
+    shifted = torch.gather(pattern.to(dtype), -1, index.clamp(max=N - 1))  # [..., N]
+    return torch.where(index < N, shifted, torch.full_like(shifted, -1.0))  # [..., N]
+
+
+def per_neuron_features(
+    obs: Mapping[str, torch.Tensor],
+    *,
+    v_rest_mV: float,
+    v_threshold_mV: float,
+    with_target: bool,
+    dtype: torch.dtype,
+    with_target_voltage: bool = False,
+) -> torch.Tensor:
+    """Per-neuron LSTM input [..., n, F]: normalised V, stimulated at t-1, (is target),
+    (the target's normalised V).
+
+    F = 2 + with_target + with_target_voltage (docs/agents.md). The target's voltage, the same
+    for every neuron, keeps the input permutation equivariant and lets each neuron's
+    memory relate its own spikes to the target's response.
+    """
+    voltage = normalised_voltage(obs["voltage"].to(dtype), v_rest_mV, v_threshold_mV)  # [..., n]
+    n = voltage.shape[-1]
+    columns = [voltage, neuron_indicator(obs["last_action"], n, dtype)]  # [..., n] each
+    if with_target:
+        columns.append(neuron_indicator(obs["target"], n, dtype))  # [..., n]
+    if with_target_voltage:
+        target_voltage = torch.gather(voltage, -1, obs["target"].unsqueeze(-1))  # [..., 1]
+        columns.append(target_voltage.expand_as(voltage))  # [..., n]
+    return torch.stack(columns, dim=-1)  # [..., n, F]
+
+
+def system_features(
+    obs: Mapping[str, torch.Tensor], *, v_rest_mV: float, v_threshold_mV: float, dtype: torch.dtype
+) -> torch.Tensor:
+    """DRQN input [..., 2n+1]: all normalised potentials and the one-hot previous action."""
+    voltage = obs["voltage"].to(dtype)  # [..., n]
+    n = voltage.shape[-1]
+    return torch.cat(
+        [
+            normalised_voltage(voltage, v_rest_mV, v_threshold_mV),  # [..., n]
+            action_one_hot(obs["last_action"], n, dtype),  # [..., n+1]
+        ],
+        dim=-1,
+    )  # [..., 2n+1]

@@ -1,0 +1,78 @@
+"""The networks' sizes and settings (:class:`AgentSizes`, the paper's Table 2 by default)
+and the architectures' names."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, fields
+from typing import Literal, get_args
+
+from spikectl.agents.heads import PerNeuronQHead
+
+Architecture = Literal["drqn", "ddrqn", "dmdrqn", "tdrqn"]
+"""The architectures' names (the paper's order); ``AGENTS`` maps them to classes."""
+ARCHITECTURES: tuple[str, ...] = get_args(Architecture)
+
+
+@dataclass(frozen=True)
+class AgentSizes:
+    """Sizes and settings of the networks; defaults are the paper's Table 2 (docs/agents.md).
+
+    The fields marked "not in the paper" are this project's choices (docs/agents.md).
+    """
+
+    lstm_hidden: int = 128
+    """Memory hidden size: LSTM width (per neuron, or of the one system LSTM in DRQN)."""
+    target_embed: int = 16
+    """Width of the target-neuron code (FF + ReLU); half of the context size 32."""
+    pattern_embed: int = 16
+    """Width of the shifted-pattern code (FF + ReLU); half of the context size 32."""
+    ff_hidden: int = 512
+    """Non-transformer FF width: the transformer's stand-in in DDRQN (per neuron) and DMDRQN."""
+    head_hidden: tuple[int, ...] = (512, 256, 128)
+    """Final FF head widths of DRQN, DDRQN and DMDRQN."""
+    tdrqn_head_hidden: tuple[int, ...] = (256, 128)
+    """Final FF head widths of TDRQN (Table 2: the 512 layer is not in TDRQN)."""
+    attn_width: int = 128
+    """Attention hidden size (model width) of TDRQN's transformer encoder."""
+    attn_layers: int = 2
+    """Number of transformer encoder layers in TDRQN."""
+    attn_heads: int = 1
+    """Attention heads per layer in TDRQN (must divide attn_width)."""
+    attn_ff: int = 256
+    """Feed-forward width inside each transformer encoder layer."""
+    value_hidden: tuple[int, ...] = (128,)
+    """Widths of the pooled do-nothing value MLP of DDRQN and TDRQN (not in the paper)."""
+    do_nothing_head: str = "dueling"
+    """DDRQN/TDRQN do-nothing Q: 'dueling' (Q_i = V + A_i) or 'pooled' (Q_i = A_i); not in paper."""
+    target_in_input: bool = True
+    """Target indicator also in each neuron's LSTM input; False = paper-literal (only after)."""
+    target_voltage_in_input: bool = False
+    """The target's normalised voltage also in each neuron's LSTM input (not in the paper)."""
+
+    def __post_init__(self) -> None:
+        for field in fields(self):
+            value = getattr(self, field.name)
+            if field.type == "int":
+                if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+                    raise ValueError(f"AgentSizes.{field.name} must be an int >= 1, got {value!r}")
+            elif field.type == "tuple[int, ...]":
+                if isinstance(value, int) or not all(
+                    isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in value
+                ):
+                    raise ValueError(
+                        f"AgentSizes.{field.name} must be a sequence of ints >= 1, got {value!r}"
+                    )
+                object.__setattr__(self, field.name, tuple(value))
+        if self.attn_width % self.attn_heads:
+            raise ValueError(
+                f"AgentSizes.attn_heads ({self.attn_heads}) must divide "
+                f"AgentSizes.attn_width ({self.attn_width})"
+            )
+        if self.do_nothing_head not in PerNeuronQHead.MODES:
+            raise ValueError(
+                f"AgentSizes.do_nothing_head must be one of {PerNeuronQHead.MODES}, got "
+                f"{self.do_nothing_head!r}"
+            )
+        for name in ("target_in_input", "target_voltage_in_input"):
+            if not isinstance(getattr(self, name), bool):
+                raise ValueError(f"AgentSizes.{name} must be a bool, got {getattr(self, name)!r}")
