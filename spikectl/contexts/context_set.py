@@ -13,8 +13,9 @@ import hashlib
 import json
 import os
 from collections.abc import Iterator, Mapping, Sequence
+from itertools import accumulate
 from pathlib import Path
-from typing import Any, overload
+from typing import Any, Self, overload
 
 import numpy as np
 
@@ -78,7 +79,7 @@ class ContextSet(Sequence[Context]):
         seed: int = 0,
         params: NeuronParams | None = None,
         extensions: Extensions | Mapping[str, Any] | None = None,
-    ) -> ContextSet:
+    ) -> Self:
         """``size`` contexts with pairwise distinct topologies, reproducible from ``seed``.
 
         Sets are prefix-stable: ``generate(10, seed=s)`` is the first 10 contexts of
@@ -86,10 +87,37 @@ class ContextSet(Sequence[Context]):
         heterogeneous neurons) are drawn with each context.
         """
         size = check_size(size)
+        return cls._draw([size], n_neurons, episode_length, seed, params, extensions)[0]
+
+    @classmethod
+    def _draw(
+        cls,
+        sizes: Sequence[int],
+        n_neurons: int,
+        episode_length: int,
+        seed: int,
+        params: NeuronParams | None,
+        extensions: Extensions | Mapping[str, Any] | None,
+        *,
+        stream: int | None = None,
+        exclude: Sequence[ContextSet] = (),
+    ) -> list[Self]:
+        """Consecutive sets of ``sizes`` from one stream of distinct topologies, none of
+        them in a set of ``exclude``. The stream is ``default_rng(seed)``, or with
+        ``stream`` ``default_rng([seed, stream])``: every way of drawing sets goes
+        through here, so a seed names the same contexts whichever asks for them."""
         seed = check_seed(seed)
         extensions = Extensions.coerce(extensions).context_part()
-        contexts = _generate_unique(size, n_neurons, episode_length, seed, params, extensions)
-        return cls(contexts, params, seed, extensions)
+        taken = {context.weights.tobytes() for contexts in exclude for context in contexts}
+        contexts = _generate_unique(
+            sum(sizes), n_neurons, episode_length, seed if stream is None else [seed, stream],
+            params, extensions, exclude=taken,
+        )  # fmt: skip
+        ends = list(accumulate(sizes))
+        return [
+            cls(contexts[end - size : end], params, seed, extensions)
+            for size, end in zip(sizes, ends, strict=True)
+        ]
 
     def __len__(self) -> int:
         return len(self._contexts)
@@ -284,12 +312,9 @@ def make_splits(
     seed = check_seed(seed)
     if isinstance(n_val, bool) or not isinstance(n_val, int | np.integer) or n_val < 0:
         raise ValueError(f"n_val must be a non-negative integer, got {n_val!r}")
-    extensions = Extensions.coerce(extensions).context_part()
-    contexts = _generate_unique(
-        n_test + n_train, n_neurons, episode_length, seed, params, extensions
+    test, train = ContextSet._draw(
+        [n_test, n_train], n_neurons, episode_length, seed, params, extensions
     )
-    test = ContextSet(contexts[:n_test], params, seed, extensions)
-    train = ContextSet(contexts[n_test:], params, seed, extensions)
     if not n_val:
         return train, test
     validation = make_validation_set(
@@ -314,14 +339,11 @@ def make_validation_set(
     """A validation set with no topology shared with itself or with any set in ``exclude``
     (the training and test sets), from a generator stream of its own (``VALIDATION_STREAM``)."""
     n_val = check_size(n_val, "n_val")
-    seed = check_seed(seed)
-    extensions = Extensions.coerce(extensions).context_part()
-    taken = {context.weights.tobytes() for contexts in exclude for context in contexts}
-    validation = _generate_unique(
-        n_val, n_neurons, episode_length, [seed, VALIDATION_STREAM], params, extensions,
-        exclude=taken,
+    (validation,) = ContextSet._draw(
+        [n_val], n_neurons, episode_length, seed, params, extensions,
+        stream=VALIDATION_STREAM, exclude=exclude,
     )  # fmt: skip
-    return ContextSet(validation, params, seed, extensions)
+    return validation
 
 
 def _generate_unique(
