@@ -19,10 +19,10 @@ from typing import Any, Self, overload
 
 import numpy as np
 
+from spikectl.contexts.context import Context
 from spikectl.contexts.file_format import ContextFileError, read_npz, write_npz
 from spikectl.contexts.generation import (
     MAX_TOPOLOGY_ATTEMPTS,
-    Context,
     check_episode_length,
     check_n_neurons,
     check_seed,
