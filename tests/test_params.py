@@ -60,3 +60,15 @@ def test_invalid_values_name_the_field(kwargs, message):
 def test_non_numbers_are_rejected():
     with pytest.raises(TypeError, match="v_rest_mV must be a number"):
         NeuronParams(v_rest_mV="-70")
+
+
+def test_derived_quantities_have_the_model_values_and_are_not_fields():
+    params = NeuronParams()
+    assert params.stimulus_step_mV == 40.0 and params.synaptic_step_mV == 20.0
+    assert params.voltage_step_mV(300.0) == 10.0
+    assert params.leak_per_step == params.dt_ms / params.membrane_time_constant_ms
+    assert params.v_spike_mV == -50.0 - 1e-6
+    assert params.recovery_per_step == 1.0 / 3.0
+    # Properties are not saved: to_dict holds exactly the fields, as before.
+    assert list(params.to_dict()) == [field.name for field in dataclasses.fields(NeuronParams)]
+    assert "leak_per_step" not in params.to_dict()

@@ -292,9 +292,7 @@ class EnvironmentEffects:
         self.noise_mV = extensions.observation_noise_mV
         self.stochastic_release = extensions.stochastic_release
         self.background_rate = extensions.background_rate
-        self.background_step_mV = (
-            params.dt_ms * extensions.background_current_pA / params.capacitance_pF
-        )
+        self.background_step_mV = params.voltage_step_mV(extensions.background_current_pA)
         tau = extensions.bleaching_time_constant_steps
         self.bleaching = (
             None if tau is None else np.exp(-np.arange(episode_length + 1, dtype=np.float64) / tau)

@@ -97,8 +97,39 @@ class NeuronParams:
 
     @property
     def membrane_time_constant_ms(self) -> float:
-        """tau_m = R * C."""
+        """tau_m = R * C, in ms."""
         return self.resistance_GOhm * self.capacitance_pF
+
+    @property
+    def leak_per_step(self) -> float:
+        """dt / (R C), dimensionless: the fraction of V - V_r that one step leaks away."""
+        return self.dt_ms / self.membrane_time_constant_ms
+
+    def voltage_step_mV(self, current_pA: float) -> float:
+        """dt * I / C, in mV: what a current of ``current_pA`` held for one step adds to V."""
+        return self.dt_ms * current_pA / self.capacitance_pF
+
+    @property
+    def stimulus_step_mV(self) -> float:
+        """dt * w_e / C, in mV: the voltage step of one stimulation (+40 mV by default)."""
+        return self.voltage_step_mV(self.stimulus_current_pA)
+
+    @property
+    def synaptic_step_mV(self) -> float:
+        """dt * w_in / C, in mV: the voltage step of one release onto a synapse of weight 1
+        (+20 mV by default; G[i, j] signs it)."""
+        return self.voltage_step_mV(self.synaptic_current_pA)
+
+    @property
+    def v_spike_mV(self) -> float:
+        """V_th - tolerance, in mV: a neuron spikes iff its potential is at least this."""
+        return self.v_threshold_mV - self.threshold_tolerance_mV
+
+    @property
+    def recovery_per_step(self) -> float:
+        """dt / tau_R, dimensionless: k steps after a release, p_r * (1 - exp(-k * this))
+        is the chance (stochastic release) or the rule's left side (the paper's)."""
+        return self.dt_ms / self.vesicle_recovery_ms
 
     @cached_property
     def min_release_interval_steps(self) -> int:

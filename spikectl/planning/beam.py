@@ -84,11 +84,10 @@ def _committed_target_spike(model: PlanningModel, state: SimulatorState) -> np.n
     (rows hypothesis-major, as in the beam)."""
     params, target = model.params, model.target
     if model.neurons is None:
-        threshold = params.v_threshold_mV - params.threshold_tolerance_mV
-        leak = params.dt_ms / params.membrane_time_constant_ms
+        threshold, leak = params.v_spike_mV, params.leak_per_step
     else:
         threshold, leak = model.neurons[0, 0, target], model.neurons[0, 1, target]
-    synaptic_step = params.dt_ms * params.synaptic_current_pA / params.capacitance_pF
+    synaptic_step = params.synaptic_step_mV
     k = model.hypotheses
     columns = model.weights[:, :, target].astype(np.float64)  # [K, n]
     released = state.released.reshape(k, -1, model.n_neurons).astype(np.float64)  # [K, E, n]

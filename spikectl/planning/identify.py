@@ -148,10 +148,7 @@ class ObservedState:
     def __init__(self, n_neurons: int, params: NeuronParams, spike_margin_mV: float) -> None:
         self.params = params
         self.state = SimulatorState.at_rest(1, n_neurons, params)
-        self._threshold = params.v_threshold_mV - params.threshold_tolerance_mV - spike_margin_mV
-        self._leak = params.dt_ms / params.membrane_time_constant_ms
-        self._stimulus_mV = params.dt_ms * params.stimulus_current_pA / params.capacitance_pF
-        self._synaptic_mV = params.dt_ms * params.synaptic_current_pA / params.capacitance_pF
+        self._threshold = params.v_spike_mV - spike_margin_mV
         self._interval = params.min_release_interval_steps
         self.spiked = np.zeros(n_neurons, dtype=bool)
 
@@ -165,10 +162,10 @@ class ObservedState:
         voltage = np.asarray(voltage, dtype=np.float64)
         before = state.voltage_mV[0]
         refractory = state.refractory_left[0] > 0
-        predicted = before - (before - params.v_rest_mV) * self._leak
+        predicted = before - (before - params.v_rest_mV) * params.leak_per_step
         if action != DO_NOTHING:
-            predicted[action] += self._stimulus_mV
-        residual = (voltage - predicted) / self._synaptic_mV
+            predicted[action] += params.stimulus_step_mV
+        residual = (voltage - predicted) / params.synaptic_step_mV
         released_before = state.released[0].astype(np.float64)
         observed = ~refractory
         spiked = observed & (voltage >= self._threshold)

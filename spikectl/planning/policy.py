@@ -170,10 +170,8 @@ class IdentifyAndPlan:
         # A plan is renewed when less than half its horizon is left, so that a wanted
         # spike just past its end is seen in time (a receding horizon).
         self._replan_margin = 1 if horizon is None else max(1, horizon // 2)
-        synaptic_mV = params.dt_ms * params.synaptic_current_pA / params.capacitance_pF
-        leak = params.dt_ms / params.membrane_time_constant_ms
         # The residual differences two noisy observations, the older one shrunk by the leak.
-        noise_sd = noise_mV * np.hypot(1.0, 1.0 - leak) / synaptic_mV
+        noise_sd = noise_mV * np.hypot(1.0, 1.0 - params.leak_per_step) / params.synaptic_step_mV
         self._residual_sd = max(noise_sd, NOISE_FREE_SD)
         self.reset()
 

@@ -72,9 +72,8 @@ def best_returns(
     reward_if_spike, reward_if_silent = step_rewards(pattern)
     n, n_actions = weights.shape[-1], actions.shape[0]
     interval = min(params.min_release_interval_steps, 2**30)
-    leak = params.dt_ms / params.membrane_time_constant_ms
-    synaptic_step = params.dt_ms * params.synaptic_current_pA / params.capacitance_pF
-    threshold = params.v_threshold_mV - params.threshold_tolerance_mV
+    leak, synaptic_step = params.leak_per_step, params.synaptic_step_mV
+    threshold = params.v_spike_mV
     target_columns = weights[:, :, target].astype(np.float64)  # [P, n]
     projection = np.random.default_rng(_PROJECTION_SEED).standard_normal(4 * n)
     beam = take_states(start, np.arange(problems))

@@ -52,15 +52,13 @@ def voltage_bounds_mV(
     (docs/extensions.md) can go beyond them, and the wrappers clip.
     """
     interval = 1 if stochastic_release else params.min_release_interval_steps
-    synaptic_step_mV = params.dt_ms * params.synaptic_current_pA / params.capacitance_pF
+    synaptic_step_mV = params.synaptic_step_mV
     if interval == NEVER_RELEASES or (stochastic_release and params.release_scale == 0):
         synaptic_step_mV = 0.0
         interval = 1
-    stimulus_step_mV = params.dt_ms * params.stimulus_current_pA / params.capacitance_pF
-    leak_per_step = params.dt_ms / params.membrane_time_constant_ms
-    high = params.v_threshold_mV + stimulus_step_mV + n_neurons * synaptic_step_mV
+    high = params.v_threshold_mV + params.stimulus_step_mV + n_neurons * synaptic_step_mV
     low = params.v_rest_mV - n_neurons * synaptic_step_mV / (
-        1.0 - (1.0 - leak_per_step) ** interval
+        1.0 - (1.0 - params.leak_per_step) ** interval
     )
     return low, high
 
