@@ -12,12 +12,15 @@ import pytest
 
 from spikectl import NeuronParams, simulate
 from spikectl.contexts.generation import generate_topology
+from spikectl.neuron.kernel import CONSTANTS, kernel_constants
+from spikectl.neuron.prediction import one_step
 from spikectl.neuron.simulator import (
     PARALLEL_MIN_BATCH,
     PARALLEL_MIN_WORK,
     SimulatorState,
     advance,
     as_weight_batch,
+    neuron_parameters,
 )
 
 V_REST = -70.0
@@ -225,6 +228,68 @@ def test_pure_python_path_matches_jit():
     v_python, s_python = json.loads(result.stdout)
     np.testing.assert_array_equal(voltages, np.array(v_python))
     np.testing.assert_array_equal(spikes, np.array(s_python))
+
+
+def test_kernel_constants_are_the_named_params_quantities():
+    params = NeuronParams(refractory_steps=3, release_scale=0.9)
+    constants = kernel_constants(params)
+    assert constants.tolist() == [float(getattr(params, name)) for name in CONSTANTS]
+    assert constants[CONSTANTS.index("synaptic_step_mV")] == 20.0
+
+
+def test_one_step_prediction_by_hand():
+    # 0 -> 2 excitatory, 1 -> 2 inhibitory, 0 and 1 released at the last step; 2 at
+    # -60 mV: -60 + (10 * 0.05 -> -0.5 leak) + 20 - 20 = -60.5; neuron 1 refractory.
+    params = NeuronParams()
+    state = SimulatorState.at_rest(2, 3, params)
+    state.voltage_mV[:] = [-70.0, -70.0, -60.0]
+    state.released[:] = [True, True, False]
+    state.refractory_left[:, 1] = 1
+    weights = np.zeros((1, 3, 3), dtype=np.int8)
+    weights[0, 0, 2], weights[0, 1, 2] = 1, -1
+    voltage, spiked = one_step(state, weights, np.array([NOTHING, 0]), params)
+    assert voltage.tolist() == [[-70.0, -70.0, -60.5], [-30.0, -70.0, -60.5]]
+    assert spiked.tolist() == [[False, False, False], [True, False, False]]
+    target_voltage, target_spiked = one_step(state, weights, NOTHING, params, neuron=2)
+    assert target_voltage.tolist() == [-60.5, -60.5] and not target_spiked.any()
+    assert state.voltage_mV[0].tolist() == [-70.0, -70.0, -60.0]  # not advanced
+
+
+@pytest.mark.parametrize("variant", ["paper", "scaled", "heterogeneous", "input"])
+def test_one_step_prediction_equals_the_simulator_step_exactly(variant):
+    batch, n, steps = 64, 8, 40
+    rng = np.random.default_rng(11)
+    weights, actions = random_batch(batch, n, steps, seed=12)
+    weights = as_weight_batch(weights)
+    params = NeuronParams(refractory_steps=2) if variant == "paper" else NeuronParams()
+    neurons = input_mV = None
+    if variant == "scaled":
+        weights = np.ascontiguousarray(weights * rng.uniform(0.3, 1.7, (batch, n, n)))
+    if variant == "heterogeneous":
+        neurons = neuron_parameters(
+            params, -50.0 + rng.uniform(-3, 3, (batch, n)), rng.uniform(10, 30, (batch, n))
+        )
+    if variant == "input":
+        input_mV = rng.normal(0.0, 8.0, (batch, steps, n))
+    state = SimulatorState.at_rest(batch, n, params)
+    out_v = np.empty((batch, 1, n))
+    out_s = np.empty((batch, 1, n), dtype=bool)
+    for t in range(steps):
+        step_input = None if input_mV is None else np.ascontiguousarray(input_mV[:, t : t + 1])
+        one_input = None if step_input is None else step_input[:, 0]
+        predicted_v, predicted_s = one_step(
+            state, weights, actions[:, t], params, neurons, one_input
+        )
+        target_v, target_s = one_step(
+            state, weights, actions[:, t], params, neurons, one_input, neuron=t % n
+        )
+        step_actions = np.ascontiguousarray(actions[:, t : t + 1])
+        advance(state, weights, step_actions, params, out_v, out_s, neurons, None, step_input)
+        np.testing.assert_array_equal(predicted_v, out_v[:, 0])
+        np.testing.assert_array_equal(predicted_s, out_s[:, 0])
+        np.testing.assert_array_equal(target_v, out_v[:, 0, t % n])
+        np.testing.assert_array_equal(target_s, out_s[:, 0, t % n])
+    assert out_s.any() or state.released.any()
 
 
 @pytest.mark.parametrize(

@@ -29,6 +29,48 @@ PARALLEL_MIN_WORK = 2**18
 # NEVER_RELEASES, so "no release yet" (t_r = -inf) stays ready to release.
 SINCE_RELEASE_CAP = 2**30
 
+# The kernel's ``constants`` array holds these NeuronParams quantities, slot k the k-th
+# name; the kernel reads each slot through the index of the same name (Numba folds a
+# global int into the code, so naming costs nothing).
+CONSTANTS = (
+    "v_rest_mV",
+    "v_spike_mV",
+    "leak_per_step",
+    "stimulus_step_mV",
+    "synaptic_step_mV",
+    "refractory_steps",
+    "min_release_interval_steps",
+    "release_scale",
+    "recovery_per_step",
+)
+(
+    V_REST_MV,
+    V_SPIKE_MV,
+    LEAK_PER_STEP,
+    STIMULUS_STEP_MV,
+    SYNAPTIC_STEP_MV,
+    REFRACTORY_STEPS,
+    MIN_RELEASE_INTERVAL_STEPS,
+    RELEASE_SCALE,
+    RECOVERY_PER_STEP,
+) = range(len(CONSTANTS))
+
+
+def integrate(v, v_rest, leak, drive):
+    """V + dt (-(V - V_r) / (R C) + I / C): the potential after one Euler step, in mV.
+
+    ``leak`` is dt / (R C), ``drive`` dt * I / C in mV (stimulus, synaptic and extra
+    input together); scalars or NumPy arrays. The kernel compiles this very function
+    (it lives here so that Numba's cache, keyed on this file, sees every edit), and
+    :func:`spikectl.neuron.prediction.one_step` calls it on arrays: the order of the
+    operations is the model's rounding, and a prediction equals the simulator only
+    while both use it.
+    """
+    return v + (-(v - v_rest) * leak + drive)
+
+
+_integrate = numba.njit(inline="always")(integrate)
+
 
 def _advance_kernel(
     weights,  # [W, n, n] int8, or float64 with scaled synapses; W == 1 (shared) or W == B
@@ -37,7 +79,7 @@ def _advance_kernel(
     refractory_left,  # [B, n] int32, state
     steps_since_release,  # [B, n] int32, state
     released,  # [B, n] bool, state: released at the previous step
-    constants,  # [9] float64, see kernel_constants
+    constants,  # [9] float64, the NeuronParams quantities named in CONSTANTS
     out_voltage,  # [B, T, n] float64
     out_spikes,  # [B, T, n] bool
     # The extensions, each None in the paper's model. Numba compiles one
@@ -47,15 +89,15 @@ def _advance_kernel(
     release_uniforms,  # [B, T, n] uniforms in [0, 1): stochastic release
     input_mV,  # [B, T, n] extra input (background activity) in mV
 ):
-    v_rest = constants[0]
-    v_spike = constants[1]  # threshold minus tolerance
-    leak_per_step = constants[2]  # dt / (R C)
-    stimulus_step_mV = constants[3]  # dt * w_e / C
-    synaptic_step_mV = constants[4]  # dt * w_in / C
-    refractory_steps = int(constants[5])
-    min_release_interval = int(constants[6])
-    release_scale = constants[7]  # p_r
-    recovery_per_step = constants[8]  # dt / tau_R
+    v_rest = constants[V_REST_MV]
+    v_spike = constants[V_SPIKE_MV]
+    leak_per_step = constants[LEAK_PER_STEP]
+    stimulus_step_mV = constants[STIMULUS_STEP_MV]
+    synaptic_step_mV = constants[SYNAPTIC_STEP_MV]
+    refractory_steps = int(constants[REFRACTORY_STEPS])
+    min_release_interval = int(constants[MIN_RELEASE_INTERVAL_STEPS])
+    release_scale = constants[RELEASE_SCALE]
+    recovery_per_step = constants[RECOVERY_PER_STEP]
     batch, horizon = actions.shape
     n = voltage.shape[1]
     shared_weights = weights.shape[0] == 1
@@ -108,10 +150,10 @@ def _advance_kernel(
                     if input_mV is not None:
                         drive += input_mV[b, t, j]
                     if neurons is None:
-                        v = v + (-(v - v_rest) * leak_per_step + drive)
+                        v = _integrate(v, v_rest, leak_per_step, drive)
                         spiked = v >= v_spike
                     else:
-                        v = v + (-(v - v_rest) * leak_b[j] + drive)
+                        v = _integrate(v, v_rest, leak_b[j], drive)
                         spiked = v >= threshold_b[j]
                 out_voltage[b, t, j] = v
                 out_spikes[b, t, j] = spiked
@@ -150,23 +192,10 @@ _CONSTANTS: dict[int, tuple[NeuronParams, np.ndarray]] = {}
 
 
 def kernel_constants(params: NeuronParams) -> np.ndarray:
-    """The kernel's ``constants`` [9] for ``params`` (computed once per params object)."""
+    """The kernel's ``constants`` for ``params`` (computed once per params object)."""
     entry = _CONSTANTS.get(id(params))
     if entry is None or entry[0] is not params:
-        constants = np.array(
-            [
-                params.v_rest_mV,
-                params.v_threshold_mV - params.threshold_tolerance_mV,
-                params.dt_ms / params.membrane_time_constant_ms,
-                params.dt_ms * params.stimulus_current_pA / params.capacitance_pF,
-                params.dt_ms * params.synaptic_current_pA / params.capacitance_pF,
-                params.refractory_steps,
-                params.min_release_interval_steps,
-                params.release_scale,
-                params.dt_ms / params.vesicle_recovery_ms,
-            ],
-            dtype=np.float64,
-        )
+        constants = np.array([getattr(params, name) for name in CONSTANTS], dtype=np.float64)
         if len(_CONSTANTS) >= 1024:
             _CONSTANTS.clear()
         entry = _CONSTANTS[id(params)] = (params, constants)
