@@ -263,11 +263,12 @@ def simulate(
         if weight_batch.shape[0] not in (1, batch):
             raise ValueError("synaptic_scale batch does not match the weights / actions batch")
     if release_uniforms is not None:
-        release_uniforms = _per_step(release_uniforms, batch, horizon, n, "release_uniforms")
+        release_uniforms = _per_network(release_uniforms, (horizon, n), batch,
+                                        "release_uniforms", repeat_shared=True)  # fmt: skip
         if ((release_uniforms < 0) | (release_uniforms > 1)).any():
             raise ValueError("release_uniforms must lie in [0, 1]")
     if input_mV is not None:
-        input_mV = _per_step(input_mV, batch, horizon, n, "input_mV")
+        input_mV = _per_network(input_mV, (horizon, n), batch, "input_mV", repeat_shared=True)
     voltages = np.empty((batch, horizon, n), dtype=np.float64)
     spikes = np.empty((batch, horizon, n), dtype=np.bool_)
     state = SimulatorState.at_rest(batch, n, params)
@@ -279,32 +280,28 @@ def simulate(
 
 
 def _per_network(
-    values: np.ndarray | None, shape: tuple[int, ...], batch: int, name: str, default=None
+    values: np.ndarray | None,
+    shape: tuple[int, ...],
+    batch: int,
+    name: str,
+    default=None,
+    *,
+    repeat_shared: bool = False,
 ) -> np.ndarray:
-    """``values`` of one network ``shape`` or of a batch [B, *shape] as float64 [1 or B, ...]."""
+    """``values`` of one network ``shape`` or of a batch [B, *shape] as float64 [1 or B, ...].
+
+    With ``repeat_shared`` the batch must be B and one network's values are repeated
+    for each (the kernel's per-step inputs have no shared form).
+    """
     if values is None:
         return np.full((1, *shape), default, dtype=np.float64)
     array = np.asarray(values, dtype=np.float64)
+    rows = (batch,) if repeat_shared else (1, batch)
     if array.shape == shape:
-        array = array[None]
-    if array.shape[1:] != shape or array.shape[0] not in (1, batch):
+        array = np.broadcast_to(array, (rows[0], *shape))
+    if array.shape[1:] != shape or array.shape[0] not in rows:
         raise ValueError(
             f"{name} must have shape {list(shape)} or [{batch}, {', '.join(map(str, shape))}], "
-            f"got {list(np.shape(values))}"
-        )
-    if not np.isfinite(array).all():
-        raise ValueError(f"{name} must be finite")
-    return np.ascontiguousarray(array)
-
-
-def _per_step(values: np.ndarray, batch: int, horizon: int, n: int, name: str) -> np.ndarray:
-    """Per-step inputs [T, n] (shared) or [B, T, n] as float64 [B, T, n]."""
-    array = np.asarray(values, dtype=np.float64)
-    if array.shape == (horizon, n):
-        array = np.broadcast_to(array, (batch, horizon, n))
-    if array.shape != (batch, horizon, n):
-        raise ValueError(
-            f"{name} must have shape [{horizon}, {n}] or [{batch}, {horizon}, {n}], "
             f"got {list(np.shape(values))}"
         )
     if not np.isfinite(array).all():
