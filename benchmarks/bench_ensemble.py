@@ -68,7 +68,8 @@ def micro(seeds: list[int], repeats: int, preset: str, device: str) -> None:
     import numpy as np
     import torch
 
-    from spikectl.training.dqn import build_networks, build_predictor, training_losses
+    from spikectl.training.learners.dqn import build_networks, build_predictor
+    from spikectl.training.learners.dqn_losses import training_losses
     from spikectl.training.replay import EpisodeReplay
 
     torch.set_num_threads(1)
@@ -136,15 +137,11 @@ def stacked_timings(
     """Milliseconds of one update and one acting step of K stacked seeds of ``config``."""
 
     import torch
+    from spikectl.training.stacked_update import clip_grad_norm_per_seed, stack_seeds
 
     from spikectl.agents.stacked import StackedNetworks
-    from spikectl.training.dqn import (
-        batch_tensors,
-        build_networks,
-        build_predictor,
-        losses_on_tensors,
-    )
-    from spikectl.training.ensemble import clip_grad_norm_per_seed, stack_seeds
+    from spikectl.training.learners.dqn import build_networks, build_predictor
+    from spikectl.training.learners.dqn_losses import batch_tensors, losses_on_tensors
 
     pairs = [build_networks(config.with_changes(seed=s)) for s in range(K)]
     stacked = StackedNetworks([pair[0] for pair in pairs])

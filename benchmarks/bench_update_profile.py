@@ -32,12 +32,10 @@ from spikectl.agents.blocks import long_indices, per_neuron_features
 from spikectl.contexts import make_splits
 from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
-from spikectl.training.dqn import (
-    EpsilonGreedyPolicy,
+from spikectl.training.greedy import greedy_returns
+from spikectl.training.learners.dqn import EpsilonGreedyPolicy, build_networks, build_predictor
+from spikectl.training.learners.dqn_losses import (
     batch_tensors,
-    build_networks,
-    build_predictor,
-    greedy_returns,
     losses_on_tensors,
     sequence_observations,
     soft_update,

@@ -23,9 +23,10 @@ from spikectl.experiments.sweep import SweepError
 from spikectl.files import FileWriteError, make_dirs, write_json
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.training.checkpoint import RunDirError
 from spikectl.training.config import AgentConfig, EnvConfig, Experiment, TrainConfig
+from spikectl.training.learners import DQNConfig
 from spikectl.training.presets import PRESET_HELP, PRESETS
+from spikectl.training.run_files import RunDirError
 
 USER_ERRORS = (ValueError, FileNotFoundError, FileWriteError, RunDirError, SweepError)
 """What the commands raise for bad input or a bad file system: reported in one line with
@@ -167,7 +168,8 @@ class TrainCommand:
     resume: Path | None = None
     """Continue the interrupted run (or seed group) in this directory (its saved config is used)."""
     seeds: tuple[int, ...] | None = None
-    """Train these seeds in one process as one batched computation (RUN_DIR/seed=S each)."""
+    """Train these seeds in one process, a round of each in turn (RUN_DIR/seed=S each;
+    each seed exactly as if trained alone)."""
 
 
 def torch_threads() -> int:
@@ -177,32 +179,54 @@ def torch_threads() -> int:
 
 
 def train(command: TrainCommand) -> None:
-    """Train (or resume), then print train/test returns against the baselines."""
-    from spikectl.experiments.figures import plot_learning_curve
-    from spikectl.training.checkpoint import read_config
-    from spikectl.training.dqn import best_on_validation
-    from spikectl.training.dqn import train as run_training
-    from spikectl.training.group_files import GROUP_FILE
+    """Train (or resume) one run or a seed group, then print the returns against the
+    baselines (for a group, each seed's)."""
+    from spikectl.training.group import GROUP_FILE, group_configs, seed_dirs
+    from spikectl.training.run import train_runs
+    from spikectl.training.run_files import read_config
 
-    if command.seeds is not None or (
-        command.resume is not None and (command.resume / GROUP_FILE).exists()
-    ):
-        train_group_command(command)
-        return
-    if command.resume is not None:
-        run_dir = command.resume
-        config = read_config(run_dir)
-    else:
-        config = command.config
-        run_dir = command.run_dir or Path(
-            f"runs/{config.agent.arch}-{command.preset}-seed{config.train.seed}"
+    resume = command.resume is not None
+    if resume and (command.resume / GROUP_FILE).exists():
+        group_dir = command.resume
+        configs, run_dirs = group_configs(group_dir)
+    elif resume:
+        group_dir, run_dirs = None, [command.resume]
+        configs = [read_config(command.resume)]
+    elif command.seeds is not None:
+        config, seeds = command.config, list(command.seeds)
+        if not seeds:
+            raise ValueError("--seeds needs at least one seed")
+        label = "-".join(str(seed) for seed in seeds)
+        group_dir = command.run_dir or Path(
+            f"runs/{config.agent.arch}-{command.preset}-seeds{label}"
         )
-    print(f"run directory: {run_dir}")
+        configs, run_dirs = [config.with_seed(seed) for seed in seeds], seed_dirs(group_dir, seeds)
+    else:
+        config, group_dir = command.config, None
+        configs = [config]
+        run_dirs = [command.run_dir or Path(
+            f"runs/{config.agent.arch}-{command.preset}-seed{config.train.seed}"
+        )]  # fmt: skip
+    if group_dir is None:
+        print(f"run directory: {run_dirs[0]}")
+    else:
+        print(f"seed group: {group_dir} ({len(configs)} seeds in one process)")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
-        metrics = run_training(config, run_dir, resume=command.resume is not None)
+        metrics = train_runs(configs, run_dirs, group_dir, resume=resume)
     for warning in caught:
         print(f"spikectl: warning: {warning.message}", file=sys.stderr)
+    if group_dir is None:
+        _print_run(configs[0], run_dirs[0], metrics[0])
+    else:
+        _print_group(configs, run_dirs, metrics)
+
+
+def _print_run(config: Experiment, run_dir: Path, metrics: list[dict]) -> None:
+    """A single run's final returns, its baselines and its best network on validation."""
+    from spikectl.experiments.figures import plot_learning_curve
+    from spikectl.training.run import best_on_validation
+
     final = metrics[-1]
     baselines = json.loads((run_dir / "baselines.json").read_text())
     curve = plot_learning_curve(
@@ -238,36 +262,10 @@ def train(command: TrainCommand) -> None:
     print(f"wrote {run_dir / 'model.pt'}, {run_dir / 'metrics.csv'} and {curve}")
 
 
-def train_group_command(command: TrainCommand) -> None:
-    """``spikectl train --seeds ...`` (or ``--resume`` of a group): one batched process,
-    then each seed's final train/test return."""
-    from spikectl.training.dqn import best_on_validation
-    from spikectl.training.ensemble import seed_dirs, train_group, train_seeds
-    from spikectl.training.group_files import group_configs
+def _print_group(configs: list[Experiment], run_dirs: list[Path], metrics: list[list[dict]]):
+    """Each seed's final returns and its best network on validation, and the group's time."""
+    from spikectl.training.run import best_on_validation
 
-    if command.resume is not None:
-        group_dir = command.resume
-        configs, run_dirs = group_configs(group_dir)
-        print(f"seed group: {group_dir}")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", RuntimeWarning)
-            metrics = train_group(configs, run_dirs, group_dir, resume=True)
-    else:
-        config, seeds = command.config, list(command.seeds)
-        if not seeds:
-            raise ValueError("--seeds needs at least one seed")
-        label = "-".join(str(seed) for seed in seeds)
-        group_dir = command.run_dir or Path(
-            f"runs/{config.agent.arch}-{command.preset}-seeds{label}"
-        )
-        configs = [config.with_seed(seed) for seed in seeds]
-        run_dirs = seed_dirs(group_dir, seeds)
-        print(f"seed group: {group_dir} ({len(seeds)} seeds in one process)")
-        with warnings.catch_warnings(record=True) as caught:
-            warnings.simplefilter("always", RuntimeWarning)
-            metrics = train_seeds(config, seeds, group_dir)
-    for warning in caught:
-        print(f"spikectl: warning: {warning.message}", file=sys.stderr)
     print(f"{'seed':<14}{'train':>8}{'test':>8}   best on validation: train, test (episode)")
     for config, rows in zip(configs, metrics, strict=True):
         final, best = rows[-1], best_on_validation(rows)
@@ -281,10 +279,11 @@ def train_group_command(command: TrainCommand) -> None:
             f"{chosen}"
         )
     final = metrics[0][-1]
+    wall = sum(rows[-1]["wall_time_s"] for rows in metrics) / 60
+    cpu = sum(rows[-1]["cpu_time_s"] for rows in metrics) / 60
     print(
         f"{len(configs)} x {final['env_steps']:,} environment steps, {final['updates']:,} "
-        f"updates each, {final['wall_time_s'] / 60:.1f} wall minutes "
-        f"({final['cpu_time_s'] / 60:.1f} core minutes) for the whole group"
+        f"updates each, {wall:.1f} wall minutes ({cpu:.1f} core minutes) for the whole group"
     )
     print(f"wrote model.pt and metrics.csv in {', '.join(str(d) for d in run_dirs)}")
 
@@ -335,7 +334,7 @@ class SweepCommand:
     address: str | None = None
     """Ray cluster address (ray backend); a local Ray instance when not given."""
     group_seeds: bool = False
-    """Train the trials that differ only in seed and n_train as one batched process per group."""
+    """Train the trials that differ only in seed and n_train in one process per group."""
 
 
 def sweep(command: SweepCommand) -> None:
@@ -623,7 +622,7 @@ def _flag_names(command: str | None = None) -> dict[str, str]:
     command-line flags; for ``train``, the model's and the extensions' fields are the
     --params.* and --extensions.* flags."""
     names = {}
-    for config_type in (EnvConfig, AgentConfig, TrainConfig,
+    for config_type in (EnvConfig, AgentConfig, TrainConfig, DQNConfig,
                         *(config for _, config in COMMANDS.values())):  # fmt: skip
         for field in dataclasses.fields(config_type):
             names[field.name] = "--" + field.name.replace("_", "-")

@@ -7,17 +7,11 @@ import math
 import pytest
 import torch
 
-from spikectl.training.checkpoint import (
-    BEST_MODEL_FILE,
-    RunDirError,
-    forget_best_model_after,
-    model_episode,
-    read_metrics,
-    save_model,
-)
-from spikectl.training.dqn import best_on_validation, train
 from spikectl.training.evaluate import evaluate_run, load_agent
 from spikectl.training.presets import SMOKE
+from spikectl.training.run import best_on_validation, train
+from spikectl.training.run_files import BEST_MODEL_FILE, RunDirError, read_metrics
+from spikectl.training.torch_files import forget_best_model_after, model_episode, save_model
 
 
 def rows(*val_returns: float) -> list[dict]:
@@ -72,7 +66,7 @@ def test_a_resumed_run_forgets_a_best_model_taken_after_its_checkpoint(tmp_path)
 
 
 def test_each_seed_of_a_group_keeps_its_own_best_model(tmp_path):
-    from spikectl.training.ensemble import train_seeds
+    from spikectl.training.run import train_seeds
 
     config = SMOKE.with_changes(n_val=4, total_env_steps=24 * 20 * 8)
     metrics = train_seeds(config, [0, 1], tmp_path / "group")

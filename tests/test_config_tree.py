@@ -12,11 +12,13 @@ import torch
 from spikectl import ContextSet, NeuronParams
 from spikectl.agents.blocks import per_neuron_features
 from spikectl.cli import main
-from spikectl.training.checkpoint import read_checkpoint, read_config, read_metrics
+from spikectl.training.checkpoint import read_checkpoint
 from spikectl.training.config import Experiment
-from spikectl.training.dqn import build_networks, train
 from spikectl.training.evaluate import evaluate_run, load_agent
+from spikectl.training.learners.dqn import build_networks
 from spikectl.training.presets import SMOKE
+from spikectl.training.run import train
+from spikectl.training.run_files import read_config, read_metrics
 
 NOISY = "spikectl/NeuronControlNoisy-v0"
 SHORT = SMOKE.with_changes(total_env_steps=2 * 8 * 20, eval_every_episodes=8,
@@ -198,7 +200,7 @@ def test_a_noisy_run_resumes_exactly(tmp_path, monkeypatch):
 
 
 def test_a_seed_group_trains_on_the_variant_and_its_seeds_evaluate_alike(tmp_path):
-    from spikectl.training.ensemble import train_seeds
+    from spikectl.training.run import train_seeds
 
     config = SHORT.with_changes({"env.id": NOISY})
     metrics = train_seeds(config, [0, 1], tmp_path / "group")
@@ -220,7 +222,8 @@ def flat_config(config: Experiment) -> dict:
 
 def test_a_run_written_before_the_tree_resumes_exactly(tmp_path, monkeypatch):
     import spikectl.training.dqn as dqn
-    from spikectl.training.checkpoint import payload_checksum
+
+    from spikectl.training.torch_files import payload_checksum
 
     config = SMOKE.with_changes(total_env_steps=4 * 8 * 20, eval_every_episodes=8,
                                 checkpoint_every_episodes=16)  # fmt: skip

@@ -1,6 +1,6 @@
-"""Seed groups: stacked networks, the vmap-able LSTM, per-seed clipping, the batched
-trainer (independence of seeds, agreement with single runs, exact resume after SIGKILL),
-and the CLI."""
+"""Seed groups: the loop's groups (each seed bit-identical to the seed alone, independence,
+exact resume after SIGKILL, the CLI, sweeps) and the stacked update's pieces (stacked
+networks, the vmap-able LSTM, per-seed clipping)."""
 
 from __future__ import annotations
 
@@ -18,10 +18,12 @@ from torch import nn
 from spikectl import ContextSet
 from spikectl.agents import ARCHITECTURES, make_agent
 from spikectl.agents.stacked import StackableLSTM, StackedNetworks
-from spikectl.training.checkpoint import RunDirError, load_model_weights, read_metrics
-from spikectl.training.dqn import build_networks, train
-from spikectl.training.ensemble import clip_grad_norm_per_seed, train_group, train_seeds
+from spikectl.training.learners.dqn import build_networks
 from spikectl.training.presets import SMOKE
+from spikectl.training.run import train, train_group, train_seeds
+from spikectl.training.run_files import RunDirError, read_metrics
+from spikectl.training.stacked_update import clip_grad_norm_per_seed
+from spikectl.training.torch_files import load_model_weights
 
 TIMES = ("wall_time_s", "cpu_time_s")
 TINY = SMOKE.with_changes(total_env_steps=24 * 20 * 8, eval_every_episodes=64,
@@ -135,21 +137,19 @@ def test_a_seed_does_not_depend_on_the_seeds_beside_it(tmp_path):
     network.load_state_dict(load_model_weights(run / "model.pt"))  # strict: today's names
 
 
-def test_a_group_of_one_follows_the_single_run_up_to_rounding(tmp_path):
-    """The same draws and data as a single run; the numbers differ only by float rounding
-    (nn.LSTM's fused kernel against the written-out LSTM), measured here."""
-    config = TINY.with_changes(seed=3)
-    (group,) = train_seeds(config, [3], tmp_path / "group")
-    single = train(config, tmp_path / "single")
-    assert [row["episode"] for row in group] == [row["episode"] for row in single]
-    assert json.loads((tmp_path / "group/seed=3/baselines.json").read_text()) == json.loads(
-        (tmp_path / "single/baselines.json").read_text()
-    )
-    assert group[0] | dict.fromkeys(TIMES) == single[0] | dict.fromkeys(TIMES)  # untrained
-    # The first training round sees the same episodes and batches: losses agree to float
-    # rounding (measured: about 1e-7 relative).
-    assert group[1]["loss"] == pytest.approx(single[1]["loss"], rel=1e-4)
-    assert group[1]["aux_loss"] == pytest.approx(single[1]["aux_loss"], rel=1e-4, nan_ok=True)
+def test_each_seed_of_a_group_is_the_seed_trained_alone(tmp_path):
+    """A group's seeds give exactly the metrics, baselines and weights of single runs."""
+    group = train_seeds(TINY, [3, 4], tmp_path / "group")
+    for seed, rows in zip((3, 4), group, strict=True):
+        single = train(TINY.with_seed(seed), tmp_path / f"single{seed}")
+        assert comparable(rows) == comparable(single)
+        for name in ("baselines.json",):
+            assert (tmp_path / f"group/seed={seed}" / name).read_text() == (
+                tmp_path / f"single{seed}" / name
+            ).read_text()
+        for name in ("model.pt", "best_model.pt"):
+            assert same_weights(tmp_path / f"group/seed={seed}" / name,
+                                tmp_path / f"single{seed}" / name)  # fmt: skip
 
 
 def test_a_group_trains_each_seed_on_its_own_training_set(tmp_path):
@@ -170,15 +170,13 @@ def test_a_group_trains_each_seed_on_its_own_training_set(tmp_path):
     }  # fmt: skip
     assert [len(sets["small"][0]), len(sets["large"][0])] == [3, 6]
     assert sets["small"][1] == sets["large"][1]  # the same unseen networks
-    # The small seed is the run of its own config: the same training set, baselines and
-    # first round's episodes (losses to float rounding) as a single run.
+    # The small seed is the run of its own config, exactly.
     single = train(small, tmp_path / "single")
     assert sets["small"][0] == ContextSet.load(tmp_path / "single/train_contexts.npz")
     assert json.loads((tmp_path / "a/small/baselines.json").read_text()) == json.loads(
         (tmp_path / "single/baselines.json").read_text()
     )
-    assert first[0][0] | dict.fromkeys(TIMES) == single[0] | dict.fromkeys(TIMES)
-    assert first[0][1]["loss"] == pytest.approx(single[1]["loss"], rel=1e-4)
+    assert comparable(first[0]) == comparable(single)
 
 
 def test_sweep_puts_training_set_sizes_in_one_group(tmp_path):
@@ -187,7 +185,7 @@ def test_sweep_puts_training_set_sizes_in_one_group(tmp_path):
     sweep = Sweep(TINY, {"n_train": [3, 6], "seed": [0, 1]})
     jobs = [(config, tmp_path / "trials" / name) for name, config in sweep.trials()]
     ((function, (configs, run_dirs, group_dir), _),) = seed_group_tasks(jobs, tmp_path)
-    assert function.__name__ == "run_group_trial" and group_dir.name == "base"
+    assert function.__name__ == "run_trials" and group_dir.name == "base"
     assert [(c.env.n_train, c.train.seed) for c in configs] == [(3, 0), (3, 1), (6, 0), (6, 1)]
     mixed = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "n_train": [3, 6], "seed": [0]})
     jobs = [(config, tmp_path / "trials" / name) for name, config in mixed.trials()]
@@ -229,10 +227,10 @@ def test_group_resume_after_sigkill_is_exact_and_seeds_evaluate(tmp_path, run_cl
         [sys.executable, "-m", "spikectl.cli", *flags, "--run-dir", str(killed)],
         stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
     )  # fmt: skip
-    # The checkpoint is complete once the seeds' baselines.json, written after it, exist.
+    # A seed's checkpoint is complete once its baselines.json, written after it, exists.
     wait_until(
         lambda: all((killed / f"seed={s}" / "baselines.json").exists() for s in (0, 1)),
-        "a complete first group checkpoint", timeout_s=180, process=process,
+        "both seeds' first checkpoints", timeout_s=180, process=process,
     )  # fmt: skip
     os.kill(process.pid, signal.SIGKILL)
     process.wait()

@@ -22,9 +22,9 @@ from spikectl.experiments.report import (
     write_results_table,
 )
 from spikectl.experiments.stats import bootstrap_ci
-from spikectl.training.checkpoint import write_metrics
-from spikectl.training.dqn import METRIC_FIELDS
 from spikectl.training.presets import SMOKE
+from spikectl.training.run import METRIC_FIELDS
+from spikectl.training.run_files import write_metrics
 
 PNG_MAGIC = b"\x89PNG\r\n\x1a\n"
 STEPS = (800, 1600, 2400)

@@ -9,11 +9,12 @@ import torch
 
 from spikectl import ContextSet, make_splits
 from spikectl.agents import ARCHITECTURES, make_agent, make_voltage_predictor
-from spikectl.training.checkpoint import read_metrics
 from spikectl.training.config import Experiment, TrainConfig
-from spikectl.training.dqn import n_step_targets, td_loss, train, training_losses
+from spikectl.training.learners.dqn_losses import n_step_targets, td_loss, training_losses
 from spikectl.training.presets import PRESETS, SMOKE
 from spikectl.training.replay import EpisodeBatchArrays
+from spikectl.training.run import train
+from spikectl.training.run_files import read_metrics
 
 
 def test_n_step_targets_by_hand():
@@ -78,7 +79,7 @@ def test_auxiliary_loss_reads_the_encoder_and_leaves_the_td_loss_unchanged(arch)
 
 
 def _seq(batch):
-    from spikectl.training.dqn import sequence_observations
+    from spikectl.training.learners.dqn_losses import sequence_observations
 
     return sequence_observations(batch, "cpu")
 
@@ -200,7 +201,7 @@ def test_target_voltage_feature_keeps_the_networks_equivariant(arch):
 
 @pytest.mark.parametrize("do_nothing", [0.0, 0.75, 1.0])
 def test_do_nothing_biased_exploration(do_nothing):
-    from spikectl.training.dqn import EpsilonGreedyPolicy
+    from spikectl.training.learners.dqn import EpsilonGreedyPolicy
 
     class Zero(torch.nn.Module):
         def step(self, obs, state):

@@ -34,17 +34,12 @@ from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.experiments.sweep import Sweep, SweepError, run_sweep, run_trial
 from spikectl.files import FileWriteError
-from spikectl.training.checkpoint import (
-    RunDirError,
-    load_model_weights,
-    payload_checksum,
-    read_checkpoint,
-    run_lock,
-    save_model,
-)
+from spikectl.training.checkpoint import read_checkpoint
 from spikectl.training.config import EnvConfig
-from spikectl.training.dqn import train
 from spikectl.training.presets import SMOKE
+from spikectl.training.run import train
+from spikectl.training.run_files import RunDirError, run_lock
+from spikectl.training.torch_files import load_model_weights, payload_checksum, save_model
 
 TINY = SMOKE.with_changes(
     total_env_steps=8 * 20 * 2, checkpoint_every_episodes=8, eval_every_episodes=8

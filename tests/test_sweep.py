@@ -15,9 +15,9 @@ from spikectl.experiments.sweep import (
     run_sweep,
     trial_dirs,
 )
-from spikectl.training.checkpoint import read_metrics
-from spikectl.training.dqn import train
 from spikectl.training.presets import SMOKE
+from spikectl.training.run import train
+from spikectl.training.run_files import read_metrics
 
 TINY = SMOKE.with_changes(total_env_steps=8 * 20 * 4, eval_every_episodes=16,
                            checkpoint_every_episodes=16)  # fmt: skip
@@ -170,8 +170,8 @@ def test_plot_a_sweep(tmp_path, capsys):
 def test_figure3_contexts_are_regenerated_when_a_trial_kept_only_its_metrics(tmp_path):
     from spikectl.contexts import ContextSet
     from spikectl.experiments.plot import training_contexts
-    from spikectl.training.checkpoint import read_config
     from spikectl.training.contexts import TRAIN_FILE
+    from spikectl.training.run_files import read_config
 
     run_dir = tmp_path / "run"
     config = TINY.with_changes(n_train=5, context_seed=3)

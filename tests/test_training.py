@@ -15,11 +15,12 @@ from spikectl.agents import AgentSizes
 from spikectl.files import FileWriteError, atomic_write_bytes
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.training.checkpoint import RunDirError, read_metrics
 from spikectl.training.config import EnvConfig, Experiment
-from spikectl.training.dqn import td_loss, train
+from spikectl.training.learners.dqn_losses import td_loss
 from spikectl.training.presets import PRESETS, QUICK, SMOKE
 from spikectl.training.replay import EpisodeBatchArrays, EpisodeReplay
+from spikectl.training.run import train
+from spikectl.training.run_files import RunDirError, read_metrics
 
 
 class TableQ(torch.nn.Module):

@@ -20,7 +20,7 @@ import numpy as np
 from spikectl.experiments.report import load_runs
 from spikectl.experiments.stats import bootstrap_ci, iqm
 from spikectl.experiments.sweep import trial_dirs
-from spikectl.training.dqn import best_on_validation
+from spikectl.training.run import best_on_validation
 
 THRESHOLD = 0.70
 

@@ -22,13 +22,13 @@ import numpy as np
 from spikectl.experiments.figures import save_figure, subplots
 from spikectl.experiments.stats import bootstrap_ci, iqm
 from spikectl.files import atomic_write_text
-from spikectl.training.checkpoint import (
+from spikectl.training.config import field_value
+from spikectl.training.run_files import (
     METRICS_FILE,
     RunDirError,
     read_config,
     read_metrics,
 )
-from spikectl.training.config import field_value
 
 DO_NOTHING_RETURN = 0.5
 """Return of never stimulating, on any context (docs/environment.md)."""

@@ -14,8 +14,8 @@ Trials run in a local process pool (one worker per core by default); each trial 
 one Torch thread so that workers do not fight over cores and so that a trial's result
 does not depend on how many ran beside it. With ``group_seeds`` the trials that differ
 only in seed and training-set size run as one seed group per process
-(``spikectl.training.ensemble``), each still in its own trial directory; the group's
-checkpoint lives in ``SWEEP_DIR/groups/``.
+(``spikectl.training.group``), each still in its own trial directory and bit-identical
+to the trial trained alone; the group's description lives in ``SWEEP_DIR/groups/``.
 """
 
 from __future__ import annotations
@@ -34,15 +34,11 @@ from typing import Any
 
 from spikectl.agents import ARCHITECTURES
 from spikectl.files import FileWriteError, make_dirs, write_json
-from spikectl.training.checkpoint import (
-    CHECKPOINT_FILE,
-    CONFIG_FILE,
-    MODEL_FILE,
-    RunDirError,
-    load_model_weights,
-)
 from spikectl.training.config import Experiment, field_value
+from spikectl.training.group import GROUP_FILE, group_key
 from spikectl.training.presets import PRESETS
+from spikectl.training.run_files import CHECKPOINT_FILE, CONFIG_FILE, MODEL_FILE, RunDirError
+from spikectl.training.torch_files import load_model_weights
 
 SWEEP_FILE = "sweep.json"
 TRIALS_DIR = "trials"
@@ -181,45 +177,39 @@ def trial_status(run_dir: Path) -> str:
 
 def run_trial(config: Experiment, run_dir: str | os.PathLike) -> dict[str, Any]:
     """Train one trial to the end: skip it if done, resume it if interrupted."""
+    return run_trials([config], [run_dir])[0]
+
+
+def run_trials(
+    configs: list[Experiment],
+    run_dirs: list[str | os.PathLike],
+    group_dir: str | os.PathLike | None = None,
+) -> list[dict[str, Any]]:
+    """Train trials to the end in this process, as a seed group in ``group_dir`` when
+    given (trials that differ only in seed and n_train; each keeps its own run
+    directory): done trials are skipped, interrupted ones resumed."""
     import torch
 
-    from spikectl.training.dqn import train
+    from spikectl.training.run import train_runs
 
-    run_dir = Path(run_dir)
-    status = trial_status(run_dir)
-    if status == "done":
-        return {"run_dir": str(run_dir), "status": "skipped (done)"}
+    run_dirs = [Path(d) for d in run_dirs]
+    statuses = [trial_status(run_dir) for run_dir in run_dirs]
+    if group_dir is None and statuses == ["done"]:
+        return [{"run_dir": str(run_dirs[0]), "status": "skipped (done)"}]
     # A trial stopped before its first checkpoint starts again from step 0 (the trainer
     # does that under the run directory's lock, so two sweeps never clobber a trial).
-    torch.set_num_threads(config.train.torch_threads or 1)
-    metrics = train(config, run_dir, resume=status == "interrupted")
-    final = metrics[-1]
-    return {
-        "run_dir": str(run_dir),
-        "status": "resumed" if status == "interrupted" else "trained",
-        "train_return": final["train_return"],
-        "test_return": final["test_return"],
-    }
-
-
-def run_group_trial(
-    configs: list[Experiment], run_dirs: list[str | os.PathLike], group_dir: str | os.PathLike
-) -> list[dict[str, Any]]:
-    """Train trials that differ only in seed and n_train as one seed group (one process, stacked
-    networks); each trial keeps its own run directory. Resumes the group if interrupted."""
-    import torch
-
-    from spikectl.training.ensemble import train_group
-    from spikectl.training.group_files import GROUP_CHECKPOINT_FILE
-
-    group_dir = Path(group_dir)
-    resume = (group_dir / GROUP_CHECKPOINT_FILE).exists()
     torch.set_num_threads(configs[0].train.torch_threads or 1)
-    metrics = train_group(configs, [Path(d) for d in run_dirs], group_dir, resume=resume)
+    if group_dir is None:
+        resume = statuses == ["interrupted"]
+        label = "resumed" if resume else "trained"
+    else:
+        resume = (Path(group_dir) / GROUP_FILE).exists()
+        label = f"{'resumed' if resume else 'trained'} in a group of {len(configs)}"
+    metrics = train_runs(configs, run_dirs, group_dir, resume=resume)
     return [
         {
             "run_dir": str(run_dir),
-            "status": f"{'resumed' if resume else 'trained'} in a group of {len(configs)}",
+            "status": label,
             "train_return": rows[-1]["train_return"],
             "test_return": rows[-1]["test_return"],
         }
@@ -229,11 +219,9 @@ def run_group_trial(
 
 def seed_group_tasks(jobs: list[tuple[Experiment, Path]], sweep_dir: Path) -> list[tuple]:
     """(function, arguments, run_dir) tasks: trials that differ only in seed and
-    training-set size (``ensemble.group_key``) become one ``run_group_trial`` in
+    training-set size (``group.group_key``) become one ``run_trials`` group in
     ``SWEEP_DIR/groups/NAME``; trials already done or interrupted as single runs stay
     single ``run_trial`` tasks."""
-    from spikectl.training.ensemble import group_key
-
     groups: dict[Experiment, list[tuple[Experiment, Path]]] = {}
     tasks = []
     for config, run_dir in jobs:
@@ -255,7 +243,7 @@ def seed_group_tasks(jobs: list[tuple[Experiment, Path]], sweep_dir: Path) -> li
         group_dir = sweep_dir / GROUPS_DIR / name
         configs = [config for config, _ in members]
         run_dirs = [run_dir for _, run_dir in members]
-        tasks.append((run_group_trial, (configs, run_dirs, group_dir), group_dir))
+        tasks.append((run_trials, (configs, run_dirs, group_dir), group_dir))
     return tasks
 
 
@@ -274,7 +262,7 @@ def run_sweep(
     ``backend="ray"``: Ray tasks of one CPU each on the cluster at ``address`` (a local
     Ray instance when None); ``sweep_dir`` must then be on storage every node sees.
     Each trial's result is the same whichever backend ran it. ``group_seeds``: trials
-    that differ only in seed and n_train train as one seed group per process (``run_group_trial``).
+    that differ only in seed and n_train train as one seed group per process (``run_trials``).
     """
     if backend not in ("local", "ray"):
         raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")

@@ -9,6 +9,7 @@ import numpy as np
 
 from spikectl.contexts import ContextSet, make_splits
 from spikectl.contexts.context_set import make_validation_set
+from spikectl.envs.rollout import EpisodeBatch, evaluate_policy
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.training.config import Experiment
 
@@ -125,3 +126,12 @@ def stream_seed(config: Experiment, stream: int, *more: int) -> int:
     """A seed for an environment's own draws, derived from the training seed."""
     entropy = [config.train.seed, stream, *more]
     return int(np.random.SeedSequence(entropy).generate_state(1, np.uint64)[0] >> 1)
+
+
+def baseline_episodes(config: Experiment, contexts: ContextSet, policy) -> EpisodeBatch:
+    """A reference policy's episodes on a set, in the run's environment (its params,
+    extensions and evaluation seed)."""
+    return evaluate_policy(
+        contexts, policy, config.env.params, config.env.extensions.environment_part(),
+        seed=stream_seed(config, EVAL_STREAM),
+    )  # fmt: skip

@@ -14,18 +14,18 @@ import torch
 from spikectl.agents import make_agent
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch, do_nothing_policy, evaluate_policy
-from spikectl.training.checkpoint import (
+from spikectl.training.checkpoint import checkpoint_weights
+from spikectl.training.config import Experiment
+from spikectl.training.contexts import TEST_FILE, TRAIN_FILE, VAL_FILE, baseline_episodes
+from spikectl.training.greedy import GreedyPolicy
+from spikectl.training.run_files import (
     BEST_MODEL_FILE,
     CHECKPOINT_FILE,
     MODEL_FILE,
     RunDirError,
-    checkpoint_weights,
-    load_model_weights,
     read_config,
 )
-from spikectl.training.config import Experiment
-from spikectl.training.contexts import TEST_FILE, TRAIN_FILE, VAL_FILE
-from spikectl.training.dqn import EpsilonGreedyPolicy, baseline_episodes
+from spikectl.training.torch_files import load_model_weights
 
 
 @dataclass(frozen=True)
@@ -105,7 +105,7 @@ def greedy_episodes(
     """One greedy episode on every context of the set, in one batch; with a run's
     ``config``, in the run's environment (its params, extensions and evaluation seed,
     as its metrics.csv scored them)."""
-    policy = EpsilonGreedyPolicy(network, 0.0, np.random.default_rng(0), "cpu")
+    policy = GreedyPolicy(network)
     if config is None:
         return evaluate_policy(contexts, policy)
     return baseline_episodes(config, contexts, policy)

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from spikectl.agents import AgentSizes
 from spikectl.training.config import AgentConfig, EnvConfig, Experiment, TrainConfig
+from spikectl.training.learners import DQNConfig
 
 PAPER = Experiment()
 
@@ -29,6 +30,11 @@ QUICK = Experiment(
     train=TrainConfig(
         total_env_steps=264_000,
         num_envs=16,
+        eval_every_episodes=400,
+        checkpoint_every_episodes=800,
+        torch_threads=1,
+    ),
+    learner=DQNConfig(
         updates_per_round=32,
         batch_size=8,
         buffer_size=40_000,
@@ -40,9 +46,6 @@ QUICK = Experiment(
         n_step=3,
         aux_voltage_weight=1.0,
         explore_do_nothing=0.75,
-        eval_every_episodes=400,
-        checkpoint_every_episodes=800,
-        torch_threads=1,
     ),
 )
 """The README's main job: ~14 minutes on one core of the project's 2-core machine
@@ -71,15 +74,17 @@ SMOKE = Experiment(
     train=TrainConfig(
         total_env_steps=40 * 20 * 8,
         num_envs=8,
+        eval_every_episodes=80,
+        checkpoint_every_episodes=80,
+        torch_threads=1,
+        progress=False,
+    ),
+    learner=DQNConfig(
         updates_per_round=2,
         batch_size=4,
         buffer_size=200,
         learning_starts=8,
         learning_rate=1e-3,
-        eval_every_episodes=80,
-        checkpoint_every_episodes=80,
-        torch_threads=1,
-        progress=False,
     ),
 )
 """Seconds on one core: 5-neuron networks, 20-step episodes, tiny networks (tests)."""

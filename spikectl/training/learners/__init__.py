@@ -1,0 +1,50 @@
+"""The learners of the training loop, chosen by name (``config.learner``).
+
+A learner is the algorithm inside the run (``spikectl.training.run``): it acts on batches
+of observations while episodes are collected, takes the finished episodes, updates its
+networks and gives and takes its whole state for checkpoints (:class:`Learner`). Each
+learner is one module and one config class; adding one means adding both here.
+
+=========  =========================  ==============================================
+name       config                     learner
+=========  =========================  ==============================================
+``dqn``    :class:`DQNConfig`         recurrent double Q-learning (the paper's)
+=========  =========================  ==============================================
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING
+
+from spikectl.training.learners.dqn_config import DQNConfig
+
+if TYPE_CHECKING:
+    from spikectl.training.learners.protocol import Learner
+
+LearnerConfig = DQNConfig
+"""The type of ``Experiment.learner``: the union of every learner's config (tyro makes
+a union of dataclasses into subcommands; with one learner it is that learner's flags)."""
+
+LEARNER_CONFIGS: dict[str, type] = {DQNConfig.name: DQNConfig}
+"""Every learner's config class by its name in config.json."""
+
+
+def learner_config_type(name: object) -> type:
+    """The config class of the learner called ``name``; a clear error for another name."""
+    if name not in LEARNER_CONFIGS:
+        raise ValueError(
+            f"learner.name: unknown learner {name!r}; this spikectl has "
+            f"{', '.join(sorted(LEARNER_CONFIGS))}"
+        )
+    return LEARNER_CONFIGS[name]
+
+
+def make_learner(config, train_set, rng) -> Learner:
+    """The learner of ``config.learner`` for one seed: it draws from the run's ``rng``."""
+    from spikectl.training.learners.dqn import DQNLearner
+
+    implementations = {DQNConfig: DQNLearner}
+    return implementations[type(config.learner)](config, train_set, rng)
+
+
+__all__ = ["DQNConfig", "LEARNER_CONFIGS", "LearnerConfig", "learner_config_type", "make_learner"]

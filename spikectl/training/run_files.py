@@ -1,0 +1,227 @@
+"""Run directories: their files, their lock, their config and metrics.
+
+A run directory holds ``config.json`` (the resolved config), the context sets,
+``metrics.csv``, ``baselines.json``, ``checkpoint.pt`` (``spikectl.training.checkpoint``),
+``tensorboard/``, ``best_model.pt`` and, at the end, ``model.pt``. Every file is written
+atomically (``spikectl.files``), so a crash or a full disk at any moment leaves the
+previous version intact. A lock file (``.spikectl.lock``) keeps two processes from
+training in one run directory at once.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import csv
+import io
+import json
+import math
+import os
+import shutil
+from collections.abc import Iterator
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from spikectl.files import (
+    FileWriteError,
+    atomic_write_text,
+    describe_os_error,
+    make_dirs,
+    write_json,
+)
+from spikectl.training.config import Experiment
+
+CONFIG_FILE = "config.json"
+CHECKPOINT_FILE = "checkpoint.pt"
+MODEL_FILE = "model.pt"
+BEST_MODEL_FILE = "best_model.pt"
+METRICS_FILE = "metrics.csv"
+BASELINES_FILE = "baselines.json"
+LOCK_FILE = ".spikectl.lock"
+UNSTARTED_LEFTOVERS = (
+    METRICS_FILE, BASELINES_FILE, "train_contexts.npz", "test_contexts.npz", "tensorboard",
+    "learning_curve.png", BEST_MODEL_FILE,
+)  # fmt: skip
+"""What a run that stopped before its first checkpoint may have written besides its
+config; a restart from step 0 removes it."""
+
+
+class RunDirError(RuntimeError):
+    """A run directory that cannot be used as asked (holds another run, incompatible,
+    damaged, locked by another process, ...)."""
+
+
+def check_device(device: str) -> None:
+    """Refuse a Torch device this machine does not have, before anything is written."""
+    try:
+        parsed = torch.device(device)
+    except (RuntimeError, TypeError):
+        raise ValueError(f"device must be cpu, cuda or cuda:N, got {device!r}") from None
+    if parsed.type == "cuda":
+        if not torch.cuda.is_available():
+            raise ValueError(
+                f"device {device!r} asks for CUDA, which this machine (or this PyTorch build) "
+                "does not have: use --device cpu"
+            )
+        if parsed.index is not None and parsed.index >= torch.cuda.device_count():
+            raise ValueError(
+                f"device {device!r}: this machine has {torch.cuda.device_count()} CUDA device(s)"
+            )
+    elif parsed.type == "mps":
+        if not torch.backends.mps.is_available():
+            raise ValueError(f"device {device!r}: MPS is not available on this machine")
+    elif parsed.type != "cpu":
+        raise ValueError(f"device must be cpu, cuda or cuda:N, got {device!r}")
+
+
+@contextlib.contextmanager
+def run_lock(run_dir: Path) -> Iterator[None]:
+    """Hold the run directory's lock file for the block; another process holding it is
+    an error naming that process. The lock dies with its process (even on SIGKILL)."""
+    import fcntl
+
+    if run_dir.exists() and not run_dir.is_dir():
+        raise RunDirError(f"{run_dir} is a file, not a run directory: choose another --run-dir")
+    created = not run_dir.exists()
+    make_dirs(run_dir)
+    path = run_dir / LOCK_FILE
+    try:
+        descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as error:
+        raise FileWriteError(
+            error.errno, f"cannot write {path}: {describe_os_error(error)}"
+        ) from error
+    try:
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            owner = os.pread(descriptor, 32, 0).decode(errors="replace").strip() or "unknown"
+            raise RunDirError(
+                f"another process (pid {owner}) is training in {run_dir}: wait for it to "
+                "finish or stop it; two runs must never write one directory"
+            ) from None
+        os.ftruncate(descriptor, 0)
+        os.pwrite(descriptor, f"{os.getpid()}\n".encode(), 0)
+        try:
+            yield
+        finally:
+            if created and {p.name for p in run_dir.iterdir()} == {LOCK_FILE}:
+                # Nothing was started: leave no empty directory behind.
+                path.unlink(missing_ok=True)
+                with contextlib.suppress(OSError):
+                    run_dir.rmdir()
+    finally:
+        os.close(descriptor)
+
+
+def prepare_run_dir(config: Experiment, run_dir: Path, resume: bool) -> bool:
+    """Create a new run directory, or check that ``run_dir`` holds this run to resume.
+
+    Returns whether there is a checkpoint to resume from. A run that stopped before its
+    first checkpoint (killed, out of disk, a bad file) is started again from step 0,
+    whether it is given with ``resume`` or as a new run with the same config.
+    """
+    check_device(config.train.device)
+    if run_dir.exists() and not run_dir.is_dir():
+        raise RunDirError(f"{run_dir} is a file, not a run directory: choose another --run-dir")
+    config_path = run_dir / CONFIG_FILE
+    has_config = config_path.exists()
+    has_checkpoint = (run_dir / CHECKPOINT_FILE).exists()
+    if resume:
+        if not has_config:
+            raise RunDirError(f"{run_dir} holds no run to resume (no {CONFIG_FILE})")
+        if read_config(run_dir) != config:
+            raise RunDirError(f"the config does not match the run saved in {run_dir}")
+        if has_checkpoint:
+            remove_temporaries(run_dir)
+            return True
+        _clear_unstarted(run_dir)
+        return False
+    if has_config:
+        if has_checkpoint or (run_dir / MODEL_FILE).exists():
+            raise RunDirError(
+                f"{run_dir} already holds a run: resume it with `spikectl train --resume "
+                f"{run_dir}` or choose another --run-dir"
+            )
+        if read_config(run_dir) != config:
+            raise RunDirError(
+                f"{run_dir} holds a run with another config that stopped before its first "
+                "checkpoint: choose another --run-dir, or delete that directory"
+            )
+        _clear_unstarted(run_dir)  # the same run, never checkpointed: start it again
+        return False
+    if run_dir.exists() and any(p.name != LOCK_FILE for p in run_dir.iterdir()):
+        raise RunDirError(f"{run_dir} is not empty and holds no spikectl run: choose another")
+    make_dirs(run_dir)
+    write_json(config_path, config.to_dict())
+    return False
+
+
+def _clear_unstarted(run_dir: Path) -> None:
+    """Remove what a run wrote before its first checkpoint, and the temporary files of
+    interrupted writes; the config stays."""
+    for name in UNSTARTED_LEFTOVERS:
+        path = run_dir / name
+        if path.is_dir():
+            shutil.rmtree(path)
+        else:
+            path.unlink(missing_ok=True)
+    remove_temporaries(run_dir)
+
+
+def remove_temporaries(run_dir: Path) -> None:
+    """Remove the temporary files of writes a kill interrupted (we hold the lock, so no
+    write of ours is under way)."""
+    for temporary in run_dir.glob(".*.tmp"):
+        temporary.unlink(missing_ok=True)
+
+
+def read_config(run_dir: Path) -> Experiment:
+    """The resolved config saved in a run directory."""
+    path = Path(run_dir) / CONFIG_FILE
+    try:
+        values = json.loads(path.read_text())
+    except FileNotFoundError:
+        raise RunDirError(f"{run_dir} is not a spikectl run directory (no {CONFIG_FILE})") from None
+    except OSError as error:
+        raise RunDirError(f"cannot read {path}: {describe_os_error(error)}") from error
+    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+        raise RunDirError(f"{path} is not a valid spikectl config: {error}") from error
+    if not isinstance(values, dict):
+        raise RunDirError(f"{path} is not a valid spikectl config: not a JSON object")
+    try:
+        return Experiment.from_dict(values)
+    except (TypeError, ValueError) as error:
+        raise RunDirError(f"{path} is not a valid spikectl config: {error}") from error
+
+
+def write_metrics(run_dir: Path, rows: list[dict], fields: tuple[str, ...]) -> None:
+    """Rewrite metrics.csv from all rows (small; rewriting keeps it exact after a resume)."""
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=fields, lineterminator="\n")
+    writer.writeheader()
+    for row in rows:
+        writer.writerow({key: _format(row.get(key, math.nan)) for key in fields})
+    atomic_write_text(run_dir / METRICS_FILE, buffer.getvalue())
+
+
+def read_metrics(run_dir: Path) -> list[dict[str, float]]:
+    path = Path(run_dir) / METRICS_FILE
+    try:
+        with open(path, newline="") as handle:
+            return [
+                {key: float(value) for key, value in row.items()} for row in csv.DictReader(handle)
+            ]
+    except FileNotFoundError:
+        raise
+    except OSError as error:
+        raise RunDirError(f"cannot read {path}: {describe_os_error(error)}") from error
+    except (ValueError, TypeError, UnicodeDecodeError, csv.Error) as error:
+        raise RunDirError(f"{path} is damaged: {error}") from error
+
+
+def _format(value: Any) -> str:
+    if isinstance(value, float):
+        return "nan" if math.isnan(value) else repr(value)
+    return str(value)
