@@ -26,10 +26,9 @@ from spikectl.envs.env_support import (
     check_context,
     check_context_index,
     observation_space,
-    resolve_contexts,
-    resolve_extensions,
+    resolve_setup,
 )
-from spikectl.neuron.extensions import EnvironmentEffects, Extensions
+from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance
 
@@ -148,23 +147,15 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         render_mode: str | None = None,
         extensions: Extensions | Mapping[str, Any] | None = None,
     ) -> None:
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(
-                f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}"
-            )
-        requested = Extensions.coerce(extensions)
-        self.contexts, self.params = resolve_contexts(
+        self.contexts, self.params, self.extensions, self._tables, self._effects = resolve_setup(
             contexts, split, n_train, n_test, context_seed, n_neurons, episode_length, params,
-            requested,
+            extensions, allow_target_action, render_mode,
         )  # fmt: skip
-        self.extensions = resolve_extensions(requested, allow_target_action, self.contexts)
         self.n_neurons = n = self.contexts.n_neurons
         self.n_observed = k = self.contexts.n_observed
         self.episode_length = length = self.contexts.episode_length
         self.allow_target_action = self.extensions.allow_target_action
         self.render_mode = render_mode
-        self._tables = ContextTables.build(self.contexts, self.allow_target_action, self.params)
-        self._effects = EnvironmentEffects(self.extensions, self.params, length)
         self._release_uniforms, self._input_mV = self._effects.input_buffers(1, n)
         self._plain = self._effects.plain  # observations are the potentials
         self._random_dynamics = self._effects.random_dynamics
@@ -298,14 +289,14 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
             return None
         if self._state is None:
             raise ResetNeeded("call reset() before render()")
-        draw = rendering.render_ansi if self.render_mode == "ansi" else rendering.render_rgb
         actions, spikes = self._action_history[0], self._spike_history
         if self._observable is not None:  # what the agent sees: the observable neurons
             actions, spikes = (
                 _observed_actions(actions, self._observable),
                 spikes[:, self._observable],
             )
-        return draw(
+        return rendering.render(
+            self.render_mode,
             self._pattern,
             self._spike_history[:, self._target],
             actions,

@@ -13,14 +13,14 @@ import operator
 import os
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, replace
-from typing import Any
+from typing import Any, NamedTuple
 
 import numpy as np
 from gymnasium import spaces
 
 from spikectl.contexts import Context, ContextSet, make_splits
 from spikectl.contexts.generation import is_int
-from spikectl.neuron.extensions import CONTEXT_FIELDS, Extensions
+from spikectl.neuron.extensions import CONTEXT_FIELDS, EnvironmentEffects, Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, neuron_parameters
 
@@ -143,6 +143,43 @@ def _cached_splits(
 ) -> tuple[ContextSet, ContextSet]:
     # Every environment of a SyncVectorEnv asks for the same sets; context sets are immutable.
     return make_splits(n_train, n_test, n_neurons, episode_length, seed, params, extensions)
+
+
+class Setup(NamedTuple):
+    """What an environment's constructor arguments resolve to (:func:`resolve_setup`)."""
+
+    contexts: ContextSet
+    params: NeuronParams
+    extensions: Extensions
+    tables: ContextTables
+    effects: EnvironmentEffects
+
+
+def resolve_setup(
+    contexts: ContextSet | str | os.PathLike | None,
+    split: str,
+    n_train: int,
+    n_test: int,
+    context_seed: int,
+    n_neurons: int | None,
+    episode_length: int | None,
+    params: NeuronParams | None,
+    extensions: Extensions | Mapping[str, Any] | None,
+    allow_target_action: bool,
+    render_mode: str | None,
+) -> Setup:
+    """Check and resolve the constructor arguments both environments take."""
+    if render_mode is not None and render_mode not in RENDER_MODES:
+        raise ValueError(f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}")
+    requested = Extensions.coerce(extensions)
+    context_set, params = resolve_contexts(
+        contexts, split, n_train, n_test, context_seed, n_neurons, episode_length, params,
+        requested,
+    )  # fmt: skip
+    effective = resolve_extensions(requested, allow_target_action, context_set)
+    tables = ContextTables.build(context_set, effective.allow_target_action, params)
+    effects = EnvironmentEffects(effective, params, context_set.episode_length)
+    return Setup(context_set, params, effective, tables, effects)
 
 
 def resolve_contexts(

@@ -16,6 +16,9 @@ The target row classifies every step: a *hit* (wanted spike, fired), a *miss*
 
 from __future__ import annotations
 
+import functools
+from typing import NamedTuple
+
 import numpy as np
 
 DO_NOTHING = -1
@@ -65,14 +68,29 @@ _PALETTE = np.array(
  _STIMULATED_SILENT) = range(len(_PALETTE))  # fmt: skip
 
 
-def _episode_arrays(
+class _Episode(NamedTuple):
+    """The checked arrays of :func:`render`, cut to the ``step`` steps taken."""
+
+    pattern: np.ndarray  # [N] bool
+    target_spikes: np.ndarray  # [step] bool
+    actions: np.ndarray  # [step]
+    spikes: np.ndarray  # [step, n] bool
+    n_neurons: int
+    target: int
+    step: int
+
+
+def render(
+    render_mode: str,
     pattern: np.ndarray,
     target_spikes: np.ndarray,
     actions: np.ndarray,
     spikes: np.ndarray,
     target: int,
     step: int,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, int]:
+) -> str | np.ndarray:
+    """The episode so far as text (``"ansi"``, :func:`_draw_ansi`) or as an RGB image
+    (``"rgb_array"``, :func:`_draw_rgb`); the arrays are described above."""
     pattern = np.asarray(pattern).astype(bool)
     episode_length = pattern.shape[0]
     spikes = np.asarray(spikes, dtype=bool)
@@ -88,7 +106,13 @@ def _episode_arrays(
     spikes = spikes[:step]
     if target_spikes.shape[0] < step or actions.shape[0] < step or spikes.shape[0] < step:
         raise ValueError(f"target_spikes, actions and spikes must hold at least {step} steps")
-    return pattern, target_spikes, actions, spikes, n_neurons
+    draw = _draw_ansi if render_mode == "ansi" else _draw_rgb
+    return draw(_Episode(pattern, target_spikes, actions, spikes, n_neurons, target, step))
+
+
+# Each mode as a function of the six arrays alone.
+render_ansi = functools.partial(render, "ansi")
+render_rgb = functools.partial(render, "rgb_array")
 
 
 def _target_codes(pattern: np.ndarray, target_spikes: np.ndarray) -> np.ndarray:
@@ -103,14 +127,7 @@ def _other_neurons(n_neurons: int, target: int) -> np.ndarray:
     return np.array([j for j in range(n_neurons) if j != target], dtype=np.int64)
 
 
-def render_ansi(
-    pattern: np.ndarray,
-    target_spikes: np.ndarray,
-    actions: np.ndarray,
-    spikes: np.ndarray,
-    target: int,
-    step: int,
-) -> str:
+def _draw_ansi(episode: _Episode) -> str:
     """A text raster of an episode so far: one column per step.
 
     Rows: ``pattern`` (``|`` wanted spike, ``.`` silence), the target (``|`` hit,
@@ -120,9 +137,7 @@ def render_ansi(
     ``*`` stimulated, ``.`` silent). Steps not taken yet are blank except in the
     pattern row.
     """
-    pattern, target_spikes, actions, spikes, n_neurons = _episode_arrays(
-        pattern, target_spikes, actions, spikes, target, step
-    )
+    pattern, target_spikes, actions, spikes, n_neurons, target, step = episode
     episode_length = pattern.shape[0]
     codes = _target_codes(pattern, target_spikes)
     wanted_so_far = int(pattern[:step].sum())
@@ -181,26 +196,17 @@ def cell_box(row: int, step: int) -> tuple[slice, slice]:
     return slice(top, top + CELL_HEIGHT_PX), slice(left, left + CELL_WIDTH_PX)
 
 
-def render_rgb(
-    pattern: np.ndarray,
-    target_spikes: np.ndarray,
-    actions: np.ndarray,
-    spikes: np.ndarray,
-    target: int,
-    step: int,
-) -> np.ndarray:
+def _draw_rgb(episode: _Episode) -> np.ndarray:
     """An episode raster as a uint8 [H, W, 3] image, drawn with NumPy only.
 
-    Rows as in :func:`render_ansi`, located by :func:`cell_box`: the pattern
+    Rows as in :func:`_draw_ansi`, located by :func:`cell_box`: the pattern
     (white = wanted spike), the target (green ``HIT``, red ``MISS``, orange
     ``EXTRA`` spike, grey correct silence), the stimulus row (blue where a neuron
     was stimulated), and one row per other neuron (white spike, blue stimulated,
     dark blue stimulated while refractory). Columns are steps, with a lighter gap
     every 10 steps; steps not taken yet are dark.
     """
-    pattern, target_spikes, actions, spikes, n_neurons = _episode_arrays(
-        pattern, target_spikes, actions, spikes, target, step
-    )
+    pattern, target_spikes, actions, spikes, n_neurons, target, step = episode
     episode_length = pattern.shape[0]
     others = _other_neurons(n_neurons, target)
     n_rows = FIRST_NEURON_ROW + others.size

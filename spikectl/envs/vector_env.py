@@ -31,10 +31,9 @@ from spikectl.envs.env_support import (
     check_context_index,
     observation_space,
     random_legal_actions,
-    resolve_contexts,
-    resolve_extensions,
+    resolve_setup,
 )
-from spikectl.neuron.extensions import EnvironmentEffects, Extensions
+from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance, uniform_neuron_parameters
 
@@ -107,24 +106,16 @@ class NeuronControlVectorEnv(VectorEnv):
     ) -> None:
         if not is_int(num_envs) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
-        if render_mode is not None and render_mode not in RENDER_MODES:
-            raise ValueError(
-                f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}"
-            )
-        requested = Extensions.coerce(extensions)
-        self.contexts, self.params = resolve_contexts(
+        self.contexts, self.params, self.extensions, self._tables, self._effects = resolve_setup(
             contexts, split, n_train, n_test, context_seed, n_neurons, episode_length, params,
-            requested,
+            extensions, allow_target_action, render_mode,
         )  # fmt: skip
-        self.extensions = resolve_extensions(requested, allow_target_action, self.contexts)
         self.num_envs = batch = int(num_envs)
         self.n_neurons = n = self.contexts.n_neurons
         self.n_observed = k = self.contexts.n_observed
         self.episode_length = length = self.contexts.episode_length
         self.allow_target_action = self.extensions.allow_target_action
         self.render_mode = render_mode
-        self._tables = ContextTables.build(self.contexts, self.allow_target_action, self.params)
-        self._effects = EnvironmentEffects(self.extensions, self.params, length)
         self._release_uniforms, self._input_mV = self._effects.input_buffers(batch, n)
 
         self.single_observation_space = observation_space(k, length)
@@ -429,9 +420,9 @@ class NeuronControlVectorEnv(VectorEnv):
             return None
         if not self._all_reset:
             raise ResetNeeded("call reset() before render()")
-        draw = rendering.render_ansi if self.render_mode == "ansi" else rendering.render_rgb
         return tuple(
-            draw(
+            rendering.render(
+                self.render_mode,
                 self._patterns[i],
                 self._spike_history[i, :, self._observed_targets[i]],
                 self._action_history[i],
