@@ -314,7 +314,7 @@ def test_paper_literal_tdrqn_builds_and_runs() -> None:
 
 
 def _features(net: torch.nn.Module, obs: dict[str, torch.Tensor]) -> torch.Tensor:
-    from spikectl.agents.blocks import per_neuron_features
+    from spikectl.agents.features import per_neuron_features
 
     s = net.sizes
     return per_neuron_features(
