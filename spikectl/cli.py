@@ -168,8 +168,11 @@ class TrainCommand:
     resume: Path | None = None
     """Continue the interrupted run (or seed group) in this directory (its saved config is used)."""
     seeds: tuple[int, ...] | None = None
-    """Train these seeds in one process, a round of each in turn (RUN_DIR/seed=S each;
-    each seed exactly as if trained alone)."""
+    """Train these seeds as one group in one process (RUN_DIR/seed=S each; each seed
+    exactly as if trained alone)."""
+    stacked: bool = False
+    """With --seeds: compute the seeds as one stacked computation (pays on a GPU; equal
+    to the seeds alone up to floating-point rounding)."""
 
 
 def torch_threads() -> int:
@@ -181,14 +184,17 @@ def torch_threads() -> int:
 def train(command: TrainCommand) -> None:
     """Train (or resume) one run or a seed group, then print the returns against the
     baselines (for a group, each seed's)."""
-    from spikectl.training.group import GROUP_FILE, group_configs, seed_dirs
+    from spikectl.training.group import GROUP_FILE, group_configs, group_is_stacked, seed_dirs
     from spikectl.training.run import train_runs
     from spikectl.training.run_files import read_config
 
-    resume = command.resume is not None
+    resume, stacked = command.resume is not None, command.stacked
+    if stacked and command.seeds is None and not resume:
+        raise ValueError("--stacked: stacking computes a seed group; give --seeds too")
     if resume and (command.resume / GROUP_FILE).exists():
         group_dir = command.resume
         configs, run_dirs = group_configs(group_dir)
+        stacked = group_is_stacked(group_dir)
     elif resume:
         group_dir, run_dirs = None, [command.resume]
         configs = [read_config(command.resume)]
@@ -210,10 +216,11 @@ def train(command: TrainCommand) -> None:
     if group_dir is None:
         print(f"run directory: {run_dirs[0]}")
     else:
-        print(f"seed group: {group_dir} ({len(configs)} seeds in one process)")
+        how = "stacked" if stacked else "in one process"
+        print(f"seed group: {group_dir} ({len(configs)} seeds {how})")
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", RuntimeWarning)
-        metrics = train_runs(configs, run_dirs, group_dir, resume=resume)
+        metrics = train_runs(configs, run_dirs, group_dir, resume=resume, stacked=stacked)
     for warning in caught:
         print(f"spikectl: warning: {warning.message}", file=sys.stderr)
     if group_dir is None:
@@ -278,12 +285,11 @@ def _print_group(configs: list[Experiment], run_dirs: list[Path], metrics: list[
             f"{config.train.seed:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}"
             f"{chosen}"
         )
-    final = metrics[0][-1]
-    wall = sum(rows[-1]["wall_time_s"] for rows in metrics) / 60
-    cpu = sum(rows[-1]["cpu_time_s"] for rows in metrics) / 60
+    final = metrics[0][-1]  # the seeds share the group's clocks
     print(
         f"{len(configs)} x {final['env_steps']:,} environment steps, {final['updates']:,} "
-        f"updates each, {wall:.1f} wall minutes ({cpu:.1f} core minutes) for the whole group"
+        f"updates each, {final['wall_time_s'] / 60:.1f} wall minutes "
+        f"({final['cpu_time_s'] / 60:.1f} core minutes) for the whole group"
     )
     print(f"wrote model.pt and metrics.csv in {', '.join(str(d) for d in run_dirs)}")
 

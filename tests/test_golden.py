@@ -17,7 +17,14 @@ from pathlib import Path
 import pytest
 
 sys.path.insert(0, str(Path(__file__).parent / "golden"))
-from golden_runs import GOLDEN_FILE, QUICK_PREFIX, RUNS, machine, record  # noqa: E402
+from golden_runs import (  # noqa: E402
+    GOLDEN_FILE,
+    QUICK_PREFIX,
+    RUNS,
+    STACKED_GROUP,
+    machine,
+    record,
+)
 
 GOLDEN = json.loads(GOLDEN_FILE.read_text())
 
@@ -46,6 +53,15 @@ def test_each_seed_of_a_group_matches_that_seed_trained_alone(tmp_path):
     _train(("train", "smoke", "--seeds", "0", "1"), tmp_path / "group")
     for seed in (0, 1):
         assert record(tmp_path / "group" / f"seed={seed}") == GOLDEN["runs"][f"smoke-seed{seed}"]
+
+
+def test_a_stacked_group_trains_as_groups_did_before_the_refactor(tmp_path):
+    """`--stacked`: the seed group of one stacked computation, exactly as it trained."""
+    _train((*STACKED_GROUP, "--stacked"), tmp_path / "group")
+    for seed in (0, 1):
+        assert record(tmp_path / "group" / f"seed={seed}") == GOLDEN["runs"][
+            f"smoke-stacked-group-seed{seed}"
+        ]
 
 
 def test_a_resume_after_sigkill_matches_the_golden_record(tmp_path, wait_until, run_cli):

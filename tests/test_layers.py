@@ -18,7 +18,7 @@ import pytest
 PACKAGE_DIR = Path(__file__).resolve().parent.parent / "spikectl"
 
 LAYERS = (
-    ("spikectl.files",),
+    ("spikectl.files", "spikectl.config_errors"),
     ("spikectl.neuron",),
     ("spikectl.contexts",),
     ("spikectl.envs",),

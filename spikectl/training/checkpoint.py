@@ -1,14 +1,17 @@
-"""checkpoint.pt: a run's whole changing state, written atomically and restored exactly.
+"""checkpoint.pt: the whole changing state of a run or a seed group, written atomically
+and restored exactly.
 
-The file holds the run's part (the generator's state, the episode count, both clocks,
-the metrics rows and baselines so far) and the learner's part (its ``state_dict``: for
-the double-Q learner the online, target and auxiliary networks, the optimiser, the
-replay buffer and its loss sums), with the config it was written for. It loads
-weights-only and carries a checksum (``spikectl.training.torch_files``); a resumed run
-continues bit-identically. A seed of a group writes the same file in its own directory.
+One format for a single run (in its run directory) and a seed group (in the group's
+directory): per seed its config and the run's part of its state (the generator's state,
+the episode count, the clocks, the metrics rows and baselines so far), and the learners'
+state (``LearnerGroup.state_dict``: for looped learners each seed's ``state_dict``; for
+the double-Q learner the online, target and auxiliary networks, the optimiser, the replay
+buffer and its loss sums). It loads weights-only and carries a checksum
+(``spikectl.training.torch_files``); a resumed run continues bit-identically, and one
+file keeps a group's seeds in lockstep.
 
-Format 3 (since the training loop took learners as plug-ins). Format 2, the double-Q
-trainer's before, is read too: its entries are the double-Q learner's. Format 1 is refused.
+Format 3 (since the training loop took learners as plug-ins). Format 2, a single run of
+the double-Q trainer before, is read too. Format 1 is refused.
 """
 
 from __future__ import annotations
@@ -25,7 +28,6 @@ from spikectl.training.config import Experiment
 from spikectl.training.run_files import (
     BASELINES_FILE,
     CHECKPOINT_FILE,
-    CONFIG_FILE,
     RunDirError,
 )
 from spikectl.training.torch_files import (
@@ -92,24 +94,32 @@ def _plain(value: Any) -> Any:
 
 
 def save_checkpoint(
-    run_dir: Path, config: Experiment, state: RunState, learner_state: dict[str, Any]
+    where: Path,
+    configs: list[Experiment],
+    states: list[RunState],
+    learners_state: dict[str, Any],
+    run_dirs: list[Path],
+    stacked: bool = False,
 ) -> None:
-    """Write checkpoint.pt atomically (then baselines.json); refuses (RunDirError) a
-    learner state holding NaN or infinite values: the previous checkpoint stays."""
+    """Write ``where/checkpoint.pt`` atomically (then each seed's baselines.json);
+    refuses (RunDirError) a learner state holding NaN or infinite values: the previous
+    checkpoint stays."""
     from spikectl import __version__
 
-    check_finite(learner_state, f"the learner's state in {run_dir}")
+    check_finite(learners_state, f"the learners' state in {where}")
     payload = {
         "format": CHECKPOINT_FORMAT,
         "format_version": CHECKPOINT_VERSION,
         "spikectl_version": __version__,
-        "config": config.to_dict(),
-        "learner": learner_state,
-        "run": state.to_payload(),
+        "configs": [config.to_dict() for config in configs],
+        "stacked": bool(stacked),
+        "learners": learners_state,
+        "runs": [state.to_payload() for state in states],
     }
     payload["checksum"] = payload_checksum(payload)
-    atomic_write_bytes(run_dir / CHECKPOINT_FILE, torch_bytes(payload))
-    write_json(run_dir / BASELINES_FILE, state.baselines)
+    atomic_write_bytes(where / CHECKPOINT_FILE, torch_bytes(payload))
+    for state, run_dir in zip(states, run_dirs, strict=True):
+        write_json(run_dir / BASELINES_FILE, state.baselines)
 
 
 def read_checkpoint(path: Path, map_location: str = "cpu") -> dict[str, Any]:
@@ -135,24 +145,27 @@ def read_checkpoint(path: Path, map_location: str = "cpu") -> dict[str, Any]:
             f"{path} has checkpoint format {version}; this spikectl reads formats "
             f"{' and '.join(map(str, READABLE_VERSIONS))}"
         )
-    required = {"config": dict, "checksum": str}
     if version == 3:
-        required |= {"learner": dict, "run": dict}
+        required = {"configs": list, "stacked": bool, "learners": dict, "runs": list}
     else:
-        required |= {"online": dict, "target": dict, "optimizer": dict, "replay": dict,
-                     "updates": int, "loss_sum": float, "aux_loss_sum": float,
-                     "loss_count": int}  # fmt: skip
-    run_entries = {"rng": dict, "episodes": int, "wall_time_s": float, "metrics": list,
-                   "baselines": dict}  # fmt: skip
-    _check_entries(path, payload, required)
+        required = {"config": dict, "online": dict, "target": dict, "optimizer": dict,
+                    "replay": dict, "updates": int, "loss_sum": float, "aux_loss_sum": float,
+                    "loss_count": int}  # fmt: skip
+    _check_entries(path, payload, {**required, "checksum": str})
     checksum = payload.pop("checksum")
     if payload_checksum(payload) != checksum:
         raise RunDirError(f"{path} is damaged: its checksum does not match its contents")
     if version == 2:
         payload = _from_format_2(payload)
-    _check_entries(path, payload["run"], run_entries)
-    if not isinstance(payload["learner"].get("network"), dict):
-        raise RunDirError(f"{path} is damaged: its learner has no 'network' entry")
+    if len(payload["runs"]) != len(payload["configs"]) or not payload["runs"]:
+        raise RunDirError(f"{path} is damaged: it has {len(payload['runs'])} runs for "
+                          f"{len(payload['configs'])} configs")  # fmt: skip
+    run_entries = {"rng": dict, "episodes": int, "wall_time_s": float, "metrics": list,
+                   "baselines": dict}  # fmt: skip
+    for run in payload["runs"]:
+        if not isinstance(run, dict):
+            raise RunDirError(f"{path} is damaged: a run entry is not a dict")
+        _check_entries(path, run, run_entries)
     return payload
 
 
@@ -167,30 +180,41 @@ def _check_entries(path: Path, payload: dict, required: dict[str, type]) -> None
 def _from_format_2(payload: dict[str, Any]) -> dict[str, Any]:
     """A format-2 checkpoint (the double-Q trainer's, one flat dict) in format 3's layout."""
     run_keys = ("rng", "episodes", "wall_time_s", "cpu_time_s", "metrics", "baselines")
+    learner = {"network": payload["online"], **{key: payload.get(key) for key in DQN_V2_ENTRIES}}
     return {
-        "config": payload["config"],
-        "learner": {"network": payload["online"],
-                    **{key: payload.get(key) for key in DQN_V2_ENTRIES}},  # fmt: skip
-        "run": {key: payload[key] for key in run_keys if key in payload},
+        "configs": [payload["config"]],
+        "stacked": False,
+        "learners": {"seeds": [learner]},
+        "runs": [{key: payload[key] for key in run_keys if key in payload}],
     }
 
 
 def load_checkpoint(
-    run_dir: Path, config: Experiment, learner, rng: np.random.Generator
-) -> RunState:
-    """Restore a run saved by ``save_checkpoint`` into ``learner`` and ``rng`` (the run's
-    generator, which the learner draws from too); returns its RunState.
-    Refuses one of another config, a damaged one, or one holding NaN or infinite values."""
-    path = run_dir / CHECKPOINT_FILE
+    where: Path,
+    configs: list[Experiment],
+    learners,
+    rngs: list[np.random.Generator],
+    stacked: bool = False,
+) -> list[RunState]:
+    """Restore ``where/checkpoint.pt`` into ``learners`` and the seeds' generators
+    ``rngs`` (which the learners draw from too); returns each seed's RunState. Refuses
+    one written for other configs, a damaged one, or one holding NaN or infinite values."""
+    path = where / CHECKPOINT_FILE
     if not path.exists():
-        raise RunDirError(f"{run_dir} has no checkpoint yet")
-    payload = read_checkpoint(path, map_location=config.train.device)
-    if saved_config(payload["config"]) != config:
-        raise RunDirError(f"{path} was written with another config than {run_dir / CONFIG_FILE}")
-    check_finite(payload["learner"], str(path))
+        raise RunDirError(f"{where} has no checkpoint yet")
+    payload = read_checkpoint(path, map_location=configs[0].train.device)
+    if [saved_config(values) for values in payload["configs"]] != configs:
+        raise RunDirError(f"{path} was written with other configs than {where}'s")
+    if payload["stacked"] != stacked:
+        raise RunDirError(
+            f"{path} was written by a {'stacked' if payload['stacked'] else 'looped'} group, "
+            f"this one is {'stacked' if stacked else 'looped'}"
+        )
+    check_finite(payload["learners"], str(path))
     try:
-        learner.load_state_dict(payload["learner"])
-        return RunState.from_payload(payload["run"], rng)
+        learners.load_state_dict(payload["learners"])
+        runs = zip(payload["runs"], rngs, strict=True)
+        return [RunState.from_payload(run, rng) for run, rng in runs]
     except (RuntimeError, ValueError, KeyError, TypeError, AttributeError) as error:
         raise RunDirError(f"{path} does not fit this run: {first_line(error)}") from None
 
@@ -205,7 +229,17 @@ def saved_config(values: dict[str, Any]) -> Experiment | None:
 
 
 def checkpoint_weights(path: Path) -> dict[str, torch.Tensor]:
-    """The acting network's verified weights from a checkpoint file."""
-    weights = read_checkpoint(path)["learner"]["network"]
+    """A single run's acting network's verified weights from its checkpoint file."""
+    payload = read_checkpoint(path)
+    try:
+        (seed,) = payload["learners"]["seeds"]
+        weights = seed["network"]
+    except (KeyError, TypeError, ValueError):
+        raise RunDirError(
+            f"{path} is not a single run's checkpoint with a network (a seed group's is in "
+            "its group directory: evaluate a seed's model.pt)"
+        ) from None
+    if not isinstance(weights, dict):
+        raise RunDirError(f"{path} is damaged: its network is not a state dict")
     check_finite(weights, str(path))
     return weights

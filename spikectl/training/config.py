@@ -96,7 +96,9 @@ class EnvConfig:
 
     def __post_init__(self) -> None:
         if not isinstance(self.id, str):
-            raise ValueError(f"env must be a registered environment id, got {self.id!r}")
+            raise ConfigError(
+                "id", f"must be a registered environment id, got {self.id!r}", label="env"
+            )
         check_int("n_neurons", self.n_neurons, 2, MAX_N_NEURONS,
                    f"an integer in 2..{MAX_N_NEURONS} (MAX_N_NEURONS)")  # fmt: skip
         check_int("episode_length", self.episode_length, 2, MAX_EPISODE_LENGTH,
@@ -107,13 +109,15 @@ class EnvConfig:
         check_int("context_seed", self.context_seed, 0, 2**63 - 1, "an integer in 0..2**63 - 1")
         for name, kind in (("params", NeuronParams), ("extensions", Extensions)):
             if not isinstance(getattr(self, name), kind):
-                raise ValueError(f"{name} must be a {kind.__name__}, got {getattr(self, name)!r}")
+                raise ConfigError(name, f"must be a {kind.__name__}, got {getattr(self, name)!r}")
         self._check_variant()
         try:
             self.extensions.hidden_count(self.n_neurons)  # at least 2 observable neurons
         except ValueError as error:
             name = "hidden_neurons" if self.extensions.hidden_neurons else "hidden_fraction"
-            raise ValueError(f"extensions.{name}: {error}") from None
+            raise ConfigError(
+                ("extensions", name), str(error), label=f"extensions.{name}", sep=": "
+            ) from None
 
     def _settings(self) -> dict[str, Any]:
         sizes = {"n_neurons": self.n_neurons, "episode_length": self.episode_length}
@@ -125,11 +129,14 @@ class EnvConfig:
         base, mine = _base_settings(), self._settings()
         for name, value in variant_settings(self.id).items():
             if mine[name] == base[name] != value:
-                raise ValueError(
-                    f"env: {self.id} sets {name} = {value!r}, but this config has the base "
+                raise ConfigError(
+                    "id",
+                    f"{self.id} sets {name} = {value!r}, but this config has the base "
                     f"environment's {mine[name]!r}: take the variant's settings with "
                     f"EnvConfig.with_variant / with_changes({{'env.id': ...}}), or use "
-                    f"{ENV_ID} to leave that setting at the paper's"
+                    f"{ENV_ID} to leave that setting at the paper's",
+                    label="env",
+                    sep=": ",
                 )
 
     @property
@@ -165,9 +172,9 @@ class AgentConfig:
 
     def __post_init__(self) -> None:
         if self.arch not in ARCHITECTURES:
-            raise ValueError(f"arch must be one of {ARCHITECTURES}, got {self.arch!r}")
+            raise ConfigError("arch", f"must be one of {ARCHITECTURES}, got {self.arch!r}")
         if not isinstance(self.sizes, AgentSizes):
-            raise ValueError(f"sizes must be an AgentSizes, got {self.sizes!r}")
+            raise ConfigError("sizes", f"must be an AgentSizes, got {self.sizes!r}")
 
 
 @dataclass(frozen=True)
@@ -287,10 +294,13 @@ class Experiment:
         sizes = dict(agent.get("sizes", {}))
         legacy_normalisation(sizes, env["params"])
         check_fields(AgentSizes, "agent.sizes", sizes)
-        agent["sizes"] = AgentSizes(
-            **{key: tuple(value) if isinstance(value, list) else value
-               for key, value in sizes.items()}
-        )  # fmt: skip
+        try:
+            agent["sizes"] = AgentSizes(
+                **{key: tuple(value) if isinstance(value, list) else value
+                   for key, value in sizes.items()}
+            )  # fmt: skip
+        except ConfigError as error:
+            raise error.within("agent", "sizes") from None
         parts = {}
         for name, kind, part in (("env", EnvConfig, env), ("agent", AgentConfig, agent),
                                  ("train", TrainConfig, nested.get("train", {})),

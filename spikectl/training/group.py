@@ -1,17 +1,19 @@
 """Seed groups: K runs of one configuration trained in one process.
 
 ``spikectl train --seeds 0 1 2`` (or ``sweep --group-seeds``) trains the seeds as one
-group: the training loop (``spikectl.training.run``) takes a round of each seed in turn.
-The seeds share nothing but the process: each has its own run directory (RUN_DIR/seed=S)
-with the files of a single run, its own generator, learner and checkpoint, and trains
-bit-identically to the same seed trained alone. The group directory holds ``group.json``
-(the seeds' configs and run directories) so ``train --resume GROUP_DIR`` resumes every
-seed from its own last checkpoint. The configs may differ in seed and training-set size
+group: the training loop (``spikectl.training.run``) plays a round of all seeds at once
+and lets each seed's learner learn. Looped (the default), the seeds share nothing but the
+process and the vector environment's blocks: each seed trains bit-identically to the same
+seed alone. Stacked (``--stacked``), the learners compute all K seeds at once (a GPU's
+way; equal up to rounding). Each seed has its own run directory (RUN_DIR/seed=S) with the
+files of a single run. The group directory holds ``group.json`` (the seeds' configs, run
+directories and whether stacked) and ``checkpoint.pt`` (every seed's state, one file, so
+the seeds stay in lockstep). The configs may differ in seed and training-set size
 (Figure 5's sizes x seeds form one group).
 
-Groups written by spikectl before the training loop took learners as plug-ins trained
-their seeds as one stacked computation and hold ``group_checkpoint.pt``; their seeds'
-finished runs load as ever, an unfinished one cannot be resumed (one clear error).
+Groups written by spikectl before the training loop took learners as plug-ins hold
+``group_checkpoint.pt``; their seeds' finished runs load as ever, an unfinished group
+cannot be resumed (one clear error).
 """
 
 from __future__ import annotations
@@ -29,6 +31,8 @@ from spikectl.training.run_files import (
     LOCK_FILE,
     MODEL_FILE,
     RunDirError,
+    prepare_run_dir,
+    read_config,
     remove_temporaries,
 )
 from spikectl.training.torch_files import first_line
@@ -73,13 +77,16 @@ def check_group(configs: list[Experiment], run_dirs: list[Path]) -> None:
         raise ValueError("the seeds of a group need distinct run directories")
 
 
-def group_description(configs: list[Experiment], run_dirs: list[Path], group_dir: Path) -> dict:
+def group_description(
+    configs: list[Experiment], run_dirs: list[Path], group_dir: Path, stacked: bool = False
+) -> dict:
     """What group.json holds: the seeds' configs and run directories (relative to the
-    group directory when inside it)."""
+    group directory when inside it) and whether they train stacked."""
     return {
         "format": "spikectl.group",
         "configs": [config.to_dict() for config in configs],
         "run_dirs": [os.path.relpath(Path(d).resolve(), group_dir.resolve()) for d in run_dirs],
+        "stacked": bool(stacked),
     }
 
 
@@ -111,45 +118,70 @@ def group_configs(group_dir: str | os.PathLike) -> tuple[list[Experiment], list[
     return configs, run_dirs
 
 
+def group_is_stacked(group_dir: str | os.PathLike) -> bool:
+    """Whether the group in ``group_dir`` trains stacked (groups before the flag: no)."""
+    stacked = read_group(group_dir).get("stacked", False)
+    if not isinstance(stacked, bool):
+        raise RunDirError(f"{Path(group_dir) / GROUP_FILE} is damaged: 'stacked' is not a bool")
+    return stacked
+
+
 def prepare_group(
-    configs: list[Experiment], run_dirs: list[Path], group_dir: Path, resume: bool
-) -> None:
-    """Create the group directory and its group.json, or check that ``group_dir`` holds
-    this group to resume (each seed's run directory is prepared by the loop)."""
+    configs: list[Experiment],
+    run_dirs: list[Path],
+    group_dir: Path,
+    resume: bool,
+    stacked: bool = False,
+) -> bool:
+    """Create the group and its seeds' run directories, or check that ``group_dir`` holds
+    this group to resume. Returns whether there is a group checkpoint to resume from; a
+    group that stopped before its first checkpoint starts again from step 0."""
     if (group_dir / STACKED_GROUP_CHECKPOINT).exists():
         raise RunDirError(
-            f"{group_dir} holds a seed group trained as one stacked computation by an earlier "
-            f"spikectl ({STACKED_GROUP_CHECKPOINT}); this version cannot resume it: finish it "
-            "with the version that started it, or start the group again in another --run-dir"
+            f"{group_dir} holds a seed group of an earlier spikectl ({STACKED_GROUP_CHECKPOINT}); "
+            "this version cannot resume it: finish it with the version that started it, or "
+            "start the group again in another --run-dir (its finished seeds' model.pt load)"
         )
     has_file = (group_dir / GROUP_FILE).exists()
+    has_checkpoint = (group_dir / CHECKPOINT_FILE).exists()
     if has_file:
         saved, saved_dirs = group_configs(group_dir)
-        if saved != configs or [d.resolve() for d in saved_dirs] != [
-            Path(d).resolve() for d in run_dirs
-        ]:
+        if (
+            saved != configs
+            or [d.resolve() for d in saved_dirs] != [Path(d).resolve() for d in run_dirs]
+            or group_is_stacked(group_dir) != stacked
+        ):
             raise RunDirError(
-                f"{group_dir} holds another seed group (its {GROUP_FILE} has other configs or "
-                "seeds): choose another --run-dir"
+                f"{group_dir} holds another seed group (its {GROUP_FILE} has other configs, "
+                "seeds or --stacked): choose another --run-dir"
             )
-        if not resume and any((d / CHECKPOINT_FILE).exists() for d in run_dirs):
+    elif resume:
+        raise RunDirError(f"{group_dir} holds no seed group to resume (no {GROUP_FILE})")
+    if has_checkpoint:
+        if not resume:
             raise RunDirError(
                 f"{group_dir} already holds a seed group: resume it with `spikectl train "
                 f"--resume {group_dir}` or choose another --run-dir"
             )
+        for config, run_dir in zip(configs, run_dirs, strict=True):
+            if not (run_dir / CONFIG_FILE).exists():
+                raise RunDirError(f"{run_dir}, a seed of the group, has lost its {CONFIG_FILE}")
+            if read_config(run_dir) != config:
+                raise RunDirError(f"the config in {run_dir} does not match its seed group")
+            remove_temporaries(run_dir)
         remove_temporaries(group_dir)
-        return
-    if resume:
-        raise RunDirError(f"{group_dir} holds no seed group to resume (no {GROUP_FILE})")
-    members = {Path(d).resolve() for d in run_dirs}
-    if group_dir.exists() and any(
-        p.name != LOCK_FILE and p.resolve() not in members for p in group_dir.iterdir()
-    ):
-        raise RunDirError(f"{group_dir} is not empty and holds no seed group: choose another")
-    for run_dir in run_dirs:
+        return True
+    if not has_file:
+        members = {Path(d).resolve() for d in run_dirs}
+        if group_dir.exists() and any(
+            p.name != LOCK_FILE and p.resolve() not in members for p in group_dir.iterdir()
+        ):
+            raise RunDirError(f"{group_dir} is not empty and holds no seed group: choose another")
+    for config, run_dir in zip(configs, run_dirs, strict=True):
         if (run_dir / CHECKPOINT_FILE).exists() or (run_dir / MODEL_FILE).exists():
             raise RunDirError(f"{run_dir} already holds a run: it cannot join a seed group")
-        if (run_dir / CONFIG_FILE).exists():
-            raise RunDirError(f"{run_dir} already holds a run's config: choose another --run-dir")
+        # A seed's directory from a group that never checkpointed starts again too.
+        prepare_run_dir(config, run_dir, resume=(run_dir / CONFIG_FILE).exists())
     make_dirs(group_dir)
-    write_json(group_dir / GROUP_FILE, group_description(configs, run_dirs, group_dir))
+    write_json(group_dir / GROUP_FILE, group_description(configs, run_dirs, group_dir, stacked))
+    return False

@@ -1,19 +1,20 @@
 """The training loop: one loop for a single run and for a group of K seeds, any learner.
 
 ``train(config, run_dir)`` trains one run and returns its metrics rows;
-``train_group(configs, run_dirs, group_dir)`` trains K seeds in one process, a round of
-each in turn (a single run is a group of one, through the same code). Per seed, a round
-is: choose ``num_envs`` training contexts with the run's generator, play them at once in
-the vector environment with the learner's collection policy, hand the finished episodes
-to the learner and let it update (``spikectl.training.learners``). Every
-``eval_every_episodes`` the learner's network plays every training, test and validation
+``train_group(configs, run_dirs, group_dir)`` trains K seeds in one process (a single
+run is a group of one, through the same code). A round, for all K seeds in lockstep:
+each seed draws its ``num_envs`` training contexts from its own generator, the vector
+environment plays all K blocks at once with the learners' collection policy, each seed's
+learner takes its finished episodes and updates (``spikectl.training.learners``). Every
+``eval_every_episodes`` each seed's network plays every training, test and validation
 context greedily (a metrics.csv row, TensorBoard, best_model.pt when the validation
-return is the best so far); every ``checkpoint_every_episodes`` the seed's whole state
-is saved, so that ``resume=True`` continues bit-identically, and a group resumes every
-seed from its own checkpoint. The loop knows nothing of Q-learning.
+return is the best so far); every ``checkpoint_every_episodes`` the whole state is saved
+in one file, so that ``resume=True`` continues bit-identically. The loop knows nothing
+of Q-learning.
 
-Seeds are independent: a seed trained in a group gives exactly the metrics and weights
-of that seed trained alone.
+Seeds are independent: in a looped group (the default) a seed gives exactly the metrics
+and weights of that seed trained alone; a stacked group (``stacked=True``) computes all
+K in one batched computation, equal up to floating-point rounding (for GPUs).
 """
 
 from __future__ import annotations
@@ -22,13 +23,18 @@ import contextlib
 import math
 import time
 import warnings
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from spikectl.envs.rollout import do_nothing_policy, make_random_policy, run_episodes
+from spikectl.contexts import ContextSet
+from spikectl.envs.rollout import (
+    EpisodeBatch,
+    do_nothing_policy,
+    make_random_policy,
+    run_episodes,
+)
 from spikectl.training.checkpoint import RunState, load_checkpoint, save_checkpoint
 from spikectl.training.config import Experiment
 from spikectl.training.contexts import (
@@ -41,11 +47,10 @@ from spikectl.training.contexts import (
 )
 from spikectl.training.greedy import greedy_returns
 from spikectl.training.group import check_group, prepare_group, seed_dirs
-from spikectl.training.learners import make_learner
+from spikectl.training.learners import make_learners
 from spikectl.training.learners.protocol import LossDiverged
 from spikectl.training.run_files import (
     BEST_MODEL_FILE,
-    CONFIG_FILE,
     RunDirError,
     check_device,
     prepare_run_dir,
@@ -79,21 +84,25 @@ def train_group(
     run_dirs: list[str | Path],
     group_dir: str | Path,
     resume: bool = False,
+    stacked: bool = False,
 ) -> list[list[dict]]:
     """Train a seed group (configs that differ only in seed and n_train) described by
-    ``group_dir/group.json``; returns each seed's metrics rows. ``resume=True`` resumes
-    every seed from its own checkpoint."""
-    return train_runs(configs, run_dirs, group_dir, resume)
+    ``group_dir/group.json``; returns each seed's metrics rows."""
+    return train_runs(configs, run_dirs, group_dir, resume, stacked)
 
 
 def train_seeds(
-    config: Experiment, seeds: list[int], run_dir: str | Path, resume: bool = False
+    config: Experiment,
+    seeds: list[int],
+    run_dir: str | Path,
+    resume: bool = False,
+    stacked: bool = False,
 ) -> list[list[dict]]:
     """``config`` with each of ``seeds`` as one group: RUN_DIR/seed=S per seed."""
     if not seeds:
         raise ValueError("--seeds needs at least one seed")
     configs = [config.with_seed(seed) for seed in seeds]
-    return train_runs(configs, seed_dirs(run_dir, list(seeds)), run_dir, resume)
+    return train_runs(configs, seed_dirs(run_dir, list(seeds)), run_dir, resume, stacked)
 
 
 def train_runs(
@@ -101,183 +110,229 @@ def train_runs(
     run_dirs: list[str | Path],
     group_dir: str | Path | None = None,
     resume: bool = False,
+    stacked: bool = False,
 ) -> list[list[dict]]:
     """The one training path: K >= 1 runs in this process, each in its run directory
-    (locked for the whole time), as a seed group when ``group_dir`` is given."""
+    (all locked while they train), as a seed group when ``group_dir`` is given (whose
+    directory then holds the checkpoint of all K)."""
     run_dirs = [Path(d) for d in run_dirs]
     check_group(configs, run_dirs)
     check_device(configs[0].train.device)
+    if group_dir is None and len(configs) > 1:
+        raise ValueError("several runs in one process are a seed group: give group_dir")
     with contextlib.ExitStack() as locks:
         if group_dir is not None:
             locks.enter_context(run_lock(Path(group_dir)))
         for run_dir in run_dirs:
             locks.enter_context(run_lock(run_dir))
-        if group_dir is not None:
-            prepare_group(configs, run_dirs, Path(group_dir), resume)
-        seeds = []
-        for config, run_dir in zip(configs, run_dirs, strict=True):
-            # A group's seed that wrote its config continues (or starts again when it
-            # stopped before its first checkpoint); a single run does as it is told.
-            continues = (run_dir / CONFIG_FILE).exists() if group_dir is not None else resume
-            seeds.append(SeedRun(config, run_dir, prepare_run_dir(config, run_dir, continues)))
-        return _train(seeds, Path(group_dir) if group_dir is not None else run_dirs[0])
-
-
-def _train(seeds: list[SeedRun], where: Path) -> list[list[dict]]:
-    threads = seeds[0].config.train.torch_threads
-    if threads:
-        torch.set_num_threads(threads)
-    for k, seed in enumerate(seeds):
-        seed.start(show_progress=k == 0)
-    while any(not seed.finished for seed in seeds):
-        for seed in seeds:
-            if not seed.finished:
-                seed.round()
-    for seed in seeds:
-        seed.finish()
-    if any(seed.learner.updates == 0 for seed in seeds):
-        config = seeds[0].config
-        warnings.warn(
-            f"the run in {where} made no gradient update (learning_starts="
-            f"{config.learner.learning_starts}, updates_per_round="
-            f"{config.learner.updates_per_round}, "
-            f"{config.total_episodes} episodes): model.pt is the untrained initial network",
-            RuntimeWarning,
-            stacklevel=3,
-        )
-    return [seed.state.metrics for seed in seeds]
-
-
-class SeedRun:
-    """One seed's run inside the loop: its contexts, environments, learner, state, files."""
-
-    def __init__(self, config: Experiment, run_dir: Path, resume: bool) -> None:
-        self.config, self.run_dir, self.resume = config, run_dir, resume
-        self._block: tuple[float, float] | None = None
-
-    def start(self, show_progress: bool) -> None:
-        """Load or make the context sets, build the learner and environments, restore the
-        checkpoint or score the baselines, and make the first evaluation."""
-        config = self.config
-        self.train_set, test_set, val_set = load_or_make_contexts(config, self.run_dir)
-        rng = np.random.default_rng(np.random.SeedSequence(config.train.seed))
-        self.learner = make_learner(config, self.train_set, rng)
-        self.state = RunState(rng=rng)
-        if self.resume:
-            self.state = load_checkpoint(self.run_dir, config, self.learner, rng)
-            forget_best_model_after(self.run_dir, self.state.episodes)
+        if group_dir is None:
+            where = run_dirs[0]
+            resume = prepare_run_dir(configs[0], where, resume)
         else:
-            self.state.baselines = {
-                name: {
-                    split: float(baseline_episodes(config, contexts, policy).returns.mean())
-                    for split, contexts in (("train", self.train_set), ("test", test_set))
-                }
-                for name, policy in (
-                    ("do_nothing", do_nothing_policy),
-                    ("random", make_random_policy(config.train.seed)),
-                )
-            }
-        self.collect_env = make_env(config, self.train_set, config.train.num_envs)
-        self.eval_envs = {
-            split: make_env(config, contexts, len(contexts))
-            for split, contexts in zip(SPLITS, (self.train_set, test_set, val_set), strict=True)
-            if contexts is not None
-        }
-        self.eval_seed = stream_seed(config, EVAL_STREAM)
-        self.logger = RunLogger(
-            self.run_dir, config.total_episodes, self.state.episodes,
-            show_progress and config.train.progress, config.agent.arch,
-        )  # fmt: skip
-        if not self.state.metrics:
-            with self.timed():
-                self.evaluate()
+            where = Path(group_dir)
+            resume = prepare_group(configs, run_dirs, where, resume, stacked)
+        return Loop(configs, run_dirs, where, stacked).run(resume)
 
-    @property
-    def finished(self) -> bool:
-        return self.state.episodes >= self.config.total_episodes
+
+class Loop:
+    """K seeds' runs in lockstep: files, contexts, environments, learners, state."""
+
+    def __init__(
+        self, configs: list[Experiment], run_dirs: list[Path], where: Path, stacked: bool
+    ) -> None:
+        self.configs, self.run_dirs, self.where, self.stacked = configs, run_dirs, where, stacked
+        self.config = configs[0]  # the settings every seed shares
+        self.K, self.E = len(configs), self.config.train.num_envs
+
+    def run(self, resume: bool) -> list[list[dict]]:
+        config, K = self.config, self.K
+        if config.train.torch_threads:
+            torch.set_num_threads(config.train.torch_threads)
+        pairs = zip(self.configs, self.run_dirs, strict=True)
+        sets = [load_or_make_contexts(config, run_dir) for config, run_dir in pairs]
+        self.train_sets = [seed_sets[0] for seed_sets in sets]
+        rngs = [np.random.default_rng(np.random.SeedSequence(c.train.seed)) for c in self.configs]
+        self.learners = make_learners(self.configs, self.train_sets, rngs, self.stacked)
+        if resume:
+            self.states = load_checkpoint(
+                self.where, self.configs, self.learners, rngs, self.stacked
+            )
+            for state, run_dir in zip(self.states, self.run_dirs, strict=True):
+                forget_best_model_after(run_dir, state.episodes)
+        else:
+            self.states = [
+                RunState(rng=rng, baselines=baselines(c, train_set, test_set))
+                for rng, c, (train_set, test_set, _) in zip(rngs, self.configs, sets, strict=True)
+            ]
+        self.collect_env, self.offsets = collection_env(config, self.train_sets, self.E)
+        self.eval_envs = evaluation_envs(config, sets)
+        self.eval_seeds = [stream_seed(c, EVAL_STREAM) for c in self.configs]
+        self.loggers = [
+            RunLogger(d, config.total_episodes, s.episodes,
+                      config.train.progress and k == 0, config.agent.arch)
+            for k, (d, s) in enumerate(zip(self.run_dirs, self.states, strict=True))
+        ]  # fmt: skip
+        # Process CPU time counts every thread: core-seconds, fair on a shared machine.
+        self.started = (
+            time.perf_counter() - self.states[0].wall_time_s,
+            time.process_time() - self.states[0].cpu_time_s,
+        )
+        if not self.states[0].metrics:
+            self.evaluate()
+        while self.states[0].episodes < config.total_episodes:
+            self.round()
+        for k, (run_dir, logger) in enumerate(zip(self.run_dirs, self.loggers, strict=True)):
+            logger.close()
+            save_model(run_dir, self.learners.network(k))
+        if any(self.learners.updates(k) == 0 for k in range(K)):
+            warnings.warn(
+                f"the run in {self.where} made no gradient update (learning_starts="
+                f"{config.learner.learning_starts}, updates_per_round="
+                f"{config.learner.updates_per_round}, {config.total_episodes} episodes): "
+                "model.pt is the untrained initial network",
+                RuntimeWarning,
+                stacklevel=4,
+            )
+        return [state.metrics for state in self.states]
 
     def round(self) -> None:
-        """Collect one round of episodes, let the learner learn, evaluate and checkpoint
-        when the round crosses their points."""
-        config, state = self.config, self.state
-        with self.timed():
-            # The environment's own draws are seeded per round, so a resumed run repeats them.
-            self.collect_env.reset(seed=stream_seed(config, COLLECT_STREAM, state.episodes))
-            contexts = state.rng.integers(len(self.train_set), size=config.train.num_envs)
-            policy = self.learner.collection_policy(state.episodes)
-            episodes = run_episodes(self.collect_env, contexts, policy)
-            self.learner.observe(episodes, contexts)
-            before = state.episodes
-            state.episodes += config.train.num_envs
-            self.logger.progress(
-                config.train.num_envs, float(episodes.returns.mean()),
-                self.learner.progress(before),
+        """Collect one round for every seed, let the learners learn, evaluate and
+        checkpoint when the round crosses their points."""
+        config, states, E = self.config, self.states, self.E
+        before = states[0].episodes
+        # Each seed's block of sub-environments draws what its single run's would; the
+        # environment's own draws are seeded per round, so a resumed run repeats them.
+        self.collect_env.reset(seed=[
+            stream_seed(c, COLLECT_STREAM, before) + i for c in self.configs for i in range(E)
+        ])  # fmt: skip
+        contexts = [state.rng.integers(len(s), size=E)
+                    for state, s in zip(states, self.train_sets, strict=True)]  # fmt: skip
+        played = np.concatenate(
+            [offset + c for offset, c in zip(self.offsets, contexts, strict=True)]
+        )  # [K*E], indices into the collection environment's set
+        episodes = run_episodes(self.collect_env, played, self.learners.collection_policy(before))
+        blocks = [block(episodes, k * E, (k + 1) * E) for k in range(self.K)]
+        self.learners.observe(blocks, contexts)
+        for state in states:
+            state.episodes += E
+        self.loggers[0].progress(
+            E, float(blocks[0].returns.mean()), self.learners.progress(before)
+        )
+        try:
+            self.learners.update(before)
+        except LossDiverged as error:
+            run_dir = self.run_dirs[error.seed]
+            raise RunDirError(
+                f"{error} (episode {states[0].episodes}{self._seed_label(run_dir)}): training "
+                f"diverged; the last good checkpoint in {self.where} is kept "
+                "(lower --learning-rate?)"
+            ) from None
+        after = states[0].episodes
+        finished = after >= config.total_episodes
+        if finished or crossed_multiple(before, after, config.train.eval_every_episodes):
+            self.evaluate()
+        if finished or crossed_multiple(before, after, config.train.checkpoint_every_episodes):
+            self.clock()
+            save_checkpoint(
+                self.where, self.configs, states, self.learners.state_dict(), self.run_dirs,
+                self.stacked,
             )  # fmt: skip
-            try:
-                self.learner.update(before)
-            except LossDiverged as error:
-                raise RunDirError(
-                    f"{error} (episode {state.episodes}): training diverged; the last good "
-                    f"checkpoint in {self.run_dir} is kept (lower --learning-rate?)"
-                ) from None
-            if self.finished or crossed_multiple(
-                before, state.episodes, config.train.eval_every_episodes
-            ):
-                self.evaluate()
-            if self.finished or crossed_multiple(
-                before, state.episodes, config.train.checkpoint_every_episodes
-            ):
-                state.wall_time_s, state.cpu_time_s = self.clocks().values()
-                self._block = (time.perf_counter(), time.process_time())
-                save_checkpoint(self.run_dir, config, state, self.learner.state_dict())
+
+    def _seed_label(self, run_dir: Path) -> str:
+        return "" if self.K == 1 else f", seed {run_dir.name}"
+
+    def clock(self) -> None:
+        """The group's clocks, which every seed shares (a single run's own)."""
+        for state in self.states:
+            state.wall_time_s = time.perf_counter() - self.started[0]
+            state.cpu_time_s = time.process_time() - self.started[1]
 
     def evaluate(self) -> None:
-        """Score the learner's network greedily on every set: one metrics row. When the
-        validation return beats every earlier one, the network is saved as
-        best_model.pt (model selection on the validation set, never on the test set)."""
-        network, state = self.learner.network, self.state
-        returns = {
-            split: greedy_returns(network, env, self.config.train.device, self.eval_seed)
-            for split, env in self.eval_envs.items()
+        """Score each seed's network greedily on each of its sets: one metrics row per
+        seed. When a seed's validation return beats every earlier one, its network is
+        saved as best_model.pt (model selection on validation, never on test)."""
+        self.clock()
+        for k, (state, run_dir) in enumerate(zip(self.states, self.run_dirs, strict=True)):
+            network = self.learners.network(k)
+            returns = {
+                split: greedy_returns(network, env, self.config.train.device, self.eval_seeds[k])
+                for split, env in self.eval_envs[k].items()
+            }
+            row = {
+                "episode": state.episodes,
+                "env_steps": state.episodes * self.config.env.episode_length,
+                **self.learners.row_metrics(k, state.episodes),
+                "train_return": float(returns["train"]),
+                "test_return": float(returns["test"]),
+                "val_return": float(returns["val"]) if "val" in returns else math.nan,
+                "wall_time_s": state.wall_time_s,
+                "cpu_time_s": state.cpu_time_s,
+            }
+            state.metrics.append(row)
+            extra = tuple(f for f in self.learners.metric_fields if f not in METRIC_FIELDS)
+            write_metrics(run_dir, state.metrics, METRIC_FIELDS + extra)
+            self.loggers[k].log(row)
+            if best_on_validation(state.metrics) is row:
+                save_model(run_dir, network, BEST_MODEL_FILE, episode=state.episodes)
+
+
+def baselines(config: Experiment, train_set: ContextSet, test_set: ContextSet) -> dict:
+    """Doing nothing's and the random policy's mean returns on the training and test sets."""
+    return {
+        name: {
+            split: float(baseline_episodes(config, contexts, policy).returns.mean())
+            for split, contexts in (("train", train_set), ("test", test_set))
         }
-        row = {
-            "episode": state.episodes,
-            "env_steps": state.episodes * self.config.env.episode_length,
-            **self.learner.row_metrics(state.episodes),
-            "train_return": float(returns["train"]),
-            "test_return": float(returns["test"]),
-            "val_return": float(returns["val"]) if "val" in returns else math.nan,
-            **self.clocks(),
-        }
-        state.metrics.append(row)
-        extra = tuple(name for name in self.learner.metric_fields if name not in METRIC_FIELDS)
-        write_metrics(self.run_dir, state.metrics, METRIC_FIELDS + extra)
-        self.logger.log(row)
-        if best_on_validation(state.metrics) is row:
-            save_model(self.run_dir, network, BEST_MODEL_FILE, episode=state.episodes)
+        for name, policy in (
+            ("do_nothing", do_nothing_policy),
+            ("random", make_random_policy(config.train.seed)),
+        )
+    }
 
-    def finish(self) -> None:
-        self.logger.close()
-        save_model(self.run_dir, self.learner.network)
 
-    @contextlib.contextmanager
-    def timed(self) -> Iterator[None]:
-        """Count the block's wall and process CPU time on this seed's clocks: a group's
-        seeds each count their own time, so core-minutes stay per seed."""
-        self._block = (time.perf_counter(), time.process_time())
-        try:
-            yield
-        finally:
-            self.state.wall_time_s, self.state.cpu_time_s = self.clocks().values()
-            self._block = None
+def collection_env(config: Experiment, train_sets: list[ContextSet], num_envs: int):
+    """One vector environment of K blocks of ``num_envs`` sub-environments over the
+    seeds' distinct training sets held one after another, and each seed's offset into it."""
+    start: dict[str, int] = {}
+    distinct: list[ContextSet] = []
+    offsets = []
+    for train_set in train_sets:
+        key = train_set.checksum()
+        if key not in start:
+            start[key] = sum(len(s) for s in distinct)
+            distinct.append(train_set)
+        offsets.append(start[key])
+    contexts = distinct[0] if len(distinct) == 1 else ContextSet(
+        [context for s in distinct for context in s],
+        params=distinct[0].params, extensions=distinct[0].extensions,
+    )  # fmt: skip
+    return make_env(config, contexts, len(train_sets) * num_envs), offsets
 
-    def clocks(self) -> dict[str, float]:
-        """This seed's clocks now: what it has counted, plus the running block's time."""
-        wall, cpu = self.state.wall_time_s, self.state.cpu_time_s
-        if self._block is not None:
-            wall += time.perf_counter() - self._block[0]
-            cpu += time.process_time() - self._block[1]
-        return {"wall_time_s": wall, "cpu_time_s": cpu}
+
+def evaluation_envs(config: Experiment, sets: list[tuple]) -> list[dict]:
+    """Per seed, an environment for each of its sets (train, test, validation), one per
+    distinct set."""
+    by_checksum: dict[str, object] = {}
+    per_seed = []
+    for seed_sets in sets:
+        envs = {}
+        for split, contexts in zip(SPLITS, seed_sets, strict=True):
+            if contexts is None:
+                continue
+            key = contexts.checksum()
+            if key not in by_checksum:
+                by_checksum[key] = make_env(config, contexts, len(contexts))
+            envs[split] = by_checksum[key]
+        per_seed.append(envs)
+    return per_seed
+
+
+def block(episodes: EpisodeBatch, start: int, stop: int) -> EpisodeBatch:
+    """Episodes ``start:stop`` of a batch."""
+    return EpisodeBatch(**{
+        name: getattr(episodes, name)[start:stop]
+        for name in ("voltage", "actions", "rewards", "spikes", "action_mask", "context_index")
+    })  # fmt: skip
 
 
 def best_on_validation(metrics: list[dict]) -> dict | None:

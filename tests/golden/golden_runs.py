@@ -7,7 +7,10 @@ every saved network. tests/test_golden.py trains them again and must find the sa
 The record was made once, on the commit before the refactor; it is bit-exact only on the
 CPU kind and PyTorch it names (``machine``), and the test says so instead of comparing
 elsewhere. Seed groups are recorded as the seeds trained alone: since the refactor a seed
-trained in a group gives exactly the metrics and weights of that seed alone.
+trained in a group gives exactly the metrics and weights of that seed alone. The group
+as it trained before the refactor (one stacked computation: ``train smoke --seeds 0 1``
+then) is recorded too, as ``smoke-stacked-group-seed0`` and ``-seed1``; today
+``--stacked`` trains that way.
 """
 
 from __future__ import annotations
@@ -36,6 +39,8 @@ RUNS: dict[str, tuple[str, ...]] = {
     "smoke-seed0": ("train", "smoke"),
     "smoke-seed1": ("train", "smoke", "--seed", "1"),
 }
+STACKED_GROUP = ("train", "smoke", "--seeds", "0", "1")
+"""The command that recorded the stacked group before the refactor (``--stacked`` today)."""
 SAVED_MODELS = ("model.pt", "best_model.pt")
 
 
@@ -101,6 +106,10 @@ def main() -> None:
         for name, args in RUNS.items():
             train(args, Path(scratch) / name)
             runs[name] = record(Path(scratch) / name)
+        group = Path(scratch) / "group"
+        train(STACKED_GROUP, group)
+        for seed in (0, 1):
+            runs[f"smoke-stacked-group-seed{seed}"] = record(group / f"seed={seed}")
     GOLDEN_FILE.write_text(json.dumps({"machine": machine(), "runs": runs}, indent=1) + "\n")
     print(f"wrote {GOLDEN_FILE}")
 

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from spikectl.training.learners.dqn_config import DQNConfig
 
 if TYPE_CHECKING:
-    from spikectl.training.learners.protocol import Learner
+    from spikectl.training.learners.protocol import Learner, LearnerGroup
 
 LearnerConfig = DQNConfig
 """The type of ``Experiment.learner``: the union of every learner's config (tyro makes
@@ -47,4 +47,28 @@ def make_learner(config, train_set, rng) -> Learner:
     return implementations[type(config.learner)](config, train_set, rng)
 
 
-__all__ = ["DQNConfig", "LEARNER_CONFIGS", "LearnerConfig", "learner_config_type", "make_learner"]
+STACKED_GROUPS = (DQNConfig,)
+"""The learners whose seeds can also train as one stacked computation (``--stacked``)."""
+
+
+def make_learners(configs, train_sets, rngs, stacked: bool = False) -> LearnerGroup:
+    """The learners of K seeds (one per config, training set and generator) as the
+    group the loop drives: looped (each seed exactly as alone) or, with ``stacked``,
+    one stacked computation where the learner has one."""
+    if stacked:
+        if not isinstance(configs[0].learner, STACKED_GROUPS):
+            raise ValueError(
+                f"--stacked: the {configs[0].learner.name} learner has no stacked form"
+            )
+        from spikectl.training.learners.dqn_stacked import StackedDQN
+
+        return StackedDQN(configs, train_sets, rngs)
+    from spikectl.training.learners.looped import LoopedLearners
+
+    return LoopedLearners(
+        [make_learner(c, s, r) for c, s, r in zip(configs, train_sets, rngs, strict=True)]
+    )
+
+
+__all__ = ["DQNConfig", "LEARNER_CONFIGS", "LearnerConfig", "learner_config_type",
+           "make_learner", "make_learners"]  # fmt: skip

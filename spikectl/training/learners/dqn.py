@@ -125,6 +125,9 @@ class DQNLearner:
     """One seed's recurrent double-Q learner (``Experiment.learner`` a DQNConfig)."""
 
     metric_fields = ("epsilon", "aux_loss")
+    counter_and_replay_keys = ("replay", "updates", "loss_sum", "aux_loss_sum", "loss_count")
+    """The entries of :meth:`state_dict` that are not networks or the optimiser (a stacked
+    group keeps those stacked, ``dqn_stacked``)."""
 
     def __init__(self, config, train_set: ContextSet, rng: np.random.Generator) -> None:
         self.settings = config.learner
@@ -221,6 +224,10 @@ class DQNLearner:
         if self.predictor is not None:
             self.predictor.load_state_dict(state["predictor"])
         self.optimizer.load_state_dict(state["optimizer"])
+        self.load_counters_and_replay(state)
+
+    def load_counters_and_replay(self, state: Mapping[str, Any]) -> None:
+        """Restore the buffer and the counters of :meth:`state_dict`."""
         self.replay.load_state_dict(
             {name: value.numpy() if torch.is_tensor(value) else value
              for name, value in state["replay"].items()}

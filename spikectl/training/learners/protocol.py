@@ -26,9 +26,9 @@ class LossDiverged(ArithmeticError):
     """A learner's loss became NaN or infinite; the loop stops the run, keeping the last
     good checkpoint."""
 
-    def __init__(self, value: float, update: int) -> None:
+    def __init__(self, value: float, update: int, seed: int = 0) -> None:
         super().__init__(f"the training loss became {value} at update {update}")
-        self.value, self.update = value, update
+        self.value, self.update, self.seed = value, update, seed
 
 
 class Learner(Protocol):
@@ -61,6 +61,48 @@ class Learner(Protocol):
     def state_dict(self) -> dict[str, Any]:
         """Everything that changes, as tensors and plain data (weights-only loadable);
         the acting network's weights under ``"network"``."""
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        """Restore :meth:`state_dict`'s output exactly."""
+
+
+class LearnerGroup(Protocol):
+    """K seeds' learners as the training loop drives them, in lockstep: one round of
+    episodes for all K (played in one vector environment, seed k's ``num_envs`` episodes
+    as block k), then every seed's update. ``LoopedLearners`` makes one out of K plain
+    :class:`Learner` s, each bit-identical to its seed alone; a learner may also offer a
+    stacked group that computes all K at once (``StackedDQN``: where that pays, a GPU)."""
+
+    size: int
+    metric_fields: tuple[str, ...]
+
+    def collection_policy(self, episode: int) -> Policy:
+        """The policy for the next round over all K blocks of sub-environments."""
+
+    def observe(self, episodes: list[EpisodeBatch], contexts: list[np.ndarray]) -> None:
+        """Take each seed's finished episodes and the indices of the training contexts
+        (in its own training set) they played."""
+
+    def update(self, episode: int) -> None:
+        """Every seed's learning after the round that started at ``episode``; raises
+        LossDiverged (its ``seed`` set) for the first seed whose loss diverged."""
+
+    def network(self, seed: int) -> torch.nn.Module:
+        """Seed ``seed``'s acting network as the plain module ``make_agent`` builds (what
+        greedy evaluation plays and model.pt holds)."""
+
+    def updates(self, seed: int) -> int:
+        """Gradient updates seed ``seed`` has made."""
+
+    def row_metrics(self, seed: int, episode: int) -> dict[str, float]:
+        """:meth:`Learner.row_metrics` of seed ``seed``."""
+
+    def progress(self, episode: int) -> dict[str, str]:
+        """The first seed's :meth:`Learner.progress`."""
+
+    def state_dict(self) -> dict[str, Any]:
+        """Every seed's state, tensors and plain data; a looped group's is
+        ``{"seeds": [learner.state_dict() for each seed]}``."""
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
         """Restore :meth:`state_dict`'s output exactly."""

@@ -1,0 +1,193 @@
+"""K seeds of the double-Q learner as one stacked computation (``--stacked``).
+
+The online, target and auxiliary networks of all seeds are stacked along a leading seed
+dimension (``spikectl.agents.stacked``); every acting step, forward, backward and Adam
+step serves all K at once (``torch.func.vmap``). Each seed keeps what it has alone: its
+replay buffer, the run's generator (drawn in the same order), its epsilon schedule,
+target network and auxiliary head, its own gradient-norm clip and Adam moments (Adam is
+elementwise, so one Adam on stacked parameters is K independent Adams). The loss
+backpropagated is the sum of the seeds' losses, whose gradients never mix.
+
+The maths is the looped group's; the numbers differ from it in floating-point rounding
+(batched kernels sum in another order, the stacked LSTM is written out where a plain
+one is nn.LSTM's fused kernel), so after enough updates a stacked seed parts from the
+seed alone as two thread counts do. It pays on a GPU, where one small update leaves the
+device idle (docs/benchmarks.md), not on a CPU.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import torch
+
+from spikectl.agents import make_agent
+from spikectl.agents.stacked import StackedNetworks
+from spikectl.envs.rollout import EpisodeBatch
+from spikectl.training.learners.dqn import DQNLearner, explore, set_learning_rate
+from spikectl.training.learners.dqn_losses import batch_tensors, losses_on_tensors
+from spikectl.training.learners.protocol import LossDiverged
+from spikectl.training.stacked_update import clip_grad_norm_per_seed, stack_seeds
+
+
+class StackedDQN:
+    """A LearnerGroup of K double-Q learners stacked into one computation."""
+
+    metric_fields = DQNLearner.metric_fields
+
+    def __init__(self, configs, train_sets, rngs: list[np.random.Generator]) -> None:
+        # Each seed's learner builds its networks, buffer and counters exactly as alone;
+        # the group then computes with their stacked parameters.
+        self.seeds = [
+            DQNLearner(config, train_set, rng)
+            for config, train_set, rng in zip(configs, train_sets, rngs, strict=True)
+        ]
+        self.configs, self.size = configs, len(configs)
+        self.settings, self.device = configs[0].learner, configs[0].train.device
+        self.online = StackedNetworks([seed.network for seed in self.seeds])
+        self.target = StackedNetworks([seed.target for seed in self.seeds], trainable=False)
+        predictors = [seed.predictor for seed in self.seeds]
+        self.predictor = None if predictors[0] is None else StackedNetworks(predictors)
+        self.trained = self.online.parameters() + (
+            self.predictor.parameters() if self.predictor is not None else []
+        )
+        self.optimizer = torch.optim.Adam(self.trained, lr=self.settings.learning_rate)
+        self.batched_losses = torch.func.vmap(
+            self._seed_losses, in_dims=(0, 0, 0 if self.predictor is not None else None, 0)
+        )
+
+    def _seed_losses(self, online_params, target_params, predictor_params, tensors):
+        td, aux = losses_on_tensors(
+            self.online.bound(online_params), self.target.bound(target_params), tensors,
+            self.settings,
+            None if self.predictor is None else self.predictor.bound(predictor_params),
+        )  # fmt: skip
+        return td, (torch.zeros_like(td) if aux is None else aux)
+
+    def collection_policy(self, episode: int) -> StackedPolicy:
+        epsilon = self.seeds[0].epsilon(episode)
+        return StackedPolicy(self, epsilon, [seed.rng for seed in self.seeds])
+
+    def observe(self, episodes: list[EpisodeBatch], contexts: list[np.ndarray]) -> None:
+        for seed, seed_episodes, seed_contexts in zip(self.seeds, episodes, contexts, strict=True):
+            seed.observe(seed_episodes, seed_contexts)
+
+    def update(self, episode: int) -> None:
+        settings = self.settings
+        if len(self.seeds[0].replay) < max(settings.learning_starts, 1):
+            return
+        total = self.seeds[0].total_episodes
+        set_learning_rate(self.optimizer, settings.learning_rate_at(episode, total))
+        for _ in range(settings.updates_per_round):
+            tensors = stack_seeds([
+                batch_tensors(seed.replay.sample(settings.batch_size, seed.rng), self.device)
+                for seed in self.seeds
+            ])  # fmt: skip  # every tensor [K, B, ...]
+            td, aux = self.batched_losses(
+                self.online.params, self.target.params,
+                self.predictor.params if self.predictor is not None else None, tensors,
+            )  # fmt: skip  # td, aux: [K]
+            losses = td if self.predictor is None else td + settings.aux_voltage_weight * aux
+            finite = torch.isfinite(losses)
+            if not bool(finite.all()):
+                k = int((~finite).nonzero()[0, 0])
+                raise LossDiverged(losses[k].item(), self.seeds[k].updates + 1, k)
+            self.optimizer.zero_grad(set_to_none=True)
+            losses.sum().backward()  # seeds' gradients stay apart: d(sum)/d(loss_k) = 1
+            if settings.max_grad_norm > 0:
+                clip_grad_norm_per_seed(self.trained, settings.max_grad_norm)
+            self.optimizer.step()
+            with torch.no_grad():
+                for name in self.target.names:
+                    self.target.params[name].lerp_(self.online.params[name], settings.tau)
+            for seed, td_k, aux_k in zip(self.seeds, td.tolist(), aux.tolist(), strict=True):
+                seed.updates += 1
+                seed.loss_sum += td_k
+                seed.aux_loss_sum += aux_k
+                seed.loss_count += 1
+
+    def network(self, seed: int) -> torch.nn.Module:
+        """Seed ``seed``'s current weights in a plain network (nn.LSTM and all), so it is
+        scored exactly as ``spikectl evaluate`` scores its model.pt."""
+        config = self.configs[seed]
+        network = make_agent(
+            config.agent.arch, config.env.n_observed, config.env.episode_length,
+            config.agent.sizes, params=config.env.params,
+        )  # fmt: skip
+        network.load_state_dict(self.online.state_dict(seed))
+        return network.to(self.device)
+
+    def updates(self, seed: int) -> int:
+        return self.seeds[seed].updates
+
+    def row_metrics(self, seed: int, episode: int) -> dict[str, float]:
+        return self.seeds[seed].row_metrics(episode)
+
+    def progress(self, episode: int) -> dict[str, str]:
+        return self.seeds[0].progress(episode)
+
+    def state_dict(self) -> dict[str, Any]:
+        return {
+            "stacked": {
+                "online": self.online.stacked_state(),
+                "target": self.target.stacked_state(),
+                "predictor": None if self.predictor is None else self.predictor.stacked_state(),
+                "optimizer": self.optimizer.state_dict(),
+            },
+            "seeds": [_counters_and_replay(seed) for seed in self.seeds],
+        }
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        stacked = state["stacked"]
+        self.online.load_stacked_state(stacked["online"])
+        self.target.load_stacked_state(stacked["target"])
+        if self.predictor is not None:
+            self.predictor.load_stacked_state(stacked["predictor"])
+        self.optimizer.load_state_dict(stacked["optimizer"])
+        for seed, entry in zip(self.seeds, state["seeds"], strict=True):
+            seed.load_counters_and_replay(entry)
+
+
+def _counters_and_replay(seed: DQNLearner) -> dict[str, Any]:
+    state = seed.state_dict()
+    return {key: state[key] for key in DQNLearner.counter_and_replay_keys}
+
+
+class StackedPolicy:
+    """Acts for K seeds at once: the sub-environments hold K blocks of E episodes, block k
+    played by seed k's online network with seed k's epsilon and generator."""
+
+    def __init__(self, group: StackedDQN, epsilon: float, rngs) -> None:
+        self.group, self.epsilon, self.rngs = group, epsilon, rngs
+        self.state = None
+
+    @torch.no_grad()
+    def __call__(self, observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
+        group, K, device = self.group, self.group.size, self.group.device
+        obs = {
+            key: torch.as_tensor(
+                np.asarray(observations[key]).astype(
+                    np.float32 if key in ("voltage", "pattern") else np.int64, copy=False
+                ),
+                device=device,
+            ).unflatten(0, (K, -1))  # [K, E, ...]
+            for key in ("voltage", "target", "pattern", "step", "last_action")
+        }
+        if self.state is None:
+            E, n = obs["voltage"].shape[1:]
+            state = group.online.template.initial_state(E, n, device=device)
+            self.state = tuple(s.expand(K, *s.shape).clone() for s in state)  # [K, E, ...]
+        q_values, self.state = group.online.call("step", obs, self.state)  # [K, E, n+1]
+        legal = torch.as_tensor(action_mask, device=q_values.device).unflatten(0, (K, -1))
+        greedy = q_values.masked_fill(~legal, -math.inf).argmax(dim=2).cpu().numpy() - 1  # [K, E]
+        if self.epsilon <= 0:
+            return greedy.reshape(-1)
+        masks = action_mask.reshape(K, -1, action_mask.shape[-1])  # [K, E, n+1]
+        return np.concatenate([
+            explore(greedy[k], masks[k], self.epsilon, self.rngs[k],
+                    group.settings.explore_do_nothing)
+            for k in range(K)
+        ])  # fmt: skip
