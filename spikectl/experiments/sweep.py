@@ -184,10 +184,12 @@ def run_trials(
     configs: list[Experiment],
     run_dirs: list[str | os.PathLike],
     group_dir: str | os.PathLike | None = None,
+    stacked: bool = False,
 ) -> list[dict[str, Any]]:
     """Train trials to the end in this process, as a seed group in ``group_dir`` when
     given (trials that differ only in seed and n_train; each keeps its own run
-    directory): done trials are skipped, interrupted ones resumed."""
+    directory; ``stacked``: one stacked computation): done trials are skipped,
+    interrupted ones resumed."""
     import torch
 
     from spikectl.training.run import train_runs
@@ -205,7 +207,7 @@ def run_trials(
     else:
         resume = (Path(group_dir) / GROUP_FILE).exists()
         label = f"{'resumed' if resume else 'trained'} in a group of {len(configs)}"
-    metrics = train_runs(configs, run_dirs, group_dir, resume=resume)
+    metrics = train_runs(configs, run_dirs, group_dir, resume=resume, stacked=stacked)
     return [
         {
             "run_dir": str(run_dir),
@@ -217,7 +219,9 @@ def run_trials(
     ]
 
 
-def seed_group_tasks(jobs: list[tuple[Experiment, Path]], sweep_dir: Path) -> list[tuple]:
+def seed_group_tasks(
+    jobs: list[tuple[Experiment, Path]], sweep_dir: Path, stacked: bool = False
+) -> list[tuple]:
     """(function, arguments, run_dir) tasks: trials that differ only in seed and
     training-set size (``group.group_key``) become one ``run_trials`` group in
     ``SWEEP_DIR/groups/NAME``; trials already done or interrupted as single runs stay
@@ -243,7 +247,7 @@ def seed_group_tasks(jobs: list[tuple[Experiment, Path]], sweep_dir: Path) -> li
         group_dir = sweep_dir / GROUPS_DIR / name
         configs = [config for config, _ in members]
         run_dirs = [run_dir for _, run_dir in members]
-        tasks.append((run_trials, (configs, run_dirs, group_dir), group_dir))
+        tasks.append((run_trials, (configs, run_dirs, group_dir, stacked), group_dir))
     return tasks
 
 
@@ -255,6 +259,7 @@ def run_sweep(
     backend: str = "local",
     address: str | None = None,
     group_seeds: bool = False,
+    stacked: bool = False,
 ) -> list[dict[str, Any]]:
     """Run every trial of ``sweep`` under ``sweep_dir``.
 
@@ -262,8 +267,12 @@ def run_sweep(
     ``backend="ray"``: Ray tasks of one CPU each on the cluster at ``address`` (a local
     Ray instance when None); ``sweep_dir`` must then be on storage every node sees.
     Each trial's result is the same whichever backend ran it. ``group_seeds``: trials
-    that differ only in seed and n_train train as one seed group per process (``run_trials``).
+    that differ only in seed and n_train train as one seed group per process
+    (``run_trials``), each trial exactly as alone; with ``stacked`` as one stacked
+    computation (for GPUs; equal up to rounding).
     """
+    if stacked and not group_seeds:
+        raise ValueError("stacked: stacking computes seed groups; ask for group_seeds too")
     if backend not in ("local", "ray"):
         raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")
     if workers is not None and (
@@ -291,7 +300,7 @@ def run_sweep(
         for name, config in trials
     ]
     if group_seeds:
-        tasks = seed_group_tasks(jobs, sweep_dir)
+        tasks = seed_group_tasks(jobs, sweep_dir, stacked)
     else:
         tasks = [(run_trial, (config, run_dir), run_dir) for config, run_dir in jobs]
     failures: list[tuple[str, BaseException]] = []
