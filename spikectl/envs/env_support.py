@@ -1,6 +1,6 @@
 """What the single and the vector environment share (docs/environment.md).
 
-Resolving the ``contexts`` / ``extensions`` arguments to a :class:`ContextSet` and the
+Resolving the constructor arguments (:func:`resolve_setup`) to a :class:`ContextSet` and the
 effective :class:`~spikectl.neuron.extensions.Extensions`, the per-context lookup tables
 (:class:`ContextTables`), the reward formula (:func:`step_rewards`), the spaces and the
 action checks.
@@ -168,36 +168,14 @@ def resolve_setup(
     allow_target_action: bool,
     render_mode: str | None,
 ) -> Setup:
-    """Check and resolve the constructor arguments both environments take."""
+    """Check and resolve the constructor arguments that both environments take.
+
+    Generated context sets are drawn with the context-level part of ``extensions``;
+    the model parameters are the set's unless ``params`` is given.
+    """
     if render_mode is not None and render_mode not in RENDER_MODES:
         raise ValueError(f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}")
     requested = Extensions.coerce(extensions)
-    context_set, params = resolve_contexts(
-        contexts, split, n_train, n_test, context_seed, n_neurons, episode_length, params,
-        requested,
-    )  # fmt: skip
-    effective = resolve_extensions(requested, allow_target_action, context_set)
-    tables = ContextTables.build(context_set, effective.allow_target_action, params)
-    effects = EnvironmentEffects(effective, params, context_set.episode_length)
-    return Setup(context_set, params, effective, tables, effects)
-
-
-def resolve_contexts(
-    contexts: ContextSet | str | os.PathLike | None,
-    split: str,
-    n_train: int,
-    n_test: int,
-    context_seed: int,
-    n_neurons: int | None,
-    episode_length: int | None,
-    params: NeuronParams | None,
-    extensions: Extensions | None = None,
-) -> tuple[ContextSet, NeuronParams]:
-    """The environment's context set and model parameters, from its constructor arguments.
-
-    Generated sets are drawn with the context-level part of ``extensions``.
-    """
-    extensions = Extensions() if extensions is None else extensions
     if split not in SPLITS:
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     if params is not None and not isinstance(params, NeuronParams):
@@ -216,7 +194,7 @@ def resolve_contexts(
             raise ValueError(f"episode_length must be an integer >= 2, got {length!r}")
         splits = _cached_splits(
             int(n_train), int(n_test), int(n), int(length), int(context_seed),
-            NeuronParams() if params is None else params, extensions.context_part(),
+            NeuronParams() if params is None else params, requested.context_part(),
         )  # fmt: skip
         context_set = splits[SPLITS.index(split)]
     elif isinstance(contexts, ContextSet):
@@ -234,7 +212,11 @@ def resolve_contexts(
     ):
         if given is not None and given != actual:
             raise ValueError(f"{name}={given!r} conflicts with the context set's {name} {actual}")
-    return context_set, context_set.params if params is None else params
+    params = context_set.params if params is None else params
+    effective = resolve_extensions(requested, allow_target_action, context_set)
+    tables = ContextTables.build(context_set, effective.allow_target_action, params)
+    effects = EnvironmentEffects(effective, params, context_set.episode_length)
+    return Setup(context_set, params, effective, tables, effects)
 
 
 def resolve_extensions(
