@@ -27,34 +27,15 @@ from spikectl.envs.env_support import (
     RENDER_FPS,
     RENDER_MODES,
     ContextTables,
+    LegalActionBatchSpace,
     check_context,
     check_context_index,
     observation_space,
-    random_legal_actions,
     resolve_setup,
 )
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance, uniform_neuron_parameters
-
-
-class LegalActionBatchSpace(spaces.MultiDiscrete):
-    """The batched action space; its unmasked ``sample()`` draws only legal actions.
-
-    Equal to ``batch_space(Discrete(n + 1, start=-1), num_envs)``. ``legal`` (bool
-    [num_envs, n + 1]) is the environment's current action mask.
-    """
-
-    def __init__(self, num_envs: int, n_neurons: int, seed: int | None = None) -> None:
-        super().__init__(
-            np.full(num_envs, n_neurons + 1), seed=seed, start=np.full(num_envs, DO_NOTHING)
-        )
-        self.legal = np.ones((num_envs, n_neurons + 1), dtype=bool)
-
-    def sample(self, mask: tuple | None = None, probability: tuple | None = None) -> np.ndarray:
-        if mask is not None or probability is not None:
-            return super().sample(mask=mask, probability=probability)
-        return random_legal_actions(self.legal, self.np_random).astype(self.dtype)
 
 
 class NeuronControlVectorEnv(VectorEnv):
