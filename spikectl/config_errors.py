@@ -13,21 +13,50 @@ from typing import Any
 
 
 class ConfigError(ValueError):
-    """A config field with a bad value; ``path`` is the field's place in the tree."""
+    """A config field with a bad value; ``path`` is the field's place in the tree.
 
-    def __init__(self, field: str | tuple[str, ...], problem: str) -> None:
+    The message is ``label``, ``sep`` and ``problem``: by default the field's own name and
+    a space (``"gamma must lie in [0, 1], got 2"``). ``label`` keeps a message that names
+    the field otherwise as it was (``"AgentSizes.lstm_hidden ..."``; ``""``: the problem
+    alone); :meth:`naming` puts another name, such as the field's flag, in its place.
+    """
+
+    def __init__(
+        self,
+        field: str | tuple[str, ...],
+        problem: str,
+        *,
+        label: str | None = None,
+        sep: str = " ",
+    ) -> None:
         self.path: tuple[str, ...] = (field,) if isinstance(field, str) else tuple(field)
         self.problem = problem
-        super().__init__(f"{self.path[-1]} {problem}")
+        self.label = self.path[-1] if label is None else label
+        self.sep = sep
+        super().__init__(f"{self.label}{sep}{problem}" if self.label else problem)
 
     def within(self, *prefix: str) -> ConfigError:
         """The same error, its path lengthened by the enclosing fields ``prefix``."""
-        return ConfigError((*prefix, *self.path), self.problem).with_traceback(None)
+        error = ConfigError((*prefix, *self.path), self.problem, label=self.label, sep=self.sep)
+        return error.with_traceback(None)
+
+    def naming(self, name: str) -> str:
+        """The message with ``name`` (a flag, say) for the field:
+        ``naming("--gamma")`` is ``"--gamma must lie in [0, 1], got 2"``."""
+        return f"{name}{self.sep if self.label else ': '}{self.problem}"
+
+    def __reduce__(self) -> tuple[Any, ...]:
+        # Pickled whole (e.g. from a sweep's worker process), not from the message alone.
+        return _config_error, (self.path, self.problem, self.label, self.sep)
 
     @property
     def dotted(self) -> str:
         """The field's dotted path, e.g. ``learner.gamma``."""
         return ".".join(self.path)
+
+
+def _config_error(path: tuple[str, ...], problem: str, label: str, sep: str) -> ConfigError:
+    return ConfigError(path, problem, label=label, sep=sep)
 
 
 def check_int(name: str, value: Any, low: int, high: int | None = None, what: str = "") -> None:

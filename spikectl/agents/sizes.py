@@ -7,6 +7,7 @@ from dataclasses import dataclass, fields
 from typing import Literal, get_args
 
 from spikectl.agents.heads import PerNeuronQHead
+from spikectl.config_errors import ConfigError
 
 Architecture = Literal["drqn", "ddrqn", "dmdrqn", "tdrqn"]
 """The architectures' names (the paper's order); ``AGENTS`` maps them to classes."""
@@ -54,25 +55,28 @@ class AgentSizes:
             value = getattr(self, field.name)
             if field.type == "int":
                 if isinstance(value, bool) or not isinstance(value, int) or value < 1:
-                    raise ValueError(f"AgentSizes.{field.name} must be an int >= 1, got {value!r}")
+                    raise ConfigError(field.name, f"must be an int >= 1, got {value!r}",
+                                      label=f"AgentSizes.{field.name}")  # fmt: skip
             elif field.type == "tuple[int, ...]":
                 if isinstance(value, int) or not all(
                     isinstance(v, int) and not isinstance(v, bool) and v >= 1 for v in value
                 ):
-                    raise ValueError(
-                        f"AgentSizes.{field.name} must be a sequence of ints >= 1, got {value!r}"
-                    )
+                    raise ConfigError(
+                        field.name, f"must be a sequence of ints >= 1, got {value!r}",
+                        label=f"AgentSizes.{field.name}",
+                    )  # fmt: skip
                 object.__setattr__(self, field.name, tuple(value))
         if self.attn_width % self.attn_heads:
-            raise ValueError(
-                f"AgentSizes.attn_heads ({self.attn_heads}) must divide "
-                f"AgentSizes.attn_width ({self.attn_width})"
-            )
+            raise ConfigError(
+                "attn_heads", f"({self.attn_heads}) must divide "
+                f"AgentSizes.attn_width ({self.attn_width})", label="AgentSizes.attn_heads",
+            )  # fmt: skip
         if self.do_nothing_head not in PerNeuronQHead.MODES:
-            raise ValueError(
-                f"AgentSizes.do_nothing_head must be one of {PerNeuronQHead.MODES}, got "
-                f"{self.do_nothing_head!r}"
-            )
+            raise ConfigError(
+                "do_nothing_head", f"must be one of {PerNeuronQHead.MODES}, got "
+                f"{self.do_nothing_head!r}", label="AgentSizes.do_nothing_head",
+            )  # fmt: skip
         for name in ("target_in_input", "target_voltage_in_input"):
             if not isinstance(getattr(self, name), bool):
-                raise ValueError(f"AgentSizes.{name} must be a bool, got {getattr(self, name)!r}")
+                raise ConfigError(name, f"must be a bool, got {getattr(self, name)!r}",
+                                  label=f"AgentSizes.{name}")  # fmt: skip

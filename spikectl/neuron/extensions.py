@@ -28,6 +28,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from spikectl.config_errors import ConfigError
 from spikectl.neuron.params import NeuronParams
 
 CONTEXT_FIELDS = (
@@ -83,7 +84,8 @@ class Extensions:
         if isinstance(hidden, (bool, np.bool_)) or not isinstance(hidden, (int, np.integer)):
             raise TypeError(f"Extensions.hidden_neurons must be an integer, got {hidden!r}")
         if hidden < 0:
-            raise ValueError(f"Extensions.hidden_neurons must be >= 0, got {hidden}")
+            raise ConfigError("hidden_neurons", f"must be >= 0, got {hidden}",
+                              label="Extensions.hidden_neurons")  # fmt: skip
         object.__setattr__(self, "hidden_neurons", int(hidden))
         for field in fields(self):
             value = getattr(self, field.name)
@@ -94,22 +96,27 @@ class Extensions:
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float)):
                 raise TypeError(f"Extensions.{field.name} must be a number, got {value!r}")
             if not math.isfinite(value):
-                raise ValueError(f"Extensions.{field.name} must be finite, got {value!r}")
+                raise ConfigError(field.name, f"must be finite, got {value!r}",
+                                  label=f"Extensions.{field.name}")  # fmt: skip
             object.__setattr__(self, field.name, float(value))
         for name in ("hidden_fraction", "threshold_spread", "time_constant_spread",
                      "synaptic_spread"):  # fmt: skip
             if not 0.0 <= getattr(self, name) < 1.0:
-                raise ValueError(f"Extensions.{name} must lie in [0, 1), got {getattr(self, name)}")
+                raise ConfigError(name, f"must lie in [0, 1), got {getattr(self, name)}",
+                                  label=f"Extensions.{name}")  # fmt: skip
         if self.hidden_neurons and self.hidden_fraction:
-            raise ValueError("give hidden_neurons or hidden_fraction, not both")
+            raise ConfigError("hidden_fraction", "give hidden_neurons or hidden_fraction, not both",
+                              label="")  # fmt: skip
         for name in ("observation_noise_mV", "background_rate"):
             if getattr(self, name) < 0:
-                raise ValueError(f"Extensions.{name} must be >= 0, got {getattr(self, name)}")
+                raise ConfigError(name, f"must be >= 0, got {getattr(self, name)}",
+                                  label=f"Extensions.{name}")  # fmt: skip
         bleaching = self.bleaching_time_constant_steps
         if bleaching is not None and bleaching <= 0:
-            raise ValueError(
-                f"Extensions.bleaching_time_constant_steps must be > 0 or None, got {bleaching}"
-            )
+            raise ConfigError(
+                "bleaching_time_constant_steps", f"must be > 0 or None, got {bleaching}",
+                label="Extensions.bleaching_time_constant_steps",
+            )  # fmt: skip
 
     # -- which parts are on
 

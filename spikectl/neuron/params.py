@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from spikectl.config_errors import ConfigError
+
 NEVER_RELEASES = 2**31 - 1
 """``min_release_interval_steps`` when the release rule can never be met (p_r < 0.5)."""
 MAX_REFRACTORY_STEPS = 2**30
@@ -57,42 +59,48 @@ class NeuronParams:
             ):
                 raise TypeError(f"NeuronParams.{field.name} must be a number, got {value!r}")
             if not math.isfinite(value):
-                raise ValueError(f"NeuronParams.{field.name} must be finite, got {value!r}")
+                raise ConfigError(field.name, f"must be finite, got {value!r}",
+                                  label=f"NeuronParams.{field.name}")  # fmt: skip
             # NumPy scalars become Python numbers, so to_dict() stays JSON-ready.
             value = int(value) if isinstance(value, (int, np.integer)) else float(value)
             object.__setattr__(self, field.name, value)
         if self.v_threshold_mV <= self.v_rest_mV:
-            raise ValueError(
-                f"v_threshold_mV ({self.v_threshold_mV}) must be above v_rest_mV ({self.v_rest_mV})"
+            raise ConfigError(
+                "v_threshold_mV",
+                f"({self.v_threshold_mV}) must be above v_rest_mV ({self.v_rest_mV})",
             )
         positive = ("resistance_GOhm", "capacitance_pF", "vesicle_recovery_ms", "dt_ms")
         for name in positive:
             if getattr(self, name) <= 0:
-                raise ValueError(f"NeuronParams.{name} must be > 0, got {getattr(self, name)}")
+                raise ConfigError(name, f"must be > 0, got {getattr(self, name)}",
+                                  label=f"NeuronParams.{name}")  # fmt: skip
         nonnegative = ("threshold_tolerance_mV", "stimulus_current_pA", "synaptic_current_pA")
         for name in nonnegative:
             if getattr(self, name) < 0:
-                raise ValueError(f"NeuronParams.{name} must be >= 0, got {getattr(self, name)}")
+                raise ConfigError(name, f"must be >= 0, got {getattr(self, name)}",
+                                  label=f"NeuronParams.{name}")  # fmt: skip
         if not 0.0 <= self.release_scale <= 1.0:
-            raise ValueError(f"release_scale must lie in [0, 1], got {self.release_scale}")
+            raise ConfigError("release_scale", f"must lie in [0, 1], got {self.release_scale}")
         if (
             int(self.refractory_steps) != self.refractory_steps
             or not 0 <= self.refractory_steps <= MAX_REFRACTORY_STEPS
         ):
-            raise ValueError(
-                f"refractory_steps must be an integer in 0..{MAX_REFRACTORY_STEPS}, "
-                f"got {self.refractory_steps}"
+            raise ConfigError(
+                "refractory_steps",
+                f"must be an integer in 0..{MAX_REFRACTORY_STEPS}, got {self.refractory_steps}",
             )
         object.__setattr__(self, "refractory_steps", int(self.refractory_steps))
         if self.v_rest_mV >= self.v_threshold_mV - self.threshold_tolerance_mV:
-            raise ValueError(
-                f"threshold_tolerance_mV ({self.threshold_tolerance_mV}) must be smaller than "
+            raise ConfigError(
+                "threshold_tolerance_mV",
+                f"({self.threshold_tolerance_mV}) must be smaller than "
                 f"v_threshold_mV - v_rest_mV ({self.v_threshold_mV - self.v_rest_mV}): "
-                "otherwise resting neurons spike at every step"
+                "otherwise resting neurons spike at every step",
             )
         if self.dt_ms / (self.resistance_GOhm * self.capacitance_pF) > 1.0:
-            raise ValueError(
-                "dt_ms exceeds the membrane time constant R*C: the Euler step would overshoot rest"
+            raise ConfigError(
+                "dt_ms",
+                "exceeds the membrane time constant R*C: the Euler step would overshoot rest",
             )
 
     @property
