@@ -3,7 +3,7 @@
 The same work two ways, each timed from the outside (process start to exit, imports and
 the first and last evaluation included, as a user pays them):
 
-- batched: ``spikectl train --seeds 0 .. K-1`` (one process, stacked networks), with
+- batched: ``spikectl train --seeds 0 .. K-1 --stacked`` (one process, stacked networks), with
   1 and with 2 Torch threads;
 - separate: K single-seed ``spikectl train`` processes, at most ``--cores`` at a time,
   one Torch thread each (how ``spikectl sweep`` runs trials).
@@ -100,14 +100,16 @@ def micro(seeds: list[int], repeats: int, preset: str, device: str) -> None:
     online, target = build_networks(config)
     predictor = build_predictor(config, online)
     params = list(online.parameters()) + (list(predictor.parameters()) if predictor else [])
-    adam = torch.optim.Adam(params, lr=config.train.learning_rate)
+    adam = torch.optim.Adam(params, lr=config.learner.learning_rate)
 
     def single_update() -> None:
-        batch = replay.sample(config.train.batch_size, rng)
-        td, aux = training_losses(online, target, batch, config, predictor)
+        batch = replay.sample(config.learner.batch_size, rng)
+        td, aux = training_losses(
+            online, target, batch, config.learner, predictor, config.train.device
+        )
         adam.zero_grad()
-        (td if aux is None else td + config.train.aux_voltage_weight * aux).backward()
-        torch.nn.utils.clip_grad_norm_(params, config.train.max_grad_norm)
+        (td if aux is None else td + config.learner.aux_voltage_weight * aux).backward()
+        torch.nn.utils.clip_grad_norm_(params, config.learner.max_grad_norm)
         adam.step()
 
     def observation(lead: tuple[int, ...]) -> dict[str, torch.Tensor]:
@@ -120,7 +122,7 @@ def micro(seeds: list[int], repeats: int, preset: str, device: str) -> None:
     with torch.no_grad():
         single_step = timed(lambda: online.step(single_obs, None), 10 * repeats)
     single = timed(single_update, 5 * repeats)
-    print(f"{preset} sizes on {device}, batch {config.train.batch_size} episodes of {N} steps, "
+    print(f"{preset} sizes on {device}, batch {config.learner.batch_size} episodes of {N} steps, "
           f"{n} neurons, {config.agent.arch}")  # fmt: skip
     print(f"one plain network: update {single:.0f} ms, acting step {single_step:.1f} ms")
     print(f"{'K':>3}{'update ms':>11}{'per seed':>10}{'vs K plain':>12}"
@@ -137,11 +139,11 @@ def stacked_timings(
     """Milliseconds of one update and one acting step of K stacked seeds of ``config``."""
 
     import torch
-    from spikectl.training.stacked_update import clip_grad_norm_per_seed, stack_seeds
 
     from spikectl.agents.stacked import StackedNetworks
     from spikectl.training.learners.dqn import build_networks, build_predictor
     from spikectl.training.learners.dqn_losses import batch_tensors, losses_on_tensors
+    from spikectl.training.stacked_update import clip_grad_norm_per_seed, stack_seeds
 
     pairs = [build_networks(config.with_changes(seed=s)) for s in range(K)]
     stacked = StackedNetworks([pair[0] for pair in pairs])
@@ -149,11 +151,11 @@ def stacked_timings(
     predictors = [build_predictor(config, pair[0]) for pair in pairs]
     heads = None if predictors[0] is None else StackedNetworks(predictors)
     trained = stacked.parameters() + (heads.parameters() if heads else [])
-    adam = torch.optim.Adam(trained, lr=config.train.learning_rate)
+    adam = torch.optim.Adam(trained, lr=config.learner.learning_rate)
 
     def seed_losses(online_params, target_params, head_params, tensors):
         td, aux = losses_on_tensors(
-            stacked.bound(online_params), targets.bound(target_params), tensors, config,
+            stacked.bound(online_params), targets.bound(target_params), tensors, config.learner,
             None if heads is None else heads.bound(head_params),
         )  # fmt: skip
         return td, (torch.zeros_like(td) if aux is None else aux)
@@ -162,13 +164,13 @@ def stacked_timings(
 
     def update() -> None:
         device = config.train.device
-        seeds_tensors = [batch_tensors(replay.sample(config.train.batch_size, rng), device)
+        seeds_tensors = [batch_tensors(replay.sample(config.learner.batch_size, rng), device)
                          for _ in range(K)]  # fmt: skip
         tensors = stack_seeds(seeds_tensors)
         td, aux = batched(stacked.params, targets.params, heads.params if heads else None, tensors)
         adam.zero_grad()
-        (td + config.train.aux_voltage_weight * aux).sum().backward()
-        clip_grad_norm_per_seed(trained, config.train.max_grad_norm)
+        (td + config.learner.aux_voltage_weight * aux).sum().backward()
+        clip_grad_norm_per_seed(trained, config.learner.max_grad_norm)
         adam.step()
 
     obs = observation((K, 16))
@@ -183,7 +185,7 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seeds", type=int, nargs="+", default=[2, 5, 10], help="values of K")
     parser.add_argument("--rounds", type=int, default=3)
-    parser.add_argument("--updates-per-round", type=int, default=QUICK.train.updates_per_round)
+    parser.add_argument("--updates-per-round", type=int, default=QUICK.learner.updates_per_round)
     parser.add_argument("--threads", type=int, nargs="+", default=[1, 2])
     parser.add_argument("--cores", type=int, default=2, help="separate processes at once")
     parser.add_argument("--repeats", type=int, default=1)
@@ -214,7 +216,7 @@ def main() -> None:
                     run_processes(separate, args.cores)
                 )
                 for threads in args.threads:
-                    group = [*flags, "--seeds", *map(str, range(K)), "--torch-threads",
+                    group = [*flags, "--seeds", *map(str, range(K)), "--stacked", "--torch-threads",
                              str(threads), "--run-dir", str(root / f"group{threads}")]  # fmt: skip
                     walls.setdefault(f"batched, {threads} thread(s)", []).append(
                         run_processes([group], 1)

@@ -38,7 +38,7 @@ def filled_replay(config, train_set, rng) -> EpisodeReplay:
     online, _ = build_networks(config)
     env = NeuronControlVectorEnv(64, contexts=train_set)
     replay = EpisodeReplay(
-        config.train.buffer_size, config.env.n_neurons, config.env.episode_length
+        config.learner.buffer_size, config.env.n_neurons, config.env.episode_length
     )
     contexts = rng.integers(len(train_set), size=64)
     episodes = run_episodes(env, contexts, EpsilonGreedyPolicy(online, 1.0, rng, "cpu"))
@@ -52,21 +52,22 @@ def filled_replay(config, train_set, rng) -> EpisodeReplay:
 def time_updates(config, replay, updates: int, rng) -> tuple[float, float]:
     """Median seconds of (trainer update, bare update)."""
     online, target = build_networks(config)
-    optimizer = torch.optim.Adam(online.parameters(), lr=config.train.learning_rate)
+    optimizer = torch.optim.Adam(online.parameters(), lr=config.learner.learning_rate)
     bare_online, bare_target = build_networks(config)
-    bare_optimizer = torch.optim.Adam(bare_online.parameters(), lr=config.train.learning_rate)
-    fixed = replay.sample(config.train.batch_size, rng)
+    bare_optimizer = torch.optim.Adam(bare_online.parameters(), lr=config.learner.learning_rate)
+    fixed = replay.sample(config.learner.batch_size, rng)
     obs_seq = sequence_observations(fixed, "cpu")
     index = torch.as_tensor(fixed.actions + 1)[..., None]  # [B, N, 1]
     td_target = torch.as_tensor(fixed.rewards)  # any fixed target: the cost is the same
 
     def trainer_update() -> None:
-        loss = td_loss(online, target, replay.sample(config.train.batch_size, rng), config)
+        batch = replay.sample(config.learner.batch_size, rng)
+        loss = td_loss(online, target, batch, config.learner)
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        torch.nn.utils.clip_grad_norm_(online.parameters(), config.train.max_grad_norm)
+        torch.nn.utils.clip_grad_norm_(online.parameters(), config.learner.max_grad_norm)
         optimizer.step()
-        soft_update(target, online, config.train.tau)
+        soft_update(target, online, config.learner.tau)
 
     def bare_update() -> None:
         q_values, _ = bare_online(obs_seq)
@@ -132,7 +133,7 @@ def main() -> None:
         paper_rate = collection_rate(config, train_set, config.train.num_envs, args.episodes, rng)
         rounds = config.total_episodes // config.train.num_envs
         paper_hours = (
-            rounds * config.train.updates_per_round * trainer_s
+            rounds * config.learner.updates_per_round * trainer_s
             + config.train.total_env_steps / paper_rate
         ) / 3600
         print(f"| {arch} | {trainer_s * 1e3:.1f} | {bare_s * 1e3:.1f} | {trainer_s / bare_s:.2f} "

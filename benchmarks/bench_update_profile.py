@@ -98,7 +98,7 @@ def main() -> None:
     online, target = build_networks(config)
     predictor = build_predictor(config, online)
     trained = [*online.parameters(), *(predictor.parameters() if predictor else [])]
-    optimizer = torch.optim.Adam(trained, lr=config.train.learning_rate)
+    optimizer = torch.optim.Adam(trained, lr=config.learner.learning_rate)
     replay = EpisodeReplay(256, config.env.n_neurons, config.env.episode_length)
     env = NeuronControlVectorEnv(64, contexts=train_set)
     contexts = rng.integers(len(train_set), size=64)
@@ -109,16 +109,18 @@ def main() -> None:
                episodes.action_mask)  # fmt: skip
 
     def update() -> None:
-        batch = replay.sample(config.train.batch_size, rng)
-        td, aux = training_losses(online, target, batch, config, predictor)
-        loss = td if aux is None else td + config.train.aux_voltage_weight * aux
+        batch = replay.sample(config.learner.batch_size, rng)
+        td, aux = training_losses(
+            online, target, batch, config.learner, predictor, config.train.device
+        )
+        loss = td if aux is None else td + config.learner.aux_voltage_weight * aux
         optimizer.zero_grad(set_to_none=True)
         loss.backward()
-        torch.nn.utils.clip_grad_norm_(trained, config.train.max_grad_norm)
+        torch.nn.utils.clip_grad_norm_(trained, config.learner.max_grad_norm)
         optimizer.step()
-        soft_update(target, online, config.train.tau)
+        soft_update(target, online, config.learner.tau)
 
-    batch = replay.sample(config.train.batch_size, rng)
+    batch = replay.sample(config.learner.batch_size, rng)
     obs = sequence_observations(batch, "cpu")
     indexed = long_indices(obs)
     sizes = online.sizes
@@ -128,7 +130,7 @@ def main() -> None:
         with_target=sizes.target_in_input, dtype=torch.float32,
         with_target_voltage=sizes.target_voltage_in_input,
     )  # fmt: skip
-    state = online.initial_state(config.train.batch_size, n)
+    state = online.initial_state(config.learner.batch_size, n)
     lstm_out = online.lstm(features, state)[0].detach().requires_grad_()
     mixed = online.mixer(lstm_out).detach()
     head_in = torch.cat([mixed, online.context(indexed, n)], -1).detach().requires_grad_()
@@ -142,7 +144,7 @@ def main() -> None:
 
     parts = {
         "replay sample + input tensors": lambda: sequence_observations(
-            replay.sample(config.train.batch_size, rng), "cpu"
+            replay.sample(config.learner.batch_size, rng), "cpu"
         ),
         "per-neuron LSTM, forward + backward": forward_backward(
             lambda: online.lstm(features, state)
@@ -166,12 +168,12 @@ def main() -> None:
         results[name] = median_ms(function, args.repeats)
     update()
     results["gradient clip"] = median_ms(
-        lambda: torch.nn.utils.clip_grad_norm_(trained, config.train.max_grad_norm),
+        lambda: torch.nn.utils.clip_grad_norm_(trained, config.learner.max_grad_norm),
         args.repeats,
     )
     results["Adam step"] = median_ms(optimizer.step, args.repeats)
     results["soft target update"] = median_ms(
-        lambda: soft_update(target, online, config.train.tau), args.repeats
+        lambda: soft_update(target, online, config.learner.tau), args.repeats
     )
     collect_env = NeuronControlVectorEnv(config.train.num_envs, contexts=train_set)
     results[f"collection round ({config.train.num_envs} episodes, epsilon 0.5)"] = median_ms(
@@ -188,7 +190,7 @@ def main() -> None:
 
     whole = results["whole update"]
     length = config.env.episode_length
-    shape = f"{config.train.batch_size} episodes x {length + 1} steps x {n} neurons"
+    shape = f"{config.learner.batch_size} episodes x {length + 1} steps x {n} neurons"
     print(f"torch {torch.__version__}, {torch.get_num_threads()} thread(s), {args.preset} "
           f"preset, batch {shape}")  # fmt: skip
     print("| part | median (ms) | share of one update |")
@@ -237,18 +239,18 @@ def compare_compiled_update(
     """A whole update with the loss compiled by ``torch.compile`` against the eager one."""
 
     def loss_of(tensors: dict) -> torch.Tensor:
-        td, aux = losses_on_tensors(online, target, tensors, config, predictor)
-        return td if aux is None else td + config.train.aux_voltage_weight * aux
+        td, aux = losses_on_tensors(online, target, tensors, config.learner, predictor)
+        return td if aux is None else td + config.learner.aux_voltage_weight * aux
 
     def update_with(loss_function):
         def run() -> None:
-            batch = replay.sample(config.train.batch_size, rng)
+            batch = replay.sample(config.learner.batch_size, rng)
             loss = loss_function(batch_tensors(batch, "cpu"))
             optimizer.zero_grad(set_to_none=True)
             loss.backward()
-            torch.nn.utils.clip_grad_norm_(trained, config.train.max_grad_norm)
+            torch.nn.utils.clip_grad_norm_(trained, config.learner.max_grad_norm)
             optimizer.step()
-            soft_update(target, online, config.train.tau)
+            soft_update(target, online, config.learner.tau)
 
         return run
 

@@ -77,3 +77,15 @@ def test_a_resume_after_sigkill_matches_the_golden_record(tmp_path, wait_until, 
     assert not (run_dir / "model.pt").exists(), "killed too late to test anything"
     run_cli("train", "--resume", str(run_dir))
     assert record(run_dir) == GOLDEN["runs"]["quick-prefix"]
+
+
+def test_a_run_of_the_double_q_trainer_before_the_refactor_resumes_exactly(tmp_path, run_cli):
+    """tests/data/format2-smoke-run: `train smoke` of the pre-refactor trainer, killed
+    after its first checkpoint (checkpoint format 2, the learner's settings in the
+    config's train section). Resumed today, it ends as the uninterrupted run did."""
+    import shutil
+
+    run_dir = tmp_path / "run"
+    shutil.copytree(Path(__file__).parent / "data" / "format2-smoke-run", run_dir)
+    run_cli("train", "--resume", str(run_dir))
+    assert record(run_dir) == GOLDEN["runs"]["smoke-seed0"]

@@ -67,8 +67,8 @@ def test_auxiliary_loss_reads_the_encoder_and_leaves_the_td_loss_unchanged(arch)
     target = make_agent(arch, 5, 20, config.agent.sizes)
     predictor = make_voltage_predictor(online)
     batch = episode_batch(5, 20, seed=1)
-    td, aux = training_losses(online, target, batch, config, predictor)
-    assert torch.equal(td, td_loss(online, target, batch, config))
+    td, aux = training_losses(online, target, batch, config.learner, predictor)
+    assert torch.equal(td, td_loss(online, target, batch, config.learner))
     # The auxiliary loss is the MSE of the prediction against the next normalised voltage.
     features, _ = online.encode(_seq(batch))
     predicted = predictor(features[:, :-1], torch.as_tensor(batch.actions))
@@ -108,7 +108,7 @@ def test_auxiliary_predictor_learns_a_hidden_synapse():
     predictor = make_voltage_predictor(online)
     optimizer = torch.optim.Adam([*online.parameters(), *predictor.parameters()], lr=3e-3)
     for _ in range(300):
-        _, aux = training_losses(online, online, batch, config, predictor)
+        _, aux = training_losses(online, online, batch, config.learner, predictor)
         optimizer.zero_grad()
         aux.backward()
         optimizer.step()
@@ -146,7 +146,7 @@ def test_trainer_evaluates_on_the_validation_set(tmp_path):
 
 def test_new_mechanisms_are_off_in_the_paper_preset_and_validated():
     paper = PRESETS["paper"]
-    assert paper.train.n_step == 1 and paper.train.aux_voltage_weight == 0.0
+    assert paper.learner.n_step == 1 and paper.learner.aux_voltage_weight == 0.0
     with pytest.raises(ValueError, match="n_step"):
         TrainConfig(n_step=0)
     with pytest.raises(ValueError, match="n_step"):
@@ -233,8 +233,8 @@ def test_learning_rate_decays_linearly_and_needs_no_scheduler_state(tmp_path):
     assert config.learning_rate(episodes) == pytest.approx(0.25e-3)
     assert config.learning_rate(2 * episodes) == pytest.approx(0.25e-3)  # no overshoot
     # The default is the paper's constant rate, exactly.
-    assert SMOKE.learning_rate(episodes) == SMOKE.train.learning_rate
-    assert PRESETS["paper"].train.learning_rate_end_fraction == 1.0
+    assert SMOKE.learning_rate(episodes) == SMOKE.learner.learning_rate
+    assert PRESETS["paper"].learner.learning_rate_end_fraction == 1.0
 
     decayed = train(config, tmp_path / "decayed")
     # The last round's updates ran at the rate of the episode count before that round.

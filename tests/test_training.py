@@ -49,14 +49,14 @@ def test_double_q_target_on_a_hand_computed_two_step_episode():
         action_masks=np.array([[True, True, False]]),
     )
     config = SMOKE.with_changes(gamma=0.9, n_neurons=2, episode_length=2)
-    loss = td_loss(online, target, batch, config)
+    loss = td_loss(online, target, batch, config.learner)
     # Step 0 took action 0 (index 1): Q = 0.4. The online net's best legal action at
     # observation 1 is index 1 (0.3 > 0.2; the illegal 9.0 is masked), which the target
     # net values at 0.5 (not its own max, 0.7): y0 = 0.25 + 0.9 * 0.5 = 0.7.
     # Step 1 took do-nothing (index 0): Q = 0.2, terminal: y1 = 0.5.
     expected = ((0.4 - 0.7) ** 2 + (0.2 - 0.5) ** 2) / 2
     assert loss.item() == pytest.approx(expected, rel=1e-6)
-    huber = td_loss(online, target, batch, config.with_changes(loss="huber"))
+    huber = td_loss(online, target, batch, config.with_changes(loss="huber").learner)
     assert huber.item() == pytest.approx(0.5 * ((0.3) ** 2 + (0.3) ** 2) / 2, rel=1e-6)
     loss.backward()  # gradients reach the online table only through the taken actions
     assert online.table.grad[1, 2] == 0 and online.table.grad[0, 1] != 0
@@ -254,7 +254,7 @@ def test_changes_name_fields_by_path_nested_or_flat():
 
 def test_paper_preset_is_table_2():
     paper = PRESETS["paper"]
-    assert (paper.train.total_env_steps, paper.env.episode_length, paper.train.buffer_size) == (
+    assert (paper.train.total_env_steps, paper.env.episode_length, paper.learner.buffer_size) == (
         1_000_000,
         60,
         16_667,
@@ -267,7 +267,7 @@ def test_paper_preset_is_table_2():
     # The paper's environment and Table 2's networks: every default of the tree.
     assert paper == Experiment() and paper.env == EnvConfig() and paper.agent.sizes == AgentSizes()
     assert paper.env.params == NeuronParams() and paper.env.extensions == Extensions()
-    assert paper.train.learning_rate == 5e-4 and paper.agent.sizes.lstm_hidden == 128
+    assert paper.learner.learning_rate == 5e-4 and paper.agent.sizes.lstm_hidden == 128
     assert paper.total_episodes == 16_665  # whole rounds of 5 episodes
 
 
