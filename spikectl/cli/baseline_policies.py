@@ -1,0 +1,83 @@
+"""``spikectl baselines``: the training-free controllers' table."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Literal
+
+from spikectl.contexts import ContextSet, make_splits
+
+
+@dataclass(frozen=True)
+class BaselinesCommand:
+    """Score do nothing, random, identify-and-plan, the oracle planner and the witness."""
+
+    split: Literal["train", "test", "validation"] = "test"
+    """Which generated set (make_splits(100, 100, seed=0, n_val=100) with the env's
+    settings) to play; choose settings on train or validation, report on test."""
+    contexts: Path | None = None
+    """A saved ContextSet (.npz) to play instead of a generated split."""
+    env: str = "spikectl/NeuronControl-v0"
+    """A registered environment id: its n_neurons and extensions apply."""
+    out: Path = Path("runs/baselines/baselines.csv")
+    """Where the per-context CSV is written."""
+    random_seeds: int = 10
+    """Seeds of the random policy (the table shows mean +- sd over them)."""
+    oracle_width: int = 256
+    """Beam width of the oracle planner."""
+    identify_width: int = 32
+    """Beam width of identify-and-plan's re-plans."""
+    observation_noise_mV: float | None = None
+    """Measurement noise sigma (mV) instead of the environment's."""
+    hidden_fraction: float | None = None
+    """Fraction of hidden neurons instead of the environment's (generated sets only)."""
+
+
+def baselines(command: BaselinesCommand) -> None:
+    """Print the table of training-free controllers and write a per-context CSV."""
+    from dataclasses import replace
+
+    import gymnasium
+
+    from spikectl.neuron.extensions import Extensions
+    from spikectl.planning import IdentifyAndPlan
+    from spikectl.planning.baselines import run_baselines
+
+    if command.env not in gymnasium.registry:
+        raise ValueError(f"unknown environment id {command.env!r}")
+    kwargs = dict(gymnasium.spec(command.env).kwargs)
+    extensions = Extensions.coerce(kwargs.get("extensions"))
+    overrides = {
+        name: value
+        for name, value in (("observation_noise_mV", command.observation_noise_mV),
+                            ("hidden_fraction", command.hidden_fraction))
+        if value is not None
+    }  # fmt: skip
+    if "hidden_fraction" in overrides:
+        if command.contexts is not None:
+            raise ValueError("--hidden-fraction applies to generated sets, not to --contexts")
+        overrides["hidden_neurons"] = 0
+    extensions = replace(extensions, **overrides)
+    if command.contexts is not None:
+        context_set = ContextSet.load(command.contexts)
+        where = str(command.contexts)
+    else:
+        n_neurons = kwargs.get("n_neurons") or 8
+        train_set, test_set, validation_set = make_splits(
+            100, 100, n_neurons, seed=0, extensions=extensions, n_val=100
+        )
+        context_set = {"train": train_set, "test": test_set,
+                       "validation": validation_set}[command.split]  # fmt: skip
+        where = f"the generated {command.split} set ({n_neurons} neurons, seed 0)"
+    policy = IdentifyAndPlan(width=command.identify_width,
+                             noise_mV=extensions.observation_noise_mV)  # fmt: skip
+    results = run_baselines(context_set, extensions=extensions,
+                            random_seeds=command.random_seeds,
+                            oracle_width=command.oracle_width, policy=policy)  # fmt: skip
+    changed = ", ".join(f"{key}={value}" for key, value in overrides.items()
+                        if key != "hidden_neurons")  # fmt: skip
+    print(f"{len(context_set)} contexts: {where}; environment {command.env}"
+          + (f" with {changed}" if changed else ""))  # fmt: skip
+    print(results.table())
+    print(f"wrote {results.write_csv(command.out)}")

@@ -1,0 +1,112 @@
+"""``spikectl evaluate``, ``sweep`` and ``plot``: trained runs, grids of them, their figures."""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Literal
+
+import tyro
+
+
+@dataclass(frozen=True)
+class EvaluateCommand:
+    """Evaluate a trained agent greedily on its own sets or on any context set."""
+
+    run_dir: Annotated[Path, tyro.conf.Positional]
+    """The run directory of a trained agent."""
+    contexts: Path | None = None
+    """A saved ContextSet (.npz) to evaluate on instead of the run's train/test sets."""
+    model: Literal["final", "best"] = "final"
+    """Which weights: the final model.pt, or best_model.pt (best validation return)."""
+
+
+def evaluate(command: EvaluateCommand) -> None:
+    """Print the agent's mean greedy return per split, with its standard error."""
+    from spikectl.training.evaluate import evaluate_run
+
+    for result in evaluate_run(command.run_dir, command.contexts, command.model):
+        print(
+            f"{result.name:<24}{result.mean:.3f} +- {result.standard_error:.3f} "
+            f"over {result.returns.size} contexts (do nothing {result.do_nothing:.3f})"
+        )
+
+
+@dataclass(frozen=True)
+class SweepCommand:
+    """Run a grid of training trials; finished trials are skipped, interrupted ones resumed."""
+
+    sweep_dir: Path = Path("runs/sweep")
+    """Where the trials' run directories and sweep.json go."""
+    preset: Literal["fig4", "fig5"] | None = None
+    """The paper's experiments: fig4 (4 architectures x 10 seeds), fig5 (TDRQN x sizes)."""
+    config: Path | None = None
+    """A JSON sweep file instead: {"base": PRESET, "overrides": {...}, "grid": {...}}."""
+    base: Literal["paper", "quick", "smoke"] | None = None
+    """Replace the sweep's base preset (e.g. quick for a laptop-sized reproduction)."""
+    seeds: tuple[int, ...] | None = None
+    """Replace the grid's seeds."""
+    total_env_steps: int | None = None
+    """Override the environment steps of every trial."""
+    workers: int = 0
+    """Trials run at once; 0 means one per CPU core."""
+    backend: Literal["local", "ray"] = "local"
+    """local: a process pool on this machine; ray: Ray tasks (pip install 'spikectl[ray]')."""
+    address: str | None = None
+    """Ray cluster address (ray backend); a local Ray instance when not given."""
+    group_seeds: bool = False
+    """Train the trials that differ only in seed and n_train in one process per group."""
+
+
+def sweep(command: SweepCommand) -> None:
+    """Run the sweep and print each trial's final train and test return."""
+    from spikectl.experiments.sweep import PAPER_SWEEPS, Sweep, load_sweep_file, run_sweep
+
+    if (command.preset is None) == (command.config is None):
+        raise ValueError("give exactly one of --preset (fig4, fig5) or --config FILE")
+    if command.workers < 0:
+        raise ValueError(f"--workers must be >= 0 (0: one per CPU core), got {command.workers}")
+    if command.config is not None:
+        description = load_sweep_file(command.config).to_dict()
+        if command.base is not None:
+            # --base swaps the preset under the file's own overrides, which stay.
+            description = json.loads(command.config.read_text())
+            if not isinstance(description.get("base", "quick"), str):
+                raise ValueError(
+                    f"--base: {command.config} holds a whole base config, not a preset name; "
+                    "edit its base or drop --base"
+                )
+    else:
+        description = dict(PAPER_SWEEPS[command.preset])
+    description = {**description, "grid": dict(description["grid"])}
+    if command.base is not None:
+        description["base"] = command.base
+    if command.seeds is not None:
+        description["grid"]["seed"] = list(command.seeds)
+    if command.total_env_steps is not None:
+        description["overrides"] = {
+            **description.get("overrides", {}), "train.total_env_steps": command.total_env_steps,
+        }  # fmt: skip
+    run_sweep(
+        Sweep.from_dict(description), command.sweep_dir, command.workers or None,
+        backend=command.backend, address=command.address, group_seeds=command.group_seeds,
+    )  # fmt: skip
+
+
+@dataclass(frozen=True)
+class PlotCommand:
+    """Draw Figures 3-5, the results tables and an episode raster of a sweep."""
+
+    sweep_dir: Annotated[Path, tyro.conf.Positional]
+    """The sweep directory (as given to spikectl sweep)."""
+    out_dir: Path | None = None
+    """Where to write them (default SWEEP_DIR/figures)."""
+
+
+def plot(command: PlotCommand) -> None:
+    """Write the figures and tables of a sweep from its saved runs."""
+    from spikectl.experiments.plot import plot_sweep
+
+    for path in plot_sweep(command.sweep_dir, command.out_dir):
+        print(f"wrote {path}")

@@ -1,0 +1,217 @@
+"""``spikectl train``: the presets as subcommands, the run or seed group, the results."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+import sys
+import warnings
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any, Union
+
+import tyro
+
+from spikectl.cli.errors import flag_for, run_tyro
+from spikectl.training.config import Experiment
+from spikectl.training.presets import PRESET_HELP, PRESETS
+
+
+@dataclass(frozen=True)
+class TrainCommand:
+    """Train an agent: the preset's settings, then every flag's."""
+
+    config: Annotated[Experiment, tyro.conf.arg(name="")]
+    preset: tyro.conf.Suppress[str] = "quick"
+    """The preset the defaults come from (the subcommand)."""
+    run_dir: Path | None = None
+    """Run directory (default runs/ARCH-PRESET-seedSEED); must be new unless resuming."""
+    resume: Path | None = None
+    """Continue the interrupted run (or seed group) in this directory (its saved config is used)."""
+    seeds: tuple[int, ...] | None = None
+    """Train these seeds as one group in one process (RUN_DIR/seed=S each; each seed
+    exactly as if trained alone)."""
+    stacked: bool = False
+    """With --seeds: compute the seeds as one stacked computation (pays on a GPU; equal
+    to the seeds alone up to floating-point rounding)."""
+
+
+def torch_threads() -> int:
+    import torch
+
+    return torch.get_num_threads()
+
+
+def train(command: TrainCommand) -> None:
+    """Train (or resume) one run or a seed group, then print the returns against the
+    baselines (for a group, each seed's)."""
+    from spikectl.training.group import GROUP_FILE, group_configs, group_is_stacked, seed_dirs
+    from spikectl.training.run import train_runs
+    from spikectl.training.run_files import read_config
+
+    resume, stacked = command.resume is not None, command.stacked
+    if stacked and command.seeds is None and not resume:
+        raise ValueError("--stacked: stacking computes a seed group; give --seeds too")
+    if resume and (command.resume / GROUP_FILE).exists():
+        group_dir = command.resume
+        configs, run_dirs = group_configs(group_dir)
+        stacked = group_is_stacked(group_dir)
+    elif resume:
+        group_dir, run_dirs = None, [command.resume]
+        configs = [read_config(command.resume)]
+    elif command.seeds is not None:
+        config, seeds = command.config, list(command.seeds)
+        if not seeds:
+            raise ValueError("--seeds needs at least one seed")
+        label = "-".join(str(seed) for seed in seeds)
+        group_dir = command.run_dir or Path(
+            f"runs/{config.agent.arch}-{command.preset}-seeds{label}"
+        )
+        configs, run_dirs = [config.with_seed(seed) for seed in seeds], seed_dirs(group_dir, seeds)
+    else:
+        config, group_dir = command.config, None
+        configs = [config]
+        run_dirs = [command.run_dir or Path(
+            f"runs/{config.agent.arch}-{command.preset}-seed{config.train.seed}"
+        )]  # fmt: skip
+    if group_dir is None:
+        print(f"run directory: {run_dirs[0]}")
+    else:
+        how = "stacked" if stacked else "in one process"
+        print(f"seed group: {group_dir} ({len(configs)} seeds {how})")
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", RuntimeWarning)
+        metrics = train_runs(configs, run_dirs, group_dir, resume=resume, stacked=stacked)
+    for warning in caught:
+        print(f"spikectl: warning: {warning.message}", file=sys.stderr)
+    if group_dir is None:
+        _print_run(configs[0], run_dirs[0], metrics[0])
+    else:
+        _print_group(configs, run_dirs, metrics)
+
+
+def _print_run(config: Experiment, run_dir: Path, metrics: list[dict]) -> None:
+    """A single run's final returns, its baselines and its best network on validation."""
+    from spikectl.experiments.figures import plot_learning_curve
+    from spikectl.training.run import best_on_validation
+
+    final = metrics[-1]
+    baselines = json.loads((run_dir / "baselines.json").read_text())
+    curve = plot_learning_curve(
+        metrics, baselines, run_dir / "learning_curve.png",
+        title=f"{config.agent.arch.upper()}, {final['env_steps']:,} steps",
+    )  # fmt: skip
+    validation = (
+        ""
+        if math.isnan(final.get("val_return", math.nan))
+        else (f"  (validation {final['val_return']:.3f})")
+    )
+    print(f"{'':<14}{'train':>8}{'test':>8}")
+    print(
+        f"{config.agent.arch:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}"
+        f"{validation}"
+    )
+    for name in ("do_nothing", "random"):
+        row = baselines[name]
+        print(f"{name.replace('_', '-'):<14}{row['train']:>8.3f}{row['test']:>8.3f}")
+    best = best_on_validation(metrics)
+    if best is not None:
+        print(
+            f"{'best on val.':<14}{best['train_return']:>8.3f}{best['test_return']:>8.3f}"
+            f"  (validation {best['val_return']:.3f}, episode {best['episode']:,}: "
+            "best_model.pt)"
+        )
+    minutes, core_minutes = final["wall_time_s"] / 60, final["cpu_time_s"] / 60
+    print(
+        f"{final['env_steps']:,} environment steps, {final['updates']:,} updates, "
+        f"{minutes:.1f} wall minutes ({core_minutes:.1f} core minutes) on "
+        f"{config.train.torch_threads or torch_threads()} thread(s)"
+    )
+    print(f"wrote {run_dir / 'model.pt'}, {run_dir / 'metrics.csv'} and {curve}")
+
+
+def _print_group(configs: list[Experiment], run_dirs: list[Path], metrics: list[list[dict]]):
+    """Each seed's final returns and its best network on validation, and the group's time."""
+    from spikectl.training.run import best_on_validation
+
+    print(f"{'seed':<14}{'train':>8}{'test':>8}   best on validation: train, test (episode)")
+    for config, rows in zip(configs, metrics, strict=True):
+        final, best = rows[-1], best_on_validation(rows)
+        chosen = (
+            ""
+            if best is None
+            else f"   {best['train_return']:.3f}, {best['test_return']:.3f} ({best['episode']:,})"
+        )
+        print(
+            f"{config.train.seed:<14}{final['train_return']:>8.3f}{final['test_return']:>8.3f}"
+            f"{chosen}"
+        )
+    final = metrics[0][-1]  # the seeds share the group's clocks
+    print(
+        f"{len(configs)} x {final['env_steps']:,} environment steps, {final['updates']:,} "
+        f"updates each, {final['wall_time_s'] / 60:.1f} wall minutes "
+        f"({final['cpu_time_s'] / 60:.1f} core minutes) for the whole group"
+    )
+    print(f"wrote model.pt and metrics.csv in {', '.join(str(d) for d in run_dirs)}")
+
+
+TRAIN_HELP = """Train an agent: spikectl train [PRESET] [FLAGS]. The defaults shown are
+the {name} preset's: {help}
+
+The preset (paper, quick or smoke; quick when none is given) sets every default, and
+the flags override them: `spikectl train paper --help` shows the paper's. --env picks
+a registered environment (spikectl/NeuronControlNoisy-v0, ...) whose settings become
+the defaults of --n-neurons, --params.* and --extensions.*."""
+
+
+def _train_presets(env_id: str | None = None) -> Any:
+    """The presets as tyro subcommands, each with its settings as defaults (on the
+    registered environment ``env_id`` when given)."""
+    choices = []
+    for name, experiment in PRESETS.items():
+        if env_id is not None:
+            experiment = dataclasses.replace(experiment, env=experiment.env.with_variant(env_id))
+        default = TrainCommand(config=experiment, preset=name)
+        description = TRAIN_HELP.format(name=name, help=PRESET_HELP[name])
+        choices.append(
+            Annotated[TrainCommand, tyro.conf.subcommand(name, default=default,
+                                                         description=description)]
+        )  # fmt: skip
+    return Union[tuple(choices)]  # noqa: UP007
+
+
+def parse_train(argv: list[str], command_types: tuple[type, ...] = ()) -> TrainCommand:
+    """The presets are tyro subcommands; without one, ``quick``. A registered --env
+    other than the default changes the defaults, so the presets are built on that
+    environment before the flags are parsed: every flag given still overrides the
+    variant's settings (and a config never holds a variant id with the base settings).
+    ``command_types`` name the flags in tyro's parse errors."""
+    if "--preset" in argv or any(arg.startswith("--preset=") for arg in argv):
+        raise ValueError(
+            "--preset: the preset is a subcommand now: spikectl train paper|quick|smoke [FLAGS]"
+        )
+    if not argv or argv[0] not in PRESETS:
+        argv = ["quick", *argv]
+    kwargs = {"args": argv, "prog": "spikectl train", "command_types": command_types}
+    env_id = _env_flag(argv)
+    return run_tyro(_train_presets(env_id), default=_quick(env_id), **kwargs)
+
+
+def _env_flag(argv: list[str]) -> str | None:
+    """The value of ``--env ID`` / ``--env=ID`` (the last one given), or None; the flag
+    is env.id's in the command's flag table."""
+    flag, env_id = flag_for(("config", "env", "id"), TrainCommand), None
+    for index, arg in enumerate(argv):
+        if arg == flag and index + 1 < len(argv):
+            env_id = argv[index + 1]
+        elif arg.startswith(f"{flag}="):
+            env_id = arg.split("=", 1)[1]
+    return env_id
+
+
+def _quick(env_id: str | None = None) -> TrainCommand:
+    experiment = PRESETS["quick"]
+    if env_id is not None:
+        experiment = dataclasses.replace(experiment, env=experiment.env.with_variant(env_id))
+    return TrainCommand(config=experiment, preset="quick")
