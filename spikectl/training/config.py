@@ -283,11 +283,11 @@ class Experiment:
                                     (TrainConfig, "train", nested.get("train", {})),
                                     (learner_type, "learner", learner)):  # fmt: skip
             check_fields(kind, section, part)
-        try:
-            env["params"] = NeuronParams.from_dict(env.get("params", {}))
-            env["extensions"] = Extensions.from_dict(env.get("extensions", {}))
-        except ConfigError as error:
-            raise error.within("env") from None
+        for name, kind in (("params", NeuronParams), ("extensions", Extensions)):
+            try:
+                env[name] = kind.from_dict(env.get(name, {}))
+            except ConfigError as error:
+                raise error.within("env", name) from None
         for name in ("train_contexts", "test_contexts"):
             if env.get(name) is not None:
                 env[name] = Path(env[name])
