@@ -28,7 +28,8 @@ OTHER_PARAMS = NeuronParams(v_rest_mV=-65.0, v_threshold_mV=-45.0, capacitance_p
 
 def first_voltages(run_dir) -> np.ndarray:
     """The observed potentials at step 0 of every stored episode [E, n]."""
-    return read_checkpoint(run_dir / "checkpoint.pt")["replay"]["voltage"][:, 0].numpy()
+    (learner,) = read_checkpoint(run_dir / "checkpoint.pt")["learners"]["seeds"]
+    return learner["replay"]["voltage"][:, 0].numpy()
 
 
 def test_training_on_the_noisy_variant_applies_its_noise(tmp_path):
@@ -174,7 +175,7 @@ def test_train_help_shows_the_defaults_it_describes(capsys):
 def test_a_noisy_run_resumes_exactly(tmp_path, monkeypatch):
     """The environment's draws are seeded per round, so a run stopped after a checkpoint
     and resumed sees the very noise the uninterrupted run saw."""
-    import spikectl.training.dqn as dqn
+    import spikectl.training.run as dqn
 
     config = SMOKE.with_changes({"env.id": NOISY, "total_env_steps": 4 * 8 * 20,
                                  "eval_every_episodes": 8,
@@ -217,12 +218,13 @@ def flat_config(config: Experiment) -> dict:
     values = config.to_dict()
     env = {k: v for k, v in values["env"].items() if k not in ("id", "params", "extensions")}
     sizes = {**values["agent"]["sizes"], "v_rest_mV": -70.0, "v_threshold_mV": -50.0}
-    return {**values["train"], **env, "arch": values["agent"]["arch"], "sizes": sizes}
+    learner = {k: v for k, v in values["learner"].items() if k != "name"}
+    return {**values["train"], **learner, **env, "arch": values["agent"]["arch"],
+            "sizes": sizes}  # fmt: skip
 
 
 def test_a_run_written_before_the_tree_resumes_exactly(tmp_path, monkeypatch):
-    import spikectl.training.dqn as dqn
-
+    import spikectl.training.run as dqn
     from spikectl.training.torch_files import payload_checksum
 
     config = SMOKE.with_changes(total_env_steps=4 * 8 * 20, eval_every_episodes=8,
@@ -243,7 +245,7 @@ def test_a_run_written_before_the_tree_resumes_exactly(tmp_path, monkeypatch):
     (run / "config.json").write_text(json.dumps(flat_config(config), indent=2))
     payload = torch.load(run / "checkpoint.pt", weights_only=True)
     del payload["checksum"]
-    payload["config"] = flat_config(config)
+    payload["configs"] = [flat_config(config)]
     payload["checksum"] = payload_checksum(payload)
     torch.save(payload, run / "checkpoint.pt")
     assert read_config(run) == config

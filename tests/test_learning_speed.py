@@ -9,7 +9,8 @@ import torch
 
 from spikectl import ContextSet, make_splits
 from spikectl.agents import ARCHITECTURES, make_agent, make_voltage_predictor
-from spikectl.training.config import Experiment, TrainConfig
+from spikectl.training.config import Experiment
+from spikectl.training.learners import DQNConfig
 from spikectl.training.learners.dqn_losses import n_step_targets, td_loss, training_losses
 from spikectl.training.presets import PRESETS, SMOKE
 from spikectl.training.replay import EpisodeBatchArrays
@@ -148,13 +149,14 @@ def test_new_mechanisms_are_off_in_the_paper_preset_and_validated():
     paper = PRESETS["paper"]
     assert paper.learner.n_step == 1 and paper.learner.aux_voltage_weight == 0.0
     with pytest.raises(ValueError, match="n_step"):
-        TrainConfig(n_step=0)
+        DQNConfig(n_step=0)
     with pytest.raises(ValueError, match="n_step"):
         paper.with_changes(n_step=61)
     with pytest.raises(ValueError, match="aux_voltage_weight"):
-        TrainConfig(aux_voltage_weight=float("inf"))
+        DQNConfig(aux_voltage_weight=float("inf"))
     # Runs saved before the validation split existed (flat configs) load with none.
-    saved = {**paper.train.__dict__, **paper.to_dict()["env"], **paper.to_dict()["agent"]}
+    saved = {**paper.train.__dict__, **paper.learner.__dict__, **paper.to_dict()["env"],
+             **paper.to_dict()["agent"]}  # fmt: skip
     del saved["n_val"], saved["id"], saved["params"], saved["extensions"]
     assert Experiment.from_dict(saved).env.n_val == 0
 
@@ -220,7 +222,7 @@ def test_do_nothing_biased_exploration(do_nothing):
         counts = np.bincount(stimulated, minlength=4)[[0, 2, 3]]
         assert counts.min() > 0.8 * counts.max()  # uniform over the legal stimulations
     with pytest.raises(ValueError, match="explore_do_nothing"):
-        TrainConfig(explore_do_nothing=1.5)
+        DQNConfig(explore_do_nothing=1.5)
 
 
 def test_learning_rate_decays_linearly_and_needs_no_scheduler_state(tmp_path):
@@ -228,25 +230,29 @@ def test_learning_rate_decays_linearly_and_needs_no_scheduler_state(tmp_path):
 
     config = SMOKE.with_changes(learning_rate=1e-3, learning_rate_end_fraction=0.25)
     episodes = config.total_episodes
-    assert config.learning_rate(0) == 1e-3
-    assert config.learning_rate(episodes // 2) == pytest.approx(0.625e-3)
-    assert config.learning_rate(episodes) == pytest.approx(0.25e-3)
-    assert config.learning_rate(2 * episodes) == pytest.approx(0.25e-3)  # no overshoot
+
+    def rate(config, episode):
+        return config.learner.learning_rate_at(episode, config.total_episodes)
+
+    assert rate(config, 0) == 1e-3
+    assert rate(config, episodes // 2) == pytest.approx(0.625e-3)
+    assert rate(config, episodes) == pytest.approx(0.25e-3)
+    assert rate(config, 2 * episodes) == pytest.approx(0.25e-3)  # no overshoot
     # The default is the paper's constant rate, exactly.
-    assert SMOKE.learning_rate(episodes) == SMOKE.learner.learning_rate
+    assert rate(SMOKE, episodes) == SMOKE.learner.learning_rate
     assert PRESETS["paper"].learner.learning_rate_end_fraction == 1.0
 
     decayed = train(config, tmp_path / "decayed")
     # The last round's updates ran at the rate of the episode count before that round.
-    saved = read_checkpoint(tmp_path / "decayed" / "checkpoint.pt")
+    (saved,) = read_checkpoint(tmp_path / "decayed" / "checkpoint.pt")["learners"]["seeds"]
     last_round = episodes - config.train.num_envs
     assert {group["lr"] for group in saved["optimizer"]["param_groups"]} == {
-        config.learning_rate(last_round)
+        rate(config, last_round)
     }
     constant = train(config.with_changes(learning_rate_end_fraction=1.0), tmp_path / "constant")
-    saved = read_checkpoint(tmp_path / "constant" / "checkpoint.pt")
+    (saved,) = read_checkpoint(tmp_path / "constant" / "checkpoint.pt")["learners"]["seeds"]
     assert {group["lr"] for group in saved["optimizer"]["param_groups"]} == {1e-3}
     assert decayed[-1]["loss"] != constant[-1]["loss"]
     for bad in (1.5, -0.1, float("nan")):
         with pytest.raises(ValueError, match="learning_rate_end_fraction"):
-            TrainConfig(learning_rate_end_fraction=bad)
+            DQNConfig(learning_rate_end_fraction=bad)

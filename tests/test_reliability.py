@@ -230,17 +230,24 @@ def test_model_files_are_plain_state_dicts_with_a_checksum(finished_run):
 
 def test_checkpoint_loads_weights_only_and_an_old_format_is_named(finished_run, tmp_path):
     payload = torch.load(finished_run / "checkpoint.pt", weights_only=True)
-    assert payload["format_version"] == 2 and len(payload["checksum"]) == 64
+    assert payload["format_version"] == 3 and len(payload["checksum"]) == 64
     old = dict(payload, format_version=1, replay={"voltage": np.zeros(3)})
     torch.save(old, tmp_path / "checkpoint.pt")
-    with pytest.raises(RunDirError, match="checkpoint format 1 .*reads format 2"):
+    with pytest.raises(RunDirError, match="checkpoint format 1 .*reads formats 2 and 3"):
         read_checkpoint(tmp_path / "checkpoint.pt")
 
 
-@pytest.mark.parametrize("key", ["online", "rng", "episodes", "checksum"])
+@pytest.mark.parametrize("key", ["learners", "runs", "configs", "checksum", "rng", "episodes"])
 def test_a_checkpoint_missing_a_key_is_refused(finished_run, tmp_path, key):
+    from spikectl.training.torch_files import payload_checksum
+
     payload = torch.load(finished_run / "checkpoint.pt", weights_only=True)
-    del payload[key]
+    if key in payload:
+        del payload[key]
+    else:  # an entry of the run's state: the file stays self-consistent otherwise
+        del payload["runs"][0][key]
+        payload.pop("checksum")
+        payload["checksum"] = payload_checksum(payload)
     torch.save(payload, tmp_path / "checkpoint.pt")
     with pytest.raises(RunDirError, match=f"no '{key}' entry"):
         read_checkpoint(tmp_path / "checkpoint.pt")
@@ -318,7 +325,7 @@ def test_damaged_context_files_are_one_clear_error_everywhere(run_copy, kind, tm
 
 
 def test_a_nan_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, monkeypatch):
-    import spikectl.training.dqn as dqn
+    import spikectl.training.learners.dqn as dqn
 
     real_losses = dqn.training_losses
     calls = []
@@ -334,8 +341,9 @@ def test_a_nan_loss_stops_the_run_and_keeps_the_last_good_checkpoint(tmp_path, m
         train(TINY.with_changes(total_env_steps=8 * 20 * 4), run)
     assert not (run / "model.pt").exists()
     payload = read_checkpoint(run / "checkpoint.pt")  # the last good one, intact
-    assert payload["updates"] == 2
-    assert all(torch.isfinite(t).all() for t in payload["online"].values())
+    (learner,) = payload["learners"]["seeds"]
+    assert learner["updates"] == 2
+    assert all(torch.isfinite(t).all() for t in learner["network"].values())
 
 
 def test_a_run_without_updates_says_so(tmp_path, capsys):
@@ -515,7 +523,7 @@ def metric_rows(run: Path) -> list[list[str]]:
 def test_a_run_stopped_before_its_first_checkpoint_restarts_exactly(
     how, finished_run, tmp_path, capsys, monkeypatch
 ):
-    import spikectl.training.dqn as dqn
+    import spikectl.training.run as dqn
 
     def out_of_disk(*args):
         raise FileWriteError(errno.ENOSPC, "cannot write checkpoint.pt: no space left")
@@ -547,7 +555,7 @@ def test_two_processes_never_train_one_run_dir(tmp_path):
     run = tmp_path / "run"
     holder = subprocess.Popen(
         [sys.executable, "-c",
-         "import sys, time; from pathlib import Path; from spikectl.training.checkpoint import "
+         "import sys, time; from pathlib import Path; from spikectl.training.run_files import "
          "run_lock\nwith run_lock(Path(sys.argv[1])):\n print('locked', flush=True)\n "
          "time.sleep(60)", str(run)],
         stdout=subprocess.PIPE, text=True,

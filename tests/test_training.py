@@ -65,12 +65,14 @@ def test_double_q_target_on_a_hand_computed_two_step_episode():
 
 def test_epsilon_schedule():
     config = SMOKE.with_changes(epsilon_start=1.0, epsilon_end=0.1)
-    anneal = 0.25 * config.total_episodes
-    assert config.epsilon(0) == 1.0
-    assert config.epsilon(anneal / 2) == pytest.approx(0.55)
-    assert config.epsilon(anneal) == pytest.approx(0.1)
-    assert config.epsilon(config.total_episodes) == pytest.approx(0.1)
-    assert config.with_changes(epsilon_anneal_fraction=0.0).epsilon(0) == 0.1
+    total = config.total_episodes
+    anneal = 0.25 * total
+    epsilon = config.learner.epsilon
+    assert epsilon(0, total) == 1.0
+    assert epsilon(anneal / 2, total) == pytest.approx(0.55)
+    assert epsilon(anneal, total) == pytest.approx(0.1)
+    assert epsilon(total, total) == pytest.approx(0.1)
+    assert config.with_changes(epsilon_anneal_fraction=0.0).learner.epsilon(0, total) == 0.1
 
 
 def make_episodes(count: int, marker_start: int, n: int = 3, length: int = 4):
@@ -213,7 +215,8 @@ def test_config_round_trips_through_json():
 def test_a_config_before_the_tree_loads_into_it():
     """config.json of runs written before the tree: flat fields, the agent's voltage
     normalisation in its sizes, no n_val."""
-    flat = {**SMOKE.train.__dict__, "arch": "drqn", "n_neurons": 5, "episode_length": 20,
+    flat = {**SMOKE.train.__dict__, **SMOKE.learner.__dict__, "arch": "drqn",
+            "n_neurons": 5, "episode_length": 20,
             "n_train": 6, "n_test": 6, "context_seed": 0, "train_contexts": None,
             "test_contexts": None,
             "sizes": {**SMOKE.with_changes().to_dict()["agent"]["sizes"],
@@ -259,7 +262,7 @@ def test_paper_preset_is_table_2():
         60,
         16_667,
     )
-    algorithm = paper.train
+    algorithm = paper.learner
     assert (algorithm.batch_size, algorithm.updates_per_round, algorithm.gamma,
             algorithm.tau) == (5, 10, 0.99, 0.1)  # fmt: skip
     assert (algorithm.epsilon_start, algorithm.epsilon_end,

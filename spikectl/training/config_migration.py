@@ -139,4 +139,5 @@ def legacy_normalisation(sizes: dict[str, Any], params: NeuronParams) -> None:
                     f"= {value} differs from the environment's params.{name} = "
                     f"{getattr(params, name)}: the agent's input is normalised with the "
                     "environment's params now, so this run cannot be rebuilt as it was",
+                    label=f"sizes.{name}",
                 )
