@@ -22,7 +22,8 @@ import numpy as np
 
 from spikectl.envs.env_support import step_rewards
 from spikectl.neuron.params import NeuronParams
-from spikectl.neuron.simulator import SimulatorState, advance
+from spikectl.neuron.prediction import one_step
+from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance
 
 # Voltages are compared at this resolution (mV) when duplicate states are merged: far
 # below any difference the dynamics can act on, far above float round-off.
@@ -81,20 +82,16 @@ class Plan:
 
 def _committed_target_spike(model: PlanningModel, state: SimulatorState) -> np.ndarray:
     """[K * E] whether the target spikes at the next step whatever the next action is
-    (rows hypothesis-major, as in the beam)."""
-    params, target = model.params, model.target
-    if model.neurons is None:
-        threshold, leak = params.v_spike_mV, params.leak_per_step
-    else:
-        threshold, leak = model.neurons[0, 0, target], model.neurons[0, 1, target]
-    synaptic_step = params.synaptic_step_mV
+    (it is not stimulable; rows hypothesis-major, as in the beam)."""
     k = model.hypotheses
-    columns = model.weights[:, :, target].astype(np.float64)  # [K, n]
-    released = state.released.reshape(k, -1, model.n_neurons).astype(np.float64)  # [K, E, n]
-    drive = synaptic_step * np.einsum("hen,hn->he", released, columns).ravel()  # [K * E]
-    voltage = state.voltage_mV[:, target]
-    next_voltage = voltage - (voltage - params.v_rest_mV) * leak + drive
-    return (next_voltage >= threshold) & (state.refractory_left[:, target] == 0)
+    size = state.voltage_mV.shape[0] // k
+    committed = np.empty(k * size, dtype=bool)
+    for h in range(k):
+        block = slice(h * size, (h + 1) * size)
+        _, committed[block] = one_step(_block(state, block), model.weights[h : h + 1],
+                                       DO_NOTHING, model.params, model.neurons,
+                                       neuron=model.target)  # fmt: skip
+    return committed
 
 
 def state_signature_rows(

@@ -28,6 +28,7 @@ from math import erfc as _erfc
 import numpy as np
 
 from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
+from spikectl.neuron.kernel import integrate
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, SimulatorState
 
@@ -162,9 +163,11 @@ class ObservedState:
         voltage = np.asarray(voltage, dtype=np.float64)
         before = state.voltage_mV[0]
         refractory = state.refractory_left[0] > 0
-        predicted = before - (before - params.v_rest_mV) * params.leak_per_step
+        stimulus = np.zeros_like(before)
         if action != DO_NOTHING:
-            predicted[action] += params.stimulus_step_mV
+            stimulus[action] = params.stimulus_step_mV
+        # The potential without synaptic input; the residual is what the synapses added.
+        predicted = integrate(before, params.v_rest_mV, params.leak_per_step, stimulus)
         residual = (voltage - predicted) / params.synaptic_step_mV
         released_before = state.released[0].astype(np.float64)
         observed = ~refractory

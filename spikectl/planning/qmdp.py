@@ -30,7 +30,8 @@ import numpy as np
 
 from spikectl.envs.env_support import step_rewards
 from spikectl.neuron.params import NeuronParams
-from spikectl.neuron.simulator import SimulatorState, advance
+from spikectl.neuron.prediction import one_step
+from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance
 from spikectl.planning.beam import state_signature_rows, take_states
 
 # Weight of the target's depolarisation (mV) in the ranking: breaks ties only (as in beam).
@@ -72,9 +73,6 @@ def best_returns(
     reward_if_spike, reward_if_silent = step_rewards(pattern)
     n, n_actions = weights.shape[-1], actions.shape[0]
     interval = min(params.min_release_interval_steps, 2**30)
-    leak, synaptic_step = params.leak_per_step, params.synaptic_step_mV
-    threshold = params.v_spike_mV
-    target_columns = weights[:, :, target].astype(np.float64)  # [P, n]
     projection = np.random.default_rng(_PROJECTION_SEED).standard_normal(4 * n)
     beam = take_states(start, np.arange(problems))
     problem = np.arange(problems)  # [E] the problem of each beam entry, ascending
@@ -86,20 +84,14 @@ def best_returns(
         voltage = np.empty((rows.shape[0], 1, n))
         spikes = np.empty((rows.shape[0], 1, n), dtype=bool)
         child_actions = np.ascontiguousarray(np.tile(actions, problem.shape[0])[:, None])
-        advance(children, np.ascontiguousarray(weights[child_problem]), child_actions,
-                params, voltage, spikes)  # fmt: skip
+        child_weights = np.ascontiguousarray(weights[child_problem])
+        advance(children, child_weights, child_actions, params, voltage, spikes)
         spiked = spikes[:, 0, target]
         child_score = score[rows] + np.where(spiked, reward_if_spike[t], reward_if_silent[t])
         ranking = child_score.copy()
         if t + 1 < end:
             # The target's next step is committed now (its input takes one step).
-            drive = synaptic_step * np.einsum(
-                "cn,cn->c", children.released.astype(np.float64), target_columns[child_problem]
-            )  # [C]
-            before = children.voltage_mV[:, target]
-            committed = (before - (before - params.v_rest_mV) * leak + drive >= threshold) & (
-                children.refractory_left[:, target] == 0
-            )
+            _, committed = one_step(children, child_weights, DO_NOTHING, params, neuron=target)
             ranking += np.where(committed, reward_if_spike[t + 1], reward_if_silent[t + 1])
         depolarisation = children.voltage_mV[:, target] - params.v_rest_mV
         ranking += _TIE_BREAK * np.clip(depolarisation, -20.0, 20.0)
