@@ -264,8 +264,8 @@ def test_every_architecture_trains_in_a_group(tmp_path, arch):
 
 @pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")
 def test_group_trains_on_cuda_and_matches_the_cpu_group_at_the_start(tmp_path):
-    cuda = train_seeds(TINY.with_changes(device="cuda"), [0, 1], tmp_path / "cuda")
-    cpu = train_seeds(TINY, [0, 1], tmp_path / "cpu")
+    cuda = train_seeds(TINY.with_changes(device="cuda"), [0, 1], tmp_path / "cuda", stacked=True)
+    cpu = train_seeds(TINY, [0, 1], tmp_path / "cpu", stacked=True)
     for on_gpu, on_cpu in zip(cuda, cpu, strict=True):
         assert on_gpu[0]["train_return"] == on_cpu[0]["train_return"]
         assert on_gpu[1]["loss"] == pytest.approx(on_cpu[1]["loss"], rel=1e-3)
@@ -320,3 +320,31 @@ def test_every_seed_of_a_group_learns_one_easy_network(tmp_path, easy_network_co
     for rows in metrics:
         assert rows[0]["train_return"] < 0.75
         assert rows[-1]["train_return"] > 0.9
+
+
+def test_a_stacked_group_resumes_exactly_and_keeps_its_kind(tmp_path, monkeypatch):
+    """--stacked: interrupted after its first checkpoint and resumed, every seed equals
+    an uninterrupted stacked group's; resuming it as a looped group is refused."""
+    from spikectl.training import run as run_module
+
+    config = TINY.with_changes(checkpoint_every_episodes=16, n_step=3, aux_voltage_weight=1.0)
+    whole = train_seeds(config, [0, 1], tmp_path / "whole", stacked=True)
+    real_round, calls = run_module.Loop.round, {"n": 0}
+
+    def round_then_stop(self):
+        real_round(self)
+        calls["n"] += 1
+        if calls["n"] == 3:  # after the checkpoint at episode 16, before the next
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(run_module.Loop, "round", round_then_stop)
+    with pytest.raises(KeyboardInterrupt):
+        train_seeds(config, [0, 1], tmp_path / "stopped", stacked=True)
+    monkeypatch.setattr(run_module.Loop, "round", real_round)
+    with pytest.raises(RunDirError, match="another seed group"):
+        train_seeds(config, [0, 1], tmp_path / "stopped", resume=True)
+    resumed = train_seeds(config, [0, 1], tmp_path / "stopped", resume=True, stacked=True)
+    for seed in (0, 1):
+        assert comparable(resumed[seed]) == comparable(whole[seed])
+        assert same_weights(tmp_path / f"stopped/seed={seed}/model.pt",
+                            tmp_path / f"whole/seed={seed}/model.pt")  # fmt: skip

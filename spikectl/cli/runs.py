@@ -57,6 +57,8 @@ class SweepCommand:
     """Ray cluster address (ray backend); a local Ray instance when not given."""
     group_seeds: bool = False
     """Train the trials that differ only in seed and n_train in one process per group."""
+    stacked: bool = False
+    """With --group-seeds: each group as one stacked computation (pays on a GPU)."""
 
 
 def sweep(command: SweepCommand) -> None:
@@ -91,6 +93,7 @@ def sweep(command: SweepCommand) -> None:
     run_sweep(
         Sweep.from_dict(description), command.sweep_dir, command.workers or None,
         backend=command.backend, address=command.address, group_seeds=command.group_seeds,
+        stacked=command.stacked,
     )  # fmt: skip
 
 
