@@ -184,8 +184,8 @@ def test_sweep_puts_training_set_sizes_in_one_group(tmp_path):
 
     sweep = Sweep(TINY, {"n_train": [3, 6], "seed": [0, 1]})
     jobs = [(config, tmp_path / "trials" / name) for name, config in sweep.trials()]
-    ((function, (configs, run_dirs, group_dir), _),) = seed_group_tasks(jobs, tmp_path)
-    assert function.__name__ == "run_trials" and group_dir.name == "base"
+    ((function, (configs, run_dirs, group_dir, stacked), _),) = seed_group_tasks(jobs, tmp_path)
+    assert function.__name__ == "run_trials" and group_dir.name == "base" and not stacked
     assert [(c.env.n_train, c.train.seed) for c in configs] == [(3, 0), (3, 1), (6, 0), (6, 1)]
     mixed = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "n_train": [3, 6], "seed": [0]})
     jobs = [(config, tmp_path / "trials" / name) for name, config in mixed.trials()]
