@@ -39,3 +39,18 @@ def test_errors_are_one_line_messages(tmp_path, capsys):
     with pytest.raises(SystemExit):
         main(["demo", "--n-train", "0"])
     assert "--n-train must be a positive integer" in capsys.readouterr().err
+
+
+def test_resume_refuses_the_flags_it_would_ignore(tmp_path, run_cli):
+    """`train --resume RUN` continues the saved config; other settings are refused in one
+    line naming them, and the run is left as it was."""
+    run_cli("train", "smoke", "--run-dir", str(tmp_path / "run"))
+    before = (tmp_path / "run" / "metrics.csv").read_text()
+    refused = run_cli("train", "--resume", str(tmp_path / "run"), "--total-env-steps", "9600",
+                      "--learning-rate", "0.1", "--run-dir", "x", check=False)  # fmt: skip
+    assert refused.returncode == 2
+    (line,) = refused.stderr.strip().splitlines()
+    assert "--resume continues the run exactly as it was saved" in line
+    assert "--run-dir, --total-env-steps, --learning-rate" in line
+    assert (tmp_path / "run" / "metrics.csv").read_text() == before
+    assert run_cli("train", "smoke", "--resume", str(tmp_path / "run")).returncode == 0

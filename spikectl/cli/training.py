@@ -43,6 +43,21 @@ def torch_threads() -> int:
     return torch.get_num_threads()
 
 
+def flags_beside_resume(command: TrainCommand) -> list[str]:
+    """The flags given with ``--resume`` that it would ignore: a setting of the tree that
+    differs from the preset's, ``--run-dir``, ``--seeds``, ``--stacked``."""
+    from spikectl.training.config_migration import leaf_paths
+
+    others = (("--run-dir", command.run_dir), ("--seeds", command.seeds),
+              ("--stacked", command.stacked or None))  # fmt: skip
+    given = [flag for flag, value in others if value is not None]
+    preset = leaf_paths(PRESETS[command.preset].to_dict())
+    for path, value in leaf_paths(command.config.to_dict()).items():
+        if preset.get(path) != value:
+            given.append(flag_for(("config", *path), TrainCommand) or ".".join(path))
+    return given
+
+
 def train(command: TrainCommand) -> None:
     """Train (or resume) one run or a seed group, then print the returns against the
     baselines (for a group, each seed's)."""
@@ -51,6 +66,14 @@ def train(command: TrainCommand) -> None:
     from spikectl.training.run_files import read_config
 
     resume, stacked = command.resume is not None, command.stacked
+    if resume:
+        given = flags_beside_resume(command)
+        if given:
+            raise ValueError(
+                f"--resume continues the run exactly as it was saved (its config.json); it "
+                f"takes no other settings, got {', '.join(given)}: drop them, or start a new "
+                "run in another --run-dir"
+            )
     if stacked and command.seeds is None and not resume:
         raise ValueError("--stacked: stacking computes a seed group; give --seeds too")
     if resume and (command.resume / GROUP_FILE).exists():
