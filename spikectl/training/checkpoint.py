@@ -25,6 +25,7 @@ import torch
 
 from spikectl.files import atomic_write_bytes, write_json
 from spikectl.training.config import Experiment
+from spikectl.training.learners.dqn import DQNLearner
 from spikectl.training.run_files import (
     BASELINES_FILE,
     CHECKPOINT_FILE,
@@ -42,8 +43,7 @@ from spikectl.training.torch_files import (
 CHECKPOINT_FORMAT = "spikectl.checkpoint"
 CHECKPOINT_VERSION = 3
 READABLE_VERSIONS = (2, 3)
-DQN_V2_ENTRIES = ("target", "predictor", "optimizer", "replay", "updates", "loss_sum",
-                  "aux_loss_sum", "loss_count")  # fmt: skip
+DQN_V2_ENTRIES = ("target", "predictor", "optimizer", *DQNLearner.counter_and_replay_keys)
 """The double-Q learner's entries at the top level of a format-2 checkpoint (and
 ``online``, its acting network)."""
 

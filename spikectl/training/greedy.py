@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from spikectl.agents import masked_q
+from spikectl.agents import greedy_action
 from spikectl.agents.blocks import observation_batch
 from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
@@ -24,7 +24,7 @@ class GreedyPolicy:
         obs = observation_batch(observations, self.device)
         scores, self.state = self.network.step(obs, self.state)  # [S, n + 1]
         legal = torch.as_tensor(action_mask, device=scores.device)
-        return masked_q(scores, legal).argmax(dim=1).cpu().numpy() - 1  # [S]
+        return greedy_action(scores, legal).cpu().numpy()  # [S]
 
 
 def greedy_returns(

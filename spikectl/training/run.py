@@ -23,6 +23,7 @@ import contextlib
 import math
 import time
 import warnings
+from dataclasses import fields
 from pathlib import Path
 
 import numpy as np
@@ -330,8 +331,7 @@ def evaluation_envs(config: Experiment, sets: list[tuple]) -> list[dict]:
 def block(episodes: EpisodeBatch, start: int, stop: int) -> EpisodeBatch:
     """Episodes ``start:stop`` of a batch."""
     return EpisodeBatch(**{
-        name: getattr(episodes, name)[start:stop]
-        for name in ("voltage", "actions", "rewards", "spikes", "action_mask", "context_index")
+        field.name: getattr(episodes, field.name)[start:stop] for field in fields(EpisodeBatch)
     })  # fmt: skip
 
 

@@ -120,9 +120,9 @@ def prepare_run_dir(config: Experiment, run_dir: Path, resume: bool) -> bool:
 
     Returns whether there is a checkpoint to resume from. A run that stopped before its
     first checkpoint (killed, out of disk, a bad file) is started again from step 0,
-    whether it is given with ``resume`` or as a new run with the same config.
+    whether it is given with ``resume`` or as a new run with the same config. The caller
+    (``training.run.train_runs``) has checked the device before any directory is touched.
     """
-    check_device(config.train.device)
     if run_dir.exists() and not run_dir.is_dir():
         raise RunDirError(f"{run_dir} is a file, not a run directory: choose another --run-dir")
     config_path = run_dir / CONFIG_FILE

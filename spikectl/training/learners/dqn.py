@@ -21,17 +21,17 @@ from typing import Any
 import numpy as np
 import torch
 
-from spikectl.agents import make_agent, make_voltage_predictor, masked_q
-from spikectl.agents.blocks import observation_batch
+from spikectl.agents import make_agent, make_voltage_predictor
 from spikectl.contexts import ContextSet
 from spikectl.envs.env_support import random_legal_actions
 from spikectl.envs.rollout import EpisodeBatch
+from spikectl.training.greedy import GreedyPolicy
 from spikectl.training.learners.dqn_losses import soft_update, training_losses
 from spikectl.training.learners.protocol import LossDiverged
 from spikectl.training.replay import EpisodeReplay
 
 
-class EpsilonGreedyPolicy:
+class EpsilonGreedyPolicy(GreedyPolicy):
     """Acts with the online network's step forward, carrying one hidden state per episode.
 
     With probability epsilon (per step and episode) a random legal action replaces the
@@ -48,19 +48,11 @@ class EpsilonGreedyPolicy:
         device: str,
         explore_do_nothing: float | None = None,
     ) -> None:
-        self.network = network
-        self.epsilon = epsilon
-        self.rng = rng
-        self.device = device
-        self.explore_do_nothing = explore_do_nothing
-        self.state = None
+        super().__init__(network, device)
+        self.epsilon, self.rng, self.explore_do_nothing = epsilon, rng, explore_do_nothing
 
-    @torch.no_grad()
     def __call__(self, observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
-        obs = observation_batch(observations, self.device)
-        q_values, self.state = self.network.step(obs, self.state)  # [S, n + 1]
-        legal = torch.as_tensor(action_mask, device=q_values.device)
-        greedy = masked_q(q_values, legal).argmax(dim=1).cpu().numpy() - 1  # [S]
+        greedy = super().__call__(observations, action_mask)  # [S]
         if self.epsilon <= 0:
             return greedy
         return explore(greedy, action_mask, self.epsilon, self.rng, self.explore_do_nothing)

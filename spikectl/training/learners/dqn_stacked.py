@@ -17,14 +17,13 @@ device idle (docs/benchmarks.md), not on a CPU.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
 import torch
 
-from spikectl.agents import make_agent
+from spikectl.agents import greedy_action, make_agent
 from spikectl.agents.stacked import StackedNetworks
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.training.learners.dqn import DQNLearner, explore, set_learning_rate
@@ -182,7 +181,7 @@ class StackedPolicy:
             self.state = tuple(s.expand(K, *s.shape).clone() for s in state)  # [K, E, ...]
         q_values, self.state = group.online.call("step", obs, self.state)  # [K, E, n+1]
         legal = torch.as_tensor(action_mask, device=q_values.device).unflatten(0, (K, -1))
-        greedy = q_values.masked_fill(~legal, -math.inf).argmax(dim=2).cpu().numpy() - 1  # [K, E]
+        greedy = greedy_action(q_values, legal).cpu().numpy()  # [K, E]
         if self.epsilon <= 0:
             return greedy.reshape(-1)
         masks = action_mask.reshape(K, -1, action_mask.shape[-1])  # [K, E, n+1]

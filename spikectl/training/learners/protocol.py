@@ -41,6 +41,9 @@ class Learner(Protocol):
     metric_fields: tuple[str, ...]
     """The metrics.csv columns :meth:`row_metrics` fills besides ``updates`` and ``loss``."""
 
+    updates: int
+    """Gradient updates (or whatever the learner counts as one) made so far."""
+
     def collection_policy(self, episode: int) -> Policy:
         """The policy that plays the next round of episodes (``episode`` done so far);
         a fresh one each round, carrying its recurrent state through the episodes."""
