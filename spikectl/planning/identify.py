@@ -138,6 +138,32 @@ class ConnectivityEstimate:
         return np.where(known[:, target], (weights[:, target] > 0).astype(float), prior)
 
 
+class KnownConnectivity:
+    """Stands in for :class:`ConnectivityEstimate` where the weights are told (a
+    privileged controller: the same loop with nothing left to identify): every entry
+    known and right, whatever is observed."""
+
+    def __init__(self, weights: np.ndarray) -> None:
+        self._weights = np.asarray(weights, dtype=np.int8)
+        self.n_neurons = self._weights.shape[0]
+
+    def add(self, released: np.ndarray, residual: np.ndarray, observed: np.ndarray) -> None:
+        """Nothing to learn."""
+
+    def posterior(self) -> tuple[np.ndarray, np.ndarray]:
+        return self._weights.astype(np.float64), np.zeros(self._weights.shape)
+
+    def weights(self, known_sd: float) -> tuple[np.ndarray, np.ndarray]:
+        return self._weights, np.ones(self._weights.shape, dtype=bool)
+
+    def sample(self, known_sd, connection_uniforms, sign_uniforms) -> np.ndarray:
+        """K copies of the weights (every draw is the truth)."""
+        return np.repeat(self._weights[None], connection_uniforms.shape[0], axis=0)
+
+    def excitation_probability(self, target: int, known_sd: float) -> np.ndarray:
+        return (self._weights[:, target] > 0).astype(np.float64)
+
+
 class ObservedState:
     """The simulator state of the observed network, tracked from observations and actions.
 

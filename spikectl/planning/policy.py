@@ -31,7 +31,12 @@ from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, advance
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.discrete import DiscreteConnectivityEstimate
-from spikectl.planning.identify import NOISE_FREE_SD, ConnectivityEstimate, ObservedState
+from spikectl.planning.identify import (
+    NOISE_FREE_SD,
+    ConnectivityEstimate,
+    KnownConnectivity,
+    ObservedState,
+)
 from spikectl.planning.qmdp import qmdp_action
 
 IDENTIFICATIONS = ("gaussian", "discrete")
@@ -44,6 +49,7 @@ _SETTINGS = (
     "width", "horizon", "known_sd", "noise_mV", "hypotheses", "seed", "probe",
     "identification", "plan_on", "spike_margin_sd", "gamble_networks",
     "gamble_information", "gamble_horizon", "gamble_width", "gamble_candidates",
+    "known_weights",
 )  # fmt: skip
 
 
@@ -92,6 +98,10 @@ class IdentifyAndPlan:
         gamble_width: beam width of the best continuation on each drawn network.
         gamble_candidates: at most this many actions are valued (do nothing, the
             probe and the likeliest excitatory inputs of the target), for large n.
+        known_weights: [n, n] the network's true signed weights (agent indexing): the
+            same loop *told* the connectivity, with nothing left to identify (a
+            privileged controller, 0.993 on the validation networks against the
+            oracle planner's 0.998; a teacher for ``spikectl.training.learners.guided``).
 
     ```python
     policy = IdentifyAndPlan()
@@ -122,6 +132,7 @@ class IdentifyAndPlan:
         gamble_horizon: int = 10,
         gamble_width: int = 8,
         gamble_candidates: int = 8,
+        known_weights: np.ndarray | None = None,
     ) -> None:
         params = NeuronParams() if params is None else params
         if not isinstance(params, NeuronParams):
@@ -165,6 +176,15 @@ class IdentifyAndPlan:
         self.gamble_networks, self.gamble_horizon = int(gamble_networks), int(gamble_horizon)
         self.gamble_width, self.gamble_candidates = int(gamble_width), int(gamble_candidates)
         self.gamble_information = float(gamble_information)
+        if known_weights is not None:
+            known_weights = np.asarray(known_weights)
+            if known_weights.ndim != 2 or known_weights.shape[0] != known_weights.shape[1]:
+                raise ValueError(
+                    f"known_weights must be a square [n, n] array, got shape {known_weights.shape}"
+                )
+            if not np.isin(known_weights, (-1, 0, 1)).all():
+                raise ValueError("known_weights must hold only -1, 0 and +1")
+        self.known_weights = known_weights
         self.params, self.width, self.horizon = params, int(width), horizon
         self.known_sd, self.noise_mV = float(known_sd), float(noise_mV)
         # A plan is renewed when less than half its horizon is left, so that a wanted
@@ -252,7 +272,14 @@ class IdentifyAndPlan:
         mean, _ = self.estimate.posterior()
         return np.where(known, signs, np.round(mean, 2)), known
 
-    def _new_estimate(self, n: int) -> ConnectivityEstimate | DiscreteConnectivityEstimate:
+    def _new_estimate(self, n: int):
+        if self.known_weights is not None:
+            if self.known_weights.shape != (n, n):
+                raise ValueError(
+                    f"known_weights has shape {self.known_weights.shape}, but the "
+                    f"observation has {n} neurons"
+                )
+            return KnownConnectivity(self.known_weights)
         if self.identification == "discrete":
             return DiscreteConnectivityEstimate(n, self._residual_sd)
         return ConnectivityEstimate(n, self._residual_sd)

@@ -222,7 +222,9 @@ class Experiment:
     """The network."""
     train: Annotated[TrainConfig, tyro.conf.arg(name="")] = field(default_factory=TrainConfig)
     """The run: seed, length, evaluations, checkpoints, machine."""
-    learner: Annotated[LearnerConfig, tyro.conf.arg(name="")] = field(default_factory=DQNConfig)
+    learner: Annotated[
+        LearnerConfig, tyro.conf.arg(name=""), tyro.conf.AvoidSubcommands
+    ] = field(default_factory=DQNConfig)
     """The learning algorithm, chosen by its config's type (``learner.name`` in config.json)."""
 
     def __post_init__(self) -> None:

@@ -8,9 +8,11 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 from spikectl.agents import AgentSizes
 from spikectl.training.config import AgentConfig, EnvConfig, Experiment, TrainConfig
-from spikectl.training.learners import DQNConfig
+from spikectl.training.learners import DQNConfig, GuidedConfig
 
 PAPER = Experiment()
 
@@ -56,6 +58,12 @@ decaying linearly to 2e-4, half-width networks, one Torch thread. Until 2026-11-
 preset had the dueling do-nothing head and a constant lr (docs/results sweep files made
 with it pin both)."""
 
+GUIDED = dataclasses.replace(
+    QUICK, learner=GuidedConfig(**dataclasses.asdict(QUICK.learner), teacher="identify")
+)
+"""The quick preset's run and sizes with the teacher-guided learner (docs/training.md,
+"Learners that beat the planner")."""
+
 SMOKE = Experiment(
     env=EnvConfig(episode_length=20, n_neurons=5, n_train=6, n_test=6, n_val=6),
     agent=AgentConfig(
@@ -89,10 +97,16 @@ SMOKE = Experiment(
 )
 """Seconds on one core: 5-neuron networks, 20-step episodes, tiny networks (tests)."""
 
-PRESETS: dict[str, Experiment] = {"paper": PAPER, "quick": QUICK, "smoke": SMOKE}
+PRESETS: dict[str, Experiment] = {
+    "paper": PAPER,
+    "quick": QUICK,
+    "guided": GUIDED,
+    "smoke": SMOKE,
+}
 PRESET_HELP: dict[str, str] = {
     "paper": "Table 2 exactly: 1 M environment steps, the paper's network sizes (days on a CPU).",
     "quick": "The main job: n-step targets, auxiliary loss, half-width networks (~15 min, 1 core).",
+    "guided": "The quick preset's run with a teacher: identify-and-plan labels the agent's states.",
     "smoke": "Seconds: 5-neuron networks, 20-step episodes, tiny networks (for tests).",
 }
 """One line per preset, for ``spikectl train --help``."""

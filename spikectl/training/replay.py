@@ -33,16 +33,31 @@ class EpisodeBatchArrays:
     """[B, N] int8."""
     action_masks: np.ndarray
     """[B, n + 1] bool legal actions (index a + 1 for action a)."""
+    labels: np.ndarray | None = None
+    """[B, N] int64 a teacher's action at every step (NO_LABEL where none was asked), in
+    a buffer made with ``labelled=True``; None otherwise."""
+
+
+NO_LABEL = -2
+"""The label of a step no teacher labelled (actions are >= -1)."""
 
 
 class EpisodeReplay:
     """A ring buffer of ``capacity`` whole episodes of length ``episode_length``."""
 
-    def __init__(self, capacity: int, n_neurons: int, episode_length: int) -> None:
+    def __init__(
+        self, capacity: int, n_neurons: int, episode_length: int, labelled: bool = False
+    ) -> None:
         if capacity < 1:
             raise ValueError(f"replay capacity must be >= 1 episode, got {capacity}")
         check_fits_in_memory(
-            capacity * ((episode_length + 1) * n_neurons * 4 + episode_length * 7 + n_neurons + 9),
+            capacity
+            * (
+                (episode_length + 1) * n_neurons * 4
+                + episode_length * (7 + 2 * labelled)
+                + n_neurons
+                + 9
+            ),
             f"a replay buffer of {capacity:,} episodes of {episode_length} steps and "
             f"{n_neurons} neurons",
             "lower buffer_size",
@@ -56,6 +71,9 @@ class EpisodeReplay:
         self.targets = np.zeros(capacity, dtype=np.int64)
         self.patterns = np.zeros((capacity, episode_length), dtype=np.int8)
         self.action_masks = np.zeros((capacity, n_neurons + 1), dtype=bool)
+        self.labels = (
+            np.full((capacity, episode_length), NO_LABEL, dtype=np.int16) if labelled else None
+        )
         self.size = 0
         """Episodes currently held."""
         self.added = 0
@@ -72,9 +90,11 @@ class EpisodeReplay:
         targets: np.ndarray,
         patterns: np.ndarray,
         action_masks: np.ndarray,
+        labels: np.ndarray | None = None,
     ) -> None:
         """Add E finished episodes: voltage [E, N + 1, n], actions/rewards/patterns [E, N],
-        targets [E], action_masks [E, n + 1]."""
+        targets [E], action_masks [E, n + 1]; in a labelled buffer, labels [E, N] (None:
+        NO_LABEL everywhere)."""
         count = voltage.shape[0]
         expected = (count, self.episode_length + 1, self.n_neurons)
         if voltage.shape != expected or actions.shape != (count, self.episode_length):
@@ -89,6 +109,12 @@ class EpisodeReplay:
         self.targets[slots] = targets
         self.patterns[slots] = patterns
         self.action_masks[slots] = action_masks
+        if self.labels is not None:
+            if labels is not None and labels.shape != actions.shape:
+                raise ValueError(f"labels must have shape {actions.shape}, got {labels.shape}")
+            self.labels[slots] = NO_LABEL if labels is None else labels
+        elif labels is not None:
+            raise ValueError("this replay buffer keeps no labels (make it with labelled=True)")
         self.added += count
         self.size = min(self.size + count, self.capacity)
 
@@ -104,12 +130,15 @@ class EpisodeReplay:
             targets=self.targets[slots],
             patterns=self.patterns[slots],
             action_masks=self.action_masks[slots],
+            labels=None if self.labels is None else self.labels[slots].astype(np.int64),
         )
 
     def state_dict(self) -> dict[str, np.ndarray | int]:
         """Everything needed to restore the buffer exactly (only the filled slots)."""
         held = slice(0, self.size)
+        labels = {} if self.labels is None else {"labels": self.labels[held].copy()}
         return {
+            **labels,
             "capacity": self.capacity,
             "size": self.size,
             "added": self.added,
@@ -127,7 +156,15 @@ class EpisodeReplay:
                 f"checkpointed replay capacity {state['capacity']} != configured {self.capacity}"
             )
         size = int(state["size"])
-        for name in ("voltage", "actions", "rewards", "targets", "patterns", "action_masks"):
+        if (self.labels is None) != ("labels" not in state):
+            raise ValueError(
+                "the checkpointed replay buffer "
+                + ("keeps" if "labels" in state else "does not keep")
+                + " teacher labels, the configured one "
+                + ("does" if self.labels is not None else "does not")
+            )
+        names = ("voltage", "actions", "rewards", "targets", "patterns", "action_masks")
+        for name in names + (("labels",) if self.labels is not None else ()):
             getattr(self, name)[:size] = state[name]
         self.size = size
         self.added = int(state["added"])

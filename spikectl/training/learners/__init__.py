@@ -9,23 +9,26 @@ learner is one module and one config class; adding one means adding both here.
 name       config                     learner
 =========  =========================  ==============================================
 ``dqn``    :class:`DQNConfig`         recurrent double Q-learning (the paper's)
+``guided`` :class:`GuidedConfig`      the same, guided by a teacher (DAgger + DQfD)
 =========  =========================  ==============================================
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Union
 
 from spikectl.training.learners.dqn_config import DQNConfig
+from spikectl.training.learners.guided_config import GuidedConfig
 
 if TYPE_CHECKING:
     from spikectl.training.learners.protocol import Learner, LearnerGroup
 
-LearnerConfig = DQNConfig
-"""The type of ``Experiment.learner``: the union of every learner's config (tyro makes
-a union of dataclasses into subcommands; with one learner it is that learner's flags)."""
+LearnerConfig = Union[DQNConfig, GuidedConfig]  # noqa: UP007 (tyro reads the Union)
+"""The type of ``Experiment.learner``: the union of every learner's config. On the
+command line the preset chooses the learner and its flags are that learner's
+(``spikectl train guided --teacher identify``)."""
 
-LEARNER_CONFIGS: dict[str, type] = {DQNConfig.name: DQNConfig}
+LEARNER_CONFIGS: dict[str, type] = {DQNConfig.name: DQNConfig, GuidedConfig.name: GuidedConfig}
 """Every learner's config class by its name in config.json."""
 
 
@@ -42,8 +45,9 @@ def learner_config_type(name: object) -> type:
 def make_learner(config, train_set, rng) -> Learner:
     """The learner of ``config.learner`` for one seed: it draws from the run's ``rng``."""
     from spikectl.training.learners.dqn import DQNLearner
+    from spikectl.training.learners.guided import GuidedDQNLearner
 
-    implementations = {DQNConfig: DQNLearner}
+    implementations = {DQNConfig: DQNLearner, GuidedConfig: GuidedDQNLearner}
     return implementations[type(config.learner)](config, train_set, rng)
 
 
@@ -56,7 +60,7 @@ def make_learners(configs, train_sets, rngs, stacked: bool = False) -> LearnerGr
     group the loop drives: looped (each seed exactly as alone) or, with ``stacked``,
     one stacked computation where the learner has one."""
     if stacked:
-        if not isinstance(configs[0].learner, STACKED_GROUPS):
+        if type(configs[0].learner) not in STACKED_GROUPS:
             raise ValueError(
                 f"--stacked: the {configs[0].learner.name} learner has no stacked form"
             )
@@ -70,5 +74,5 @@ def make_learners(configs, train_sets, rngs, stacked: bool = False) -> LearnerGr
     )
 
 
-__all__ = ["DQNConfig", "LEARNER_CONFIGS", "LearnerConfig", "learner_config_type",
+__all__ = ["DQNConfig", "GuidedConfig", "LEARNER_CONFIGS", "LearnerConfig", "learner_config_type",
            "make_learner", "make_learners"]  # fmt: skip

@@ -162,10 +162,7 @@ class DQNLearner:
         set_learning_rate(self.optimizer, settings.learning_rate_at(episode, self.total_episodes))
         for _ in range(settings.updates_per_round):
             batch = self.replay.sample(settings.batch_size, self.rng)
-            td, aux = training_losses(
-                self.network, self.target, batch, settings, self.predictor, self.device
-            )
-            loss = td if aux is None else td + settings.aux_voltage_weight * aux
+            loss = self.batch_loss(batch, episode)
             if not torch.isfinite(loss):
                 raise LossDiverged(loss.item(), self.updates + 1)
             self.optimizer.zero_grad(set_to_none=True)
@@ -175,9 +172,17 @@ class DQNLearner:
             self.optimizer.step()
             soft_update(self.target, self.network, settings.tau)
             self.updates += 1
-            self.loss_sum += td.item()
-            self.aux_loss_sum += 0.0 if aux is None else aux.item()
             self.loss_count += 1
+
+    def batch_loss(self, batch, episode: int) -> torch.Tensor:
+        """The loss of one sampled batch (the TD loss plus the weighted auxiliary loss);
+        adds its parts to the running sums the metrics rows report."""
+        td, aux = training_losses(
+            self.network, self.target, batch, self.settings, self.predictor, self.device
+        )
+        self.loss_sum += td.item()
+        self.aux_loss_sum += 0.0 if aux is None else aux.item()
+        return td if aux is None else td + self.settings.aux_voltage_weight * aux
 
     def row_metrics(self, episode: int) -> dict[str, float]:
         n = self.loss_count

@@ -61,11 +61,13 @@ def training_losses(
     settings: DQNConfig,
     predictor: torch.nn.Module | None = None,
     device: str = "cpu",
-) -> tuple[torch.Tensor, torch.Tensor | None]:
+    return_q_values: bool = False,
+) -> tuple[torch.Tensor, ...]:
     """The double-Q TD loss over every step of the sampled episodes and, with a
-    ``predictor``, the auxiliary next-voltage loss (None without one)."""
+    ``predictor``, the auxiliary next-voltage loss (None without one); with
+    ``return_q_values`` also the online Q-values [B, N + 1, n + 1] they were made from."""
     tensors = batch_tensors(batch, device)
-    return losses_on_tensors(online, target, tensors, settings, predictor)
+    return losses_on_tensors(online, target, tensors, settings, predictor, return_q_values)
 
 
 def batch_tensors(batch: EpisodeBatchArrays, device: str) -> dict[str, torch.Tensor]:
@@ -84,7 +86,8 @@ def losses_on_tensors(
     tensors: dict,
     settings: DQNConfig,
     predictor=None,
-) -> tuple[torch.Tensor, torch.Tensor | None]:
+    return_q_values: bool = False,
+) -> tuple[torch.Tensor, ...]:
     """:func:`training_losses` on :func:`batch_tensors`' output; the networks may be
     modules or one seed's view of stacked networks (inside vmap)."""
     obs_seq, actions, rewards, legal = (
@@ -113,12 +116,13 @@ def losses_on_tensors(
     else:
         td = F.mse_loss(q_taken, td_target)
     if predictor is None:
-        return td, None
+        return (td, None, q_values) if return_q_values else (td, None)
     next_voltage = normalised_voltage(
         obs_seq["voltage"][:, 1:], online.v_rest_mV, online.v_threshold_mV
     )  # [B, N, n]
     predicted = predictor(features[:, :-1], actions)  # [B, N, n]
-    return td, F.mse_loss(predicted, next_voltage)
+    aux = F.mse_loss(predicted, next_voltage)
+    return (td, aux, q_values) if return_q_values else (td, aux)
 
 
 def td_loss(

@@ -1,0 +1,160 @@
+"""Teacher-guided recurrent double Q-learning: the DQN learner that also imitates a
+teacher on the states it visits itself, weaned off so that reward can take it further.
+
+Each round the agent collects its episodes as the DQN learner does (epsilon-greedy on
+its own network: the states are the student's, as in DAgger). While the imitation
+weight is above zero, a teacher (``learners.teachers``) is played beside every finished
+episode and labels each step with the action it would have taken; the labels are
+stored with the episode. Every update adds to the TD loss (and the auxiliary loss) the
+large-margin imitation loss of DQfD (Hester et al. 2018) on the labelled steps,
+
+    imitation_loss = mean over labelled steps of  max_a [Q(h, a) + margin·(a ≠ a_E)] − Q(h, a_E)
+
+which is zero once the teacher's action a_E leads every other by the margin, so it
+shapes the ranking of the actions and leaves the values to the TD loss. Its weight
+decays linearly to ``imitation_weight_end`` (0: pure Q-learning from then on, and no
+more labels). The teacher runs in the training process: its CPU time is part of the
+run's, and metrics.csv reports it (``teacher_seconds``).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping
+from typing import Any
+
+import numpy as np
+import torch
+
+from spikectl.agents import masked_q
+from spikectl.contexts import ContextSet
+from spikectl.envs.rollout import EpisodeBatch
+from spikectl.training.learners.dqn import DQNLearner
+from spikectl.training.learners.dqn_losses import training_losses
+from spikectl.training.learners.teachers import teacher_labels
+from spikectl.training.replay import EpisodeReplay
+
+
+def large_margin_loss(
+    q_values: torch.Tensor, labels: torch.Tensor, legal: torch.Tensor, margin: float
+) -> tuple[torch.Tensor, torch.Tensor]:
+    """DQfD's supervised loss and the student's agreement with the teacher.
+
+    q_values [B, N, n + 1] at the labelled observations, labels [B, N] (the teacher's
+    actions, < -1 where unlabelled), legal [B, 1, n + 1]. Returns (the mean loss over
+    labelled steps, the fraction of them where the student's greedy action is the
+    teacher's); both 0 without labelled steps.
+    """
+    labelled = labels >= -1  # [B, N]
+    index = (labels.clamp(min=-1) + 1)[..., None]  # [B, N, 1]
+    margins = torch.full_like(q_values, margin).scatter(2, index, 0.0)  # [B, N, n+1]
+    best_with_margin = masked_q(q_values + margins, legal).max(dim=2).values  # [B, N]
+    q_teacher = q_values.gather(2, index).squeeze(2)  # [B, N]
+    count = labelled.sum()
+    if count == 0:
+        zero = q_values.new_zeros(())
+        return zero, zero
+    loss = ((best_with_margin - q_teacher) * labelled).sum() / count
+    with torch.no_grad():
+        greedy = masked_q(q_values, legal).argmax(dim=2)  # [B, N]
+        agreement = ((greedy == index.squeeze(2)) & labelled).sum() / count
+    return loss, agreement
+
+
+class GuidedDQNLearner(DQNLearner):
+    """One seed's teacher-guided learner (``Experiment.learner`` a GuidedConfig)."""
+
+    metric_fields = DQNLearner.metric_fields + (
+        "imitation_weight", "imitation_loss", "teacher_agreement", "teacher_seconds",
+    )  # fmt: skip
+
+    def __init__(self, config, train_set: ContextSet, rng: np.random.Generator) -> None:
+        super().__init__(config, train_set, rng)
+        self.replay = EpisodeReplay(
+            self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
+            labelled=True,
+        )  # fmt: skip
+        self.contexts = list(train_set)
+        self.params = config.env.params
+        self.noise_mV = float(config.env.extensions.observation_noise_mV)
+        if (
+            self.settings.teacher == "told-weights"
+            and config.env.n_observed != config.env.n_neurons
+        ):
+            raise ValueError(
+                "learner.teacher 'told-weights' needs every neuron observed; "
+                f"{config.env.id} hides some (use teacher 'identify')"
+            )
+        self.teacher_seconds = 0.0
+        self.imitation_loss_sum, self.agreement_sum = 0.0, 0.0
+
+    def imitation_weight(self, episode: int) -> float:
+        return self.settings.imitation_weight_at(episode, self.total_episodes)
+
+    def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
+        labels = None
+        if self.imitation_weight(self.replay.added) > 0:
+            started = time.process_time()
+            labels = teacher_labels(
+                episodes, [self.contexts[i] for i in contexts], self.settings.teacher,
+                self.params, self.noise_mV, self.settings.teacher_width,
+            )  # fmt: skip
+            self.teacher_seconds += time.process_time() - started
+        self.replay.add(
+            episodes.voltage, episodes.actions, episodes.rewards, self.targets[contexts],
+            self.patterns[contexts], episodes.action_mask, labels,
+        )  # fmt: skip
+
+    def batch_loss(self, batch, episode: int) -> torch.Tensor:
+        weight = self.imitation_weight(episode)
+        if weight <= 0:
+            return super().batch_loss(batch, episode)
+        td, aux, q_values = training_losses(
+            self.network, self.target, batch, self.settings, self.predictor, self.device,
+            return_q_values=True,
+        )  # fmt: skip
+        labels = torch.as_tensor(batch.labels, device=self.device)  # [B, N]
+        legal = torch.as_tensor(batch.action_masks, device=self.device)[:, None]  # [B, 1, n+1]
+        imitation, agreement = large_margin_loss(
+            q_values[:, :-1], labels, legal, self.settings.imitation_margin
+        )
+        self.loss_sum += td.item()
+        self.aux_loss_sum += 0.0 if aux is None else aux.item()
+        self.imitation_loss_sum += imitation.item()
+        self.agreement_sum += agreement.item()
+        loss = td if aux is None else td + self.settings.aux_voltage_weight * aux
+        return loss + weight * imitation
+
+    def row_metrics(self, episode: int) -> dict[str, float]:
+        n = self.loss_count
+        guided = n > 0 and self.imitation_loss_sum + self.agreement_sum > 0
+        row = {
+            **super().row_metrics(episode),
+            "imitation_weight": self.imitation_weight(episode),
+            "imitation_loss": self.imitation_loss_sum / n if guided else math.nan,
+            "teacher_agreement": self.agreement_sum / n if guided else math.nan,
+            "teacher_seconds": self.teacher_seconds,
+        }
+        self.imitation_loss_sum, self.agreement_sum = 0.0, 0.0
+        return row
+
+    def progress(self, episode: int) -> dict[str, str]:
+        return {**super().progress(episode), "imit": f"{self.imitation_weight(episode):.2f}"}
+
+    def state_dict(self) -> dict[str, Any]:
+        return {
+            **super().state_dict(),
+            "teacher_seconds": float(self.teacher_seconds),
+            "imitation_loss_sum": float(self.imitation_loss_sum),
+            "agreement_sum": float(self.agreement_sum),
+        }
+
+    def load_state_dict(self, state: Mapping[str, Any]) -> None:
+        super().load_state_dict(state)
+        self.teacher_seconds = float(state["teacher_seconds"])
+        self.imitation_loss_sum = float(state["imitation_loss_sum"])
+        self.agreement_sum = float(state["agreement_sum"])
+
+
+__all__ = ["GuidedDQNLearner", "large_margin_loss"]

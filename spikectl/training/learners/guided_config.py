@@ -1,0 +1,74 @@
+"""The settings of teacher-guided recurrent double Q-learning
+(``spikectl.training.learners.guided``): the DQN learner's, plus the teacher's.
+
+A plain frozen dataclass with no Torch in sight (like :class:`DQNConfig`, which it
+extends: every DQN option keeps its meaning).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import ClassVar, Literal
+
+from spikectl.config_errors import ConfigError, check_int
+from spikectl.training.learners.dqn_config import DQNConfig
+
+TEACHERS = ("identify", "told-weights")
+"""``identify``: identify-and-plan, which sees only what the agent sees (realisable:
+0.837 on the test networks); ``told-weights``: the same loop told the network's true
+weights (privileged: 0.993 on the validation networks; a student cannot copy what it
+cannot infer, the imitation gap)."""
+
+
+@dataclass(frozen=True)
+class GuidedConfig(DQNConfig):
+    """Recurrent double Q-learning guided by a teacher: DAgger-style relabelling of the
+    agent's own episodes with a large-margin imitation loss (DQfD), weaned off."""
+
+    name: ClassVar[str] = "guided"
+    """The learner's name in config.json (``"learner": {"name": "guided", ...}``)."""
+
+    teacher: Literal["identify", "told-weights"] = "identify"
+    """Who labels the visited states: identify-and-plan or the same loop told the weights."""
+    teacher_width: int = 32
+    """Beam width of the teacher's plans (identify-and-plan's default)."""
+    imitation_weight: float = 1.0
+    """Weight of the large-margin imitation loss at the start of training."""
+    imitation_weight_end: float = 0.0
+    """Weight at the end of the anneal, then constant; at 0 the teacher stops labelling."""
+    imitation_anneal_fraction: float = 0.5
+    """Fraction of all episodes over which the weight moves linearly to its end value."""
+    imitation_margin: float = 0.05
+    """Margin (in units of return) by which the teacher's action should lead every other."""
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if self.teacher not in TEACHERS:
+            raise ConfigError(
+                "teacher", f"must be one of {', '.join(TEACHERS)}, got {self.teacher!r}"
+            )
+        check_int("teacher_width", self.teacher_width, 1, what="a positive integer")
+        for name in ("imitation_weight", "imitation_weight_end", "imitation_anneal_fraction",
+                     "imitation_margin"):  # fmt: skip
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, float)):
+                raise ConfigError(name, f"must be a number, got {value!r}")
+            if not (math.isfinite(value) and value >= 0):
+                raise ConfigError(name, f"must be a finite number >= 0, got {value!r}")
+        if self.imitation_anneal_fraction > 1:
+            raise ConfigError(
+                "imitation_anneal_fraction",
+                f"must lie in [0, 1], got {self.imitation_anneal_fraction}",
+            )
+
+    def imitation_weight_at(self, episode: int, total_episodes: int) -> float:
+        """The imitation loss's weight after ``episode`` episodes: linear from
+        imitation_weight to imitation_weight_end over the anneal, then constant."""
+        anneal = self.imitation_anneal_fraction * total_episodes
+        if anneal <= 0:
+            return self.imitation_weight_end
+        fraction = min(episode / anneal, 1.0)
+        return self.imitation_weight + fraction * (
+            self.imitation_weight_end - self.imitation_weight
+        )

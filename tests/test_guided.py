@@ -1,0 +1,213 @@
+"""The teacher-guided learner: its loss by hand, its teachers' labels, exact resume,
+and that imitation teaches (``spikectl.training.learners.guided``)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from spikectl.config_errors import ConfigError
+from spikectl.contexts import make_splits
+from spikectl.envs.rollout import evaluate_policy, make_random_policy
+from spikectl.neuron.params import NeuronParams
+from spikectl.planning import IdentifyAndPlan
+from spikectl.training import run as run_module
+from spikectl.training.config import Experiment
+from spikectl.training.learners import GuidedConfig
+from spikectl.training.learners.guided import large_margin_loss
+from spikectl.training.learners.teachers import teacher_labels
+from spikectl.training.presets import PRESETS, SMOKE
+from spikectl.training.replay import NO_LABEL, EpisodeReplay
+from spikectl.training.run import train
+
+CLOCKS = ("wall_time_s", "cpu_time_s", "teacher_seconds")
+
+
+def guided(config: Experiment = SMOKE, **changes) -> Experiment:
+    learner = GuidedConfig(**{**dataclasses.asdict(config.learner), **changes})
+    return dataclasses.replace(config, learner=learner)
+
+
+def test_large_margin_loss_by_hand():
+    q_values = torch.tensor([[[0.0, 0.3, 0.1, 0.9],  # teacher 0 (index 1): 0.9 + 0.2 - 0.3
+                              [0.5, 0.2, 0.1, 0.0],  # teacher -1 leads by 0.3: 0
+                              [0.4, 0.4, 0.4, 0.4]]])  # unlabelled  # fmt: skip
+    labels = torch.tensor([[0, -1, NO_LABEL]])
+    legal = torch.tensor([[[True, True, True, True]]])
+    loss, agreement = large_margin_loss(q_values, labels, legal, margin=0.2)
+    assert loss.item() == pytest.approx((0.8 + 0.0) / 2)
+    assert agreement.item() == pytest.approx(0.5)  # step 1 agrees, step 0 does not
+    # An illegal action's value does not count, however large.
+    legal = torch.tensor([[[True, True, True, False]]])
+    loss, agreement = large_margin_loss(q_values, labels, legal, margin=0.2)
+    assert loss.item() == pytest.approx(0.0) and agreement.item() == 1.0
+    # Without labelled steps both are 0 (not NaN).
+    loss, agreement = large_margin_loss(q_values, torch.full((1, 3), NO_LABEL), legal, 0.2)
+    assert loss.item() == 0.0 and agreement.item() == 0.0
+
+
+def test_loss_gradient_moves_only_the_leading_and_teacher_actions():
+    q_values = torch.tensor([[[0.0, 0.3, 0.1, 0.9]]], requires_grad=True)
+    loss, _ = large_margin_loss(
+        q_values, torch.tensor([[0]]), torch.ones(1, 1, 4, dtype=torch.bool), margin=0.2
+    )
+    loss.backward()
+    assert q_values.grad.tolist() == [[[0.0, -1.0, 0.0, 1.0]]]
+
+
+@pytest.fixture(scope="module")
+def contexts():
+    return make_splits(4, 1, seed=3, n_val=0)[0]
+
+
+def test_labels_of_the_teachers_own_episodes_are_its_actions(contexts):
+    """Played beside an episode it played itself, the teacher says what it did."""
+    episodes = evaluate_policy(contexts, IdentifyAndPlan().vector_policy(len(contexts)))
+    labels = teacher_labels(episodes, list(contexts), "identify", NeuronParams())
+    np.testing.assert_array_equal(labels, episodes.actions)
+    episodes = evaluate_policy(contexts, told_weights_policy(contexts))
+    labels = teacher_labels(episodes, list(contexts), "told-weights", NeuronParams())
+    np.testing.assert_array_equal(labels, episodes.actions)
+
+
+def told_weights_policy(contexts):
+    """The loop told each context's weights, batched (context i in environment i)."""
+    copies = [IdentifyAndPlan(known_weights=context.weights) for context in contexts]
+
+    def policy(observations, action_mask):
+        return np.array([
+            copy.act({key: value[i] for key, value in observations.items()},
+                     {"action_mask": action_mask[i]})
+            for i, copy in enumerate(copies)
+        ])  # fmt: skip
+
+    return policy
+
+
+def test_teachers_label_other_trajectories_legally(contexts):
+    episodes = evaluate_policy(contexts, make_random_policy(1))
+    for teacher in ("identify", "told-weights"):
+        labels = teacher_labels(episodes, list(contexts), teacher, NeuronParams())
+        assert labels.shape == episodes.actions.shape
+        legal = np.take_along_axis(episodes.action_mask, labels.astype(np.int64) + 1, axis=1)
+        assert legal.all()
+
+
+def test_told_weights_loop_scores_near_the_oracle():
+    contexts = make_splits(12, 1, seed=5, n_val=0)[0]
+    told = evaluate_policy(contexts, told_weights_policy(contexts)).returns
+    identify = evaluate_policy(contexts, IdentifyAndPlan().vector_policy(len(contexts))).returns
+    assert told.mean() >= 0.97 and told.mean() > identify.mean()
+
+
+def test_known_weights_are_checked():
+    with pytest.raises(ValueError, match="known_weights must be a square"):
+        IdentifyAndPlan(known_weights=np.zeros((3, 4)))
+    with pytest.raises(ValueError, match="only -1, 0 and \\+1"):
+        IdentifyAndPlan(known_weights=np.full((3, 3), 2))
+
+
+def test_labelled_replay_round_trip_and_mismatch():
+    replay = EpisodeReplay(4, 3, 5, labelled=True)
+    voltage = np.zeros((2, 6, 3), np.float32)
+    actions = np.full((2, 5), -1)
+    args = (voltage, actions, np.zeros((2, 5)), np.zeros(2, int), np.zeros((2, 5)),
+            np.ones((2, 4), bool))  # fmt: skip
+    replay.add(*args, labels=np.arange(10).reshape(2, 5) % 3)
+    replay.add(*args)  # unlabelled episodes
+    copy = EpisodeReplay(4, 3, 5, labelled=True)
+    copy.load_state_dict(replay.state_dict())
+    np.testing.assert_array_equal(copy.labels, replay.labels)
+    assert (copy.labels[2:] == NO_LABEL).all()
+    with pytest.raises(ValueError, match="keeps teacher labels"):
+        EpisodeReplay(4, 3, 5).load_state_dict(replay.state_dict())
+    with pytest.raises(ValueError, match="keeps no labels"):
+        EpisodeReplay(4, 3, 5).add(*args, labels=np.zeros((2, 5)))
+
+
+def test_config_checks_and_round_trip():
+    config = guided(teacher="told-weights", imitation_margin=0.1)
+    again = Experiment.from_dict(json.loads(json.dumps(config.to_dict())))
+    assert again == config and type(again.learner) is GuidedConfig
+    assert config.to_dict()["learner"]["name"] == "guided"
+    with pytest.raises(ConfigError, match="teacher"):
+        GuidedConfig(teacher="oracle")
+    with pytest.raises(ConfigError, match="imitation_margin"):
+        GuidedConfig(imitation_margin=-1.0)
+    with pytest.raises(ConfigError, match="imitation_anneal_fraction"):
+        GuidedConfig(imitation_anneal_fraction=1.5)
+    schedule = GuidedConfig(imitation_weight=2.0, imitation_weight_end=0.5,
+                            imitation_anneal_fraction=0.5)  # fmt: skip
+    assert [schedule.imitation_weight_at(e, 100) for e in (0, 25, 50, 90)] == [2.0, 1.25, 0.5, 0.5]
+    assert type(PRESETS["guided"].learner) is GuidedConfig
+
+
+def test_stacked_groups_refuse_the_guided_learner(tmp_path):
+    from spikectl.training.learners import make_learners
+
+    with pytest.raises(ValueError, match="guided learner has no stacked form"):
+        make_learners([guided()], [None], [None], stacked=True)
+
+
+SHORT = guided(
+    SMOKE.with_changes(
+        total_env_steps=6 * 20 * 8, eval_every_episodes=16, checkpoint_every_episodes=16
+    ),  # fmt: skip
+    teacher="told-weights",
+    imitation_anneal_fraction=0.5,
+)
+
+
+def test_guided_run_resumes_exactly(tmp_path, monkeypatch):
+    reference = train(SHORT, tmp_path / "reference")
+    assert reference[1]["imitation_weight"] < 1.0 and reference[-1]["imitation_weight"] == 0.0
+    assert reference[1]["teacher_seconds"] > 0 and not math.isnan(reference[1]["imitation_loss"])
+    assert math.isnan(reference[-1]["imitation_loss"])  # weaned: TD only
+    calls = {"n": 0}
+    real_round = run_module.Loop.round
+
+    def round_then_die(self):
+        real_round(self)
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(run_module.Loop, "round", round_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        train(SHORT, tmp_path / "killed")
+    monkeypatch.setattr(run_module.Loop, "round", real_round)
+    resumed = train(SHORT, tmp_path / "killed", resume=True)
+
+    def without_clocks(rows):
+        return [
+            {k: None if isinstance(v, float) and math.isnan(v) else v
+             for k, v in row.items() if k not in CLOCKS}
+            for row in rows
+        ]  # fmt: skip
+
+    assert without_clocks(resumed) == without_clocks(reference)
+
+
+def test_imitation_teaches_the_teachers_actions(tmp_path):
+    """Imitation outweighing the TD loss: the student's agreement with the teacher on
+    the labelled steps it samples climbs (0.42 -> 0.63 over these 160 episodes)."""
+    config = guided(
+        SMOKE.with_changes(
+            total_env_steps=20 * 20 * 8,
+            eval_every_episodes=32,
+            checkpoint_every_episodes=160,
+            learning_rate=3e-3,
+        ),  # fmt: skip
+        teacher="identify",
+        imitation_weight=10.0,
+        imitation_weight_end=10.0,
+        imitation_margin=0.1,
+    )
+    rows = train(config, tmp_path / "run")
+    agreement = [row["teacher_agreement"] for row in rows[1:]]
+    assert agreement[-1] > agreement[0] + 0.15
