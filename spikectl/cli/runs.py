@@ -43,7 +43,7 @@ class SweepCommand:
     """The paper's experiments: fig4 (4 architectures x 10 seeds), fig5 (TDRQN x sizes)."""
     config: Path | None = None
     """A JSON sweep file instead: {"base": PRESET, "overrides": {...}, "grid": {...}}."""
-    base: Literal["paper", "quick", "smoke"] | None = None
+    base: Literal["paper", "quick", "guided", "smoke"] | None = None
     """Replace the sweep's base preset (e.g. quick for a laptop-sized reproduction)."""
     seeds: tuple[int, ...] | None = None
     """Replace the grid's seeds."""

@@ -1,0 +1,67 @@
+"""Learning curves against core-minutes: the quick preset and the guided learners
+(docs/training.md, "Learners that beat the planner"), from committed results only.
+
+    python docs/results/plot_guided.py docs/results docs/images/guided_core_minutes.png
+
+Each curve is the mean over seeds of the greedy return on the validation networks
+(left) and the unseen test networks (right) against the process CPU time of the run
+(teacher included), each seed interpolated onto a common grid within the range all
+seeds reach; the shade is ± one standard deviation over seeds. Identify-and-plan's
+return (no training) is the dashed line.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from spikectl.experiments.figures import save_figure, subplots
+from spikectl.experiments.sweep import trial_dirs
+from spikectl.training.run_files import read_metrics
+
+IDENTIFY_AND_PLAN = {"val_return": 0.866, "test_return": 0.837}  # docs/baselines.md
+GROUPS = {
+    "TDRQN, quick preset": "learn-fast-pooled-decay",
+    "guided, teacher identify-and-plan": "guided/identify",
+    "guided, teacher told the weights": "guided/told-weights",
+}
+
+
+def curve(run_dirs: list[Path], column: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(core-minutes grid, mean, sd) of ``column`` over the runs."""
+    series = []
+    for run_dir in run_dirs:
+        rows = read_metrics(run_dir)
+        minutes = np.array([row["cpu_time_s"] for row in rows]) / 60.0
+        series.append((minutes, np.array([row[column] for row in rows])))
+    end = min(minutes[-1] for minutes, _ in series)
+    grid = np.linspace(0.0, end, 60)
+    values = np.stack([np.interp(grid, minutes, value) for minutes, value in series])
+    return grid, values.mean(axis=0), values.std(axis=0)
+
+
+def main(results: Path, out: Path) -> None:
+    figure, axes = subplots(1, 2, figsize=(11.0, 4.0), sharey=True)
+    for axis, column, title in zip(axes, ("val_return", "test_return"),
+                                   ("validation networks", "unseen test networks")):  # fmt: skip
+        for label, folder in GROUPS.items():
+            runs = trial_dirs(results / folder) if (results / folder).exists() else []
+            if not runs:
+                continue
+            grid, mean, sd = curve(runs, column)
+            axis.plot(grid, mean, label=f"{label} ({len(runs)} seeds)")
+            axis.fill_between(grid, mean - sd, mean + sd, alpha=0.2)
+        axis.axhline(IDENTIFY_AND_PLAN[column], color="k", linestyle="--", linewidth=1,
+                     label="identify-and-plan (no training)")  # fmt: skip
+        axis.axhline(0.5, color="grey", linestyle=":", linewidth=1)
+        axis.set_title(title)
+        axis.set_xlabel("core-minutes (process CPU time, teacher included)")
+    axes[0].set_ylabel("greedy return (n = 8)")
+    axes[0].legend(loc="lower right", fontsize=8)
+    save_figure(figure, out)
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]), Path(sys.argv[2]))
