@@ -211,3 +211,21 @@ def test_imitation_teaches_the_teachers_actions(tmp_path):
     rows = train(config, tmp_path / "run")
     agreement = [row["teacher_agreement"] for row in rows[1:]]
     assert agreement[-1] > agreement[0] + 0.15
+
+
+def test_cli_guided_preset_flags_and_errors(capsys):
+    from spikectl.cli import main
+
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", "guided", "--teacher", "oracle", "--run-dir", "unused"])
+    assert exit_info.value.code == 2
+    assert "identify" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", "guided", "--imitation-margin", "-1", "--run-dir", "unused"])
+    assert exit_info.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "--imitation-margin" in line and ">= 0" in line
+    # The quick preset's learner has no teacher.
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", "quick", "--teacher", "identify", "--run-dir", "unused"])
+    assert exit_info.value.code == 2

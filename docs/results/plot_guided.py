@@ -24,8 +24,8 @@ from spikectl.training.run_files import read_metrics
 IDENTIFY_AND_PLAN = {"val_return": 0.866, "test_return": 0.837}  # docs/baselines.md
 GROUPS = {
     "TDRQN, quick preset": "learn-fast-pooled-decay",
-    "guided, teacher identify-and-plan": "guided/identify",
-    "guided, teacher told the weights": "guided/told-weights",
+    "guided, teacher identify-and-plan": "guided-identify",
+    "guided, teacher told the weights (pilot)": "guided-told-weights-pilot",
 }
 
 

@@ -21,7 +21,8 @@ import re
 import sys
 import traceback
 from collections.abc import Iterable, Iterator
-from typing import Annotated, Any, get_args, get_origin, get_type_hints
+from types import UnionType
+from typing import Annotated, Any, Union, get_args, get_origin, get_type_hints
 
 import tyro
 
@@ -59,9 +60,13 @@ def _walk(
             if isinstance(extra, _ARG_CONFIG) and extra.name is not None:
                 name = extra.name
         here, flag = (*path, field.name), (*names, name) if name else names
-        yield here, flag, hint
-        if dataclasses.is_dataclass(hint):
-            yield from _walk(hint, here, flag)
+        # A union of configs (the learner's) collapses to the preset's member on the
+        # command line, with that member's flags at the same place: walk every member.
+        members = get_args(hint) if get_origin(hint) in (Union, UnionType) else (hint,)
+        for member in members:
+            yield here, flag, member
+            if dataclasses.is_dataclass(member):
+                yield from _walk(member, here, flag)
 
 
 @functools.cache
