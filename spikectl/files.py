@@ -8,6 +8,12 @@ one, never half of one. Failures of the file system (no space, read-only, no
 permission, a file where a folder should be) become one :class:`FileWriteError`
 naming the file and the problem.
 
+Every file spikectl reads that a user could have replaced (run files, sweep files,
+context sets, checkpoints) is opened through :func:`open_regular_file`: a FIFO would
+block the reader forever and a link to ``/dev/zero`` would feed it until memory runs
+out, so anything that is not a regular file is refused with a
+:class:`NotARegularFileError`, and :func:`read_text_file` bounds what it reads.
+
 This module is at the bottom of the layering: it imports nothing from spikectl.
 """
 
@@ -17,8 +23,10 @@ import errno
 import functools
 import json
 import os
+import stat
 import tempfile
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
 
@@ -47,6 +55,76 @@ class FileWriteError(OSError):
 
 class TooLargeError(ValueError):
     """A size that would need more memory than this machine has (names the setting)."""
+
+
+class NotARegularFileError(OSError):
+    """A path to read names something that is not a regular file (a FIFO, a device, a
+    socket): reading it could block forever or never end. An OSError, so every reader's
+    ``except OSError`` reports it as the file's problem."""
+
+    def __str__(self) -> str:
+        return f"{self.filename}: {self.strerror}"
+
+
+MAX_TEXT_FILE_BYTES = 64 * 2**20
+"""The most :func:`read_text_file` reads by default: far above any config, sweep file or
+metrics.csv spikectl writes, far below what would hurt."""
+
+
+def _file_kind(mode: int) -> str:
+    for test, kind in ((stat.S_ISFIFO, "a FIFO (named pipe)"), (stat.S_ISCHR, "a character device"),
+                       (stat.S_ISBLK, "a block device"), (stat.S_ISSOCK, "a socket"),
+                       (stat.S_ISDIR, "a folder")):  # fmt: skip
+        if test(mode):
+            return kind
+    return "something else"
+
+
+@contextmanager
+def open_regular_file(path: str | os.PathLike) -> Iterator[IO[bytes]]:
+    """Open ``path`` for reading in binary mode, refusing anything but a regular file.
+
+    The file is opened without blocking and checked on the open descriptor (``fstat``),
+    so a FIFO swapped in after a check cannot block the reader. Raises
+    FileNotFoundError, NotARegularFileError or another OSError.
+    """
+    flags = os.O_RDONLY | os.O_NONBLOCK | getattr(os, "O_CLOEXEC", 0)
+    descriptor = os.open(path, flags)
+    try:
+        mode = os.fstat(descriptor).st_mode
+        if not stat.S_ISREG(mode):
+            raise NotARegularFileError(
+                None, f"it is {_file_kind(mode)}, not a regular file", os.fspath(path)
+            )
+        os.set_blocking(descriptor, True)
+        handle = os.fdopen(descriptor, "rb")
+    except BaseException:
+        os.close(descriptor)
+        raise
+    with handle:
+        yield handle
+
+
+def check_regular_file(path: str | os.PathLike) -> None:
+    """Refuse a path (after links) that is not a regular file, before a library that
+    takes a path (NumPy, PyTorch, zipfile) opens it: NotARegularFileError."""
+    mode = os.stat(path).st_mode
+    if not stat.S_ISREG(mode) and not stat.S_ISDIR(mode):
+        raise NotARegularFileError(
+            None, f"it is {_file_kind(mode)}, not a regular file", os.fspath(path)
+        )
+
+
+def read_text_file(path: str | os.PathLike, max_bytes: int = MAX_TEXT_FILE_BYTES) -> str:
+    """The UTF-8 text of the regular file ``path``, at most ``max_bytes`` long (a longer
+    file is a TooLargeError naming it); decoding errors raise UnicodeDecodeError."""
+    with open_regular_file(path) as handle:
+        data = handle.read(max_bytes + 1)
+    if len(data) > max_bytes:
+        raise TooLargeError(
+            f"{os.fspath(path)} is larger than {max_bytes:,} bytes: not a file spikectl wrote"
+        )
+    return data.decode("utf-8")
 
 
 def describe_os_error(error: OSError) -> str:

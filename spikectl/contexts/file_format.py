@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from spikectl.files import atomic_write, physical_memory_bytes
+from spikectl.files import atomic_write, check_regular_file, physical_memory_bytes
 
 FORMAT_NAME = "spikectl.ContextSet"
 FORMAT_VERSION = 1
@@ -67,6 +67,10 @@ def read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         raise FileNotFoundError(f"context set file not found: {path}")
     if path.is_dir():
         raise ContextFileError(f"{path} is a folder, not a context set file")
+    try:
+        check_regular_file(path)
+    except OSError as error:
+        raise ContextFileError(f"{path} is not a context set file: {error.strerror}") from None
     try:
         _check_array_sizes(path)
         with np.load(path, allow_pickle=False) as data:

@@ -25,9 +25,11 @@ import torch
 
 from spikectl.files import (
     FileWriteError,
+    TooLargeError,
     atomic_write_text,
     describe_os_error,
     make_dirs,
+    read_text_file,
     write_json,
 )
 from spikectl.training.config import Experiment
@@ -181,12 +183,12 @@ def read_config(run_dir: Path) -> Experiment:
     """The resolved config saved in a run directory."""
     path = Path(run_dir) / CONFIG_FILE
     try:
-        values = json.loads(path.read_text())
+        values = json.loads(read_text_file(path))
     except FileNotFoundError:
         raise RunDirError(f"{run_dir} is not a spikectl run directory (no {CONFIG_FILE})") from None
     except OSError as error:
         raise RunDirError(f"cannot read {path}: {describe_os_error(error)}") from error
-    except (json.JSONDecodeError, UnicodeDecodeError) as error:
+    except (json.JSONDecodeError, UnicodeDecodeError, TooLargeError) as error:
         raise RunDirError(f"{path} is not a valid spikectl config: {error}") from error
     if not isinstance(values, dict):
         raise RunDirError(f"{path} is not a valid spikectl config: not a JSON object")
@@ -209,10 +211,8 @@ def write_metrics(run_dir: Path, rows: list[dict], fields: tuple[str, ...]) -> N
 def read_metrics(run_dir: Path) -> list[dict[str, float]]:
     path = Path(run_dir) / METRICS_FILE
     try:
-        with open(path, newline="") as handle:
-            return [
-                {key: float(value) for key, value in row.items()} for row in csv.DictReader(handle)
-            ]
+        handle = io.StringIO(read_text_file(path), newline="")
+        return [{key: float(value) for key, value in row.items()} for row in csv.DictReader(handle)]
     except FileNotFoundError:
         raise
     except OSError as error:

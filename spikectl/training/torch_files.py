@@ -20,7 +20,7 @@ from typing import Any
 
 import torch
 
-from spikectl.files import atomic_write_bytes
+from spikectl.files import atomic_write_bytes, check_regular_file
 from spikectl.training.run_files import BEST_MODEL_FILE, MODEL_FILE, RunDirError
 
 MODEL_FORMAT = "spikectl.model"
@@ -106,6 +106,7 @@ def load_torch_file(path: Path, what: str, map_location: str = "cpu") -> Any:
     if path.is_dir():
         raise RunDirError(f"{path} is a folder, not a {what}")
     try:
+        check_regular_file(path)
         if path.stat().st_size == 0:
             raise RunDirError(f"{path} is not a readable {what}: the file is empty")
         if not zipfile.is_zipfile(path):

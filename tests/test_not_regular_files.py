@@ -1,0 +1,106 @@
+"""Issue 26, class 1: a FIFO or a link to a device where a file should be is refused
+in one line, never read forever (every reader opens through spikectl.files)."""
+
+from __future__ import annotations
+
+import os
+import signal
+from contextlib import contextmanager
+from pathlib import Path
+
+import pytest
+
+from spikectl.cli import main
+from spikectl.contexts import make_splits
+from spikectl.contexts.file_format import ContextFileError
+from spikectl.experiments.sweep import load_sweep_file
+from spikectl.files import NotARegularFileError, open_regular_file, read_text_file
+from spikectl.training.presets import SMOKE
+from spikectl.training.run import train
+from spikectl.training.run_files import RunDirError, read_config, read_metrics
+from spikectl.training.torch_files import load_model_weights
+
+
+@contextmanager
+def no_hang(seconds: int = 20):
+    """Fail (instead of hanging the test run) if the block blocks."""
+
+    def expired(signum, frame):
+        raise TimeoutError("the reader blocked")
+
+    previous = signal.signal(signal.SIGALRM, expired)
+    signal.alarm(seconds)
+    try:
+        yield
+    finally:
+        signal.alarm(0)
+        signal.signal(signal.SIGALRM, previous)
+
+
+def fifo(path: Path) -> Path:
+    path.unlink(missing_ok=True)
+    os.mkfifo(path)
+    return path
+
+
+def zero_link(path: Path) -> Path:
+    path.unlink(missing_ok=True)
+    path.symlink_to("/dev/zero")
+    return path
+
+
+@pytest.fixture(scope="module")
+def run_dir(tmp_path_factory):
+    run_dir = tmp_path_factory.mktemp("run") / "run"
+    train(SMOKE.with_changes(total_env_steps=2 * 20 * 8, eval_every_episodes=8), run_dir)
+    return run_dir
+
+
+def test_the_readers_refuse_what_is_not_a_regular_file(tmp_path):
+    for make, kind in ((fifo, "FIFO"), (zero_link, "character device")):
+        path = make(tmp_path / "file")
+        with no_hang(), pytest.raises(NotARegularFileError, match=kind):
+            read_text_file(path)
+        with no_hang(), pytest.raises(NotARegularFileError, match="not a regular file"):
+            with open_regular_file(path):
+                pass
+    regular = tmp_path / "regular.txt"
+    regular.write_text("é")
+    assert read_text_file(regular) == "é"
+    with pytest.raises(ValueError, match="larger than 1 bytes"):
+        read_text_file(regular, max_bytes=1)
+
+
+@pytest.mark.parametrize("make", [fifo, zero_link], ids=["fifo", "dev-zero"])
+def test_run_files_that_are_not_files_are_one_line_errors(tmp_path, run_dir, make, capsys):
+    import shutil
+
+    copy = tmp_path / "run"
+    shutil.copytree(run_dir, copy)
+    for name, read in (("config.json", read_config), ("metrics.csv", read_metrics)):
+        saved = (copy / name).read_bytes()
+        make(copy / name)
+        with no_hang(), pytest.raises(RunDirError, match="not a regular file"):
+            read(copy)
+        (copy / name).unlink()
+        (copy / name).write_bytes(saved)
+    make(copy / "model.pt")
+    with no_hang(), pytest.raises(RunDirError, match="not a regular file"):
+        load_model_weights(copy / "model.pt")
+    make(copy / "config.json")
+    with no_hang(), pytest.raises(SystemExit) as exit_info:
+        main(["evaluate", str(copy)])
+    assert exit_info.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "config.json" in line and "not a regular file" in line
+
+
+def test_context_and_sweep_files_that_are_not_files(tmp_path):
+    path = fifo(tmp_path / "contexts.npz")
+    from spikectl.contexts import ContextSet
+
+    with no_hang(), pytest.raises(ContextFileError, match="FIFO"):
+        ContextSet.load(path)
+    with no_hang(), pytest.raises(ValueError, match="not a regular file"):
+        load_sweep_file(fifo(tmp_path / "sweep.json"))
+    make_splits(2, 2, seed=0)  # the module still works after the refusals
