@@ -1,0 +1,131 @@
+"""Per-decision latency of a TDRQN controlling one environment: the PyTorch step beside
+the compiled policy (issue 24; docs/realtime.md).
+
+For each n, one randomly initialised TDRQN (a fixed seed; latency does not depend on
+what the weights learned) at the quick preset's sizes plays one episode on each of the
+first ``--episodes`` contexts of a generated test set, one Torch thread. Every step
+both controllers decide on the same observation, in alternating order, and each
+decision is timed alone (``time.perf_counter_ns``), from the environment's observation
+dict to an action:
+
+- ``pytorch``: ``GreedyPolicy`` (spikectl.training.greedy), the path the library's
+  evaluation uses, on a batch of one: ``observation_batch``, ``network.step`` under
+  ``no_grad``, masked argmax, back to NumPy;
+- ``compiled``: ``CompiledPolicy.act`` (spikectl.agents.compiled).
+
+The environment follows the compiled policy's action (the two agree except at
+near-ties; the run counts disagreements). One untimed episode warms both up first.
+Reports the median, p99 and max per decision, the fraction over 1 ms, and the ratios
+PyTorch / compiled, all from this one run.
+
+    python benchmarks/bench_compiled_policy.py [--episodes 10] [--n 8 32] [--sizes quick]
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import platform
+import time
+
+import numpy as np
+import torch
+
+from spikectl.agents import make_agent
+from spikectl.agents.compiled import CompiledPolicy
+from spikectl.contexts import make_splits
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.training.greedy import GreedyPolicy
+from spikectl.training.presets import QUICK
+
+EPISODE_LENGTH = 60
+
+
+def cpu_model() -> str:
+    try:
+        with open("/proc/cpuinfo") as handle:
+            for line in handle:
+                if line.startswith("model name"):
+                    return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def measure(n: int, episodes: int, sizes) -> tuple[dict[str, np.ndarray], int, int]:
+    """({controller: decision times in seconds}, decisions, disagreements)."""
+    torch.manual_seed(0)
+    network = make_agent("tdrqn", n, EPISODE_LENGTH, sizes).eval()
+    compiled = CompiledPolicy.from_network(network)
+    contexts = make_splits(n_train=1, n_test=episodes, n_neurons=n,
+                           episode_length=EPISODE_LENGTH)[1]  # fmt: skip
+    env = NeuronControlEnv(contexts=contexts)
+    times: dict[str, list[int]] = {"pytorch": [], "compiled": []}
+    disagreements = 0
+    for episode in range(-1, episodes):  # episode -1 warms up, untimed
+        observation, info = env.reset(seed=0, options={"context": max(episode, 0)})
+        pytorch, done = GreedyPolicy(network), False
+        while not done:
+            decisions = {}
+            order = ("pytorch", "compiled") if observation["step"] % 2 else ("compiled", "pytorch")
+            for name in order:
+                start = time.perf_counter_ns()
+                if name == "pytorch":
+                    batch = {key: np.asarray(value)[None] for key, value in observation.items()}
+                    action = int(pytorch(batch, info["action_mask"][None])[0])
+                else:
+                    action = compiled.act(observation, info)
+                elapsed = time.perf_counter_ns() - start
+                decisions[name] = action
+                if episode >= 0:
+                    times[name].append(elapsed)
+            disagreements += episode >= 0 and decisions["pytorch"] != decisions["compiled"]
+            observation, _, terminated, truncated, info = env.step(decisions["compiled"])
+            done = terminated or truncated
+    arrays = {name: np.array(values) * 1e-9 for name, values in times.items()}
+    return arrays, len(times["compiled"]), disagreements
+
+
+def row(times: np.ndarray) -> dict[str, float]:
+    return {
+        "median": float(np.median(times)) * 1e3,
+        "p99": float(np.percentile(times, 99)) * 1e3,
+        "max": float(times.max()) * 1e3,
+        "over_1ms": float(np.mean(times > 1e-3)),
+    }
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--episodes", type=int, default=10)
+    parser.add_argument("--n", type=int, nargs="+", default=[8, 32])
+    parser.add_argument("--sizes", choices=["quick", "paper"], default="quick")
+    args = parser.parse_args()
+    torch.set_num_threads(1)
+    sizes = QUICK.agent.sizes if args.sizes == "quick" else None
+    print(f"{cpu_model()}; torch {torch.__version__}, {torch.get_num_threads()} thread; "
+          f"load average {os.getloadavg()[0]:.2f} at the start")  # fmt: skip
+    print(f"TDRQN, {args.sizes} sizes, {args.episodes} test episodes of {EPISODE_LENGTH} steps")
+    print()
+    print("| n | controller | median (ms) | p99 (ms) | max (ms) | over 1 ms |")
+    print("|---:|---|---:|---:|---:|---:|")
+    ratios = []
+    for n in args.n:
+        times, decisions, disagreements = measure(n, args.episodes, sizes)
+        stats = {name: row(values) for name, values in times.items()}
+        for name, s in stats.items():
+            print(f"| {n} | {name} | {s['median']:.3f} | {s['p99']:.3f} | {s['max']:.3f} | "
+                  f"{s['over_1ms']:.1%} |")  # fmt: skip
+        torch_s, compiled_s = stats["pytorch"], stats["compiled"]
+        ratios.append(
+            f"n = {n}: PyTorch / compiled {torch_s['median'] / compiled_s['median']:.1f}x "
+            f"(median), {torch_s['p99'] / compiled_s['p99']:.1f}x (p99); "
+            f"{decisions} decisions each, {disagreements} disagreements"
+        )
+    print()
+    print("\n".join(ratios))
+    print(f"load average {os.getloadavg()[0]:.2f} at the end")
+
+
+if __name__ == "__main__":
+    main()
