@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import io
 import json
+import os
 import subprocess
 import sys
 from dataclasses import dataclass, replace
@@ -271,6 +272,10 @@ def test_unreadable_files_are_refused_with_the_problem(tmp_path, policy_file):
         CompiledPolicy.load(tmp_path / "missing.npz")
     with pytest.raises(PolicyFileError, match="is a folder"):
         CompiledPolicy.load(tmp_path)
+    fifo = tmp_path / "fifo.npz"
+    os.mkfifo(fifo)
+    with pytest.raises(PolicyFileError, match="not a regular file"):
+        CompiledPolicy.load(fifo)  # refused at once, never a hang
     garbage = tmp_path / "garbage.npz"
     garbage.write_bytes(b"not a zip file")
     with pytest.raises(PolicyFileError, match="not a readable compiled policy"):

@@ -34,7 +34,7 @@ from typing import Any
 import numba
 import numpy as np
 
-from spikectl.files import atomic_write_bytes
+from spikectl.files import atomic_write_bytes, check_regular_file
 
 FORMAT_NAME = "spikectl.CompiledPolicy"
 FORMAT_VERSION = 1
@@ -592,6 +592,12 @@ class CompiledPolicy:
             raise FileNotFoundError(f"compiled policy file not found: {path}")
         if path.is_dir():
             raise PolicyFileError(f"{path} is a folder, not a compiled policy file")
+        try:
+            check_regular_file(path)  # a FIFO or a device would block or never end
+        except OSError as error:
+            raise PolicyFileError(
+                f"{path} is not a compiled policy file: {error.strerror}"
+            ) from None
         return cls._from_npz(path, str(path), warm_up)
 
     @classmethod
