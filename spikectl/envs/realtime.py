@@ -1,0 +1,128 @@
+"""A real-time rig: a controller plays the environment paced at a wall-clock rate (1 kHz
+by default: one step is 1 ms of the neurons' time), and every decision is timed against
+its deadline (issue 24; docs/realtime.md).
+
+A controller is anything with ``reset()`` and ``act(observation, info) -> int`` (the
+planners, :class:`~spikectl.agents.compiled.CompiledPolicy`). Frame k "arrives" at tick
+k = start + k / rate; the controller's decision on it must be ready before tick k + 1.
+Its latency is measured from the tick, so a decision that overruns delays the next
+frame's processing too (the frames queue up, as on a rig that reads every frame). A
+decision later than one period is a deadline miss; with ``on_miss="nothing"`` (the
+default) the stimulator did nothing in that frame, so the environment steps with -1
+instead, and the return shows what the misses cost.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from spikectl.neuron.simulator import DO_NOTHING
+
+ON_MISS = ("nothing", "late")
+"""What a missed deadline does: the frame passes with no stimulation (``nothing``), or
+the late action is applied anyway (``late``, as if the clock had waited)."""
+_SPIN_NS = 300_000
+"""Sleep until this close to a tick, then spin: ``time.sleep`` overshoots by tens of
+microseconds, a spin on the clock by well under one."""
+
+
+class Controller(Protocol):
+    """What the rig drives: one environment's controller."""
+
+    def reset(self) -> None: ...
+
+    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int: ...
+
+
+@dataclass(frozen=True)
+class RealtimeReport:
+    """Decisions of one paced run, in order (every step of every episode)."""
+
+    rate_hz: float
+    latencies_s: np.ndarray
+    """[steps] each decision's time from its frame's tick to the action, seconds."""
+    missed: np.ndarray
+    """[steps] bool: the decision came later than one period after its tick."""
+    returns: np.ndarray
+    """[episodes] each episode's return, misses included."""
+
+    @property
+    def misses(self) -> int:
+        return int(self.missed.sum())
+
+    def summary(self) -> dict[str, float]:
+        """Median, p99 and max latency (ms), misses, their fraction, and the mean return."""
+        ms = self.latencies_s * 1e3
+        return {
+            "median_ms": float(np.median(ms)),
+            "p99_ms": float(np.percentile(ms, 99)),
+            "max_ms": float(ms.max()),
+            "misses": self.misses,
+            "miss_fraction": float(self.missed.mean()),
+            "mean_return": float(self.returns.mean()),
+        }
+
+
+def run_realtime(
+    env: Any,
+    controller: Controller,
+    contexts: Sequence[int],
+    rate_hz: float = 1000.0,
+    on_miss: str = "nothing",
+    seed: int = 0,
+) -> RealtimeReport:
+    """Play one episode per context index of ``env`` (a single ``NeuronControlEnv``),
+    paced at ``rate_hz``, and time every decision of ``controller`` against its deadline.
+
+    Episode i resets with ``seed + i``; its first frame arrives when the reset returns.
+    The rig waits for each tick by sleeping, then spinning on ``time.perf_counter_ns``
+    (it keeps a core busy, as a rig's control loop would).
+    """
+    if not isinstance(rate_hz, int | float) or not rate_hz > 0:
+        raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
+    if on_miss not in ON_MISS:
+        raise ValueError(f"on_miss must be one of {ON_MISS}, got {on_miss!r}")
+    contexts = list(contexts)
+    if not contexts:
+        raise ValueError("contexts must name at least one context index")
+    period = round(1e9 / rate_hz)  # ns
+    latencies: list[int] = []
+    missed: list[bool] = []
+    returns = np.zeros(len(contexts))
+    for episode, context in enumerate(contexts):
+        controller.reset()
+        observation, info = env.reset(seed=seed + episode, options={"context": int(context)})
+        tick = time.perf_counter_ns()
+        done = False
+        while not done:
+            action = controller.act(observation, info)
+            latency = time.perf_counter_ns() - tick
+            late = latency > period
+            latencies.append(latency)
+            missed.append(late)
+            if late and on_miss == "nothing":
+                action = DO_NOTHING
+            observation, reward, terminated, truncated, info = env.step(action)
+            returns[episode] += reward
+            done = terminated or truncated
+            tick += period
+            _wait_until(tick)
+    return RealtimeReport(
+        rate_hz=float(rate_hz),
+        latencies_s=np.array(latencies, dtype=np.float64) * 1e-9,
+        missed=np.array(missed, dtype=bool),
+        returns=returns,
+    )
+
+
+def _wait_until(tick_ns: int) -> None:
+    remaining = tick_ns - time.perf_counter_ns()
+    if remaining > _SPIN_NS:
+        time.sleep((remaining - _SPIN_NS) * 1e-9)
+    while time.perf_counter_ns() < tick_ns:
+        pass
