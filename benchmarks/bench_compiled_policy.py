@@ -18,7 +18,13 @@ near-ties; the run counts disagreements). One untimed episode warms both up firs
 Reports the median, p99 and max per decision, the fraction over 1 ms, and the ratios
 PyTorch / compiled, all from this one run.
 
+``--rig-episodes K`` then runs each controller alone through the real-time rig
+(``spikectl.envs.realtime.run_realtime``, 1 kHz, a missed deadline stimulates nothing)
+on the first K test contexts, and reports its latency from the frame's tick, its
+deadline misses and its return.
+
     python benchmarks/bench_compiled_policy.py [--episodes 10] [--n 8 32] [--sizes quick]
+        [--rig-episodes 100]
 """
 
 from __future__ import annotations
@@ -35,6 +41,7 @@ from spikectl.agents import make_agent
 from spikectl.agents.compiled import CompiledPolicy
 from spikectl.contexts import make_splits
 from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.realtime import run_realtime
 from spikectl.training.greedy import GreedyPolicy
 from spikectl.training.presets import QUICK
 
@@ -50,6 +57,42 @@ def cpu_model() -> str:
     except OSError:
         pass
     return platform.processor() or "unknown"
+
+
+class TorchController:
+    """The PyTorch network behind the controller face the rig drives (reset / act)."""
+
+    def __init__(self, network: torch.nn.Module) -> None:
+        self.network = network
+        self.reset()
+
+    def reset(self) -> None:
+        self.policy = GreedyPolicy(self.network)
+
+    def act(self, observation, info) -> int:
+        batch = {key: np.asarray(value)[None] for key, value in observation.items()}
+        return int(self.policy(batch, info["action_mask"][None])[0])
+
+
+def rig(n: int, episodes: int, sizes) -> list[str]:
+    """Both controllers through the 1 kHz rig, one after the other: table rows."""
+    torch.manual_seed(0)
+    network = make_agent("tdrqn", n, EPISODE_LENGTH, sizes).eval()
+    contexts = make_splits(n_train=1, n_test=episodes, n_neurons=n,
+                           episode_length=EPISODE_LENGTH)[1]  # fmt: skip
+    env = NeuronControlEnv(contexts=contexts)
+    rows = []
+    for name, controller in (
+        ("pytorch", TorchController(network)),
+        ("compiled", CompiledPolicy.from_network(network)),
+    ):
+        run_realtime(env, controller, [0])  # warm-up
+        s = run_realtime(env, controller, range(episodes)).summary()
+        rows.append(
+            f"| {n} | {name} | {s['median_ms']:.3f} | {s['p99_ms']:.3f} | {s['max_ms']:.3f} | "
+            f"{s['misses']} of {episodes * EPISODE_LENGTH} | {s['mean_return']:.3f} |"
+        )
+    return rows
 
 
 def measure(n: int, episodes: int, sizes) -> tuple[dict[str, np.ndarray], int, int]:
@@ -100,6 +143,7 @@ def main() -> None:
     parser.add_argument("--episodes", type=int, default=10)
     parser.add_argument("--n", type=int, nargs="+", default=[8, 32])
     parser.add_argument("--sizes", choices=["quick", "paper"], default="quick")
+    parser.add_argument("--rig-episodes", type=int, default=0)
     args = parser.parse_args()
     torch.set_num_threads(1)
     sizes = QUICK.agent.sizes if args.sizes == "quick" else None
@@ -124,6 +168,14 @@ def main() -> None:
         )
     print()
     print("\n".join(ratios))
+    if args.rig_episodes:
+        print()
+        print(f"Real-time rig, 1 kHz, {args.rig_episodes} test episodes per controller:")
+        print()
+        print("| n | controller | median (ms) | p99 (ms) | max (ms) | misses | mean return |")
+        print("|---:|---|---:|---:|---:|---:|---:|")
+        for n in args.n:
+            print("\n".join(rig(n, args.rig_episodes, sizes)))
     print(f"load average {os.getloadavg()[0]:.2f} at the end")
 
 
