@@ -303,18 +303,23 @@ def _layout(
     return params, np.array(rows, dtype=np.int64), ints, floats
 
 
-_JIT = dict(cache=True, nogil=True, fastmath={"contract"})
+_JIT = dict(cache=True, nogil=True, fastmath={"contract"}, error_model="numpy")
 """No reassociation: each output sums its inputs in order, as a plain matrix product
-does. Contraction lets mul + add become one FMA (rounding once instead of twice)."""
+does. Contraction lets mul + add become one FMA (rounding once instead of twice).
+``error_model="numpy"``: a float division by zero gives inf as in NumPy instead of
+raising, so divisions carry no branch and their loops vectorise (5x for the LSTM's
+gates)."""
 
 
 @numba.njit(**_JIT)
 def _linear(params, row, x, y, relu, accumulate):  # pragma: no cover - compiled
     """y [m, out] (+)= x [m, in] @ W^T + b, then ReLU if ``relu``.
 
-    The input loop is outermost so one weight row [out] serves every token from the
-    cache; four tokens share each load of it, and the innermost loop runs along the
-    output, contiguous and free of any reduction, which vectorises. Each output sums
+    Four inputs at a time are outermost, so their four weight rows [out] serve every
+    token from the cache, and each output is loaded and stored once per four inputs
+    (the loads and stores of y, not the arithmetic, bound a plain loop: this one is
+    2-2.5x faster). The innermost loop runs along the output, contiguous and free of
+    any reduction, so it vectorises without reassociation: each output still sums
     its inputs in order, then adds the bias.
     """
     w_offset, b_offset, n_in, n_out = row[0], row[1], row[2], row[3]
@@ -324,24 +329,22 @@ def _linear(params, row, x, y, relu, accumulate):  # pragma: no cover - compiled
     if not accumulate:
         for i in range(m):
             y[i, :] = 0.0
-    for k in range(n_in):
-        w_k = weight[k]  # [out]
-        i = 0
-        while i + 4 <= m:
-            x0, x1, x2, x3 = x[i, k], x[i + 1, k], x[i + 2, k], x[i + 3, k]
-            y0, y1, y2, y3 = y[i], y[i + 1], y[i + 2], y[i + 3]
+    k = 0
+    while k + 4 <= n_in:
+        w0, w1, w2, w3 = weight[k], weight[k + 1], weight[k + 2], weight[k + 3]  # [out] each
+        for i in range(m):
+            x0, x1, x2, x3 = x[i, k], x[i, k + 1], x[i, k + 2], x[i, k + 3]
+            y_i = y[i]
             for j in range(n_out):
-                w_kj = w_k[j]
-                y0[j] += x0 * w_kj
-                y1[j] += x1 * w_kj
-                y2[j] += x2 * w_kj
-                y3[j] += x3 * w_kj
-            i += 4
-        while i < m:
+                y_i[j] = y_i[j] + x0 * w0[j] + x1 * w1[j] + x2 * w2[j] + x3 * w3[j]
+        k += 4
+    while k < n_in:
+        w_k = weight[k]
+        for i in range(m):
             x_ik, y_i = x[i, k], y[i]
             for j in range(n_out):
                 y_i[j] += x_ik * w_k[j]
-            i += 1
+        k += 1
     for i in range(m):
         y_i = y[i]
         for j in range(n_out):
