@@ -3,20 +3,21 @@ the compiled policy (issue 24; docs/realtime.md).
 
 For each n, one randomly initialised TDRQN (a fixed seed; latency does not depend on
 what the weights learned) at the quick preset's sizes plays one episode on each of the
-first ``--episodes`` contexts of a generated test set, one Torch thread. Every step
-both controllers decide on the same observation, in alternating order, and each
-decision is timed alone (``time.perf_counter_ns``), from the environment's observation
-dict to an action:
+first ``--episodes`` contexts of a generated test set, one Torch thread. Each
+controller plays every episode itself, the two alternating episode by episode (so both
+see the same machine, and neither evicts the other's weights from the cache between
+its decisions: a rig runs only one), and each decision is timed alone
+(``time.perf_counter_ns``), from the environment's observation dict to an action:
 
 - ``pytorch``: ``GreedyPolicy`` (spikectl.training.greedy), the path the library's
   evaluation uses, on a batch of one: ``observation_batch``, ``network.step`` under
   ``no_grad``, masked argmax, back to NumPy;
 - ``compiled``: ``CompiledPolicy.act`` (spikectl.agents.compiled).
 
-The environment follows the compiled policy's action (the two agree except at
-near-ties; the run counts disagreements). One untimed episode warms both up first.
-Reports the median, p99 and max per decision, the fraction over 1 ms, and the ratios
-PyTorch / compiled, all from this one run.
+One untimed episode warms both up first. (That the two choose the same actions is
+tests/test_compiled_policy.py's business.) Reports the median, p99 and max per
+decision, the fraction over 1 ms, and the ratios PyTorch / compiled, all from this one
+run.
 
 ``--rig-episodes K`` then runs each controller alone through the real-time rig
 (``spikectl.envs.realtime.run_realtime``, 1 kHz, a missed deadline stimulates nothing)
@@ -95,38 +96,32 @@ def rig(n: int, episodes: int, sizes) -> list[str]:
     return rows
 
 
-def measure(n: int, episodes: int, sizes) -> tuple[dict[str, np.ndarray], int, int]:
-    """({controller: decision times in seconds}, decisions, disagreements)."""
+def measure(n: int, episodes: int, sizes) -> dict[str, np.ndarray]:
+    """{controller: decision times in seconds}, every step of every episode."""
     torch.manual_seed(0)
     network = make_agent("tdrqn", n, EPISODE_LENGTH, sizes).eval()
-    compiled = CompiledPolicy.from_network(network)
+    controllers = {"pytorch": TorchController(network),
+                   "compiled": CompiledPolicy.from_network(network)}  # fmt: skip
     contexts = make_splits(n_train=1, n_test=episodes, n_neurons=n,
                            episode_length=EPISODE_LENGTH)[1]  # fmt: skip
     env = NeuronControlEnv(contexts=contexts)
-    times: dict[str, list[int]] = {"pytorch": [], "compiled": []}
-    disagreements = 0
+    times: dict[str, list[int]] = {name: [] for name in controllers}
     for episode in range(-1, episodes):  # episode -1 warms up, untimed
-        observation, info = env.reset(seed=0, options={"context": max(episode, 0)})
-        pytorch, done = GreedyPolicy(network), False
-        while not done:
-            decisions = {}
-            order = ("pytorch", "compiled") if observation["step"] % 2 else ("compiled", "pytorch")
-            for name in order:
+        names = list(controllers) if episode % 2 else list(controllers)[::-1]
+        for name in names:
+            controller = controllers[name]
+            controller.reset()
+            observation, info = env.reset(seed=0, options={"context": max(episode, 0)})
+            done = False
+            while not done:
                 start = time.perf_counter_ns()
-                if name == "pytorch":
-                    batch = {key: np.asarray(value)[None] for key, value in observation.items()}
-                    action = int(pytorch(batch, info["action_mask"][None])[0])
-                else:
-                    action = compiled.act(observation, info)
+                action = controller.act(observation, info)
                 elapsed = time.perf_counter_ns() - start
-                decisions[name] = action
                 if episode >= 0:
                     times[name].append(elapsed)
-            disagreements += episode >= 0 and decisions["pytorch"] != decisions["compiled"]
-            observation, _, terminated, truncated, info = env.step(decisions["compiled"])
-            done = terminated or truncated
-    arrays = {name: np.array(values) * 1e-9 for name, values in times.items()}
-    return arrays, len(times["compiled"]), disagreements
+                observation, _, terminated, truncated, info = env.step(action)
+                done = terminated or truncated
+    return {name: np.array(values) * 1e-9 for name, values in times.items()}
 
 
 def row(times: np.ndarray) -> dict[str, float]:
@@ -155,7 +150,7 @@ def main() -> None:
     print("|---:|---|---:|---:|---:|---:|")
     ratios = []
     for n in args.n:
-        times, decisions, disagreements = measure(n, args.episodes, sizes)
+        times = measure(n, args.episodes, sizes)
         stats = {name: row(values) for name, values in times.items()}
         for name, s in stats.items():
             print(f"| {n} | {name} | {s['median']:.3f} | {s['p99']:.3f} | {s['max']:.3f} | "
@@ -164,7 +159,7 @@ def main() -> None:
         ratios.append(
             f"n = {n}: PyTorch / compiled {torch_s['median'] / compiled_s['median']:.1f}x "
             f"(median), {torch_s['p99'] / compiled_s['p99']:.1f}x (p99); "
-            f"{decisions} decisions each, {disagreements} disagreements"
+            f"{times['compiled'].size} decisions each"
         )
     print()
     print("\n".join(ratios))
