@@ -1,0 +1,55 @@
+"""The table of docs/training.md's "Learners that beat the planner?", from committed runs.
+
+    python docs/results/guided_table.py docs/results
+
+Per group (every trial on one Torch thread, on the same 2-core AMD EPYC machine, no
+AVX-512): final validation and test return (mean ± sd over seeds, ddof 0), the test
+IQM with its 95% stratified-bootstrap interval, the network selected on the validation
+set (the evaluation with the highest validation return) scored on the test set, and
+core-minutes (process CPU time) in all and in the teacher.
+"""
+
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from spikectl.experiments.report import load_runs
+from spikectl.experiments.stats import bootstrap_ci, iqm
+from spikectl.experiments.sweep import trial_dirs
+from spikectl.training.run import best_on_validation
+
+GROUPS = {
+    "TDRQN, quick preset (`spikectl train quick`)": "quick-this-machine",
+    "guided, teacher identify-and-plan (`spikectl train guided`)": "guided-identify",
+    "guided, teacher told the weights (pilot, 1 seed)": "guided-told-weights-pilot",
+}
+
+
+def mean_sd(values) -> str:
+    return f"{np.mean(values):.3f} ± {np.std(values):.3f}"
+
+
+def main(results: Path) -> None:
+    print("| learner | seeds | final val | final test | test IQM [95% CI] | selected on val: "
+          "test | core-minutes | of which teacher |")
+    print("|---|---:|---:|---:|---:|---:|---:|---:|")
+    for label, folder in GROUPS.items():
+        if not (results / folder).exists():
+            continue
+        runs = load_runs(trial_dirs(results / folder))
+        final = [run.metrics[-1] for run in runs]
+        selected = [best_on_validation(run.metrics) for run in runs]
+        tests = np.array([row["test_return"] for row in final])
+        interval = bootstrap_ci(tests, iqm, rng=0)
+        teacher = [row.get("teacher_seconds", 0.0) / 60 for row in final]
+        print(
+            f"| {label} | {len(runs)} | {mean_sd([r['val_return'] for r in final])} | "
+            f"{mean_sd(tests)} | {interval.estimate:.3f} [{interval.low:.3f}, {interval.high:.3f}] | "
+            f"{mean_sd([r['test_return'] for r in selected])} | "
+            f"{np.mean([r['cpu_time_s'] for r in final]) / 60:.1f} | {np.mean(teacher):.1f} |"
+        )
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]))
