@@ -314,6 +314,24 @@ def test_weights_that_do_not_match_the_header_are_named(policy_file):
         CompiledPolicy.load(altered)
 
 
+def test_header_values_and_weights_are_checked(policy_file):
+    for changes, message in (
+        ({"lstm_hidden": "16"}, "lstm_hidden is '16'"),
+        ({"head_hidden": [32, 0]}, "head_hidden is"),
+        ({"target_in_input": 1}, "target_in_input is 1"),
+        ({"do_nothing_head": "mean"}, "do_nothing_head 'mean'"),
+        ({"attn_heads": 3}, "must divide attn_width"),
+    ):
+        with pytest.raises(PolicyFileError, match=message):
+            CompiledPolicy.load(rewrite(policy_file, changes))
+    with np.load(policy_file) as data:
+        arrays = {name: data[name] for name in data.files}
+    arrays["head.value.0.weight"][0, 0] = np.nan
+    np.savez(policy_file, **arrays)
+    with pytest.raises(PolicyFileError, match=r"\['head.value.0.weight'\] hold NaN"):
+        CompiledPolicy.load(policy_file)
+
+
 def test_act_checks_its_inputs(policy_file):
     policy = CompiledPolicy.load(policy_file)
     observation = dict(voltage=np.full(5, -70.0, np.float32), target=1,

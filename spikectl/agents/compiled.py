@@ -625,6 +625,9 @@ class CompiledPolicy:
         bad = sorted(name for name, array in arrays.items() if array.dtype != np.float32)
         if bad:
             raise PolicyFileError(f"{where}: weights {bad} are not float32")
+        bad = sorted(name for name, array in arrays.items() if not np.isfinite(array).all())
+        if bad:
+            raise PolicyFileError(f"{where}: weights {bad} hold NaN or infinite values")
         policy = cls(spec, arrays, where)
         if warm_up:
             policy.warm_up()
@@ -718,10 +721,31 @@ def _parse_header(where: str, raw: np.ndarray) -> PolicySpec:
     if missing:
         raise PolicyFileError(f"{where}: the header lacks {missing}")
     values = {name: header[name] for name in names}
-    for name in ("head_hidden", "value_hidden"):
-        values[name] = tuple(values[name])
+    for field in fields(PolicySpec):
+        value = values[field.name]
+        if field.type == "int":
+            ok = type(value) is int and value >= 1
+        elif field.type == "float":
+            ok = type(value) in (int, float) and math.isfinite(value)
+        elif field.type == "bool":
+            ok = type(value) is bool
+        elif field.type == "tuple[int, ...]":
+            ok = isinstance(value, list) and all(type(v) is int and v >= 1 for v in value)
+            value = tuple(value) if ok else value
+        else:
+            ok = isinstance(value, str)
+        if not ok:
+            raise PolicyFileError(f"{where}: the header's {field.name} is {value!r}")
+        values[field.name] = value
     if values["do_nothing_head"] not in ("dueling", "pooled"):
         raise PolicyFileError(
             f"{where}: do_nothing_head {values['do_nothing_head']!r} is not 'dueling' or 'pooled'"
         )
+    if values["attn_width"] % values["attn_heads"] or values["layer_norm_eps"] <= 0:
+        raise PolicyFileError(
+            f"{where}: attn_heads {values['attn_heads']} must divide attn_width "
+            f"{values['attn_width']}, and layer_norm_eps {values['layer_norm_eps']} be > 0"
+        )
+    if values["v_threshold_mV"] == values["v_rest_mV"]:
+        raise PolicyFileError(f"{where}: v_threshold_mV equals v_rest_mV")
     return PolicySpec(**values)
