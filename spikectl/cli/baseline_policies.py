@@ -34,6 +34,28 @@ class BaselinesCommand:
     """Fraction of hidden neurons instead of the environment's (generated sets only)."""
 
 
+ENTRY_POINT = "spikectl.envs.env:NeuronControlEnv"
+
+
+def check_contexts_fit(context_set, command: BaselinesCommand, extensions, n_neurons) -> None:
+    """Refuse --contexts made for another environment than --env: the table would show
+    their numbers under the environment's name (hidden and heterogeneous neurons, and
+    the network size, belong to the contexts)."""
+    wanted = extensions.context_part()
+    if context_set.extensions != wanted:
+        raise ValueError(
+            f"--contexts {command.contexts} were made with context-level extensions "
+            f"{context_set.extensions.to_dict(only_changed=True) or 'none'}, but {command.env} "
+            f"has {wanted.to_dict(only_changed=True) or 'none'}: play a generated --split of "
+            "it, or contexts made with its extensions (ContextSet.generate(..., extensions=...))"
+        )
+    if n_neurons is not None and context_set.n_neurons != n_neurons:
+        raise ValueError(
+            f"--contexts {command.contexts} have {context_set.n_neurons} neurons, but "
+            f"{command.env} has {n_neurons}"
+        )
+
+
 def baselines(command: BaselinesCommand) -> None:
     """Print the table of training-free controllers and write a per-context CSV."""
     from dataclasses import replace
@@ -46,6 +68,11 @@ def baselines(command: BaselinesCommand) -> None:
 
     if command.env not in gymnasium.registry:
         raise ValueError(f"unknown environment id {command.env!r}")
+    if gymnasium.spec(command.env).entry_point != ENTRY_POINT:
+        raise ValueError(
+            f"--env {command.env!r} is not a spikectl environment; the baselines play "
+            "spikectl/NeuronControl-v0 and its variants (spikectl/NeuronControlNoisy-v0, ...)"
+        )
     kwargs = dict(gymnasium.spec(command.env).kwargs)
     extensions = Extensions.coerce(kwargs.get("extensions"))
     overrides = {
@@ -62,6 +89,7 @@ def baselines(command: BaselinesCommand) -> None:
     if command.contexts is not None:
         context_set = ContextSet.load(command.contexts)
         where = str(command.contexts)
+        check_contexts_fit(context_set, command, extensions, kwargs.get("n_neurons"))
     else:
         n_neurons = kwargs.get("n_neurons") or 8
         train_set, test_set, validation_set = make_splits(
