@@ -212,6 +212,15 @@ def resolve_setup(
     ):
         if given is not None and given != actual:
             raise ValueError(f"{name}={given!r} conflicts with the context set's {name} {actual}")
+    if params is not None and params != context_set.params:
+        mine, theirs = params.to_dict(), context_set.params.to_dict()
+        differ = ", ".join(f"{key} {mine[key]} (the contexts': {theirs[key]})"
+                           for key in mine if mine[key] != theirs[key])  # fmt: skip
+        raise ValueError(
+            f"params differ from those the contexts were made with: {differ}; the "
+            "contexts' patterns and witnesses hold only under their own params (leave "
+            "params out to play them, or generate contexts with these params)"
+        )
     params = context_set.params if params is None else params
     effective = resolve_extensions(requested, allow_target_action, context_set)
     tables = ContextTables.build(context_set, effective.allow_target_action, params)

@@ -61,6 +61,9 @@ class RunState:
     """Process CPU seconds (all threads) spent on this seed: its core-seconds."""
     metrics: list[dict] = field(default_factory=list)
     baselines: dict[str, dict[str, float]] = field(default_factory=dict)
+    contexts: dict[str, str] = field(default_factory=dict)
+    """The checksum of each context set the run plays (train, test, validation), so that
+    a resume refuses sets swapped for others (empty in checkpoints before they were kept)."""
 
     def to_payload(self) -> dict[str, Any]:
         return {
@@ -68,9 +71,11 @@ class RunState:
             "episodes": int(self.episodes),
             "wall_time_s": float(self.wall_time_s),
             "cpu_time_s": float(self.cpu_time_s),
-            "metrics": [{key: _plain(value) for key, value in row.items()}
-                        for row in self.metrics],  # fmt: skip
+            "metrics": [
+                {key: _plain(value) for key, value in row.items()} for row in self.metrics
+            ],  # fmt: skip
             "baselines": self.baselines,
+            "contexts": dict(self.contexts),
         }
 
     @classmethod
@@ -85,6 +90,7 @@ class RunState:
             cpu_time_s=float(entry.get("cpu_time_s", 0.0)),
             metrics=entry["metrics"],
             baselines=entry["baselines"],
+            contexts={str(k): str(v) for k, v in dict(entry.get("contexts", {})).items()},
         )
 
 

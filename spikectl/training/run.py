@@ -41,6 +41,9 @@ from spikectl.training.config import Experiment
 from spikectl.training.contexts import (
     COLLECT_STREAM,
     EVAL_STREAM,
+    TEST_FILE,
+    TRAIN_FILE,
+    VAL_FILE,
     baseline_episodes,
     load_or_make_contexts,
     make_env,
@@ -158,13 +161,16 @@ class Loop:
             self.states = load_checkpoint(
                 self.where, self.configs, self.learners, rngs, self.stacked
             )
-            for state, run_dir in zip(self.states, self.run_dirs, strict=True):
+            for state, run_dir, seed_sets in zip(self.states, self.run_dirs, sets, strict=True):
+                check_same_contexts(state, run_dir, seed_sets)
                 forget_best_model_after(run_dir, state.episodes)
         else:
             self.states = [
-                RunState(rng=rng, baselines=baselines(c, train_set, test_set))
-                for rng, c, (train_set, test_set, _) in zip(rngs, self.configs, sets, strict=True)
-            ]
+                RunState(rng=rng, baselines=baselines(c, train_set, test_set),
+                         contexts=context_checksums((train_set, test_set, val_set)))
+                for rng, c, (train_set, test_set, val_set)
+                in zip(rngs, self.configs, sets, strict=True)
+            ]  # fmt: skip
         self.collect_env, self.offsets = collection_env(config, self.train_sets, self.E)
         self.eval_envs = evaluation_envs(config, sets)
         self.eval_seeds = [stream_seed(c, EVAL_STREAM) for c in self.configs]
@@ -216,9 +222,7 @@ class Loop:
         self.learners.observe(blocks, contexts)
         for state in states:
             state.episodes += E
-        self.loggers[0].progress(
-            E, float(blocks[0].returns.mean()), self.learners.progress(before)
-        )
+        self.loggers[0].progress(E, float(blocks[0].returns.mean()), self.learners.progress(before))
         try:
             self.learners.update(before)
         except LossDiverged as error:
@@ -289,6 +293,29 @@ def baselines(config: Experiment, train_set: ContextSet, test_set: ContextSet) -
             ("random", make_random_policy(config.train.seed)),
         )
     }
+
+
+SPLIT_FILES = {"train": TRAIN_FILE, "test": TEST_FILE, "validation": VAL_FILE}
+
+
+def context_checksums(seed_sets) -> dict[str, str]:
+    """The checksum of each of a run's context sets (train, test, validation or None)."""
+    return {split: contexts.checksum()
+            for split, contexts in zip(SPLIT_FILES, seed_sets, strict=True)
+            if contexts is not None}  # fmt: skip
+
+
+def check_same_contexts(state: RunState, run_dir: Path, seed_sets) -> None:
+    """Refuse to resume a run on context sets other than those it started on (a valid
+    file swapped in would otherwise train and score on other networks, silently)."""
+    found = context_checksums(seed_sets)
+    for split, recorded in state.contexts.items():
+        if found.get(split) != recorded:
+            raise RunDirError(
+                f"{run_dir / SPLIT_FILES[split]} is not the {split} set this run started "
+                f"on (checksum {str(found.get(split))[:12]}, recorded {recorded[:12]}): put "
+                "the run's own file back, or start a new run on these contexts"
+            )
 
 
 def collection_env(config: Experiment, train_sets: list[ContextSet], num_envs: int):

@@ -1,5 +1,9 @@
-"""Issue 26, class 1: a FIFO or a link to a device where a file should be is refused
-in one line, never read forever (every reader opens through spikectl.files)."""
+"""Reliability round 3 (issue 26).
+
+Class 1: a FIFO or a link to a device where a file should be is refused in one line,
+never read forever (every reader opens through spikectl.files). Class 2: resume and
+the environment check what they are given (context sets, params).
+"""
 
 from __future__ import annotations
 
@@ -104,3 +108,39 @@ def test_context_and_sweep_files_that_are_not_files(tmp_path):
     with no_hang(), pytest.raises(ValueError, match="not a regular file"):
         load_sweep_file(fifo(tmp_path / "sweep.json"))
     make_splits(2, 2, seed=0)  # the module still works after the refusals
+
+
+def test_resume_refuses_context_sets_swapped_for_others(tmp_path, monkeypatch):
+    """Issue 26, class 2: a valid context file swapped into a run directory is refused
+    on resume, naming the file, and nothing is trained on it."""
+    from spikectl.contexts import ContextSet
+    from spikectl.training import run as run_module
+
+    config = SMOKE.with_changes(total_env_steps=6 * 20 * 8, eval_every_episodes=16,
+                                checkpoint_every_episodes=16)  # fmt: skip
+    calls = {"n": 0}
+    real_round = run_module.Loop.round
+
+    def round_then_die(self):
+        real_round(self)
+        calls["n"] += 1
+        if calls["n"] == 3:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(run_module.Loop, "round", round_then_die)
+    with pytest.raises(KeyboardInterrupt):
+        train(config, tmp_path / "run")
+    monkeypatch.setattr(run_module.Loop, "round", real_round)
+    path = tmp_path / "run" / "train_contexts.npz"
+    original = ContextSet.load(path)
+    other = ContextSet.generate(len(original), n_neurons=original.n_neurons,
+                                episode_length=original.episode_length, seed=99)  # fmt: skip
+    path.unlink()
+    other.save(path)
+    before = (tmp_path / "run" / "metrics.csv").read_text()
+    with pytest.raises(RunDirError, match="train_contexts.npz is not the train set"):
+        train(config, tmp_path / "run", resume=True)
+    assert (tmp_path / "run" / "metrics.csv").read_text() == before
+    path.unlink()
+    original.save(path)
+    assert train(config, tmp_path / "run", resume=True)[-1]["episode"] == 48
