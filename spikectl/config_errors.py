@@ -55,6 +55,11 @@ class ConfigError(ValueError):
         return ".".join(self.path)
 
 
+class MissingExtraError(ImportError):
+    """An optional dependency a feature needs is not installed; the message names the
+    pip extra that installs it (``pip install "spikectl[ray]"``)."""
+
+
 def _config_error(path: tuple[str, ...], problem: str, label: str, sep: str) -> ConfigError:
     return ConfigError(path, problem, label=label, sep=sep)
 

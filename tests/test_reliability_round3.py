@@ -144,3 +144,61 @@ def test_resume_refuses_context_sets_swapped_for_others(tmp_path, monkeypatch):
     path.unlink()
     original.save(path)
     assert train(config, tmp_path / "run", resume=True)[-1]["episode"] == 48
+
+
+def test_a_closed_pipe_ends_quietly(run_dir):
+    """Class 5: ``spikectl evaluate RUN | head -1`` prints no traceback."""
+    import subprocess
+    import sys
+
+    evaluate = subprocess.Popen(
+        [sys.executable, "-m", "spikectl.cli", "evaluate", str(run_dir)],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+    )  # fmt: skip
+    evaluate.stdout.close()  # the reader is gone before the first line
+    stderr = evaluate.stderr.read().decode()
+    assert evaluate.wait(timeout=120) == 141
+    assert "Traceback" not in stderr and stderr == ""
+
+
+def test_an_interrupt_is_one_line_with_how_to_resume(monkeypatch, capsys):
+    """Class 5: Ctrl-C during a command is one line (exit 130), never a traceback."""
+    import spikectl.cli as cli
+
+    def interrupted(command):
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(cli.COMMANDS, "demo", (interrupted, cli.COMMANDS["demo"][1]))
+    with pytest.raises(SystemExit) as exit_info:
+        cli.main(["demo"])
+    assert exit_info.value.code == 130
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "interrupted" in line and "--resume" in line
+
+
+def test_a_missing_extra_names_the_pip_extra(tmp_path, monkeypatch, capsys):
+    """Class 5: ``sweep --backend ray`` without Ray is one line naming the extra."""
+    import builtins
+
+    real_import = builtins.__import__
+
+    def no_ray(name, *args, **kwargs):
+        if name == "ray":
+            raise ImportError("No module named 'ray'")
+        return real_import(name, *args, **kwargs)
+
+    monkeypatch.setattr(builtins, "__import__", no_ray)
+    sweep = tmp_path / "sweep.json"
+    sweep.write_text('{"base": "smoke", "overrides": {"total_env_steps": 1600}, '
+                     '"grid": {"seed": [0]}}')  # fmt: skip
+    with pytest.raises(SystemExit) as exit_info:
+        main(["sweep", "--config", str(sweep), "--sweep-dir", str(tmp_path / "s"),
+              "--backend", "ray", "--workers", "1"])  # fmt: skip
+    assert exit_info.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "pip install 'spikectl[ray]'" in line
+    # The refused command leaves no trap: the corrected one runs in the same directory.
+    monkeypatch.setattr(builtins, "__import__", real_import)
+    main(["sweep", "--config", str(sweep), "--sweep-dir", str(tmp_path / "s"),
+          "--backend", "local", "--workers", "1"])  # fmt: skip
+    assert (tmp_path / "s" / "trials" / "seed=0" / "model.pt").exists()

@@ -8,6 +8,7 @@ becomes one line naming the flag). This module holds the command table and ``mai
 
 from __future__ import annotations
 
+import os
 import sys
 from typing import Annotated, Union
 
@@ -26,6 +27,7 @@ from spikectl.cli.errors import (
 from spikectl.cli.runs import EvaluateCommand, PlotCommand, SweepCommand, evaluate, plot, sweep
 from spikectl.cli.training import TrainCommand, parse_train, train
 from spikectl.config_errors import ConfigError
+from spikectl.files import describe_os_error
 
 __all__ = [
     "COMMANDS", "USER_ERRORS", "BaselinesCommand", "ContextsConfig", "DemoConfig",
@@ -68,4 +70,23 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(2) from error
     except USER_ERRORS as error:
         print(f"spikectl: error: {flag_message(str(error), command_types)}", file=sys.stderr)
+        raise SystemExit(2) from error
+    except BrokenPipeError:
+        # The reader went away (``spikectl evaluate RUN | head -1``): what it wanted it
+        # has; stop quietly, as a shell tool does, without a second error at exit.
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        raise SystemExit(141) from None
+    except KeyboardInterrupt:
+        print(
+            "spikectl: interrupted (a training run or sweep continues from its last "
+            "checkpoint: spikectl train --resume RUN_DIR, or the same sweep command)",
+            file=sys.stderr,
+        )
+        raise SystemExit(130) from None
+    except OSError as error:
+        # The machine's problem, not spikectl's (a full disk under TensorBoard's writer,
+        # a file system gone read-only): one line naming it.
+        where = f"{error.filename}: " if error.filename else ""
+        print(f"spikectl: error: {where}{describe_os_error(error)}", file=sys.stderr)
         raise SystemExit(2) from error

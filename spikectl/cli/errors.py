@@ -26,12 +26,14 @@ from typing import Annotated, Any, Union, get_args, get_origin, get_type_hints
 
 import tyro
 
-from spikectl.config_errors import ConfigError
+from spikectl.config_errors import ConfigError, MissingExtraError
 from spikectl.experiments.sweep import SweepError
 from spikectl.files import FileWriteError
 from spikectl.training.run_files import RunDirError
 
-USER_ERRORS = (ValueError, FileNotFoundError, FileWriteError, RunDirError, SweepError)
+USER_ERRORS = (
+    ValueError, FileNotFoundError, FileWriteError, RunDirError, SweepError, MissingExtraError,
+)  # fmt: skip
 """What the commands raise for bad input or a bad file system: reported in one line with
 exit status 2. ValueError covers every validation error of the library (ConfigError,
 ContextFileError, TooLargeError, argument checks); anything else is a bug and keeps its

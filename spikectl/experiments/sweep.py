@@ -33,6 +33,7 @@ from pathlib import Path
 from typing import Any
 
 from spikectl.agents import ARCHITECTURES
+from spikectl.config_errors import MissingExtraError
 from spikectl.files import FileWriteError, TooLargeError, make_dirs, read_text_file, write_json
 from spikectl.training.config import Experiment, field_value
 from spikectl.training.group import GROUP_FILE, group_key
@@ -367,7 +368,9 @@ def _run_with_ray(tasks: list[tuple], address: str | None, workers: int):
     try:
         import ray
     except ImportError:
-        raise RuntimeError("the Ray backend needs Ray: pip install 'spikectl[ray]'") from None
+        raise MissingExtraError(
+            "--backend ray needs Ray, which is not installed: pip install 'spikectl[ray]'"
+        ) from None
     started_here = not ray.is_initialized()
     if started_here:
         local = {"num_cpus": workers, "include_dashboard": False} if address is None else {}

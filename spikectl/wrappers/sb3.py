@@ -29,6 +29,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.envs.registration import EnvSpec
 
+from spikectl.config_errors import MissingExtraError
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.wrappers.sb3_spaces import (
@@ -166,7 +167,7 @@ def sb3_vec_env(
     try:
         from spikectl.wrappers.sb3_vec_adapter import SB3VecEnv
     except ImportError as error:
-        raise ImportError(
+        raise MissingExtraError(
             f"sb3_vec_env needs Stable-Baselines3 ({error}); install it with "
             'pip install "spikectl[sb3]"'
         ) from None
