@@ -127,6 +127,41 @@ def read_text_file(path: str | os.PathLike, max_bytes: int = MAX_TEXT_FILE_BYTES
     return data.decode("utf-8")
 
 
+class FolderBusyError(ValueError):
+    """Another process holds a folder's lock (two writers would lose one's results)."""
+
+
+@contextmanager
+def folder_lock(folder: Path, doing: str) -> Iterator[None]:
+    """Hold ``folder/.spikectl.lock`` (made with the folder) for the block; while another
+    process holds it, a FolderBusyError naming that process and ``doing`` (what the
+    holder is doing in the folder). The lock dies with its process, even on SIGKILL."""
+    import fcntl
+
+    make_dirs(folder)
+    path = folder / ".spikectl.lock"
+    try:
+        descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
+    except OSError as error:
+        raise FileWriteError(
+            error.errno, f"cannot write {path}: {describe_os_error(error)}"
+        ) from error
+    try:
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            owner = os.pread(descriptor, 32, 0).decode(errors="replace").strip() or "unknown"
+            raise FolderBusyError(
+                f"another process (pid {owner}) is {doing} in {folder}: wait for it to "
+                "finish or stop it; two writers must never share one folder"
+            ) from None
+        os.ftruncate(descriptor, 0)
+        os.pwrite(descriptor, f"{os.getpid()}\n".encode(), 0)
+        yield
+    finally:
+        os.close(descriptor)
+
+
 def describe_os_error(error: OSError) -> str:
     """A short description of a file-system error, without the Python exception clutter."""
     return _PROBLEMS.get(error.errno, error.strerror or str(error))

@@ -202,3 +202,21 @@ def test_a_missing_extra_names_the_pip_extra(tmp_path, monkeypatch, capsys):
     main(["sweep", "--config", str(sweep), "--sweep-dir", str(tmp_path / "s"),
           "--backend", "local", "--workers", "1"])  # fmt: skip
     assert (tmp_path / "s" / "trials" / "seed=0" / "model.pt").exists()
+
+
+def test_two_context_commands_at_once_never_lose_a_result(tmp_path):
+    """Class 4: while one ``spikectl contexts --out-dir D`` writes, a second is refused
+    naming the first (it used to report success, and one result was lost)."""
+    from spikectl.files import FolderBusyError, folder_lock
+
+    out = tmp_path / "sets"
+    with folder_lock(out, "writing context sets"):  # the first command, mid-write
+        with pytest.raises(SystemExit) as exit_info:
+            main(["contexts", "--out-dir", str(out), "--n-train", "2", "--n-test", "2"])
+        assert exit_info.value.code == 2
+        with pytest.raises(FolderBusyError, match=f"pid {os.getpid()}"):
+            with folder_lock(out, "writing context sets"):
+                pass
+    assert not (out / "train_contexts.npz").exists()
+    main(["contexts", "--out-dir", str(out), "--n-train", "2", "--n-test", "2"])
+    assert (out / "train_contexts.npz").exists()

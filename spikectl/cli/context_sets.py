@@ -9,7 +9,7 @@ from typing import Literal
 import numpy as np
 
 from spikectl.contexts import ContextSet, make_splits
-from spikectl.files import make_dirs, write_json
+from spikectl.files import folder_lock, make_dirs, write_json
 
 
 @dataclass(frozen=True)
@@ -120,15 +120,20 @@ def contexts(config: ContextsConfig) -> None:
         print(f"targets: {[context.target for context in described]}")
         return
     paths = {name: config.out_dir / f"{name}_contexts.npz" for name in ("train", "test")}
-    existing = [str(path) for path in paths.values() if path.exists()]
-    if existing and not config.overwrite:
-        raise ValueError(
-            f"--out-dir: {' and '.join(existing)} exist(s): pass --overwrite to replace, or "
-            "choose another --out-dir"
+    if config.out_dir.exists() and not config.out_dir.is_dir():
+        raise ValueError(f"--out-dir: {config.out_dir} is a file, not a folder")
+    # Under the folder's lock, so that a second `spikectl contexts` at once is refused
+    # instead of overwriting the first one's sets past the --overwrite guard.
+    with folder_lock(config.out_dir, "writing context sets"):
+        existing = [str(path) for path in paths.values() if path.exists()]
+        if existing and not config.overwrite:
+            raise ValueError(
+                f"--out-dir: {' and '.join(existing)} exist(s): pass --overwrite to replace, "
+                "or choose another --out-dir"
+            )
+        train, test = make_splits(
+            config.n_train, config.n_test, config.n_neurons, config.episode_length, config.seed
         )
-    train, test = make_splits(
-        config.n_train, config.n_test, config.n_neurons, config.episode_length, config.seed
-    )
-    for name, contexts_set in (("train", train), ("test", test)):
-        path = contexts_set.save(paths[name])
-        print(f"wrote {path}: {contexts_set!r}")
+        for name, contexts_set in (("train", train), ("test", test)):
+            path = contexts_set.save(paths[name])
+            print(f"wrote {path}: {contexts_set!r}")
