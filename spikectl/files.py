@@ -162,6 +162,17 @@ def folder_lock(folder: Path, doing: str) -> Iterator[None]:
         os.close(descriptor)
 
 
+def read_json_file(path: str | os.PathLike, max_bytes: int = MAX_TEXT_FILE_BYTES) -> Any:
+    """The JSON value in the regular file ``path`` (:func:`read_text_file`); JSON nested
+    too deeply to parse is a ValueError (json.JSONDecodeError is one too), not a
+    RecursionError."""
+    text = read_text_file(path, max_bytes)
+    try:
+        return json.loads(text)
+    except RecursionError:
+        raise ValueError("its JSON is nested too deeply to read") from None
+
+
 def describe_os_error(error: OSError) -> str:
     """A short description of a file-system error, without the Python exception clutter."""
     return _PROBLEMS.get(error.errno, error.strerror or str(error))

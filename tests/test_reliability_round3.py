@@ -220,3 +220,40 @@ def test_two_context_commands_at_once_never_lose_a_result(tmp_path):
     assert not (out / "train_contexts.npz").exists()
     main(["contexts", "--out-dir", str(out), "--n-train", "2", "--n-test", "2"])
     assert (out / "train_contexts.npz").exists()
+
+
+@pytest.mark.parametrize(
+    ("body", "problem"),
+    [
+        (
+            '{"base": "smoke", "grid": {"seed": [0]}, "overrides": {"sizes": 4}}',
+            "agent.sizes is a section of the config (a table of fields), not a value: got 4",
+        ),
+        (
+            '{"base": {"env": 5}, "grid": {"seed": [0]}}',
+            "env is a section of the config (a table of fields), got 5",
+        ),
+        ("[" * 100_000 + "]" * 100_000, "nested too deeply"),
+    ],
+    ids=["number-for-a-table", "number-for-a-section", "deep-json"],
+)
+def test_sweep_files_of_the_wrong_shape_are_one_line_errors(tmp_path, capsys, body, problem):
+    """Class 6: a number where a table belongs, JSON nested too deeply."""
+    sweep = tmp_path / "sweep.json"
+    sweep.write_text(body)
+    with pytest.raises(SystemExit) as exit_info:
+        main(["sweep", "--config", str(sweep), "--sweep-dir", str(tmp_path / "s")])
+    assert exit_info.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert problem in line
+    assert not (tmp_path / "s").exists()  # a refused sweep leaves nothing behind
+
+
+def test_a_run_config_nested_too_deeply_is_a_run_dir_error(tmp_path, run_dir):
+    import shutil
+
+    copy = tmp_path / "run"
+    shutil.copytree(run_dir, copy)
+    (copy / "config.json").write_text("[" * 100_000 + "]" * 100_000)
+    with pytest.raises(RunDirError, match="nested too deeply"):
+        read_config(copy)

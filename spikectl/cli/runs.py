@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Annotated, Literal
@@ -64,7 +63,7 @@ class SweepCommand:
 def sweep(command: SweepCommand) -> None:
     """Run the sweep and print each trial's final train and test return."""
     from spikectl.experiments.sweep import PAPER_SWEEPS, Sweep, load_sweep_file, run_sweep
-    from spikectl.files import read_text_file
+    from spikectl.files import read_json_file
 
     if (command.preset is None) == (command.config is None):
         raise ValueError("give exactly one of --preset (fig4, fig5) or --config FILE")
@@ -74,7 +73,7 @@ def sweep(command: SweepCommand) -> None:
         description = load_sweep_file(command.config).to_dict()
         if command.base is not None:
             # --base swaps the preset under the file's own overrides, which stay.
-            description = json.loads(read_text_file(command.config))
+            description = read_json_file(command.config)
             if not isinstance(description.get("base", "quick"), str):
                 raise ValueError(
                     f"--base: {command.config} holds a whole base config, not a preset name; "

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 import math
 import sys
 import warnings
@@ -117,11 +116,11 @@ def train(command: TrainCommand) -> None:
 def _print_run(config: Experiment, run_dir: Path, metrics: list[dict]) -> None:
     """A single run's final returns, its baselines and its best network on validation."""
     from spikectl.experiments.figures import plot_learning_curve
-    from spikectl.files import read_text_file
+    from spikectl.files import read_json_file
     from spikectl.training.run import best_on_validation
 
     final = metrics[-1]
-    baselines = json.loads(read_text_file(run_dir / "baselines.json"))
+    baselines = read_json_file(run_dir / "baselines.json")
     curve = plot_learning_curve(
         metrics, baselines, run_dir / "learning_curve.png",
         title=f"{config.agent.arch.upper()}, {final['env_steps']:,} steps",

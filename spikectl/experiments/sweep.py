@@ -34,7 +34,7 @@ from typing import Any
 
 from spikectl.agents import ARCHITECTURES
 from spikectl.config_errors import MissingExtraError
-from spikectl.files import FileWriteError, TooLargeError, make_dirs, read_text_file, write_json
+from spikectl.files import FileWriteError, make_dirs, read_json_file, write_json
 from spikectl.training.config import Experiment, field_value
 from spikectl.training.group import GROUP_FILE, group_key
 from spikectl.training.presets import PRESETS
@@ -141,14 +141,14 @@ def load_sweep_file(path: str | os.PathLike) -> Sweep:
 
 def _read_json(path: Path, what: str) -> Any:
     try:
-        return json.loads(read_text_file(path))
+        return read_json_file(path)
     except FileNotFoundError:
         raise FileNotFoundError(f"{what} not found: {path}") from None
     except IsADirectoryError:
         raise ValueError(f"{path} is a folder, not a {what}") from None
     except OSError as error:
         raise ValueError(f"cannot read {path}: {error.strerror}") from error
-    except (json.JSONDecodeError, UnicodeDecodeError, TooLargeError) as error:
+    except ValueError as error:  # bad JSON or text, too large, nested too deeply
         raise ValueError(f"{path} is not valid JSON: {error}") from error
 
 

@@ -64,6 +64,10 @@ from spikectl.training.variants import flat_settings, split_settings, variant_se
 
 LEARNER_CONFIGS_TUPLE = tuple(LEARNER_CONFIGS.values())
 
+SECTION_PATHS = (("env",), ("env", "params"), ("env", "extensions"), ("agent",),
+                 ("agent", "sizes"), ("train",), ("learner",))  # fmt: skip
+"""The tables of a saved config (what must be a JSON object, not a value)."""
+
 __all__ = ["AgentConfig", "EnvConfig", "Experiment", "TrainConfig", "field_value", "nest"]
 
 
@@ -222,9 +226,9 @@ class Experiment:
     """The network."""
     train: Annotated[TrainConfig, tyro.conf.arg(name="")] = field(default_factory=TrainConfig)
     """The run: seed, length, evaluations, checkpoints, machine."""
-    learner: Annotated[
-        LearnerConfig, tyro.conf.arg(name=""), tyro.conf.AvoidSubcommands
-    ] = field(default_factory=DQNConfig)
+    learner: Annotated[LearnerConfig, tyro.conf.arg(name=""), tyro.conf.AvoidSubcommands] = field(
+        default_factory=DQNConfig
+    )
     """The learning algorithm, chosen by its config's type (``learner.name`` in config.json)."""
 
     def __post_init__(self) -> None:
@@ -277,6 +281,14 @@ class Experiment:
         """Inverse of :meth:`to_dict`; also reads the configs of runs saved by earlier
         versions (``spikectl.training.config_migration``). Unknown fields are an error."""
         nested = migrate(values)
+        for path in SECTION_PATHS:
+            section = nested
+            for key in path:
+                section = section.get(key, {}) if isinstance(section, Mapping) else {}
+            if not isinstance(section, Mapping):
+                raise ConfigError(
+                    path, f"is a section of the config (a table of fields), got {section!r}"
+                )
         env = dict(nested.get("env", {}))
         agent = dict(nested.get("agent", {}))
         learner = dict(nested.get("learner", {}))
@@ -337,6 +349,11 @@ class Experiment:
                 node = node[key]
             if path[-1] not in node:
                 raise ValueError(f"unknown config field {'.'.join(path)!r}")
+            if isinstance(node[path[-1]], dict) and not isinstance(value, Mapping):
+                raise ValueError(
+                    f"{'.'.join(path)} is a section of the config (a table of fields), not "
+                    f"a value: got {value!r}"
+                )
             node[path[-1]] = value
         return Experiment.from_dict(values)
 

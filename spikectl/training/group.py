@@ -19,11 +19,10 @@ cannot be resumed (one clear error).
 from __future__ import annotations
 
 import dataclasses
-import json
 import os
 from pathlib import Path
 
-from spikectl.files import TooLargeError, make_dirs, read_text_file, write_json
+from spikectl.files import make_dirs, read_json_file, write_json
 from spikectl.training.config import Experiment
 from spikectl.training.run_files import (
     CHECKPOINT_FILE,
@@ -96,8 +95,8 @@ def read_group(group_dir: str | os.PathLike) -> dict:
     if not path.exists():
         raise RunDirError(f"{group_dir} holds no seed group (no {GROUP_FILE})")
     try:
-        description = json.loads(read_text_file(path))
-    except (OSError, json.JSONDecodeError, UnicodeDecodeError, TooLargeError) as error:
+        description = read_json_file(path)
+    except (OSError, ValueError) as error:
         raise RunDirError(f"{path} is not a valid seed-group file: {first_line(error)}") from None
     if not isinstance(description, dict):
         raise RunDirError(f"{path} is not a valid seed-group file: not a JSON object")

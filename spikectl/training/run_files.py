@@ -13,7 +13,6 @@ from __future__ import annotations
 import contextlib
 import csv
 import io
-import json
 import math
 import os
 import shutil
@@ -25,10 +24,10 @@ import torch
 
 from spikectl.files import (
     FileWriteError,
-    TooLargeError,
     atomic_write_text,
     describe_os_error,
     make_dirs,
+    read_json_file,
     read_text_file,
     write_json,
 )
@@ -183,12 +182,12 @@ def read_config(run_dir: Path) -> Experiment:
     """The resolved config saved in a run directory."""
     path = Path(run_dir) / CONFIG_FILE
     try:
-        values = json.loads(read_text_file(path))
+        values = read_json_file(path)
     except FileNotFoundError:
         raise RunDirError(f"{run_dir} is not a spikectl run directory (no {CONFIG_FILE})") from None
     except OSError as error:
         raise RunDirError(f"cannot read {path}: {describe_os_error(error)}") from error
-    except (json.JSONDecodeError, UnicodeDecodeError, TooLargeError) as error:
+    except ValueError as error:  # bad JSON or text, too large, nested too deeply
         raise RunDirError(f"{path} is not a valid spikectl config: {error}") from error
     if not isinstance(values, dict):
         raise RunDirError(f"{path} is not a valid spikectl config: not a JSON object")

@@ -27,9 +27,7 @@ class RunLogger:
     def progress(self, episodes: int, collect_return: float, learner: dict[str, str]) -> None:
         self.bar.update(episodes)
         # refresh=False: the bar redraws at most every mininterval, not on every round.
-        self.bar.set_postfix(
-            **learner, collect=f"{collect_return:.3f}", **self.last, refresh=False
-        )
+        self.bar.set_postfix(**learner, collect=f"{collect_return:.3f}", **self.last, refresh=False)
 
     def log(self, row: dict) -> None:
         for key in ("train_return", "test_return", "loss", "epsilon"):

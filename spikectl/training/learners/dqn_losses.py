@@ -108,9 +108,7 @@ def losses_on_tensors(
         target_q_values, _ = target(obs_seq)  # [B, N+1, n+1]
         bootstrap = target_q_values.gather(2, best_actions[..., None]).squeeze(2)  # [B, N+1]
         bootstrap[:, -1] = 0.0  # observation N follows the terminal step
-        td_target = n_step_targets(
-            rewards, bootstrap, settings.gamma, settings.n_step
-        )  # [B, N]
+        td_target = n_step_targets(rewards, bootstrap, settings.gamma, settings.n_step)  # [B, N]
     if settings.loss == "huber":
         td = F.smooth_l1_loss(q_taken, td_target)
     else:
