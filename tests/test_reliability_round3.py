@@ -257,3 +257,29 @@ def test_a_run_config_nested_too_deeply_is_a_run_dir_error(tmp_path, run_dir):
     (copy / "config.json").write_text("[" * 100_000 + "]" * 100_000)
     with pytest.raises(RunDirError, match="nested too deeply"):
         read_config(copy)
+
+
+def test_sizes_are_checked_before_anything_is_allocated(monkeypatch):
+    """Class 7: sizes no machine could hold are refused at once, naming the size."""
+    import numpy as np
+
+    import spikectl.files
+    from spikectl import simulate
+    from spikectl.config_errors import ConfigError
+    from spikectl.contexts import Context, ContextSet
+    from spikectl.files import TooLargeError
+    from spikectl.training.config import TrainConfig
+
+    monkeypatch.setattr(spikectl.files, "physical_memory_bytes", lambda: 2**30)
+    weights = np.zeros((8, 8), np.int8)
+    with no_hang(), pytest.raises(TooLargeError, match="simulating 1 x 200,000,000 steps"):
+        simulate(weights, np.broadcast_to(np.int16(-1), (200_000_000,)))
+    with no_hang(), pytest.raises(TooLargeError, match="1,000,000,000,000 contexts"):
+        ContextSet.generate(10**12)
+    with pytest.raises(ConfigError, match="torch_threads must be an integer in 0..256"):
+        TrainConfig(torch_threads=100_000)
+    pattern = np.zeros(5, bool)
+    pattern[2] = True
+    huge = np.zeros((1100, 1100), np.int8)
+    with pytest.raises(ValueError, match="n_neurons must be an integer in 2..1024"):
+        ContextSet([Context(huge, 1, pattern)])

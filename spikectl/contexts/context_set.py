@@ -29,8 +29,12 @@ from spikectl.contexts.generation import (
     check_size,
     generate_context,
 )
+from spikectl.files import check_fits_in_memory
 from spikectl.neuron.extensions import Extensions, Heterogeneity
 from spikectl.neuron.params import NeuronParams
+
+CONTEXT_OVERHEAD_BYTES = 1024
+"""About what one Context costs besides its arrays' data (objects and array headers)."""
 
 
 class ContextSet(Sequence[Context]):
@@ -59,6 +63,9 @@ class ContextSet(Sequence[Context]):
             if not isinstance(context, Context):
                 raise TypeError(f"item {index} is a {type(context).__name__}, not a Context")
         first = self._contexts[0]
+        # The documented limits hold for sets read from files too, not only generated.
+        check_n_neurons(first.n_neurons)
+        check_episode_length(first.episode_length)
         for index, context in enumerate(self._contexts):
             if _shape(context) != _shape(first):
                 raise ValueError(
@@ -108,6 +115,12 @@ class ContextSet(Sequence[Context]):
         through here, so a seed names the same contexts whichever asks for them."""
         seed = check_seed(seed)
         extensions = Extensions.coerce(extensions).context_part()
+        # Refuse at once what could never be held (a context is about a kilobyte of
+        # Python and NumPy objects besides its arrays), instead of generating for days.
+        check_fits_in_memory(
+            sum(sizes) * (CONTEXT_OVERHEAD_BYTES + n_neurons**2 + 3 * episode_length),
+            f"{sum(sizes):,} contexts of {n_neurons} neurons", "generate fewer contexts",
+        )  # fmt: skip
         taken = {context.weights.tobytes() for contexts in exclude for context in contexts}
         contexts = _generate_unique(
             sum(sizes), n_neurons, episode_length, seed if stream is None else [seed, stream],

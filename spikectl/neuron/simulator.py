@@ -25,6 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from spikectl.files import check_fits_in_memory
 from spikectl.neuron.kernel import (
     PARALLEL_MIN_BATCH,
     PARALLEL_MIN_WORK,
@@ -237,6 +238,11 @@ def simulate(
     if action_array.size and (action_array.min() < DO_NOTHING or action_array.max() >= n):
         raise ValueError(f"actions must lie in -1..{n - 1} for {n} neurons")
     batch = action_array.shape[0]
+    check_fits_in_memory(
+        batch * action_array.shape[1] * n * 9,  # float64 voltages and bool spikes
+        f"simulating {batch:,} x {action_array.shape[1]:,} steps of {n} neurons",
+        "simulate fewer steps or networks per call",
+    )
     if weight_batch.shape[0] not in (1, batch):
         raise ValueError(
             f"weights batch ({weight_batch.shape[0]}) does not match actions batch ({batch})"

@@ -64,6 +64,10 @@ from spikectl.training.variants import flat_settings, split_settings, variant_se
 
 LEARNER_CONFIGS_TUPLE = tuple(LEARNER_CONFIGS.values())
 
+MAX_TORCH_THREADS = 256
+"""More Torch threads than any one machine spikectl runs on has cores (a typo such as
+100000 made OpenBLAS fail to start its threads and the run hang)."""
+
 SECTION_PATHS = (("env",), ("env", "params"), ("env", "extensions"), ("agent",),
                  ("agent", "sizes"), ("train",), ("learner",))  # fmt: skip
 """The tables of a saved config (what must be a JSON object, not a value)."""
@@ -208,7 +212,8 @@ class TrainConfig:
         for name in ("total_env_steps", "num_envs", "eval_every_episodes",
                      "checkpoint_every_episodes"):  # fmt: skip
             check_int(name, getattr(self, name), 1, what="a positive integer")
-        check_int("torch_threads", self.torch_threads, 0, what="a non-negative integer")
+        check_int("torch_threads", self.torch_threads, 0, MAX_TORCH_THREADS,
+                  f"an integer in 0..{MAX_TORCH_THREADS} (0: PyTorch's default)")  # fmt: skip
         check_int("seed", self.seed, 0, 2**63 - 1, "an integer in 0..2**63 - 1")
         if not isinstance(self.device, str) or not self.device:
             raise ConfigError(
