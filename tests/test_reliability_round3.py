@@ -283,3 +283,29 @@ def test_sizes_are_checked_before_anything_is_allocated(monkeypatch):
     huge = np.zeros((1100, 1100), np.int8)
     with pytest.raises(ValueError, match="n_neurons must be an integer in 2..1024"):
         ContextSet([Context(huge, 1, pattern)])
+
+
+def test_an_impossible_task_is_one_line_and_leaves_no_trap(tmp_path, capsys):
+    """Class 8: params that no target can spike under are a clear error (exit 2), not a
+    RuntimeError; class 9: the corrected command then runs in the same directory."""
+    run = str(tmp_path / "run")
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", "smoke", "--run-dir", run, "--params.synaptic-current-pA", "0",
+              "--total-env-steps", "1600"])  # fmt: skip
+    assert exit_info.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert "made neuron" in line and "a release moves a neuron by 0 mV" in line
+    main(["train", "smoke", "--run-dir", run, "--total-env-steps", "1600"])
+    assert (tmp_path / "run" / "model.pt").exists()
+
+
+def test_absurd_magnitudes_are_refused_where_they_are_given():
+    """Class 8: 1e308 pA is refused as a parameter, not reported later as divergence."""
+    from spikectl.config_errors import ConfigError
+    from spikectl.neuron.params import NeuronParams
+
+    with pytest.raises(ConfigError, match="synaptic_current_pA .* no neuron's"):
+        NeuronParams(synaptic_current_pA=1e308)
+    with pytest.raises(ConfigError, match="stimulus_current_pA"):
+        NeuronParams(stimulus_current_pA=1e12)
+    assert NeuronParams(synaptic_current_pA=6000.0).synaptic_step_mV == pytest.approx(200.0)

@@ -138,7 +138,14 @@ def generate_pattern(
         pattern = spikes[:, target]
         if pattern.any():
             return pattern.copy(), witness.astype(np.int16)
-    raise RuntimeError(f"no action sequence made neuron {target} spike in {max_attempts} attempts")
+    params = NeuronParams() if params is None else params
+    raise ImpossibleTaskError(
+        f"no random action sequence of {episode_length} steps made neuron {target} spike in "
+        f"{max_attempts} attempts: with these NeuronParams a release moves a neuron by "
+        f"{params.synaptic_step_mV:g} mV and a stimulation by {params.stimulus_step_mV:g} mV, "
+        f"{params.v_threshold_mV - params.v_rest_mV:g} mV below threshold at rest, so the target "
+        "may never spike (check synaptic_current_pA, stimulus_current_pA, capacitance_pF)"
+    )
 
 
 def generate_context(
@@ -235,6 +242,10 @@ def make_context(
 def is_int(value: Any) -> bool:
     """True for Python and NumPy integers, False for booleans (which Python calls ints)."""
     return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
+
+
+class ImpossibleTaskError(ValueError):
+    """The neuron model cannot (or almost never) make a target spike: no context exists."""
 
 
 def check_n_neurons(n_neurons: int) -> int:

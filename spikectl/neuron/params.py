@@ -23,6 +23,10 @@ NEVER_RELEASES = 2**31 - 1
 MAX_REFRACTORY_STEPS = 2**30
 """The simulator counts refractory steps in int32; longer periods would wrap."""
 
+MAX_VOLTAGE_STEP_mV = 10_000.0
+"""The largest voltage step one stimulation or release may cause (the paper's are 40 and
+20 mV): beyond it, sums of steps overflow into NaN long before any spike means anything."""
+
 
 @dataclass(frozen=True)
 class NeuronParams:
@@ -97,6 +101,15 @@ class NeuronParams:
                 f"v_threshold_mV - v_rest_mV ({self.v_threshold_mV - self.v_rest_mV}): "
                 "otherwise resting neurons spike at every step",
             )
+        for current in ("stimulus_current_pA", "synaptic_current_pA"):
+            step = self.voltage_step_mV(getattr(self, current))
+            if not step <= MAX_VOLTAGE_STEP_mV:
+                raise ConfigError(
+                    current,
+                    f"({getattr(self, current):g}) moves a neuron by {step:g} mV in one step "
+                    f"(dt I / C); more than {MAX_VOLTAGE_STEP_mV:g} mV is no neuron's",
+                    label=f"NeuronParams.{current}",
+                )
         if self.dt_ms / (self.resistance_GOhm * self.capacitance_pF) > 1.0:
             raise ConfigError(
                 "dt_ms",

@@ -145,6 +145,11 @@ def prepare_run_dir(config: Experiment, run_dir: Path, resume: bool) -> bool:
                 f"{run_dir} already holds a run: resume it with `spikectl train --resume "
                 f"{run_dir}` or choose another --run-dir"
             )
+        if _holds_only_a_config(run_dir):
+            # A start that failed before anything else was written (bad contexts, an
+            # impossible task): the corrected command takes the directory over.
+            write_json(config_path, config.to_dict())
+            return False
         if read_config(run_dir) != config:
             raise RunDirError(
                 f"{run_dir} holds a run with another config that stopped before its first "
@@ -157,6 +162,15 @@ def prepare_run_dir(config: Experiment, run_dir: Path, resume: bool) -> bool:
     make_dirs(run_dir)
     write_json(config_path, config.to_dict())
     return False
+
+
+def _holds_only_a_config(run_dir: Path) -> bool:
+    """Whether ``run_dir`` holds config.json and nothing else of a run (its lock and
+    temporary files aside): what a start that failed before its contexts leaves."""
+    return all(
+        path.name in (CONFIG_FILE, LOCK_FILE) or path.name.endswith(".tmp")
+        for path in run_dir.iterdir()
+    )
 
 
 def _clear_unstarted(run_dir: Path) -> None:
