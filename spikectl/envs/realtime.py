@@ -26,9 +26,6 @@ from spikectl.neuron.simulator import DO_NOTHING
 ON_MISS = ("nothing", "late")
 """What a missed deadline does: the frame passes with no stimulation (``nothing``), or
 the late action is applied anyway (``late``, as if the clock had waited)."""
-_SPIN_NS = 300_000
-"""Sleep until this close to a tick, then spin: ``time.sleep`` overshoots by tens of
-microseconds, a spin on the clock by well under one."""
 
 
 class Controller(Protocol):
@@ -80,8 +77,11 @@ def run_realtime(
     paced at ``rate_hz``, and time every decision of ``controller`` against its deadline.
 
     Episode i resets with ``seed + i``; its first frame arrives when the reset returns.
-    The rig waits for each tick by sleeping, then spinning on ``time.perf_counter_ns``
-    (it keeps a core busy, as a rig's control loop would).
+    The rig waits for each tick by spinning on ``time.perf_counter_ns``, never sleeping:
+    it keeps its core (and the controller's weights in that core's caches) as a rig's
+    control loop would. A sleeping loop hands the core to other processes between
+    frames, whose data then evict the controller's; that doubled the compiled policy's
+    median decision time (docs/realtime.md).
     """
     if not isinstance(rate_hz, int | float) or not rate_hz > 0:
         raise ValueError(f"rate_hz must be a positive number, got {rate_hz!r}")
@@ -121,8 +121,5 @@ def run_realtime(
 
 
 def _wait_until(tick_ns: int) -> None:
-    remaining = tick_ns - time.perf_counter_ns()
-    if remaining > _SPIN_NS:
-        time.sleep((remaining - _SPIN_NS) * 1e-9)
     while time.perf_counter_ns() < tick_ns:
         pass
