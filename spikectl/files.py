@@ -131,15 +131,24 @@ class FolderBusyError(ValueError):
     """Another process holds a folder's lock (two writers would lose one's results)."""
 
 
+LOCK_FILE = ".spikectl.lock"
+"""The lock file :func:`folder_lock` holds in a folder (a run directory's too)."""
+
+
 @contextmanager
-def folder_lock(folder: Path, doing: str) -> Iterator[None]:
+def folder_lock(
+    folder: Path, doing: str, busy: type[Exception] = FolderBusyError
+) -> Iterator[None]:
     """Hold ``folder/.spikectl.lock`` (made with the folder) for the block; while another
-    process holds it, a FolderBusyError naming that process and ``doing`` (what the
-    holder is doing in the folder). The lock dies with its process, even on SIGKILL."""
+    process holds it, a ``busy`` error naming that process and ``doing`` (what the holder
+    is doing in the folder). The lock dies with its process, even on SIGKILL. A folder
+    this call made and that holds nothing else at the end is removed again."""
+    import contextlib
     import fcntl
 
+    created = not folder.exists()
     make_dirs(folder)
-    path = folder / ".spikectl.lock"
+    path = folder / LOCK_FILE
     try:
         descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
     except OSError as error:
@@ -151,13 +160,20 @@ def folder_lock(folder: Path, doing: str) -> Iterator[None]:
             fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
         except BlockingIOError:
             owner = os.pread(descriptor, 32, 0).decode(errors="replace").strip() or "unknown"
-            raise FolderBusyError(
+            raise busy(
                 f"another process (pid {owner}) is {doing} in {folder}: wait for it to "
                 "finish or stop it; two writers must never share one folder"
             ) from None
         os.ftruncate(descriptor, 0)
         os.pwrite(descriptor, f"{os.getpid()}\n".encode(), 0)
-        yield
+        try:
+            yield
+        finally:
+            if created and {p.name for p in folder.iterdir()} == {LOCK_FILE}:
+                # Nothing was made: leave no empty folder behind.
+                path.unlink(missing_ok=True)
+                with contextlib.suppress(OSError):
+                    folder.rmdir()
     finally:
         os.close(descriptor)
 

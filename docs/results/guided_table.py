@@ -20,6 +20,7 @@ from spikectl.experiments.sweep import trial_dirs
 from spikectl.training.run import best_on_validation
 
 GROUPS = {
+    "TDRQN, quick preset, committed (made on another CPU kind)": "learn-fast-pooled-decay",
     "TDRQN, quick preset (`spikectl train quick`)": "quick-this-machine",
     "guided, teacher identify-and-plan (`spikectl train guided`)": "guided-identify",
     "guided, teacher told the weights (pilot, 1 seed)": "guided-told-weights-pilot",
@@ -35,7 +36,7 @@ def main(results: Path) -> None:
           "test | core-minutes | of which teacher |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|")
     for label, folder in GROUPS.items():
-        if not (results / folder).exists():
+        if not trial_dirs(results / folder):
             continue
         runs = load_runs(trial_dirs(results / folder))
         final = [run.metrics[-1] for run in runs]

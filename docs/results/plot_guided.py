@@ -23,7 +23,8 @@ from spikectl.training.run_files import read_metrics
 
 IDENTIFY_AND_PLAN = {"val_return": 0.866, "test_return": 0.837}  # docs/baselines.md
 GROUPS = {
-    "TDRQN, quick preset": "learn-fast-pooled-decay",
+    "TDRQN, quick preset (committed, another CPU kind)": "learn-fast-pooled-decay",
+    "TDRQN, quick preset": "quick-this-machine",
     "guided, teacher identify-and-plan": "guided-identify",
     "guided, teacher told the weights (pilot)": "guided-told-weights-pilot",
 }
@@ -47,7 +48,7 @@ def main(results: Path, out: Path) -> None:
     for axis, column, title in zip(axes, ("val_return", "test_return"),
                                    ("validation networks", "unseen test networks")):  # fmt: skip
         for label, folder in GROUPS.items():
-            runs = trial_dirs(results / folder) if (results / folder).exists() else []
+            runs = trial_dirs(results / folder)
             if not runs:
                 continue
             grid, mean, sd = curve(runs, column)
@@ -59,7 +60,7 @@ def main(results: Path, out: Path) -> None:
         axis.set_title(title)
         axis.set_xlabel("core-minutes (process CPU time, teacher included)")
     axes[0].set_ylabel("greedy return (n = 8)")
-    axes[0].legend(loc="lower right", fontsize=8)
+    axes[0].legend(loc="upper left", fontsize=7)
     save_figure(figure, out)
 
 

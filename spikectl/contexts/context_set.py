@@ -115,6 +115,7 @@ class ContextSet(Sequence[Context]):
         through here, so a seed names the same contexts whichever asks for them."""
         seed = check_seed(seed)
         extensions = Extensions.coerce(extensions).context_part()
+        n_neurons, episode_length = check_n_neurons(n_neurons), check_episode_length(episode_length)
         # Refuse at once what could never be held (a context is about a kilobyte of
         # Python and NumPy objects besides its arrays), instead of generating for days.
         check_fits_in_memory(

@@ -14,7 +14,6 @@ import contextlib
 import csv
 import io
 import math
-import os
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
@@ -23,9 +22,10 @@ from typing import Any
 import torch
 
 from spikectl.files import (
-    FileWriteError,
+    LOCK_FILE,
     atomic_write_text,
     describe_os_error,
+    folder_lock,
     make_dirs,
     read_json_file,
     read_text_file,
@@ -39,7 +39,6 @@ MODEL_FILE = "model.pt"
 BEST_MODEL_FILE = "best_model.pt"
 METRICS_FILE = "metrics.csv"
 BASELINES_FILE = "baselines.json"
-LOCK_FILE = ".spikectl.lock"
 UNSTARTED_LEFTOVERS = (
     METRICS_FILE, BASELINES_FILE, "train_contexts.npz", "test_contexts.npz", "tensorboard",
     "learning_curve.png", BEST_MODEL_FILE,
@@ -79,41 +78,11 @@ def check_device(device: str) -> None:
 @contextlib.contextmanager
 def run_lock(run_dir: Path) -> Iterator[None]:
     """Hold the run directory's lock file for the block; another process holding it is
-    an error naming that process. The lock dies with its process (even on SIGKILL)."""
-    import fcntl
-
+    a RunDirError naming that process. The lock dies with its process (even on SIGKILL)."""
     if run_dir.exists() and not run_dir.is_dir():
         raise RunDirError(f"{run_dir} is a file, not a run directory: choose another --run-dir")
-    created = not run_dir.exists()
-    make_dirs(run_dir)
-    path = run_dir / LOCK_FILE
-    try:
-        descriptor = os.open(path, os.O_RDWR | os.O_CREAT, 0o644)
-    except OSError as error:
-        raise FileWriteError(
-            error.errno, f"cannot write {path}: {describe_os_error(error)}"
-        ) from error
-    try:
-        try:
-            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            owner = os.pread(descriptor, 32, 0).decode(errors="replace").strip() or "unknown"
-            raise RunDirError(
-                f"another process (pid {owner}) is training in {run_dir}: wait for it to "
-                "finish or stop it; two runs must never write one directory"
-            ) from None
-        os.ftruncate(descriptor, 0)
-        os.pwrite(descriptor, f"{os.getpid()}\n".encode(), 0)
-        try:
-            yield
-        finally:
-            if created and {p.name for p in run_dir.iterdir()} == {LOCK_FILE}:
-                # Nothing was started: leave no empty directory behind.
-                path.unlink(missing_ok=True)
-                with contextlib.suppress(OSError):
-                    run_dir.rmdir()
-    finally:
-        os.close(descriptor)
+    with folder_lock(run_dir, "training", busy=RunDirError):
+        yield
 
 
 def prepare_run_dir(config: Experiment, run_dir: Path, resume: bool) -> bool:
