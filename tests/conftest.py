@@ -113,3 +113,26 @@ def spike_pattern(length: int, spikes: list[int]):
     pattern = np.zeros(length, dtype=bool)
     pattern[spikes] = True
     return pattern
+
+
+@pytest.fixture
+def interrupt_after_rounds(monkeypatch) -> Callable[[int], Callable[[], None]]:
+    """``stop = interrupt_after_rounds(n)``: the training loop raises KeyboardInterrupt
+    after its n-th round from now on (as Ctrl-C would); ``stop()`` undoes it."""
+    from spikectl.training import run as run_module
+
+    real_round = run_module.Loop.round
+
+    def interrupt(rounds: int) -> Callable[[], None]:
+        calls = {"n": 0}
+
+        def round_then_die(self):
+            real_round(self)
+            calls["n"] += 1
+            if calls["n"] == rounds:
+                raise KeyboardInterrupt
+
+        monkeypatch.setattr(run_module.Loop, "round", round_then_die)
+        return lambda: monkeypatch.setattr(run_module.Loop, "round", real_round)
+
+    return interrupt

@@ -16,7 +16,6 @@ from spikectl.contexts import make_splits
 from spikectl.envs.rollout import evaluate_policy, make_random_policy
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning import IdentifyAndPlan
-from spikectl.training import run as run_module
 from spikectl.training.config import Experiment
 from spikectl.training.learners import GuidedConfig
 from spikectl.training.learners.guided import large_margin_loss
@@ -163,24 +162,15 @@ SHORT = guided(
 )
 
 
-def test_guided_run_resumes_exactly(tmp_path, monkeypatch):
+def test_guided_run_resumes_exactly(tmp_path, interrupt_after_rounds):
     reference = train(SHORT, tmp_path / "reference")
     assert reference[1]["imitation_weight"] < 1.0 and reference[-1]["imitation_weight"] == 0.0
     assert reference[1]["teacher_seconds"] > 0 and not math.isnan(reference[1]["imitation_loss"])
     assert math.isnan(reference[-1]["imitation_loss"])  # weaned: TD only
-    calls = {"n": 0}
-    real_round = run_module.Loop.round
-
-    def round_then_die(self):
-        real_round(self)
-        calls["n"] += 1
-        if calls["n"] == 3:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(run_module.Loop, "round", round_then_die)
+    restore = interrupt_after_rounds(3)  # after the checkpoint at episode 16
     with pytest.raises(KeyboardInterrupt):
         train(SHORT, tmp_path / "killed")
-    monkeypatch.setattr(run_module.Loop, "round", real_round)
+    restore()
     resumed = train(SHORT, tmp_path / "killed", resume=True)
 
     def without_clocks(rows):

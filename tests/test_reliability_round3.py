@@ -110,27 +110,17 @@ def test_context_and_sweep_files_that_are_not_files(tmp_path):
     make_splits(2, 2, seed=0)  # the module still works after the refusals
 
 
-def test_resume_refuses_context_sets_swapped_for_others(tmp_path, monkeypatch):
+def test_resume_refuses_context_sets_swapped_for_others(tmp_path, interrupt_after_rounds):
     """Issue 26, class 2: a valid context file swapped into a run directory is refused
     on resume, naming the file, and nothing is trained on it."""
     from spikectl.contexts import ContextSet
-    from spikectl.training import run as run_module
 
     config = SMOKE.with_changes(total_env_steps=6 * 20 * 8, eval_every_episodes=16,
                                 checkpoint_every_episodes=16)  # fmt: skip
-    calls = {"n": 0}
-    real_round = run_module.Loop.round
-
-    def round_then_die(self):
-        real_round(self)
-        calls["n"] += 1
-        if calls["n"] == 3:
-            raise KeyboardInterrupt
-
-    monkeypatch.setattr(run_module.Loop, "round", round_then_die)
+    restore = interrupt_after_rounds(3)  # after the checkpoint at episode 16
     with pytest.raises(KeyboardInterrupt):
         train(config, tmp_path / "run")
-    monkeypatch.setattr(run_module.Loop, "round", real_round)
+    restore()
     path = tmp_path / "run" / "train_contexts.npz"
     original = ContextSet.load(path)
     other = ContextSet.generate(len(original), n_neurons=original.n_neurons,
