@@ -191,7 +191,10 @@ def generate_context(
                 raise
             continue  # unreachable from the observable neurons: draw a new network
         return Context(weights, target, pattern, witness, hidden, heterogeneity)
-    raise RuntimeError(f"no reachable target pattern in {MAX_TOPOLOGY_ATTEMPTS} networks")
+    raise ImpossibleTaskError(
+        f"no reachable target pattern in {MAX_TOPOLOGY_ATTEMPTS} networks (hidden or "
+        "heterogeneous neurons may leave no observable neuron able to drive a target)"
+    )
 
 
 def make_context(
@@ -244,8 +247,10 @@ def is_int(value: Any) -> bool:
     return isinstance(value, (int, np.integer)) and not isinstance(value, (bool, np.bool_))
 
 
-class ImpossibleTaskError(ValueError):
-    """The neuron model cannot (or almost never) make a target spike: no context exists."""
+class ImpossibleTaskError(ValueError, RuntimeError):
+    """The neuron model cannot (or almost never) make a target spike: no context exists.
+    A ValueError for the user (the parameters are the problem); a RuntimeError for the
+    generator, which draws another network after one whose target it could not drive."""
 
 
 def check_n_neurons(n_neurons: int) -> int:
