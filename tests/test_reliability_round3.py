@@ -299,3 +299,23 @@ def test_absurd_magnitudes_are_refused_where_they_are_given():
     with pytest.raises(ConfigError, match="stimulus_current_pA"):
         NeuronParams(stimulus_current_pA=1e12)
     assert NeuronParams(synaptic_current_pA=6000.0).synaptic_step_mV == pytest.approx(200.0)
+
+
+def test_a_checkpoint_holding_sparse_tensors_is_damaged_not_a_traceback(tmp_path, run_dir):
+    """Class 6: a crafted checkpoint with sparse tensors is refused in one line (the
+    checksum itself used to raise)."""
+    import shutil
+
+    import torch
+
+    from spikectl.training.checkpoint import read_checkpoint
+
+    copy = tmp_path / "run"
+    shutil.copytree(run_dir, copy)
+    payload = torch.load(copy / "checkpoint.pt", weights_only=True)
+    network = payload["learners"]["seeds"][0]["network"]
+    name = next(key for key, value in network.items() if value.dim() == 2)
+    network[name] = network[name].to_sparse()
+    torch.save(payload, copy / "checkpoint.pt")
+    with pytest.raises(RunDirError, match="is damaged: cannot checksum a torch.sparse_coo"):
+        read_checkpoint(copy / "checkpoint.pt")

@@ -38,6 +38,7 @@ from spikectl.training.torch_files import (
     payload_checksum,
     peek_header,
     torch_bytes,
+    verify_checksum,
 )
 
 CHECKPOINT_FORMAT = "spikectl.checkpoint"
@@ -159,8 +160,7 @@ def read_checkpoint(path: Path, map_location: str = "cpu") -> dict[str, Any]:
                     "loss_count": int}  # fmt: skip
     _check_entries(path, payload, {**required, "checksum": str})
     checksum = payload.pop("checksum")
-    if payload_checksum(payload) != checksum:
-        raise RunDirError(f"{path} is damaged: its checksum does not match its contents")
+    verify_checksum(payload, checksum, path)
     if version == 2:
         payload = _from_format_2(payload)
     if len(payload["runs"]) != len(payload["configs"]) or not payload["runs"]:

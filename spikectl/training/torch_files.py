@@ -35,8 +35,21 @@ def payload_checksum(payload: Any) -> str:
     return digest.hexdigest()
 
 
+def verify_checksum(payload: Any, checksum: Any, path: Path) -> None:
+    """Refuse (RunDirError) a loaded payload whose checksum is not ``checksum``, or that
+    holds what no spikectl file holds (sparse tensors, objects, nesting too deep)."""
+    try:
+        actual = payload_checksum(payload)
+    except (TypeError, RecursionError) as error:
+        raise RunDirError(f"{path} is damaged: {first_line(error)}") from None
+    if actual != checksum:
+        raise RunDirError(f"{path} is damaged: its checksum does not match its contents")
+
+
 def _digest(value: Any, digest: Any) -> None:
     if isinstance(value, torch.Tensor):
+        if value.layout != torch.strided:
+            raise TypeError(f"cannot checksum a {value.layout} tensor (dense tensors only)")
         tensor = value.detach().cpu().contiguous()
         digest.update(f"T{tensor.dtype}{tuple(tensor.shape)}".encode())
         digest.update(tensor.reshape(-1).view(torch.uint8).numpy())
@@ -199,7 +212,6 @@ def load_model_weights(path: Path) -> dict[str, torch.Tensor]:
         )
     if not all(torch.is_tensor(value) for value in weights.values()):
         raise RunDirError(f"{path} is damaged: it holds entries that are not tensors")
-    if payload_checksum(dict(weights)) != header.get("checksum"):
-        raise RunDirError(f"{path} is damaged: its checksum does not match its contents")
+    verify_checksum(dict(weights), header.get("checksum"), path)
     check_finite(weights, str(path))
     return weights
