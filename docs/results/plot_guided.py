@@ -60,7 +60,7 @@ def main(results: Path, out: Path) -> None:
         axis.set_title(title)
         axis.set_xlabel("core-minutes (process CPU time, teacher included)")
     axes[0].set_ylabel("greedy return (n = 8)")
-    axes[0].legend(loc="upper left", fontsize=7)
+    axes[1].legend(loc="lower right", fontsize=7)
     save_figure(figure, out)
 
 
