@@ -21,9 +21,9 @@ from spikectl.agents.compiled import (
     FORMAT_VERSION,
     CompiledPolicy,
     PolicyFileError,
-    _tanh,
     export_policy,
 )
+from spikectl.agents.policy_kernel import _tanh
 from spikectl.contexts import ContextSet, make_splits
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.training.presets import QUICK, SMOKE
