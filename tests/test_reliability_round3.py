@@ -319,3 +319,12 @@ def test_a_checkpoint_holding_sparse_tensors_is_damaged_not_a_traceback(tmp_path
     torch.save(payload, copy / "checkpoint.pt")
     with pytest.raises(RunDirError, match="is damaged: cannot checksum a torch.sparse_coo"):
         read_checkpoint(copy / "checkpoint.pt")
+
+
+def test_saving_a_context_set_to_a_folder_is_refused(tmp_path):
+    """Class 9: ``ContextSet.save(existing_dir)`` used to write ``existing_dir.npz``
+    beside it, where nobody looks."""
+    contexts = make_splits(2, 2, seed=0)[0]
+    with pytest.raises(ValueError, match="is a folder: give a file name"):
+        contexts.save(tmp_path)
+    assert not (tmp_path.parent / f"{tmp_path.name}.npz").exists()

@@ -246,6 +246,9 @@ class ContextSet(Sequence[Context]):
         context-level extensions as version 2 (``spikectl.contexts.file_format``).
         """
         path = Path(path)
+        if path.is_dir():
+            # Writing "folder.npz" beside it would not be where the caller looks.
+            raise ValueError(f"{path} is a folder: give a file name (e.g. {path / 'contexts.npz'})")
         if path.suffix != ".npz":
             path = path.with_suffix(path.suffix + ".npz")
         metadata = {
