@@ -328,3 +328,29 @@ def test_saving_a_context_set_to_a_folder_is_refused(tmp_path):
     with pytest.raises(ValueError, match="is a folder: give a file name"):
         contexts.save(tmp_path)
     assert not (tmp_path.parent / f"{tmp_path.name}.npz").exists()
+
+
+@pytest.mark.parametrize(
+    ("argv", "line"),
+    [
+        (["baselines", "--identify-width", "0"], "--identify-width must be an integer >= 1, got 0"),
+        (["baselines", "--oracle-width", "0"], "--oracle-width must be an integer >= 1, got 0"),
+        (
+            ["train", "smoke", "--extensions.background-rate", "1e30"],
+            "--extensions.background-rate must be at most 1000 inputs per neuron per step",
+        ),
+        (
+            ["train", "smoke", "--extensions.background-current-pA", "1e300"],
+            "--extensions.background-current-pA must lie in [-1e+06, 1e+06] pA",
+        ),
+    ],
+)
+def test_messages_name_the_flag(tmp_path, capsys, argv, line):
+    """Class 9 and 8: the message names the flag ("width must be ..." did not), and
+    absurd background inputs are refused where they are given ("lam value too large")."""
+    with pytest.raises(SystemExit) as exit_info:
+        main([*argv, "--out" if argv[0] == "baselines" else "--run-dir", str(tmp_path / "x")])
+    assert exit_info.value.code == 2
+    (error,) = capsys.readouterr().err.strip().splitlines()
+    assert line in error
+    assert not (tmp_path / "x").exists()

@@ -66,6 +66,10 @@ def baselines(command: BaselinesCommand) -> None:
     from spikectl.planning import IdentifyAndPlan
     from spikectl.planning.baselines import run_baselines
 
+    for flag, value in (("--identify-width", command.identify_width),
+                        ("--oracle-width", command.oracle_width)):  # fmt: skip
+        if value < 1:
+            raise ValueError(f"{flag} must be an integer >= 1, got {value}")
     if command.env not in gymnasium.registry:
         raise ValueError(f"unknown environment id {command.env!r}")
     if gymnasium.spec(command.env).entry_point != ENTRY_POINT:

@@ -41,6 +41,12 @@ CONTEXT_FIELDS = (
 """Fields drawn with the contexts and saved in the context set."""
 
 
+MAX_BACKGROUND_RATE = 1000.0
+"""Spontaneous inputs per neuron per step, at most (the registered variant uses 0.005)."""
+MAX_BACKGROUND_CURRENT_pA = 1e6
+"""The largest spontaneous input current in pA, either sign (the default is 600)."""
+
+
 @dataclass(frozen=True)
 class Extensions:
     """Frozen, validated switches for the extensions; the defaults are the paper's model."""
@@ -111,6 +117,21 @@ class Extensions:
             if getattr(self, name) < 0:
                 raise ConfigError(name, f"must be >= 0, got {getattr(self, name)}",
                                   label=f"Extensions.{name}")  # fmt: skip
+        # Beyond these no network is anything but noise, and NumPy's Poisson draws and
+        # the voltage sums overflow (a rate of 1e30 was "lam value too large").
+        if self.background_rate > MAX_BACKGROUND_RATE:
+            raise ConfigError(
+                "background_rate",
+                f"must be at most {MAX_BACKGROUND_RATE:g} inputs per neuron per step, got "
+                f"{self.background_rate:g}", label="Extensions.background_rate",
+            )  # fmt: skip
+        if not abs(self.background_current_pA) <= MAX_BACKGROUND_CURRENT_pA:
+            raise ConfigError(
+                "background_current_pA",
+                f"must lie in [-{MAX_BACKGROUND_CURRENT_pA:g}, {MAX_BACKGROUND_CURRENT_pA:g}] "
+                f"pA, got {self.background_current_pA:g}",
+                label="Extensions.background_current_pA",
+            )  # fmt: skip
         bleaching = self.bleaching_time_constant_steps
         if bleaching is not None and bleaching <= 0:
             raise ConfigError(
