@@ -117,6 +117,8 @@ class DQNLearner:
     """One seed's recurrent double-Q learner (``Experiment.learner`` a DQNConfig)."""
 
     metric_fields = ("epsilon", "aux_loss")
+    labelled_replay = False
+    """Whether the buffer keeps a label per step (a learner that imitates sets it)."""
     counter_and_replay_keys = ("replay", "updates", "loss_sum", "aux_loss_sum", "loss_count")
     """The entries of :meth:`state_dict` that are not networks or the optimiser (a stacked
     group keeps those stacked, ``dqn_stacked``)."""
@@ -133,8 +135,9 @@ class DQNLearner:
         )
         self.optimizer = torch.optim.Adam(self.trained, lr=self.settings.learning_rate)
         self.replay = EpisodeReplay(
-            self.settings.buffer_size, config.env.n_observed, config.env.episode_length
-        )
+            self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
+            labelled=self.labelled_replay,
+        )  # fmt: skip
         self.targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
         self.patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
         self.updates, self.loss_count = 0, 0
@@ -180,6 +183,10 @@ class DQNLearner:
         td, aux = training_losses(
             self.network, self.target, batch, self.settings, self.predictor, self.device
         )
+        return self.td_and_aux_loss(td, aux)
+
+    def td_and_aux_loss(self, td: torch.Tensor, aux: torch.Tensor | None) -> torch.Tensor:
+        """TD loss plus the weighted auxiliary loss, each added to the running sums."""
         self.loss_sum += td.item()
         self.aux_loss_sum += 0.0 if aux is None else aux.item()
         return td if aux is None else td + self.settings.aux_voltage_weight * aux

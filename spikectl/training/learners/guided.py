@@ -33,7 +33,6 @@ from spikectl.envs.rollout import EpisodeBatch
 from spikectl.training.learners.dqn import DQNLearner
 from spikectl.training.learners.dqn_losses import training_losses
 from spikectl.training.learners.teachers import teacher_labels
-from spikectl.training.replay import EpisodeReplay
 
 
 def large_margin_loss(
@@ -69,12 +68,10 @@ class GuidedDQNLearner(DQNLearner):
         "imitation_weight", "imitation_loss", "teacher_agreement", "teacher_seconds",
     )  # fmt: skip
 
+    labelled_replay = True
+
     def __init__(self, config, train_set: ContextSet, rng: np.random.Generator) -> None:
         super().__init__(config, train_set, rng)
-        self.replay = EpisodeReplay(
-            self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
-            labelled=True,
-        )  # fmt: skip
         self.contexts = list(train_set)
         self.params = config.env.params
         self.noise_mV = float(config.env.extensions.observation_noise_mV)
@@ -87,7 +84,7 @@ class GuidedDQNLearner(DQNLearner):
                 f"{config.env.id} hides some (use teacher 'identify')"
             )
         self.teacher_seconds = 0.0
-        self.imitation_loss_sum, self.agreement_sum = 0.0, 0.0
+        self.imitation_loss_sum, self.agreement_sum, self.imitation_count = 0.0, 0.0, 0
 
     def imitation_weight(self, episode: int) -> float:
         return self.settings.imitation_weight_at(episode, self.total_episodes)
@@ -119,24 +116,23 @@ class GuidedDQNLearner(DQNLearner):
         imitation, agreement = large_margin_loss(
             q_values[:, :-1], labels, legal, self.settings.imitation_margin
         )
-        self.loss_sum += td.item()
-        self.aux_loss_sum += 0.0 if aux is None else aux.item()
         self.imitation_loss_sum += imitation.item()
         self.agreement_sum += agreement.item()
-        loss = td if aux is None else td + self.settings.aux_voltage_weight * aux
-        return loss + weight * imitation
+        self.imitation_count += 1
+        return self.td_and_aux_loss(td, aux) + weight * imitation
 
     def row_metrics(self, episode: int) -> dict[str, float]:
-        n = self.loss_count
-        guided = n > 0 and self.imitation_loss_sum + self.agreement_sum > 0
+        # Means over the updates since the last row that imitated (the row where the
+        # weight reaches 0 has updates of both kinds).
+        n = self.imitation_count
         row = {
             **super().row_metrics(episode),
             "imitation_weight": self.imitation_weight(episode),
-            "imitation_loss": self.imitation_loss_sum / n if guided else math.nan,
-            "teacher_agreement": self.agreement_sum / n if guided else math.nan,
+            "imitation_loss": self.imitation_loss_sum / n if n else math.nan,
+            "teacher_agreement": self.agreement_sum / n if n else math.nan,
             "teacher_seconds": self.teacher_seconds,
         }
-        self.imitation_loss_sum, self.agreement_sum = 0.0, 0.0
+        self.imitation_loss_sum, self.agreement_sum, self.imitation_count = 0.0, 0.0, 0
         return row
 
     def progress(self, episode: int) -> dict[str, str]:
@@ -148,6 +144,7 @@ class GuidedDQNLearner(DQNLearner):
             "teacher_seconds": float(self.teacher_seconds),
             "imitation_loss_sum": float(self.imitation_loss_sum),
             "agreement_sum": float(self.agreement_sum),
+            "imitation_count": int(self.imitation_count),
         }
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
@@ -155,6 +152,7 @@ class GuidedDQNLearner(DQNLearner):
         self.teacher_seconds = float(state["teacher_seconds"])
         self.imitation_loss_sum = float(state["imitation_loss_sum"])
         self.agreement_sum = float(state["agreement_sum"])
+        self.imitation_count = int(state["imitation_count"])
 
 
 __all__ = ["GuidedDQNLearner", "large_margin_loss"]
