@@ -9,7 +9,7 @@ see the same machine, and neither evicts the other's weights from the cache betw
 its decisions: a rig runs only one), and each decision is timed alone
 (``time.perf_counter_ns``), from the environment's observation dict to an action:
 
-- ``pytorch``: ``GreedyPolicy`` (spikectl.training.greedy), the path the library's
+- ``pytorch``: ``GreedyController`` (spikectl.agents.greedy), the path the library's
   evaluation uses, on a batch of one: ``observation_batch``, ``network.step`` under
   ``no_grad``, masked argmax, back to NumPy;
 - ``compiled``: ``CompiledPolicy.act`` (spikectl.agents.compiled).
@@ -40,10 +40,10 @@ import torch
 
 from spikectl.agents import make_agent
 from spikectl.agents.compiled import CompiledPolicy
+from spikectl.agents.greedy import GreedyController
 from spikectl.contexts import make_splits
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.realtime import run_realtime
-from spikectl.training.greedy import GreedyPolicy
 from spikectl.training.presets import QUICK
 
 EPISODE_LENGTH = 60
@@ -60,21 +60,6 @@ def cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
-class TorchController:
-    """The PyTorch network behind the controller face the rig drives (reset / act)."""
-
-    def __init__(self, network: torch.nn.Module) -> None:
-        self.network = network
-        self.reset()
-
-    def reset(self) -> None:
-        self.policy = GreedyPolicy(self.network)
-
-    def act(self, observation, info) -> int:
-        batch = {key: np.asarray(value)[None] for key, value in observation.items()}
-        return int(self.policy(batch, info["action_mask"][None])[0])
-
-
 def rig(n: int, episodes: int, sizes) -> list[str]:
     """Both controllers through the 1 kHz rig, one after the other: table rows."""
     torch.manual_seed(0)
@@ -84,7 +69,7 @@ def rig(n: int, episodes: int, sizes) -> list[str]:
     env = NeuronControlEnv(contexts=contexts)
     rows = []
     for name, controller in (
-        ("pytorch", TorchController(network)),
+        ("pytorch", GreedyController(network)),
         ("compiled", CompiledPolicy.from_network(network)),
     ):
         run_realtime(env, controller, [0])  # warm-up
@@ -100,7 +85,7 @@ def measure(n: int, episodes: int, sizes) -> dict[str, np.ndarray]:
     """{controller: decision times in seconds}, every step of every episode."""
     torch.manual_seed(0)
     network = make_agent("tdrqn", n, EPISODE_LENGTH, sizes).eval()
-    controllers = {"pytorch": TorchController(network),
+    controllers = {"pytorch": GreedyController(network),
                    "compiled": CompiledPolicy.from_network(network)}  # fmt: skip
     contexts = make_splits(n_train=1, n_test=episodes, n_neurons=n,
                            episode_length=EPISODE_LENGTH)[1]  # fmt: skip

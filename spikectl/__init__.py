@@ -1,8 +1,11 @@
 """spikectl: closed-loop control of simulated neuronal networks with reinforcement learning.
 
 The public API is re-exported here; importing the package registers the Gymnasium
-environment ids (a cheap dictionary entry) and does no other work.
+environment ids (a cheap dictionary entry) and does no other work. ``load_controller``
+(which needs PyTorch) loads its module on first use.
 """
+
+from typing import Any
 
 from spikectl.contexts import Context, ContextSet, make_context, make_splits
 from spikectl.envs.env import NeuronControlEnv
@@ -23,6 +26,7 @@ __all__ = [
     "NeuronControlEnv",
     "NeuronControlVectorEnv",
     "IdentifyAndPlan",
+    "load_controller",
     "NeuronParams",
     "make_context",
     "make_splits",
@@ -32,3 +36,13 @@ __all__ = [
     "simulate",
 ]
 __version__ = "0.1.0"
+
+
+def __getattr__(name: str) -> Any:
+    # PEP 562: ``spikectl.load_controller`` imports PyTorch, so only on first use.
+    if name == "load_controller":
+        from spikectl.training.controllers import load_controller
+
+        globals()[name] = load_controller
+        return load_controller
+    raise AttributeError(f"module 'spikectl' has no attribute {name!r}")

@@ -13,7 +13,8 @@ import torch
 
 from spikectl.config_errors import ConfigError
 from spikectl.contexts import make_splits
-from spikectl.envs.rollout import evaluate_policy, make_random_policy
+from spikectl.envs.controller import RandomLegal
+from spikectl.envs.rollout import evaluate_policy
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning import IdentifyAndPlan
 from spikectl.training.config import Experiment
@@ -89,7 +90,7 @@ def told_weights_policy(contexts):
 
 
 def test_teachers_label_other_trajectories_legally(contexts):
-    episodes = evaluate_policy(contexts, make_random_policy(1))
+    episodes = evaluate_policy(contexts, RandomLegal(1))
     for teacher in ("identify", "told-weights"):
         labels = teacher_labels(episodes, list(contexts), teacher, NeuronParams())
         assert labels.shape == episodes.actions.shape

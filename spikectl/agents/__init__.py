@@ -20,6 +20,7 @@ _HOMES = {
     "DDRQN": "per_neuron_networks",
     "DMDRQN": "system_networks",
     "DRQN": "system_networks",
+    "GreedyController": "greedy",
     "OBS_KEYS": "observation",
     "TDRQN": "per_neuron_networks",
     "AgentSizes": "sizes",

@@ -49,7 +49,7 @@ class CompiledPolicy:
 
     ``reset()`` forgets the episode (``act`` at step 0 also does); ``act(observation,
     info)`` returns the legal action of highest Q-value (-1 = do nothing, j = stimulate
-    neuron j), as ``GreedyPolicy`` picks it from the PyTorch network, and advances the
+    neuron j), as ``GreedyController`` picks it from the PyTorch network, and advances the
     recurrent state. ``last_q`` holds that decision's Q-values [n + 1] (action + 1
     order). Runs on any n, like the network. Build one with :meth:`load` (a file from
     :func:`export_policy`) or :meth:`from_network`.

@@ -2,7 +2,8 @@
 
 One module per concept: ``training`` (``spikectl train``: the presets as subcommands, the
 run or seed group), ``context_sets`` (``demo``, ``contexts``), ``runs`` (``evaluate``,
-``sweep``, ``plot``), ``baseline_policies`` (``baselines``) and ``errors`` (how a refusal
+``sweep``, ``plot``), ``baseline_policies`` (``baselines``), ``realtime`` (the 1 kHz
+rig) and ``errors`` (how a refusal
 becomes one line naming the flag). This module holds the command table and ``main``.
 """
 
@@ -24,6 +25,7 @@ from spikectl.cli.errors import (
     parse_error_line,
     run_tyro,
 )
+from spikectl.cli.realtime import RealtimeCommand, realtime
 from spikectl.cli.runs import EvaluateCommand, PlotCommand, SweepCommand, evaluate, plot, sweep
 from spikectl.cli.training import TrainCommand, parse_train, train
 from spikectl.config_errors import ConfigError
@@ -31,7 +33,8 @@ from spikectl.files import describe_os_error
 
 __all__ = [
     "COMMANDS", "USER_ERRORS", "BaselinesCommand", "ContextsConfig", "DemoConfig",
-    "EvaluateCommand", "PlotCommand", "SweepCommand", "TrainCommand", "flag_for", "main",
+    "EvaluateCommand", "PlotCommand", "RealtimeCommand", "SweepCommand", "TrainCommand",
+    "flag_for", "main",
     "parse_error_line",
 ]  # fmt: skip
 
@@ -43,6 +46,7 @@ COMMANDS = {
     "demo": (demo, DemoConfig),
     "contexts": (contexts, ContextsConfig),
     "baselines": (baselines, BaselinesCommand),
+    "realtime": (realtime, RealtimeCommand),
 }
 
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Literal
+from typing import Any, Literal
 
 from spikectl.contexts import ContextSet, make_splits
 
@@ -56,13 +56,39 @@ def check_contexts_fit(context_set, command: BaselinesCommand, extensions, n_neu
         )
 
 
+def environment_setup(env_id: str) -> tuple[dict, Any]:
+    """(the registered kwargs, the Extensions) of a spikectl environment id; refuses ids
+    that are unknown or not spikectl's."""
+    import gymnasium
+
+    from spikectl.neuron.extensions import Extensions
+
+    if env_id not in gymnasium.registry:
+        raise ValueError(f"unknown environment id {env_id!r}")
+    if gymnasium.spec(env_id).entry_point != ENTRY_POINT:
+        raise ValueError(
+            f"--env {env_id!r} is not a spikectl environment; spikectl plays "
+            "spikectl/NeuronControl-v0 and its variants (spikectl/NeuronControlNoisy-v0, ...)"
+        )
+    kwargs = dict(gymnasium.spec(env_id).kwargs)
+    return kwargs, Extensions.coerce(kwargs.get("extensions"))
+
+
+def generated_split(
+    split: str, n_neurons: int, extensions: Any, episode_length: int = 60
+) -> ContextSet:
+    """The ``split`` of make_splits(100, 100, n_neurons, episode_length, seed=0,
+    n_val=100): the sets every table of docs/baselines.md and docs/realtime.md plays."""
+    train_set, test_set, validation_set = make_splits(
+        100, 100, n_neurons, episode_length, seed=0, extensions=extensions, n_val=100
+    )
+    return {"train": train_set, "test": test_set, "validation": validation_set}[split]
+
+
 def baselines(command: BaselinesCommand) -> None:
     """Print the table of training-free controllers and write a per-context CSV."""
     from dataclasses import replace
 
-    import gymnasium
-
-    from spikectl.neuron.extensions import Extensions
     from spikectl.planning import IdentifyAndPlan
     from spikectl.planning.baselines import run_baselines
 
@@ -70,15 +96,7 @@ def baselines(command: BaselinesCommand) -> None:
                         ("--oracle-width", command.oracle_width)):  # fmt: skip
         if value < 1:
             raise ValueError(f"{flag} must be an integer >= 1, got {value}")
-    if command.env not in gymnasium.registry:
-        raise ValueError(f"unknown environment id {command.env!r}")
-    if gymnasium.spec(command.env).entry_point != ENTRY_POINT:
-        raise ValueError(
-            f"--env {command.env!r} is not a spikectl environment; the baselines play "
-            "spikectl/NeuronControl-v0 and its variants (spikectl/NeuronControlNoisy-v0, ...)"
-        )
-    kwargs = dict(gymnasium.spec(command.env).kwargs)
-    extensions = Extensions.coerce(kwargs.get("extensions"))
+    kwargs, extensions = environment_setup(command.env)
     overrides = {
         name: value
         for name, value in (("observation_noise_mV", command.observation_noise_mV),
@@ -96,11 +114,7 @@ def baselines(command: BaselinesCommand) -> None:
         check_contexts_fit(context_set, command, extensions, kwargs.get("n_neurons"))
     else:
         n_neurons = kwargs.get("n_neurons") or 8
-        train_set, test_set, validation_set = make_splits(
-            100, 100, n_neurons, seed=0, extensions=extensions, n_val=100
-        )
-        context_set = {"train": train_set, "test": test_set,
-                       "validation": validation_set}[command.split]  # fmt: skip
+        context_set = generated_split(command.split, n_neurons, extensions)
         where = f"the generated {command.split} set ({n_neurons} neurons, seed 0)"
     policy = IdentifyAndPlan(width=command.identify_width,
                              noise_mV=extensions.observation_noise_mV)  # fmt: skip

@@ -32,12 +32,8 @@ class DemoConfig:
 
 def demo(config: DemoConfig) -> dict[str, dict[str, float]]:
     """A 3-second tour: score do-nothing, random and witness policies; save an episode raster."""
-    from spikectl.envs.rollout import (
-        do_nothing_policy,
-        evaluate_policy,
-        make_random_policy,
-        make_witness_policy,
-    )
+    from spikectl.envs.controller import DoNothing, RandomLegal, Witness
+    from spikectl.envs.rollout import evaluate_policy
     from spikectl.experiments.figures import plot_episode_raster
 
     train, test = make_splits(
@@ -57,9 +53,9 @@ def demo(config: DemoConfig) -> dict[str, dict[str, float]]:
         row = {}
         for split, contexts in (("train", train), ("test", test)):
             policy = {
-                "do-nothing": do_nothing_policy,
-                "random": make_random_policy(config.seed),
-                "witness": make_witness_policy(contexts),
+                "do-nothing": DoNothing(),
+                "random": RandomLegal(config.seed),
+                "witness": Witness(contexts),
             }[name]
             episodes = evaluate_policy(contexts, policy)
             row[split] = float(episodes.returns.mean())

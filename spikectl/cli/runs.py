@@ -19,13 +19,16 @@ class EvaluateCommand:
     """A saved ContextSet (.npz) to evaluate on instead of the run's train/test sets."""
     model: Literal["final", "best"] = "final"
     """Which weights: the final model.pt, or best_model.pt (best validation return)."""
+    compiled: bool = False
+    """Play the network's compiled policy (NumPy/Numba, what a real-time rig runs)
+    instead of the PyTorch network; the returns agree but for near-ties."""
 
 
 def evaluate(command: EvaluateCommand) -> None:
     """Print the agent's mean greedy return per split, with its standard error."""
     from spikectl.training.evaluate import evaluate_run
 
-    for result in evaluate_run(command.run_dir, command.contexts, command.model):
+    for result in evaluate_run(command.run_dir, command.contexts, command.model, command.compiled):
         print(
             f"{result.name:<24}{result.mean:.3f} +- {result.standard_error:.3f} "
             f"over {result.returns.size} contexts (do nothing {result.do_nothing:.3f})"

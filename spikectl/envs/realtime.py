@@ -2,8 +2,9 @@
 by default: one step is 1 ms of the neurons' time), and every decision is timed against
 its deadline (issue 24; docs/realtime.md).
 
-A controller is anything with ``reset()`` and ``act(observation, info) -> int`` (the
-planners, :class:`~spikectl.agents.compiled.CompiledPolicy`). Frame k "arrives" at tick
+A controller is anything with ``reset()`` and ``act(observation, info) -> int``
+(:mod:`spikectl.envs.controller`; ``spikectl.load_controller`` builds any of the
+library's, and ``spikectl realtime`` runs this rig from the command line). Frame k "arrives" at tick
 k = start + k / rate; the controller's decision on it must be ready before tick k + 1.
 Its latency is measured from the tick, so a decision that overruns delays the next
 frame's processing too (the frames queue up, as on a rig that reads every frame). A
@@ -15,25 +16,18 @@ instead, and the return shows what the misses cost.
 from __future__ import annotations
 
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
+from spikectl.envs.controller import Controller
 from spikectl.neuron.simulator import DO_NOTHING
 
 ON_MISS = ("nothing", "late")
 """What a missed deadline does: the frame passes with no stimulation (``nothing``), or
 the late action is applied anyway (``late``, as if the clock had waited)."""
-
-
-class Controller(Protocol):
-    """What the rig drives: one environment's controller."""
-
-    def reset(self) -> None: ...
-
-    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int: ...
 
 
 @dataclass(frozen=True)

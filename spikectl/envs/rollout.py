@@ -1,9 +1,10 @@
-"""Run policies on every context of a set at once, through the vector environment.
+"""Run controllers on every context of a set at once, through the vector environment.
 
-A *policy* here is a function ``policy(observations, action_mask) -> actions`` on
-batches ([num_envs, ...] arrays in, int [num_envs] out). The reference policies
-(do nothing, uniformly random legal actions, replaying the witness) are built by the
-``make_*`` functions below; agents plug in the same way.
+What plays is a controller (:mod:`spikectl.envs.controller`: ``reset()`` and
+``act_batch(observations, infos)``; one without a batched form plays a copy per
+sub-environment), or a bare *policy* function ``policy(observations, action_mask) ->
+actions`` on batches ([num_envs, ...] arrays in, int [num_envs] out), as the learners'
+exploration policies are.
 """
 
 from __future__ import annotations
@@ -14,13 +15,13 @@ from dataclasses import dataclass
 import numpy as np
 
 from spikectl.contexts import ContextSet
-from spikectl.envs.env_support import random_legal_actions
+from spikectl.envs.controller import Controller, batched
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.neuron.simulator import DO_NOTHING
 
 Policy = Callable[[dict[str, np.ndarray], np.ndarray], np.ndarray]
+"""A bare batched policy: (observations, action_mask [S, n + 1]) -> int64 [S]."""
 
 
 @dataclass(frozen=True)
@@ -46,42 +47,32 @@ class EpisodeBatch:
         return self.rewards.sum(axis=1)
 
 
-def do_nothing_policy(observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
-    """Never stimulate: scores exactly 0.5 on every context."""
-    return np.full(action_mask.shape[0], DO_NOTHING, dtype=np.int64)
-
-
-def make_random_policy(seed: int) -> Policy:
-    """Uniformly random legal actions from a generator seeded with ``seed``."""
-    rng = np.random.default_rng(seed)
-
-    def random_policy(observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
-        return random_legal_actions(action_mask, rng)
-
-    return random_policy
-
-
-def make_witness_policy(contexts: ContextSet) -> Policy:
-    """Replay each context's witness (context i in sub-environment i): return 1.0 where
-    the dynamics are deterministic. Actions are in the agent's indexing (observable
-    neurons only, when some are hidden)."""
-    if any(context.witness is None for context in contexts):
-        raise ValueError("some contexts have no witness to replay")
-    witnesses = np.stack([context.agent_witness for context in contexts]).astype(np.int64)
-
-    def witness_policy(observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
-        return witnesses[np.arange(witnesses.shape[0]), observations["step"]]
-
-    return witness_policy
+def _batch_actor(policy: Controller | Policy) -> Callable[[dict, dict], np.ndarray]:
+    """(observations, infos) -> actions of a controller (reset here) or a bare policy."""
+    if isinstance(policy, Controller):
+        controller = batched(policy)
+        controller.reset()
+        return controller.act_batch
+    if not callable(policy):
+        raise TypeError(
+            f"{type(policy).__name__} is neither a controller (reset() and act(observation, "
+            "info)) nor a policy function (observations, action_mask) -> actions"
+        )
+    return lambda observations, infos: policy(observations, infos["action_mask"])
 
 
 def run_episodes(
-    env: NeuronControlVectorEnv, context_indices: np.ndarray | list[int], policy: Policy
+    env: NeuronControlVectorEnv,
+    context_indices: np.ndarray | list[int],
+    policy: Controller | Policy,
 ) -> EpisodeBatch:
-    """One episode of ``policy`` in each sub-environment, on the given contexts of its set.
+    """One episode of ``policy`` (a controller, or a bare policy function) in each
+    sub-environment, on the given contexts of its set.
 
     ``context_indices`` has one index per sub-environment (``env.num_envs`` of them).
+    A controller is reset before the first step.
     """
+    act = _batch_actor(policy)
     # With hidden neurons (an extension) only the k observable ones are seen.
     size, length, n = env.num_envs, env.episode_length, env.n_observed
     observations, infos = env.reset(options={"context": [int(i) for i in context_indices]})
@@ -92,7 +83,7 @@ def run_episodes(
     action_mask = infos["action_mask"].copy()
     voltage[:, 0] = observations["voltage"]
     for t in range(length):
-        actions[:, t] = policy(observations, infos["action_mask"])
+        actions[:, t] = act(observations, infos)
         observations, rewards[:, t], _, _, infos = env.step(actions[:, t])
         voltage[:, t + 1] = observations["voltage"]
         spikes[:, t] = infos["spikes"]
@@ -108,12 +99,13 @@ def run_episodes(
 
 def evaluate_policy(
     contexts: ContextSet,
-    policy: Policy,
+    policy: Controller | Policy,
     params: NeuronParams | None = None,
     extensions: Extensions | None = None,
     seed: int | None = None,
 ) -> EpisodeBatch:
-    """One episode of ``policy`` on every context of a set, all in one batch (with the
+    """One episode of ``policy`` (a controller or a bare policy function) on every
+    context of a set, all in one batch (with the
     environment-level ``extensions``, whose draws start from ``seed``)."""
     env = NeuronControlVectorEnv(
         num_envs=len(contexts), contexts=contexts, params=params, extensions=extensions

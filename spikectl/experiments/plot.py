@@ -27,7 +27,8 @@ def plot_sweep(
     sweep_dir: str | os.PathLike, out_dir: str | os.PathLike | None = None
 ) -> list[Path]:
     """Write figure3/4/5 PNGs, results tables and an episode raster; returns their paths."""
-    from spikectl.training.evaluate import greedy_episodes, load_agent
+    from spikectl.training.controllers import load_agent
+    from spikectl.training.evaluate import greedy_episodes
 
     sweep_dir = Path(sweep_dir)
     out_dir = Path(out_dir) if out_dir is not None else sweep_dir / "figures"

@@ -9,7 +9,12 @@ estimate every step. See docs/baselines.md.
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.discrete import DiscreteConnectivityEstimate
 from spikectl.planning.identify import ConnectivityEstimate, ObservedState
-from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, model_of_context, plan_episode
+from spikectl.planning.oracle import (
+    DEFAULT_ORACLE_WIDTH,
+    OraclePlanner,
+    model_of_context,
+    plan_episode,
+)
 from spikectl.planning.policy import IdentifyAndPlan
 
 __all__ = [
@@ -18,6 +23,7 @@ __all__ = [
     "DiscreteConnectivityEstimate",
     "IdentifyAndPlan",
     "ObservedState",
+    "OraclePlanner",
     "Plan",
     "PlanningModel",
     "beam_search",

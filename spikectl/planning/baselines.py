@@ -1,9 +1,10 @@
 """Score every training-free controller on a context set: the table of `spikectl baselines`.
 
 Do nothing, uniformly random legal actions (10 seeds), identify-and-plan, the oracle
-planner (its plan replayed open loop in the environment) and the witness, each on
-every context of a set through the vector environment, so that environment-level
-extensions (noise, stochastic release, background input) act on all of them alike.
+planner (its plan replayed open loop in the environment) and the witness, each a
+controller (:mod:`spikectl.envs.controller`) played on every context of a set through
+the vector environment, so that environment-level extensions (noise, stochastic
+release, background input) act on all of them alike.
 """
 
 from __future__ import annotations
@@ -18,18 +19,13 @@ from pathlib import Path
 import numpy as np
 
 from spikectl.contexts import ContextSet
-from spikectl.envs.rollout import (
-    do_nothing_policy,
-    make_random_policy,
-    make_witness_policy,
-    run_episodes,
-)
+from spikectl.envs.controller import Controller, DoNothing, RandomLegal, Witness
+from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.files import atomic_write_text
 from spikectl.neuron.extensions import CONTEXT_FIELDS, Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.neuron.simulator import DO_NOTHING
-from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, plan_episode
+from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
 from spikectl.planning.policy import IdentifyAndPlan
 
 CONTROLLERS = ("do_nothing", "random", "identify_and_plan", "oracle", "witness")
@@ -79,23 +75,6 @@ class BaselineResults:
         return atomic_write_text(path, buffer.getvalue())
 
 
-def _replay_policy(actions: np.ndarray):
-    """Replay fixed agent actions [S, N] open loop."""
-
-    def policy(observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
-        return actions[np.arange(actions.shape[0]), observations["step"]]
-
-    return policy
-
-
-def agent_actions(context, actions: np.ndarray) -> np.ndarray:
-    """Simulator actions (neuron indices) of ``context`` as the agent's indices."""
-    if context.hidden is None:
-        return actions.astype(np.int64)
-    observed = np.searchsorted(context.observable, actions)
-    return np.where(actions >= 0, observed, DO_NOTHING).astype(np.int64)
-
-
 def run_baselines(
     contexts: ContextSet,
     params: NeuronParams | None = None,
@@ -134,25 +113,20 @@ def run_baselines(
         policy = IdentifyAndPlan(params, noise_mV=env.extensions.observation_noise_mV)
     indices = np.arange(len(contexts))
 
-    def play(controller) -> np.ndarray:
+    def play(controller: Controller) -> np.ndarray:
         env.reset(seed=env_seed)
         return run_episodes(env, indices, controller).returns
 
-    returns = {"do_nothing": play(do_nothing_policy)}
-    seed_returns = np.stack([play(make_random_policy(seed)) for seed in range(random_seeds)])
+    returns = {"do_nothing": play(DoNothing())}
+    seed_returns = np.stack([play(RandomLegal(seed)) for seed in range(random_seeds)])
     returns["random"] = seed_returns.mean(axis=0)
     started = time.process_time()
-    returns["identify_and_plan"] = play(policy.vector_policy(len(contexts)))
+    returns["identify_and_plan"] = play(policy)
     identify_seconds = (time.process_time() - started) / len(contexts)
-    started = time.process_time()
-    planned = np.stack([
-        agent_actions(context, plan_episode(context, params, oracle_width,
-                                            env.extensions.allow_target_action)[0])
-        for context in contexts
-    ])  # fmt: skip
-    oracle_seconds = (time.process_time() - started) / len(contexts)
-    returns["oracle"] = play(_replay_policy(planned))
+    oracle = OraclePlanner(contexts, params, oracle_width, env.extensions.allow_target_action)
+    returns["oracle"] = play(oracle)
+    oracle_seconds = oracle.plan_seconds / len(contexts)
     if all(context.witness is not None for context in contexts):
-        returns["witness"] = play(make_witness_policy(contexts))
+        returns["witness"] = play(Witness(contexts))
     env.close()
     return BaselineResults(returns, seed_returns.mean(axis=1), identify_seconds, oracle_seconds)

@@ -3,10 +3,15 @@
 It knows the context's connectivity (and heterogeneous neurons, if any) but not its
 witness, and searches action sequences from rest with :func:`beam_search`. Its return
 is a context's reachable return found without the witness: the headroom a
-topology-agnostic controller is chasing.
+topology-agnostic controller is chasing. :class:`OraclePlanner` plays it as a
+controller (``reset()`` / ``act(observation, info)``).
 """
 
 from __future__ import annotations
+
+import time
+from collections.abc import Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -14,7 +19,7 @@ from spikectl.contexts import Context
 from spikectl.contexts.generation import legal_actions
 from spikectl.envs.env_support import step_rewards
 from spikectl.neuron.params import NeuronParams
-from spikectl.neuron.simulator import SimulatorState, neuron_parameters, simulate
+from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, neuron_parameters, simulate
 from spikectl.planning.beam import PlanningModel, beam_search
 
 DEFAULT_ORACLE_WIDTH = 256
@@ -75,3 +80,67 @@ def plan_episode(
     reward_if_spike, reward_if_silent = step_rewards(context.pattern)
     ret = float(np.where(spikes[:, context.target], reward_if_spike, reward_if_silent).sum())
     return plan.actions, ret
+
+
+def agent_actions(context: Context, actions: np.ndarray) -> np.ndarray:
+    """Simulator actions (neuron indices) of ``context`` as the agent's indices."""
+    if context.hidden is None:
+        return actions.astype(np.int64)
+    observed = np.searchsorted(context.observable, actions)
+    return np.where(actions >= 0, observed, DO_NOTHING).astype(np.int64)
+
+
+class OraclePlanner:
+    """The oracle planner as a controller (a privileged reference, like the witness):
+    at step 0 it plans the whole episode of the context named by
+    ``info["context_index"]`` in ``contexts`` with :func:`plan_episode`, knowing its
+    weights, then replays the plan open loop. Plans are kept per context, so a second
+    episode of a context costs nothing; ``plan_seconds`` sums the CPU time spent
+    planning.
+    """
+
+    def __init__(
+        self,
+        contexts: Sequence[Context],
+        params: NeuronParams | None = None,
+        width: int = DEFAULT_ORACLE_WIDTH,
+        allow_target_action: bool = False,
+    ) -> None:
+        self.contexts, self.params, self.width = contexts, params, width
+        self.allow_target_action = allow_target_action
+        self.plans: dict[int, np.ndarray] = {}
+        self.plan_seconds = 0.0
+        self._plan: np.ndarray | None = None
+
+    def reset(self) -> None:
+        self._plan = None
+
+    def plan(self, context: int) -> np.ndarray:
+        """The agent's actions [N] for context index ``context`` (planned once)."""
+        if context not in self.plans:
+            started = time.process_time()
+            actions, _ = plan_episode(
+                self.contexts[context], self.params, self.width, self.allow_target_action
+            )
+            self.plans[context] = agent_actions(self.contexts[context], actions)
+            self.plan_seconds += time.process_time() - started
+        return self.plans[context]
+
+    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
+        step = int(observation["step"])
+        if step == 0 or self._plan is None:
+            if "context_index" not in info:
+                raise ValueError(
+                    "OraclePlanner plans the context it is told and needs "
+                    "info['context_index'] (an index into its contexts)"
+                )
+            self._plan = self.plan(int(info["context_index"]))
+        return int(self._plan[step])
+
+    def act_batch(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Any]):
+        contexts = np.asarray(infos["context_index"], dtype=np.int64)  # [S]
+        steps = np.asarray(observations["step"], dtype=np.int64)  # [S]
+        return np.array(
+            [self.plan(int(context))[step] for context, step in zip(contexts, steps, strict=True)],
+            dtype=np.int64,
+        )

@@ -30,12 +30,8 @@ import numpy as np
 import torch
 
 from spikectl.contexts import ContextSet
-from spikectl.envs.rollout import (
-    EpisodeBatch,
-    do_nothing_policy,
-    make_random_policy,
-    run_episodes,
-)
+from spikectl.envs.controller import DoNothing, RandomLegal
+from spikectl.envs.rollout import EpisodeBatch, run_episodes
 from spikectl.training.checkpoint import RunState, load_checkpoint, save_checkpoint
 from spikectl.training.config import Experiment
 from spikectl.training.contexts import (
@@ -289,8 +285,8 @@ def baselines(config: Experiment, train_set: ContextSet, test_set: ContextSet) -
             for split, contexts in (("train", train_set), ("test", test_set))
         }
         for name, policy in (
-            ("do_nothing", do_nothing_policy),
-            ("random", make_random_policy(config.train.seed)),
+            ("do_nothing", DoNothing()),
+            ("random", RandomLegal(config.train.seed)),
         )
     }
 

@@ -22,16 +22,16 @@ import numpy as np
 import torch
 
 from spikectl.agents import make_agent, make_voltage_predictor
+from spikectl.agents.greedy import GreedyController
 from spikectl.contexts import ContextSet
 from spikectl.envs.env_support import random_legal_actions
 from spikectl.envs.rollout import EpisodeBatch
-from spikectl.training.greedy import GreedyPolicy
 from spikectl.training.learners.dqn_losses import soft_update, training_losses
 from spikectl.training.learners.protocol import LossDiverged
 from spikectl.training.replay import EpisodeReplay
 
 
-class EpsilonGreedyPolicy(GreedyPolicy):
+class EpsilonGreedyPolicy(GreedyController):
     """Acts with the online network's step forward, carrying one hidden state per episode.
 
     With probability epsilon (per step and episode) a random legal action replaces the

@@ -1,0 +1,181 @@
+"""One interface for everything that acts: trained agents, planners and the references.
+
+A *controller* has ``reset()`` (a new episode starts) and ``act(observation, info) ->
+int`` on one environment's observation and ``info`` (``info["action_mask"]``, and
+``info["context_index"]`` for the privileged references that replay a known answer).
+Its *batched form*, ``act_batch(observations, infos) -> int [S]``, acts on the
+batched observations of a vector environment, one episode per sub-environment.
+Controllers that carry state per episode and have no natural batch (the planners)
+get one through :func:`batched`, which plays an independent copy per sub-environment.
+
+The reference controllers live here: :class:`DoNothing`, :class:`RandomLegal` and
+:class:`Witness`. The planners (``IdentifyAndPlan``, ``OraclePlanner``) are in
+``spikectl.planning``, trained agents (``GreedyController``, ``CompiledPolicy``) in
+``spikectl.agents``, and ``spikectl.load_controller`` builds any of them by name or
+from a file. :func:`spikectl.envs.rollout.run_episodes`, ``spikectl evaluate``,
+``spikectl baselines`` and the real-time rig (``spikectl realtime``) all play
+controllers (docs/environment.md, "Controllers").
+"""
+
+from __future__ import annotations
+
+import copy
+from collections.abc import Mapping, Sequence
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+from spikectl.contexts import ContextSet
+from spikectl.envs.env_support import random_legal_actions
+from spikectl.neuron.simulator import DO_NOTHING
+
+
+@runtime_checkable
+class Controller(Protocol):
+    """What acts on one environment: a new episode starts at ``reset()``."""
+
+    def reset(self) -> None: ...
+
+    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int: ...
+
+
+@runtime_checkable
+class BatchController(Controller, Protocol):
+    """A controller with a batched form for the vector environment: ``reset()`` starts
+    a new episode in every sub-environment, ``act_batch`` returns int64 [S]."""
+
+    def act_batch(
+        self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Any]
+    ) -> np.ndarray: ...
+
+
+def _context_index(info: Mapping[str, Any], who: str) -> int:
+    if "context_index" not in info:
+        raise ValueError(
+            f"{who} replays a known answer per context and needs info['context_index'] "
+            "(the environment's info has it when a context comes from its ContextSet)"
+        )
+    return int(info["context_index"])
+
+
+class DoNothing:
+    """Never stimulate: scores exactly 0.5 on every context."""
+
+    def reset(self) -> None:
+        pass
+
+    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
+        return DO_NOTHING
+
+    def act_batch(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Any]):
+        return np.full(np.shape(infos["action_mask"])[0], DO_NOTHING, dtype=np.int64)
+
+
+class RandomLegal:
+    """Uniformly random legal actions from a generator seeded once, with ``seed``."""
+
+    def __init__(self, seed: int | None = None) -> None:
+        self.rng = np.random.default_rng(seed)
+
+    def reset(self) -> None:
+        pass
+
+    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
+        mask = np.asarray(info["action_mask"], dtype=bool)[None]  # [1, n + 1]
+        return int(random_legal_actions(mask, self.rng)[0])
+
+    def act_batch(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Any]):
+        return random_legal_actions(infos["action_mask"], self.rng)
+
+
+class Witness:
+    """Replay each context's witness (a privileged reference): return 1.0 where the
+    dynamics are deterministic. The context comes from ``info["context_index"]`` into
+    ``contexts``; actions are in the agent's indexing (observable neurons only)."""
+
+    def __init__(self, contexts: ContextSet) -> None:
+        if any(context.witness is None for context in contexts):
+            raise ValueError("some contexts have no witness to replay")
+        self.witnesses = np.stack([context.agent_witness for context in contexts]).astype(
+            np.int64
+        )  # [C, N]
+
+    def reset(self) -> None:
+        pass
+
+    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
+        context = _context_index(info, "Witness")
+        return int(self.witnesses[context, int(observation["step"])])
+
+    def act_batch(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Any]):
+        contexts = np.asarray(infos["context_index"], dtype=np.int64)  # [S]
+        return self.witnesses[contexts, np.asarray(observations["step"], dtype=np.int64)]
+
+
+class Copies:
+    """The batched form of a single-environment controller: one independent copy per
+    sub-environment, made from ``controller`` when the batch size is first seen (by
+    ``controller.spawn(index)`` where it has one, e.g. to seed each copy apart, else
+    a deep copy). ``reset()`` resets every copy."""
+
+    def __init__(self, controller: Controller) -> None:
+        self.controller = controller
+        self.copies: list[Controller] = []
+
+    def _spawn(self, index: int) -> Controller:
+        spawn = getattr(self.controller, "spawn", None)
+        return spawn(index) if spawn is not None else copy.deepcopy(self.controller)
+
+    def reset(self) -> None:
+        for controller in self.copies:
+            controller.reset()
+
+    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
+        return self.controller.act(observation, info)
+
+    def act_batch(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Any]):
+        size = np.shape(infos["action_mask"])[0]
+        if len(self.copies) != size:
+            self.copies = [self._spawn(index) for index in range(size)]
+        actions = np.empty(size, dtype=np.int64)
+        for index, controller in enumerate(self.copies):
+            observation = {key: value[index] for key, value in observations.items()}
+            info = {key: value[index] for key, value in infos.items() if _per_env(value, size)}
+            actions[index] = controller.act(observation, info)
+        return actions
+
+
+def _per_env(value: Any, size: int) -> bool:
+    return isinstance(value, np.ndarray) and value.ndim >= 1 and value.shape[0] == size
+
+
+def batched(controller: Controller) -> BatchController:
+    """``controller`` itself where it has ``act_batch``, else :class:`Copies` of it."""
+    if not isinstance(controller, Controller):
+        raise TypeError(
+            f"{type(controller).__name__} is not a controller: it needs reset() and "
+            "act(observation, info) -> int"
+        )
+    return controller if hasattr(controller, "act_batch") else Copies(controller)
+
+
+def play_episode(env: Any, controller: Controller, context: int, seed: int | None = None):
+    """One episode of ``controller`` on context ``context`` of a single environment:
+    (actions [N], return). The simplest closed loop; the rig times the same loop."""
+    controller.reset()
+    observation, info = env.reset(seed=seed, options={"context": int(context)})
+    actions: list[int] = []
+    total, done = 0.0, False
+    while not done:
+        action = controller.act(observation, info)
+        actions.append(action)
+        observation, reward, terminated, truncated, info = env.step(action)
+        total += reward
+        done = terminated or truncated
+    return np.array(actions, dtype=np.int64), total
+
+
+__all__: Sequence[str] = (
+    "BatchController", "Controller", "Copies", "DoNothing", "RandomLegal", "Witness",
+    "batched", "play_episode",
+)  # fmt: skip

@@ -1,0 +1,179 @@
+"""``load_controller``: any controller of the library by name or from a file; and
+``load_agent``, a run's trained network.
+
+Every controller has the interface of :mod:`spikectl.envs.controller` (``reset()``,
+``act(observation, info) -> int``; the batched ``act_batch`` directly or through
+``batched``), so one call gives what ``spikectl evaluate``, ``spikectl baselines`` and
+the real-time rig play:
+
+```python
+controller = spikectl.load_controller("runs/quick", model="best")  # the PyTorch network
+controller = spikectl.load_controller("runs/quick", compiled=True)  # its compiled policy
+controller = spikectl.load_controller("policy.npz")                 # an exported policy
+controller = spikectl.load_controller("identify-and-plan", env=env)
+```
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from spikectl.contexts import ContextSet
+from spikectl.envs.controller import Controller, DoNothing, RandomLegal, Witness
+from spikectl.neuron.params import NeuronParams
+from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
+from spikectl.planning.policy import IdentifyAndPlan
+
+NAMED_CONTROLLERS = ("do-nothing", "random", "identify-and-plan", "oracle", "witness")
+"""The controllers that need no training, by name; the oracle and the witness are
+privileged references that read the played context from ``info["context_index"]``."""
+
+PRIVILEGED = ("oracle", "witness")
+
+MODEL_CHOICES = ("final", "best")
+"""Which weights of a run to load: ``final`` (model.pt, else the last checkpoint) or
+``best`` (best_model.pt, the evaluation with the highest validation return)."""
+
+
+def load_agent(
+    run_dir: str | os.PathLike, n_neurons: int | None = None, model: str = "final"
+) -> Any:
+    """The trained online network of a run, on CPU: ``model="final"`` loads model.pt
+    (else the last checkpoint), ``model="best"`` loads best_model.pt (the network of the
+    evaluation with the highest validation return).
+
+    Both files load weights-only with their checksums verified; a damaged, foreign or
+    crafted file, or weights holding NaN or infinite values, is a RunDirError.
+    ``n_neurons`` builds the network for another network size (per-neuron architectures
+    only; DRQN and DMDRQN refuse it when they run).
+    """
+    # PyTorch and the training stack load here, never for a compiled policy file or a
+    # planner: a rig running those imports neither.
+    from spikectl.agents import make_agent
+    from spikectl.training.checkpoint import checkpoint_weights
+    from spikectl.training.run_files import (
+        BEST_MODEL_FILE,
+        CHECKPOINT_FILE,
+        MODEL_FILE,
+        RunDirError,
+        read_config,
+    )
+    from spikectl.training.torch_files import load_model_weights
+
+    if model not in MODEL_CHOICES:
+        raise ValueError(f"model must be one of {MODEL_CHOICES}, got {model!r}")
+    run_dir = Path(run_dir)
+    config = read_config(run_dir)
+    network = make_agent(
+        config.agent.arch, config.env.n_observed if n_neurons is None else n_neurons,
+        config.env.episode_length, config.agent.sizes, params=config.env.params,
+    )  # fmt: skip
+    if model == "best":
+        if not (run_dir / BEST_MODEL_FILE).exists():
+            raise RunDirError(
+                f"{run_dir} holds no {BEST_MODEL_FILE}: runs save one only when they have a "
+                "validation set (n_val > 0), from their first evaluation on"
+            )
+        weights = load_model_weights(run_dir / BEST_MODEL_FILE)
+    elif (run_dir / MODEL_FILE).exists():
+        weights = load_model_weights(run_dir / MODEL_FILE)
+    elif (run_dir / CHECKPOINT_FILE).exists():
+        weights = checkpoint_weights(run_dir / CHECKPOINT_FILE)
+    else:
+        raise RunDirError(f"{run_dir} holds no trained weights ({MODEL_FILE} or {CHECKPOINT_FILE})")
+    try:
+        network.load_state_dict(weights)
+    except RuntimeError as error:
+        raise RunDirError(
+            f"the weights in {run_dir} do not fit a {config.agent.arch} of the saved config: "
+            f"{str(error).splitlines()[0]}"
+        ) from error
+    network.eval()
+    return network
+
+
+def load_controller(
+    source: str | os.PathLike,
+    *,
+    model: str = "final",
+    compiled: bool = False,
+    env: Any = None,
+    contexts: ContextSet | None = None,
+    params: NeuronParams | None = None,
+    seed: int = 0,
+) -> Controller:
+    """The controller ``source`` names: a run directory (its trained network,
+    ``model="final"`` or ``"best"``; ``compiled=True`` for its compiled policy), a
+    compiled policy file (.npz from ``spikectl.agents.export_policy``), or one of
+    :data:`NAMED_CONTROLLERS`.
+
+    The named ones take the neuron model, the measurement noise, whether stimulating
+    the target is legal, and (oracle, witness) the contexts from ``env`` (a
+    ``NeuronControlEnv`` or ``NeuronControlVectorEnv``) where it is given, else from
+    ``contexts`` and ``params``. ``seed`` seeds the random controller.
+    """
+    if model not in MODEL_CHOICES:
+        raise ValueError(f"model must be one of {MODEL_CHOICES}, got {model!r}")
+    name = os.fspath(source)
+    if name in NAMED_CONTROLLERS:
+        return _named(name, env, contexts, params, seed)
+    path = Path(name)
+    if not path.exists():
+        raise FileNotFoundError(
+            f"no controller {name!r}: not a run directory, not a compiled policy file, and "
+            f"not one of {', '.join(NAMED_CONTROLLERS)}"
+        )
+    if path.is_dir():
+        network = load_agent(path, model=model)
+        if not compiled:
+            from spikectl.agents.greedy import GreedyController
+
+            return GreedyController(network)
+        from spikectl.agents.compiled import CompiledPolicy
+        from spikectl.agents.policy_file import PolicyFileError
+
+        try:
+            return CompiledPolicy.from_network(network)
+        except (PolicyFileError, ValueError) as error:
+            raise PolicyFileError(f"{path} cannot be compiled: {error}") from None
+    from spikectl.agents.compiled import CompiledPolicy
+
+    return CompiledPolicy.load(path)
+
+
+def _named(
+    name: str, env: Any, contexts: ContextSet | None, params: NeuronParams | None, seed: int
+) -> Controller:
+    noise_mV, allow_target = 0.0, False
+    if env is not None:
+        unwrapped = getattr(env, "unwrapped", env)
+        missing = [
+            key for key in ("contexts", "params", "extensions") if not hasattr(unwrapped, key)
+        ]
+        if missing:
+            raise TypeError(
+                f"env must be a spikectl NeuronControlEnv or NeuronControlVectorEnv, got "
+                f"{type(env).__name__} (it has no {', '.join(missing)})"
+            )
+        contexts, params = unwrapped.contexts, unwrapped.params
+        noise_mV = unwrapped.extensions.observation_noise_mV
+        allow_target = unwrapped.extensions.allow_target_action
+    elif contexts is not None:
+        params = contexts.params if params is None else params
+        noise_mV = contexts.extensions.observation_noise_mV
+        allow_target = contexts.extensions.allow_target_action
+    if name in PRIVILEGED and contexts is None:
+        raise ValueError(
+            f"the {name} controller replays a known answer per context: give env= or contexts="
+        )
+    if name == "do-nothing":
+        return DoNothing()
+    if name == "random":
+        return RandomLegal(seed)
+    if name == "identify-and-plan":
+        return IdentifyAndPlan(params, noise_mV=noise_mV)
+    if name == "oracle":
+        return OraclePlanner(contexts, params, DEFAULT_ORACLE_WIDTH, allow_target)
+    return Witness(contexts)

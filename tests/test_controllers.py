@@ -1,0 +1,180 @@
+"""One controller interface (issue 24, part 1): every controller plays one environment
+with reset()/act() and a vector environment with act_batch, and both agree; load_controller
+builds each by name or from a file; evaluate and the rig play them."""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import spikectl
+from spikectl import NeuronControlEnv, NeuronControlVectorEnv, make_splits
+from spikectl.envs.controller import (
+    BatchController,
+    Controller,
+    Copies,
+    DoNothing,
+    RandomLegal,
+    batched,
+    play_episode,
+)
+from spikectl.envs.rollout import evaluate_policy, run_episodes
+from spikectl.planning import OraclePlanner, plan_episode
+from spikectl.training.controllers import NAMED_CONTROLLERS, load_controller
+from spikectl.training.evaluate import evaluate_run
+
+ROOT = Path(__file__).resolve().parent.parent
+RUN = ROOT / "tests" / "data" / "format2-smoke-run"
+
+
+@pytest.fixture(scope="module")
+def contexts():
+    return make_splits(4, 4, 5, 20, seed=3)[1]
+
+
+def single_play(controller: Controller, contexts) -> tuple[np.ndarray, np.ndarray]:
+    """(actions [S, N], returns [S]): one episode per context on a single environment."""
+    env = NeuronControlEnv(contexts=contexts)
+    played = [play_episode(env, controller, i, seed=0) for i in range(len(contexts))]
+    return np.stack([actions for actions, _ in played]), np.array([ret for _, ret in played])
+
+
+def assert_same_play(controller: Controller, batch, contexts) -> None:
+    actions, returns = single_play(controller, contexts)
+    np.testing.assert_array_equal(actions, batch.actions)
+    np.testing.assert_allclose(returns, batch.returns, rtol=0, atol=1e-12)  # summing order
+
+
+@pytest.mark.parametrize("name", ["do-nothing", "identify-and-plan", "oracle", "witness"])
+def test_every_named_controller_plays_alone_and_batched_alike(name, contexts):
+    env = NeuronControlVectorEnv(num_envs=len(contexts), contexts=contexts)
+    controller = load_controller(name, env=env)
+    assert isinstance(controller, Controller)
+    assert isinstance(batched(controller), BatchController)
+    env.reset(seed=0)
+    batch = run_episodes(env, np.arange(len(contexts)), controller)
+    assert_same_play(controller, batch, contexts)
+    expected = {"do-nothing": 0.5, "witness": 1.0}
+    if name in expected:
+        np.testing.assert_allclose(batch.returns, expected[name])
+
+
+def test_the_oracle_controller_scores_what_plan_episode_finds(contexts):
+    oracle = OraclePlanner(contexts, width=16)
+    _, returns = single_play(oracle, contexts)
+    planned = [plan_episode(context, width=16)[1] for context in contexts]
+    np.testing.assert_allclose(returns, planned)
+    assert set(oracle.plans) == set(range(len(contexts))) and oracle.plan_seconds > 0
+
+
+def test_a_trained_network_plays_alone_as_in_the_batch(contexts):
+    run_contexts = spikectl.ContextSet.load(RUN / "test_contexts.npz")
+    controller = load_controller(RUN, model="best")
+    assert_same_play(controller, evaluate_policy(run_contexts, controller), run_contexts)
+
+
+def test_evaluate_plays_the_compiled_policy_as_the_network():
+    # The compiled policy picks the network's actions (test_compiled_policy.py), so the
+    # returns evaluate reports are the same on this run's sets.
+    torch_results = evaluate_run(RUN, model="best")
+    compiled_results = evaluate_run(RUN, model="best", compiled=True)
+    for pytorch, compiled in zip(torch_results, compiled_results, strict=True):
+        assert pytorch.name == compiled.name
+        np.testing.assert_array_equal(pytorch.returns, compiled.returns)
+
+
+def test_random_legal_is_seeded_and_legal(contexts):
+    first = evaluate_policy(contexts, RandomLegal(7))
+    second = evaluate_policy(contexts, RandomLegal(7))
+    np.testing.assert_array_equal(first.actions, second.actions)
+    assert not np.array_equal(first.actions, evaluate_policy(contexts, RandomLegal(8)).actions)
+    legal = first.action_mask[np.arange(len(contexts))[:, None], first.actions + 1]
+    assert legal.all()
+
+
+def test_copies_give_each_environment_its_own_state(contexts):
+    class Counter:
+        def __init__(self):
+            self.steps = 0
+
+        def reset(self):
+            self.steps = 0
+
+        def act(self, observation, info):
+            assert int(observation["step"]) == self.steps  # its own episode, in order
+            self.steps += 1
+            return -1
+
+    copies = batched(Counter())
+    assert isinstance(copies, Copies)
+    episodes = evaluate_policy(contexts, copies)
+    assert [c.steps for c in copies.copies] == [contexts.episode_length] * len(contexts)
+    np.testing.assert_allclose(episodes.returns, 0.5)
+
+
+def test_load_controller_refuses_what_it_cannot_build(tmp_path, contexts):
+    with pytest.raises(FileNotFoundError, match="not one of do-nothing"):
+        load_controller("identify-and-pla")
+    with pytest.raises(ValueError, match="oracle controller .* give env= or contexts="):
+        load_controller("oracle")
+    with pytest.raises(ValueError, match="model must be one of"):
+        load_controller(RUN, model="last")
+    with pytest.raises(TypeError, match="env must be a spikectl NeuronControlEnv"):
+        load_controller("identify-and-plan", env=object())
+    with pytest.raises(TypeError, match="is not a controller"):
+        batched(lambda observations, infos: None)
+    (tmp_path / "policy.npz").write_bytes(b"not a zip")
+    with pytest.raises(spikectl.agents.compiled.PolicyFileError, match="not a readable"):
+        load_controller(tmp_path / "policy.npz")
+    assert load_controller("witness", contexts=contexts).witnesses.shape == (4, 20)
+    assert set(NAMED_CONTROLLERS) == {"do-nothing", "random", "identify-and-plan", "oracle",
+                                      "witness"}  # fmt: skip
+    assert isinstance(load_controller("do-nothing"), DoNothing)
+
+
+def test_a_compiled_policy_file_loads_without_pytorch(tmp_path):
+    from spikectl.agents import export_policy
+    from spikectl.training.controllers import load_agent
+
+    export_policy(load_agent(RUN, model="best"), tmp_path / "policy.npz")
+    script = (
+        "import sys, spikectl\n"
+        f"controller = spikectl.load_controller({str(tmp_path / 'policy.npz')!r})\n"
+        "print(type(controller).__name__, 'torch' in sys.modules)\n"
+    )
+    result = subprocess.run([sys.executable, "-c", script], capture_output=True, text=True)
+    assert result.returncode == 0, result.stderr
+    assert result.stdout.split() == ["CompiledPolicy", "False"]
+
+
+def test_the_realtime_command_writes_every_decision(run_cli, tmp_path):
+    out = tmp_path / "decisions.csv"
+    result = run_cli("realtime", "do-nothing", "--episodes", "2", "--out", str(out))
+    assert "deadline misses:" in result.stdout and "mean return 0.500" in result.stdout
+    lines = out.read_text().splitlines()
+    assert lines[0] == "episode,step,latency_ms,missed" and len(lines) == 1 + 2 * 60
+    assert lines[-1].startswith("1,59,")
+    result = run_cli("realtime", str(RUN), "--compiled", "--model", "best", "--episodes", "3")
+    assert "CompiledPolicy paced at 1000 Hz" in result.stdout
+    assert "3 episodes on the generated test set (5 neurons, seed 0)" in result.stdout
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["realtime", "do-nothing", "--episodes", "0"], "--episodes must be an integer >= 1"),
+        (["realtime", "do-nothing", "--episodes", "101"], "has 100 contexts"),
+        (["realtime", "do-nothing", "--cpu", "4096"], "--cpu 4096: this process may run on"),
+        (["realtime", "do-nothing", "--rate-hz", "0"], "--rate-hz must be a positive"),
+        (["realtime", "no-such-controller"], "not one of do-nothing"),
+        (["realtime", "random", "--env", "CartPole-v1"], "is not a spikectl environment"),
+    ],
+)
+def test_the_realtime_command_refuses_bad_input(run_cli, args, message):
+    result = run_cli(*args, check=False)
+    assert result.returncode == 2
+    assert message in result.stderr and "Traceback" not in result.stderr
