@@ -72,6 +72,94 @@ def integrate(v, v_rest, leak, drive):
 _integrate = numba.njit(inline="always")(integrate)
 
 
+def _step_network(
+    w,  # [n, n] int8 or float64: the network's signed weights
+    action,  # int: the neuron stimulated, -1 = do nothing
+    v,  # [n] float64, state, updated in place
+    refractory_left,  # [n] int32, state
+    steps_since_release,  # [n] int32, state
+    released,  # [n] bool, state: released at the previous step
+    synaptic_input,  # [n] float64 scratch
+    model,  # the constants of the step, from step_constants(constants)
+    out_voltage,  # [B, T, n] float64: [b, t] gets the potential before reset
+    out_spikes,  # [B, T, n] bool: [b, t] gets the spikes
+    b,  # int: the network's row of out_voltage, out_spikes and input_mV
+    t,  # int: the step's column of out_voltage, out_spikes and input_mV
+    threshold,  # [n] per-neuron V_th less the tolerance, or None (the paper's)
+    leak,  # [n] per-neuron dt / RC, or None
+    may_release,  # [n] bool: whether a spike may release now (stochastic release), or None
+    input_mV,  # [B, T, n] extra input (background activity) in mV, or None
+):
+    """One 1 ms step of one network, in place: the model's whole step (docs/model.md).
+
+    ``_advance_kernel`` calls it for every network and step; the planners
+    (``spikectl.planning.beam``) call it from their own compiled search on their own
+    buffers, so they predict with this very arithmetic. A None input prunes its branch
+    at compile time. (The constants come unpacked, once per call of the kernel:
+    unpacked at every step they cost 40 % of a step of 8 neurons.)
+    """
+    v_rest, v_spike, leak_per_step, stimulus_step_mV, synaptic_step_mV = model[:5]
+    refractory_steps, min_release_interval = model[5:]
+    n = v.shape[0]
+    synaptic_input[:] = 0.0
+    for i in range(n):
+        if released[i]:
+            for j in range(n):
+                synaptic_input[j] += w[i, j]
+    for j in range(n):
+        since = steps_since_release[j]
+        if since < SINCE_RELEASE_CAP:
+            since += 1
+        spiked = False
+        if refractory_left[j] > 0:
+            refractory_left[j] -= 1
+            v_j = v_rest
+        else:
+            v_j = v[j]
+            drive = synaptic_step_mV * synaptic_input[j]
+            if action == j:
+                drive += stimulus_step_mV
+            if input_mV is not None:
+                drive += input_mV[b, t, j]
+            if threshold is None:
+                v_j = _integrate(v_j, v_rest, leak_per_step, drive)
+                spiked = v_j >= v_spike
+            else:
+                v_j = _integrate(v_j, v_rest, leak[j], drive)
+                spiked = v_j >= threshold[j]
+        out_voltage[b, t, j] = v_j
+        out_spikes[b, t, j] = spiked
+        release = False
+        if spiked:
+            v_j = v_rest
+            refractory_left[j] = refractory_steps
+            if may_release is None:
+                if since >= min_release_interval:
+                    release = True
+                    since = 0
+            elif may_release[j]:
+                release = True
+                since = 0
+        v[j] = v_j
+        steps_since_release[j] = since
+        released[j] = release
+
+
+step_network = numba.njit(inline="always", cache=True, nogil=True)(_step_network)
+
+
+def _step_constants(constants):
+    """What :func:`step_network` takes as ``model``, from the kernel's ``constants``."""
+    return (
+        constants[V_REST_MV], constants[V_SPIKE_MV], constants[LEAK_PER_STEP],
+        constants[STIMULUS_STEP_MV], constants[SYNAPTIC_STEP_MV],
+        int(constants[REFRACTORY_STEPS]), int(constants[MIN_RELEASE_INTERVAL_STEPS]),
+    )  # fmt: skip
+
+
+step_constants = numba.njit(inline="always", cache=True, nogil=True)(_step_constants)
+
+
 def _advance_kernel(
     weights,  # [W, n, n] int8, or float64 with scaled synapses; W == 1 (shared) or W == B
     actions,  # [B, T] int64, -1 = do nothing
@@ -89,13 +177,7 @@ def _advance_kernel(
     release_uniforms,  # [B, T, n] uniforms in [0, 1): stochastic release
     input_mV,  # [B, T, n] extra input (background activity) in mV
 ):
-    v_rest = constants[V_REST_MV]
-    v_spike = constants[V_SPIKE_MV]
-    leak_per_step = constants[LEAK_PER_STEP]
-    stimulus_step_mV = constants[STIMULUS_STEP_MV]
-    synaptic_step_mV = constants[SYNAPTIC_STEP_MV]
-    refractory_steps = int(constants[REFRACTORY_STEPS])
-    min_release_interval = int(constants[MIN_RELEASE_INTERVAL_STEPS])
+    model = step_constants(constants)
     release_scale = constants[RELEASE_SCALE]
     recovery_per_step = constants[RECOVERY_PER_STEP]
     batch, horizon = actions.shape
@@ -110,67 +192,30 @@ def _advance_kernel(
         since_b = steps_since_release[b].copy()
         released_b = released[b].copy()
         synaptic_input = np.empty(n)
-        if neurons is not None:
-            if neurons.shape[0] == 1:
-                threshold_b = neurons[0, 0].copy()
-                leak_b = neurons[0, 1].copy()
-            else:
-                threshold_b = neurons[b, 0].copy()
-                leak_b = neurons[b, 1].copy()
-        if release_uniforms is not None:
+        if neurons is None:
+            threshold_b = None
+            leak_b = None
+        elif neurons.shape[0] == 1:
+            threshold_b = neurons[0, 0].copy()
+            leak_b = neurons[0, 1].copy()
+        else:
+            threshold_b = neurons[b, 0].copy()
+            leak_b = neurons[b, 1].copy()
+        if release_uniforms is None:
+            may_release = None
+        else:
             may_release = np.empty(n, dtype=np.bool_)
         for t in range(horizon):
-            synaptic_input[:] = 0.0
-            for i in range(n):
-                if released_b[i]:
-                    for j in range(n):
-                        synaptic_input[j] += w[i, j]
             if release_uniforms is not None:
                 # A spike at t releases with probability p_r * (1 - exp(-(t - t_r) / tau_R))
-                # (t_r = -inf: p_r), decided before the loop below so that it stays free
-                # of calls.
+                # (t_r = -inf: p_r), decided before the step so that it stays free of calls.
                 for j in range(n):
                     since = min(since_b[j] + 1, SINCE_RELEASE_CAP)
                     probability = release_scale * (1.0 - np.exp(-since * recovery_per_step))
                     may_release[j] = release_uniforms[b, t, j] < probability
-            action = actions[b, t]
-            for j in range(n):
-                since = since_b[j]
-                if since < SINCE_RELEASE_CAP:
-                    since += 1
-                spiked = False
-                if refractory_b[j] > 0:
-                    refractory_b[j] -= 1
-                    v = v_rest
-                else:
-                    v = v_b[j]
-                    drive = synaptic_step_mV * synaptic_input[j]
-                    if action == j:
-                        drive += stimulus_step_mV
-                    if input_mV is not None:
-                        drive += input_mV[b, t, j]
-                    if neurons is None:
-                        v = _integrate(v, v_rest, leak_per_step, drive)
-                        spiked = v >= v_spike
-                    else:
-                        v = _integrate(v, v_rest, leak_b[j], drive)
-                        spiked = v >= threshold_b[j]
-                out_voltage[b, t, j] = v
-                out_spikes[b, t, j] = spiked
-                release = False
-                if spiked:
-                    v = v_rest
-                    refractory_b[j] = refractory_steps
-                    if release_uniforms is None:
-                        if since >= min_release_interval:
-                            release = True
-                            since = 0
-                    elif may_release[j]:
-                        release = True
-                        since = 0
-                v_b[j] = v
-                since_b[j] = since
-                released_b[j] = release
+            step_network(w, actions[b, t], v_b, refractory_b, since_b, released_b,
+                         synaptic_input, model, out_voltage, out_spikes, b, t,
+                         threshold_b, leak_b, may_release, input_mV)  # fmt: skip
         voltage[b] = v_b
         refractory_left[b] = refractory_b
         steps_since_release[b] = since_b
