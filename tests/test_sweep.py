@@ -203,5 +203,5 @@ def test_ray_backend_gives_the_same_results_as_the_local_pool(
 
 
 def test_unknown_backend():
-    with pytest.raises(ValueError, match="backend"):
-        run_sweep(Sweep(TINY, {"seed": [0]}), "unused", backend="slurm")
+    with pytest.raises(ValueError, match="backend must be 'local', 'ray' or 'slurm', got 'dask'"):
+        run_sweep(Sweep(TINY, {"seed": [0]}), "unused", backend="dask")

@@ -8,6 +8,8 @@ from typing import Annotated, Literal
 
 import tyro
 
+from spikectl.experiments.slurm import SlurmSettings
+
 
 @dataclass(frozen=True)
 class EvaluateCommand:
@@ -52,15 +54,17 @@ class SweepCommand:
     total_env_steps: int | None = None
     """Override the environment steps of every trial."""
     workers: int = 0
-    """Trials run at once; 0 means one per CPU core."""
-    backend: Literal["local", "ray"] = "local"
-    """local: a process pool on this machine; ray: Ray tasks (pip install 'spikectl[ray]')."""
+    """Trials run at once; 0 means one per CPU core (slurm: jobs at once, 0 Slurm's limit)."""
+    backend: Literal["local", "ray", "slurm"] = "local"
+    """local: a process pool; ray: Ray tasks (pip extra ray); slurm: Slurm jobs (extra slurm)."""
     address: str | None = None
     """Ray cluster address (ray backend); a local Ray instance when not given."""
     group_seeds: bool = False
     """Train the trials that differ only in seed and n_train in one process per group."""
     stacked: bool = False
     """With --group-seeds: each group as one stacked computation (pays on a GPU)."""
+    slurm: SlurmSettings = SlurmSettings()
+    """The jobs' sbatch options (slurm backend): each job is requeued and resumes exactly."""
 
 
 def sweep(command: SweepCommand) -> None:
@@ -72,6 +76,8 @@ def sweep(command: SweepCommand) -> None:
         raise ValueError("give exactly one of --preset (fig4, fig5) or --config FILE")
     if command.workers < 0:
         raise ValueError(f"--workers must be >= 0 (0: one per CPU core), got {command.workers}")
+    if command.backend != "slurm" and command.slurm != SlurmSettings():
+        raise ValueError("--slurm.* options apply to --backend slurm only")
     if command.config is not None:
         description = load_sweep_file(command.config).to_dict()
         if command.base is not None:
@@ -97,6 +103,7 @@ def sweep(command: SweepCommand) -> None:
         Sweep.from_dict(description), command.sweep_dir, command.workers or None,
         backend=command.backend, address=command.address, group_seeds=command.group_seeds,
         stacked=command.stacked,
+        slurm=command.slurm if command.backend == "slurm" else None,
     )  # fmt: skip
 
 

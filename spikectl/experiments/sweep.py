@@ -16,6 +16,8 @@ does not depend on how many ran beside it. With ``group_seeds`` the trials that 
 only in seed and training-set size run as one seed group per process
 (``spikectl.training.group``), each still in its own trial directory and bit-identical
 to the trial trained alone; the group's description lives in ``SWEEP_DIR/groups/``.
+The same tasks can run as Ray tasks (``backend="ray"``) or as Slurm jobs through
+submitit (``backend="slurm"``, ``spikectl.experiments.slurm``), each trial ending the same.
 """
 
 from __future__ import annotations
@@ -34,6 +36,13 @@ from typing import Any
 
 from spikectl.agents import ARCHITECTURES
 from spikectl.config_errors import MissingExtraError
+from spikectl.experiments.slurm import (
+    SLURM_DIR,
+    JobLostError,
+    SlurmSettings,
+    check_slurm_backend,
+    run_with_slurm,
+)
 from spikectl.files import FileWriteError, make_dirs, read_json_file, write_json
 from spikectl.training.config import Experiment, field_value
 from spikectl.training.group import GROUP_FILE, group_key
@@ -54,9 +63,9 @@ PAPER_SWEEPS: dict[str, dict[str, Any]] = {
 """The paper's two experiments: Figure 4 (architectures) and Figure 5 (training-set size)."""
 PARENT_POLL_S = 0.2
 """How often a worker checks that the sweep's process is still alive."""
-TRIAL_ERRORS = (ValueError, FileNotFoundError, FileWriteError, RunDirError)
-"""Failures of a trial that are about its inputs or files (reported in one line each);
-anything else is a bug and keeps its traceback."""
+TRIAL_ERRORS = (ValueError, FileNotFoundError, FileWriteError, RunDirError, JobLostError)
+"""Failures of a trial that are about its inputs or files, or a Slurm job lost (reported
+in one line each); anything else is a bug and keeps its traceback."""
 
 
 class SweepError(RuntimeError):
@@ -261,12 +270,17 @@ def run_sweep(
     address: str | None = None,
     group_seeds: bool = False,
     stacked: bool = False,
+    slurm: SlurmSettings | None = None,
 ) -> list[dict[str, Any]]:
     """Run every trial of ``sweep`` under ``sweep_dir``.
 
     ``backend="local"``: a process pool of ``workers`` (default: one per core).
     ``backend="ray"``: Ray tasks of one CPU each on the cluster at ``address`` (a local
     Ray instance when None); ``sweep_dir`` must then be on storage every node sees.
+    ``backend="slurm"``: one Slurm job per task, submitted as one job array with the
+    ``slurm`` settings (default ``SlurmSettings()``), at most ``workers`` running at once
+    (None: Slurm's limits), requeued and resumed on preemption or time limit; its logs
+    in ``SWEEP_DIR/slurm``, ``sweep_dir`` on storage every node sees.
     Each trial's result is the same whichever backend ran it. ``group_seeds``: trials
     that differ only in seed and n_train train as one seed group per process
     (``run_trials``), each trial exactly as alone; with ``stacked`` as one stacked
@@ -274,12 +288,17 @@ def run_sweep(
     """
     if stacked and not group_seeds:
         raise ValueError("stacked: stacking computes seed groups; ask for group_seeds too")
-    if backend not in ("local", "ray"):
-        raise ValueError(f"backend must be 'local' or 'ray', got {backend!r}")
+    if backend not in ("local", "ray", "slurm"):
+        raise ValueError(f"backend must be 'local', 'ray' or 'slurm', got {backend!r}")
     if workers is not None and (
         isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
     ):
         raise ValueError(f"workers must be a positive integer or None, got {workers!r}")
+    if slurm is not None and backend != "slurm":
+        raise ValueError(f"Slurm settings apply to the slurm backend, not {backend!r}")
+    if backend == "slurm":
+        slurm = slurm or SlurmSettings()
+        check_slurm_backend(slurm)
     sweep_dir = Path(sweep_dir).resolve()
     if sweep_dir.exists() and not sweep_dir.is_dir():
         raise ValueError(f"{sweep_dir} is a file, not a sweep directory")
@@ -292,8 +311,11 @@ def run_sweep(
     make_dirs(sweep_dir)
     write_json(saved, sweep.to_dict())
     trials = sweep.trials()
+    parallelism = workers  # the slurm backend's: None leaves it to Slurm
     workers = max(1, min(workers or os.cpu_count() or 1, len(trials)))
-    echo(f"{len(trials)} trials in {sweep_dir / TRIALS_DIR}, {workers} worker(s)")
+    where = (f"Slurm jobs (logs in {sweep_dir / SLURM_DIR})" if backend == "slurm"
+             else f"{workers} worker(s)")  # fmt: skip
+    echo(f"{len(trials)} trials in {sweep_dir / TRIALS_DIR}, {where}")
     results = []
     # torch_threads=1: one core per trial, and results independent of the pool size.
     jobs = [
@@ -305,8 +327,13 @@ def run_sweep(
     else:
         tasks = [(run_trial, (config, run_dir), run_dir) for config, run_dir in jobs]
     failures: list[tuple[str, BaseException]] = []
-    for outcome in (_run_with_ray(tasks, address, workers) if backend == "ray"
-                    else _run_locally(tasks, workers)):  # fmt: skip
+    if backend == "slurm":
+        outcomes = run_with_slurm(tasks, sweep_dir, slurm, parallelism, echo)
+    elif backend == "ray":
+        outcomes = _run_with_ray(tasks, address, workers)
+    else:
+        outcomes = _run_locally(tasks, workers)
+    for outcome in outcomes:
         if isinstance(outcome, BaseException):
             name = Path(outcome.run_dir).name
             failures.append((name, outcome))
