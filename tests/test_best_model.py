@@ -12,7 +12,7 @@ from spikectl.training.evaluate import evaluate_run
 from spikectl.training.presets import SMOKE
 from spikectl.training.run import best_on_validation, train
 from spikectl.training.run_files import BEST_MODEL_FILE, RunDirError, read_metrics
-from spikectl.training.torch_files import forget_best_model_after, model_episode, save_model
+from spikectl.training.torch_files import model_episode, save_model
 
 
 def rows(*val_returns: float) -> list[dict]:
@@ -53,17 +53,32 @@ def test_runs_without_a_validation_set_keep_no_best_model(tmp_path):
         load_agent(tmp_path / "run", model="latest")
 
 
-def test_a_resumed_run_forgets_a_best_model_taken_after_its_checkpoint(tmp_path):
-    network = torch.nn.Linear(2, 2)
-    save_model(tmp_path, network, BEST_MODEL_FILE, episode=160)
-    forget_best_model_after(tmp_path, 160)
-    assert model_episode(tmp_path / BEST_MODEL_FILE) == 160  # taken at the checkpoint: kept
-    forget_best_model_after(tmp_path, 80)
-    assert not (tmp_path / BEST_MODEL_FILE).exists()  # taken after it: gone
-    (tmp_path / BEST_MODEL_FILE).write_bytes(b"damaged")
-    forget_best_model_after(tmp_path, 80)
-    assert not (tmp_path / BEST_MODEL_FILE).exists()
-    forget_best_model_after(tmp_path, 80)  # nothing to forget is fine
+def test_a_resume_restores_the_checkpoints_best_model(tmp_path):
+    """A file taken after the checkpoint is dropped (the run writes it again); one that
+    is not the checkpoint's best network is moved aside with a warning, never deleted;
+    the checkpoint's network is written in its place."""
+    from spikectl.training.best_model import LEGACY, kept_network, restore_best_model
+
+    network, other = torch.nn.Linear(2, 2), torch.nn.Linear(2, 2)
+    best = kept_network(network, 80)
+    path = tmp_path / BEST_MODEL_FILE
+    save_model(tmp_path, other, BEST_MODEL_FILE, episode=160)
+    restore_best_model(tmp_path, best, 80, network)  # taken after the checkpoint
+    assert model_episode(path) == 80 and not list(tmp_path.glob("*set-aside*"))
+    restore_best_model(tmp_path, best, 80, network)  # the same network: kept
+    save_model(tmp_path, other, BEST_MODEL_FILE, episode=80)
+    with pytest.warns(RuntimeWarning, match="other weights.*moved aside"):
+        restore_best_model(tmp_path, best, 80, network)
+    assert torch.equal(torch.load(path, weights_only=True)["weight"], network.weight)
+    path.write_bytes(b"damaged")
+    with pytest.warns(RuntimeWarning, match="not a readable.*set-aside-2.pt"):
+        restore_best_model(tmp_path, best, 80, network)
+    assert (tmp_path / "best_model.set-aside-2.pt").read_bytes() == b"damaged"
+    path.write_bytes(b"damaged")  # an older checkpoint cannot restore it: set aside too
+    with pytest.warns(RuntimeWarning, match="cannot restore it"):
+        restore_best_model(tmp_path, LEGACY, 80, network)
+    assert not path.exists()
+    restore_best_model(tmp_path, None, 80, network)  # nothing to restore is fine
 
 
 def test_each_seed_of_a_group_keeps_its_own_best_model(tmp_path):

@@ -138,6 +138,9 @@ def run_tyro(*args: Any, command_types: Iterable[type] = (), **kwargs: Any) -> A
     itself."""
     captured = io.StringIO()
     reported, refused = False, None
+    argv = list(kwargs.get("args") or ())
+    # The subcommand chosen (a preset, a command): tyro suggests the flags of all of them.
+    chosen = argv[0] if argv and argv[0] in _subcommand_names(args[0] if args else None) else None
     try:
         with contextlib.redirect_stderr(captured):
             return tyro.cli(*args, **kwargs)
@@ -145,7 +148,11 @@ def run_tyro(*args: Any, command_types: Iterable[type] = (), **kwargs: Any) -> A
         if exit.code in (0, None):
             raise
         refused = config_error_in(exit)
-        line = None if refused is not None else parse_error_line(captured.getvalue())
+        line = (
+            None
+            if refused is not None
+            else parse_error_line(captured.getvalue(), chosen, kwargs.get("prog"))
+        )
         if refused is None and line is None:
             raise
         reported = True
@@ -158,6 +165,17 @@ def run_tyro(*args: Any, command_types: Iterable[type] = (), **kwargs: Any) -> A
     raise refused
 
 
+def _subcommand_names(kind: Any) -> set[str]:
+    """The names of the subcommands of a union of ``tyro.conf.subcommand`` types."""
+    names = set()
+    for member in get_args(kind) if get_origin(kind) in (Union, UnionType) else ():
+        for extra in get_args(member)[1:] if get_origin(member) is Annotated else ():
+            name = getattr(extra, "name", None)
+            if isinstance(name, str) and type(extra).__name__ == "_SubcommandConfig":
+                names.add(name)
+    return names
+
+
 _BOX_TOP = re.compile(r"^╭─ (?P<title>.+?) ─+╮$")
 _ANSI = re.compile(r"\x1b\[[0-9;]*m")
 
@@ -166,12 +184,16 @@ def _is_rule(line: str) -> bool:
     return bool(line) and set(line) <= {"─", "-"}
 
 
-def parse_error_line(text: str) -> str | None:
+def parse_error_line(text: str, chosen: str | None = None, prog: str | None = None) -> str | None:
     """One line from tyro's framed parse error (title, message up to the first rule,
-    the help command of its footer); None when ``text`` holds no such frame.
+    the flags it suggests, the help command of its footer); None when ``text`` holds no
+    such frame.
 
     tyro draws the frame in box characters on UTF-8 consoles and as a title over a
-    dashed rule elsewhere; both are read.
+    dashed rule elsewhere; both are read. For a misspelt flag tyro suggests the near
+    flags of every subcommand, each followed by the help commands of the subcommands
+    that have it: only those of ``chosen`` (the subcommand given) are named, and the
+    help command is ``PROG CHOSEN --help``.
     """
     lines = [_ANSI.sub("", line).strip().strip("│╰╯").strip() for line in text.splitlines()]
     lines = [line for line in lines if line]
@@ -196,8 +218,45 @@ def parse_error_line(text: str) -> str | None:
     first_words = message.lower().split()[:3]
     if title != "Value error" and title.split()[0].lower() not in first_words:
         message = f"{title.lower()}: {message}"  # e.g. "missing subcommand: Expected one of"
-    hint = re.search(r"(spikectl[\w .-]* --help)", " ".join(" ".join(body[rule:]).split()))
-    return message + (f" (see {hint.group(1)})" if hint else "")
+    rest = body[rule:]
+    flags = _suggested_flags(rest, chosen)
+    if chosen is not None and prog:
+        hint = f"{prog} {chosen} --help"
+    else:
+        commands = (re.sub(r"^.*?\b(?:run|see) ", "", line) for line in rest)
+        found = (re.fullmatch(r"(\S+(?: [\w.-]+)*? --help)", line) for line in commands)
+        hint = next((match.group(1) for match in found if match), None)
+    said = []
+    if flags:
+        said.append(f"did you mean {' or '.join(flags)}?")
+    if hint:
+        said.append(f"see {hint}")
+    return message + (f" ({' '.join(said)})" if said else "")
+
+
+_SUGGESTED = re.compile(r"^(--[\w.-]+)(?:\s|$)")
+_IN_HELP = re.compile(r"^in (\S+(?: \S+)*) --help$")
+
+
+def _suggested_flags(lines: list[str], chosen: str | None, most: int = 3) -> list[str]:
+    """The flags under tyro's "Perhaps you meant:" that ``chosen`` has (each flag's
+    entry ends with "in PROG SUBCOMMAND --help" lines; without them, every flag)."""
+    where: dict[str, list[str]] = {}
+    flag, suggesting = None, False
+    for line in lines:
+        if _is_rule(line) or line.endswith(":"):
+            suggesting = line == "Perhaps you meant:"
+        elif not suggesting:
+            continue
+        elif match := _SUGGESTED.match(line):
+            flag = match.group(1)
+            where.setdefault(flag, [])
+        elif flag is not None and (match := _IN_HELP.match(line)):
+            where[flag].append(match.group(1).split()[-1])
+    return [
+        flag for flag, places in where.items()
+        if chosen is None or not places or chosen in places
+    ][:most]  # fmt: skip
 
 
 def flag_message(message: str, command_types: Iterable[type] = ()) -> str:

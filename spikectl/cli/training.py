@@ -57,6 +57,26 @@ def flags_beside_resume(command: TrainCommand) -> list[str]:
     return given
 
 
+def check_given_sizes(command: TrainCommand) -> None:
+    """Refuse --n-train / --n-test given (not the preset's) beside a context file of
+    another size: a run records its file's size, so the number would be dropped."""
+    from spikectl.contexts import ContextSet
+
+    env, preset = command.config.env, PRESETS[command.preset].env
+    for size_field, file_field in (("n_train", "train_contexts"), ("n_test", "test_contexts")):
+        given, path = getattr(env, size_field), getattr(env, file_field)
+        if path is None or given == getattr(preset, size_field):
+            continue
+        size = len(ContextSet.load(path))
+        if size != given:
+            flag = flag_for(("config", "env", size_field), TrainCommand)
+            file_flag = flag_for(("config", "env", file_field), TrainCommand)
+            raise ValueError(
+                f"{flag} {given}, but {file_flag} {path} holds {size} contexts: drop {flag} "
+                f"(a run records its file's size) or give {flag} {size}"
+            )
+
+
 def train(command: TrainCommand) -> None:
     """Train (or resume) one run or a seed group, then print the returns against the
     baselines (for a group, each seed's)."""
@@ -73,6 +93,8 @@ def train(command: TrainCommand) -> None:
                 f"takes no other settings, got {', '.join(given)}: drop them, or start a new "
                 "run in another --run-dir"
             )
+    if not resume:
+        check_given_sizes(command)
     if stacked and command.seeds is None and not resume:
         raise ValueError("--stacked: stacking computes a seed group; give --seeds too")
     if resume and (command.resume / GROUP_FILE).exists():
@@ -102,15 +124,38 @@ def train(command: TrainCommand) -> None:
     else:
         how = "stacked" if stacked else "in one process"
         print(f"seed group: {group_dir} ({len(configs)} seeds {how})")
-    with warnings.catch_warnings(record=True) as caught:
+    with warnings.catch_warnings():
+        # A run's warnings (a best_model.pt set aside, another kind of CPU) are one line
+        # each, printed when they happen.
         warnings.simplefilter("always", RuntimeWarning)
+        warnings.showwarning = _one_line_warning(warnings.showwarning)
         metrics = train_runs(configs, run_dirs, group_dir, resume=resume, stacked=stacked)
-    for warning in caught:
-        print(f"spikectl: warning: {warning.message}", file=sys.stderr)
     if group_dir is None:
         _print_run(configs[0], run_dirs[0], metrics[0])
     else:
         _print_group(configs, run_dirs, metrics)
+
+
+def _one_line_warning(show):
+    """``warnings.showwarning`` printing RuntimeWarnings as ``spikectl: warning: ...``."""
+
+    def one_line(message, category, filename, lineno, file=None, line=None):
+        if not issubclass(category, RuntimeWarning):
+            return show(message, category, filename, lineno, file, line)
+        print(f"spikectl: warning: {message}", file=sys.stderr, flush=True)
+
+    return one_line
+
+
+def _holds_best(run_dir: Path, episode: int) -> bool:
+    """Whether run_dir/best_model.pt is the network of that episode (the table names it)."""
+    from spikectl.training.run_files import BEST_MODEL_FILE, RunDirError
+    from spikectl.training.torch_files import model_episode
+
+    try:
+        return model_episode(run_dir / BEST_MODEL_FILE) == episode
+    except (RunDirError, OSError):
+        return False
 
 
 def _print_run(config: Experiment, run_dir: Path, metrics: list[dict]) -> None:
@@ -143,7 +188,7 @@ def _print_run(config: Experiment, run_dir: Path, metrics: list[dict]) -> None:
         print(
             f"{'best on val.':<14}{best['train_return']:>8.3f}{best['test_return']:>8.3f}"
             f"  (validation {best['val_return']:.3f}, episode {best['episode']:,}: "
-            "best_model.pt)"
+            f"{'best_model.pt' if _holds_best(run_dir, best['episode']) else 'not kept'})"
         )
     minutes, core_minutes = final["wall_time_s"] / 60, final["cpu_time_s"] / 60
     print(

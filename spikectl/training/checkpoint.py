@@ -24,6 +24,13 @@ import numpy as np
 import torch
 
 from spikectl.files import atomic_write_bytes, write_json
+from spikectl.training.best_model import LEGACY, check_kept, fitting_weights
+from spikectl.training.checkpoint_checks import (
+    check_entries,
+    check_learner_state,
+    check_optimizers,
+    check_runs,
+)
 from spikectl.training.config import Experiment
 from spikectl.training.learners.dqn import DQNLearner
 from spikectl.training.run_files import (
@@ -65,6 +72,10 @@ class RunState:
     contexts: dict[str, str] = field(default_factory=dict)
     """The checksum of each context set the run plays (train, test, validation), so that
     a resume refuses sets swapped for others (empty in checkpoints before they were kept)."""
+    best_model: Any = None
+    """The best network on validation so far (``best_model.kept_network``: its episode and
+    weights), None before the first validation, ``best_model.LEGACY`` in checkpoints of
+    spikectl before they kept it: a resume restores best_model.pt from it."""
 
     def to_payload(self) -> dict[str, Any]:
         return {
@@ -77,6 +88,7 @@ class RunState:
             ],  # fmt: skip
             "baselines": self.baselines,
             "contexts": dict(self.contexts),
+            "best_model": self.best_model,
         }
 
     @classmethod
@@ -92,6 +104,7 @@ class RunState:
             metrics=entry["metrics"],
             baselines=entry["baselines"],
             contexts={str(k): str(v) for k, v in dict(entry.get("contexts", {})).items()},
+            best_model=entry.get("best_model", LEGACY),
         )
 
 
@@ -163,6 +176,8 @@ def read_checkpoint(path: Path, map_location: str = "cpu") -> dict[str, Any]:
     verify_checksum(payload, checksum, path)
     if version == 2:
         payload = _from_format_2(payload)
+    elif isinstance(payload["runs"], list):
+        check_entries(path, payload)
     if len(payload["runs"]) != len(payload["configs"]) or not payload["runs"]:
         raise RunDirError(f"{path} is damaged: it has {len(payload['runs'])} runs for "
                           f"{len(payload['configs'])} configs")  # fmt: skip
@@ -172,6 +187,7 @@ def read_checkpoint(path: Path, map_location: str = "cpu") -> dict[str, Any]:
         if not isinstance(run, dict):
             raise RunDirError(f"{path} is damaged: a run entry is not a dict")
         _check_entries(path, run, run_entries)
+        check_kept(run.get("best_model", LEGACY), path)
     return payload
 
 
@@ -217,12 +233,19 @@ def load_checkpoint(
             f"this one is {'stacked' if stacked else 'looped'}"
         )
     check_finite(payload["learners"], str(path))
+    check_runs(path, payload["runs"], [config.total_episodes for config in configs])
+    check_learner_state(path, payload["learners"], learners.state_dict())
     try:
         learners.load_state_dict(payload["learners"])
         runs = zip(payload["runs"], rngs, strict=True)
-        return [RunState.from_payload(run, rng) for run, rng in runs]
+        states = [RunState.from_payload(run, rng) for run, rng in runs]
+        for k, state in enumerate(states):
+            if isinstance(state.best_model, dict):
+                fitting_weights(state.best_model, learners.network(k))
     except (RuntimeError, ValueError, KeyError, TypeError, AttributeError) as error:
         raise RunDirError(f"{path} does not fit this run: {first_line(error)}") from None
+    check_optimizers(path, learners)
+    return states
 
 
 def saved_config(values: dict[str, Any]) -> Experiment | None:

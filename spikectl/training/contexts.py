@@ -3,6 +3,7 @@ and the environments that play them with the run's model and extensions."""
 
 from __future__ import annotations
 
+import dataclasses
 from pathlib import Path
 
 import numpy as np
@@ -32,6 +33,28 @@ def generated_contexts(config: Experiment) -> tuple[ContextSet, ContextSet]:
     )  # fmt: skip
 
 
+def recorded_config(config: Experiment, run_dir: Path, resume: bool) -> Experiment:
+    """The config as the run records it: where a context file is given, ``n_train`` /
+    ``n_test`` are its size, not the preset's (reports group runs by ``n_train``). A
+    resumed run keeps the sizes its config.json holds (runs of spikectl before this
+    recorded the preset's); a damaged file is refused here, before config.json is written."""
+    from spikectl.training.run_files import CONFIG_FILE, read_config
+
+    env = config.env
+    if env.train_contexts is None and env.test_contexts is None:
+        return config
+    if resume and (run_dir / CONFIG_FILE).exists():
+        saved = read_config(run_dir).env
+        sizes = {"n_train": saved.n_train, "n_test": saved.n_test}
+    else:
+        sizes = {
+            name: len(ContextSet.load(path))
+            for name, path in (("n_train", env.train_contexts), ("n_test", env.test_contexts))
+            if path is not None
+        }
+    return dataclasses.replace(config, env=dataclasses.replace(env, **sizes))
+
+
 def load_or_make_contexts(
     config: Experiment, run_dir: Path
 ) -> tuple[ContextSet, ContextSet, ContextSet | None]:
@@ -49,9 +72,18 @@ def load_or_make_contexts(
     else:
         train = ContextSet.load(env.train_contexts) if env.train_contexts is not None else None
         test = ContextSet.load(env.test_contexts) if env.test_contexts is not None else None
-        for name, contexts in (("training", train), ("test", test)):
+        for name, contexts, path, size in (
+            ("training", train, env.train_contexts, env.n_train),
+            ("test", test, env.test_contexts, env.n_test),
+        ):
             if contexts is not None:
                 check_model(contexts, config, name)
+                if len(contexts) != size:
+                    raise ValueError(
+                        f"{path} holds {len(contexts)} {name} contexts, the run records "
+                        f"{size} (n_{name.removesuffix('ing')}): was the file changed? Start "
+                        "the run again in a new --run-dir"
+                    )
         if train is None or test is None:
             generated = generated_contexts(config)
             train = generated[0] if train is None else train

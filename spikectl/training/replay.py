@@ -163,8 +163,22 @@ class EpisodeReplay:
                 + " teacher labels, the configured one "
                 + ("does" if self.labels is not None else "does not")
             )
+        if not 0 <= size <= min(self.capacity, int(state["added"])):
+            raise ValueError(
+                f"the checkpointed replay buffer holds {size} episodes of "
+                f"{state['added']} added, capacity {self.capacity}"
+            )
         names = ("voltage", "actions", "rewards", "targets", "patterns", "action_masks")
         for name in names + (("labels",) if self.labels is not None else ()):
             getattr(self, name)[:size] = state[name]
+        # Indices the networks and the sampler use must lie in range (a crafted file's
+        # would fail deep inside the first update).
+        for name, low, high in (("actions", DO_NOTHING, self.n_neurons - 1),
+                                ("targets", 0, self.n_neurons - 1)):  # fmt: skip
+            held = getattr(self, name)[:size]
+            if held.size and not (low <= held.min() and held.max() <= high):
+                raise ValueError(
+                    f"the checkpointed replay buffer's {name} lie outside {low}..{high}"
+                )
         self.size = size
         self.added = int(state["added"])

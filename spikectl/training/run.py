@@ -32,6 +32,7 @@ import torch
 from spikectl.contexts import ContextSet
 from spikectl.envs.controller import DoNothing, RandomLegal
 from spikectl.envs.rollout import EpisodeBatch, run_episodes
+from spikectl.training.best_model import kept_network, restore_best_model
 from spikectl.training.checkpoint import RunState, load_checkpoint, save_checkpoint
 from spikectl.training.config import Experiment
 from spikectl.training.contexts import (
@@ -43,12 +44,14 @@ from spikectl.training.contexts import (
     baseline_episodes,
     load_or_make_contexts,
     make_env,
+    recorded_config,
     stream_seed,
 )
 from spikectl.training.greedy import greedy_returns
 from spikectl.training.group import check_group, prepare_group, seed_dirs
 from spikectl.training.learners import make_learners
 from spikectl.training.learners.protocol import LossDiverged
+from spikectl.training.machine import record_machine
 from spikectl.training.run_files import (
     BEST_MODEL_FILE,
     RunDirError,
@@ -58,7 +61,7 @@ from spikectl.training.run_files import (
     write_metrics,
 )
 from spikectl.training.run_logger import RunLogger
-from spikectl.training.torch_files import forget_best_model_after, save_model
+from spikectl.training.torch_files import save_model
 
 METRIC_FIELDS = (
     "episode", "env_steps", "updates", "epsilon", "train_return", "test_return", "loss",
@@ -117,6 +120,7 @@ def train_runs(
     directory then holds the checkpoint of all K)."""
     run_dirs = [Path(d) for d in run_dirs]
     check_group(configs, run_dirs)
+    configs = [recorded_config(c, d, resume) for c, d in zip(configs, run_dirs, strict=True)]
     check_device(configs[0].train.device)
     if group_dir is None and len(configs) > 1:
         raise ValueError("several runs in one process are a seed group: give group_dir")
@@ -153,13 +157,20 @@ class Loop:
         self.train_sets = [seed_sets[0] for seed_sets in sets]
         rngs = [np.random.default_rng(np.random.SeedSequence(c.train.seed)) for c in self.configs]
         self.learners = make_learners(self.configs, self.train_sets, rngs, self.stacked)
+        extra = tuple(f for f in self.learners.metric_fields if f not in METRIC_FIELDS)
+        self.metric_fields = METRIC_FIELDS + extra
         if resume:
             self.states = load_checkpoint(
                 self.where, self.configs, self.learners, rngs, self.stacked
             )
-            for state, run_dir, seed_sets in zip(self.states, self.run_dirs, sets, strict=True):
-                check_same_contexts(state, run_dir, seed_sets)
-                forget_best_model_after(run_dir, state.episodes)
+            for k, (state, run_dir) in enumerate(zip(self.states, self.run_dirs, strict=True)):
+                check_same_contexts(state, run_dir, sets[k])
+                # The directory as it was at the checkpoint: what a killed run wrote
+                # after it (metrics rows, best_model.pt) is written again exactly.
+                write_metrics(run_dir, state.metrics, self.metric_fields)
+                restore_best_model(
+                    run_dir, state.best_model, state.episodes, self.learners.network(k)
+                )
         else:
             self.states = [
                 RunState(rng=rng, baselines=baselines(c, train_set, test_set),
@@ -167,12 +178,14 @@ class Loop:
                 for rng, c, (train_set, test_set, val_set)
                 in zip(rngs, self.configs, sets, strict=True)
             ]  # fmt: skip
+        for run_dir, state in zip(self.run_dirs, self.states, strict=True):
+            record_machine(run_dir, state.episodes)
         self.collect_env, self.offsets = collection_env(config, self.train_sets, self.E)
         self.eval_envs = evaluation_envs(config, sets)
         self.eval_seeds = [stream_seed(c, EVAL_STREAM) for c in self.configs]
         self.loggers = [
             RunLogger(d, config.total_episodes, s.episodes,
-                      config.train.progress and k == 0, config.agent.arch)
+                      config.train.progress and k == 0, config.agent.arch, self.where)
             for k, (d, s) in enumerate(zip(self.run_dirs, self.states, strict=True))
         ]  # fmt: skip
         # Process CPU time counts every thread: core-seconds, fair on a shared machine.
@@ -185,8 +198,8 @@ class Loop:
         while self.states[0].episodes < config.total_episodes:
             self.round()
         for k, (run_dir, logger) in enumerate(zip(self.run_dirs, self.loggers, strict=True)):
-            logger.close()
             save_model(run_dir, self.learners.network(k))
+            logger.close()  # TensorBoard last: its failure must cost no run file
         if any(self.learners.updates(k) == 0 for k in range(K)):
             warnings.warn(
                 f"the run in {self.where} made no gradient update (learning_starts="
@@ -270,11 +283,11 @@ class Loop:
                 "cpu_time_s": state.cpu_time_s,
             }
             state.metrics.append(row)
-            extra = tuple(f for f in self.learners.metric_fields if f not in METRIC_FIELDS)
-            write_metrics(run_dir, state.metrics, METRIC_FIELDS + extra)
-            self.loggers[k].log(row)
+            write_metrics(run_dir, state.metrics, self.metric_fields)
             if best_on_validation(state.metrics) is row:
                 save_model(run_dir, network, BEST_MODEL_FILE, episode=state.episodes)
+                state.best_model = kept_network(network, state.episodes)
+            self.loggers[k].log(row)
 
 
 def baselines(config: Experiment, train_set: ContextSet, test_set: ContextSet) -> dict:

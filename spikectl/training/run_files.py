@@ -2,7 +2,8 @@
 
 A run directory holds ``config.json`` (the resolved config), the context sets,
 ``metrics.csv``, ``baselines.json``, ``checkpoint.pt`` (``spikectl.training.checkpoint``),
-``tensorboard/``, ``best_model.pt`` and, at the end, ``model.pt``. Every file is written
+``tensorboard/``, ``best_model.pt``, ``machine.json`` (``spikectl.training.machine``) and,
+at the end, ``model.pt``. Every file is written
 atomically (``spikectl.files``), so a crash or a full disk at any moment leaves the
 previous version intact. A lock file (``.spikectl.lock``) keeps two processes from
 training in one run directory at once.
@@ -39,9 +40,10 @@ MODEL_FILE = "model.pt"
 BEST_MODEL_FILE = "best_model.pt"
 METRICS_FILE = "metrics.csv"
 BASELINES_FILE = "baselines.json"
+MACHINE_FILE = "machine.json"
 UNSTARTED_LEFTOVERS = (
     METRICS_FILE, BASELINES_FILE, "train_contexts.npz", "test_contexts.npz", "tensorboard",
-    "learning_curve.png", BEST_MODEL_FILE,
+    "learning_curve.png", BEST_MODEL_FILE, MACHINE_FILE,
 )  # fmt: skip
 """What a run that stopped before its first checkpoint may have written besides its
 config; a restart from step 0 removes it."""
@@ -137,7 +139,7 @@ def _holds_only_a_config(run_dir: Path) -> bool:
     """Whether ``run_dir`` holds config.json and nothing else of a run (its lock and
     temporary files aside): what a start that failed before its contexts leaves."""
     return all(
-        path.name in (CONFIG_FILE, LOCK_FILE) or path.name.endswith(".tmp")
+        path.name in (CONFIG_FILE, LOCK_FILE, MACHINE_FILE) or path.name.endswith(".tmp")
         for path in run_dir.iterdir()
     )
 

@@ -1,28 +1,61 @@
 """A run's progress bar and TensorBoard log: optional views of a run, never its record
-(metrics.csv is)."""
+(metrics.csv is).
+
+TensorBoard writes from a thread of its own and reports a failure (a full disk) at the
+next call; each call here turns an OSError into one FileWriteError naming the log. The
+loop logs after metrics.csv and best_model.pt are written, and closes the log after
+model.pt, so the run stops with its files and its last checkpoint intact.
+"""
 
 from __future__ import annotations
 
+import contextlib
 import math
+from collections.abc import Iterator
 from pathlib import Path
+
+from spikectl.files import FileWriteError, describe_os_error
 
 
 class RunLogger:
-    """tqdm progress bar (optional) and a TensorBoard writer in ``run_dir/tensorboard``."""
+    """tqdm progress bar (optional) and a TensorBoard writer in ``run_dir/tensorboard``;
+    ``resume_dir`` is where the run resumes from (a seed group's directory)."""
 
     def __init__(
-        self, run_dir: Path, total_episodes: int, episodes: int, show_progress: bool, desc: str
+        self,
+        run_dir: Path,
+        total_episodes: int,
+        episodes: int,
+        show_progress: bool,
+        desc: str,
+        resume_dir: Path | None = None,
     ) -> None:
         from torch.utils.tensorboard import SummaryWriter
         from tqdm.auto import tqdm
 
-        # purge_step drops events a killed run logged after its last checkpoint.
-        self.writer = SummaryWriter(str(run_dir / "tensorboard"), purge_step=episodes)
+        self.log_dir, self.resume_dir = run_dir / "tensorboard", resume_dir or run_dir
+        with self._writing():
+            # purge_step drops events a killed run logged after its last checkpoint.
+            self.writer = SummaryWriter(str(self.log_dir), purge_step=episodes)
         self.bar = tqdm(
             total=total_episodes, initial=episodes, unit="ep", disable=not show_progress,
             dynamic_ncols=True, desc=desc, mininterval=1.0,
         )  # fmt: skip
         self.last: dict[str, str] = {}
+
+    @contextlib.contextmanager
+    def _writing(self) -> Iterator[None]:
+        try:
+            yield
+        except FileWriteError:
+            raise
+        except OSError as error:
+            raise FileWriteError(
+                error.errno,
+                f"cannot write the TensorBoard log {self.log_dir}: {describe_os_error(error)}; "
+                "the run stopped with its last checkpoint and metrics.csv intact: free the "
+                f"space, then spikectl train --resume {self.resume_dir}",
+            ) from error
 
     def progress(self, episodes: int, collect_return: float, learner: dict[str, str]) -> None:
         self.bar.update(episodes)
@@ -30,12 +63,14 @@ class RunLogger:
         self.bar.set_postfix(**learner, collect=f"{collect_return:.3f}", **self.last, refresh=False)
 
     def log(self, row: dict) -> None:
-        for key in ("train_return", "test_return", "loss", "epsilon"):
-            if key in row and not math.isnan(row[key]):
-                self.writer.add_scalar(key, row[key], row["episode"])
-        self.writer.flush()
+        with self._writing():
+            for key in ("train_return", "test_return", "loss", "epsilon"):
+                if key in row and not math.isnan(row[key]):
+                    self.writer.add_scalar(key, row[key], row["episode"])
+            self.writer.flush()
         self.last = {"train": f"{row['train_return']:.3f}", "test": f"{row['test_return']:.3f}"}
 
     def close(self) -> None:
         self.bar.close()
-        self.writer.close()
+        with self._writing():
+            self.writer.close()

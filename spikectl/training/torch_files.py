@@ -21,7 +21,7 @@ from typing import Any
 import torch
 
 from spikectl.files import atomic_write_bytes, check_regular_file
-from spikectl.training.run_files import BEST_MODEL_FILE, MODEL_FILE, RunDirError
+from spikectl.training.run_files import MODEL_FILE, RunDirError
 
 MODEL_FORMAT = "spikectl.model"
 MODEL_VERSION = 1
@@ -155,8 +155,11 @@ def save_model(
     ``_metadata["spikectl"]`` entry (which ``load_state_dict`` ignores) holds the format,
     the checksum of the weights and, if given, the ``episode`` they were taken at.
     Refuses NaN or infinite weights."""
-    path = run_dir / file_name
-    weights = network.state_dict()
+    return save_weights(run_dir / file_name, network.state_dict(), episode)
+
+
+def save_weights(path: Path, weights: dict[str, torch.Tensor], episode: int | None = None) -> Path:
+    """Write a state dict (as ``state_dict()`` returns it) in ``save_model``'s format."""
     check_finite(weights, f"the network saved as {path}")
     header = {
         "format": MODEL_FORMAT,
@@ -175,22 +178,6 @@ def model_episode(path: Path) -> int | None:
     weights = load_model_weights(path)
     episode = weights._metadata["spikectl"].get("episode")
     return episode if isinstance(episode, int) and not isinstance(episode, bool) else None
-
-
-def forget_best_model_after(run_dir: Path, episode: int) -> None:
-    """Remove a ``best_model.pt`` taken after ``episode`` (a run killed after its last
-    checkpoint may have written one): the resumed run writes it again when it gets
-    there, so the file always belongs to the evaluations in metrics.csv. A damaged
-    file is removed too, for the same reason."""
-    path = run_dir / BEST_MODEL_FILE
-    if not path.exists():
-        return
-    try:
-        taken_at = model_episode(path)
-    except RunDirError:
-        taken_at = None
-    if taken_at is None or taken_at > episode:
-        path.unlink()
 
 
 def load_model_weights(path: Path) -> dict[str, torch.Tensor]:
