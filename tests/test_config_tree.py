@@ -14,7 +14,8 @@ from spikectl.agents.blocks import per_neuron_features
 from spikectl.cli import main
 from spikectl.training.checkpoint import read_checkpoint
 from spikectl.training.config import Experiment
-from spikectl.training.evaluate import evaluate_run, load_agent
+from spikectl.training.controllers import load_agent
+from spikectl.training.evaluate import evaluate_run
 from spikectl.training.learners.dqn import build_networks
 from spikectl.training.presets import SMOKE
 from spikectl.training.run import train
