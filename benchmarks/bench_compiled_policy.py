@@ -32,7 +32,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import time
 
 import numpy as np
@@ -44,20 +43,10 @@ from spikectl.agents.greedy import GreedyController
 from spikectl.contexts import make_splits
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.realtime import run_realtime
+from spikectl.training.machine import cpu_description
 from spikectl.training.presets import QUICK
 
 EPISODE_LENGTH = 60
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as handle:
-            for line in handle:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def rig(n: int, episodes: int, sizes) -> list[str]:
@@ -127,8 +116,8 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     sizes = QUICK.agent.sizes if args.sizes == "quick" else None
-    print(f"{cpu_model()}; torch {torch.__version__}, {torch.get_num_threads()} thread; "
-          f"load average {os.getloadavg()[0]:.2f} at the start")  # fmt: skip
+    print(f"{cpu_description()['cpu']}; torch {torch.__version__}, "
+          f"{torch.get_num_threads()} thread; load average {os.getloadavg()[0]:.2f} at the start")  # fmt: skip
     print(f"TDRQN, {args.sizes} sizes, {args.episodes} test episodes of {EPISODE_LENGTH} steps")
     print()
     print("| n | controller | median (ms) | p99 (ms) | max (ms) | over 1 ms |")

@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import argparse
 import os
-import platform
 import sys
 
 from spikectl.cli.baseline_policies import generated_split
@@ -30,19 +29,9 @@ from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.realtime import run_realtime
 from spikectl.neuron.extensions import Extensions
 from spikectl.training.controllers import load_controller
+from spikectl.training.machine import cpu_description
 
 SLOW_AT_32 = ("identify-and-plan", "oracle")
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as handle:
-            for line in handle:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 def controllers(run: str | None) -> list[tuple[str, str, dict]]:
@@ -68,7 +57,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.cpu is not None:
         os.sched_setaffinity(0, {args.cpu})
-    print(f"{cpu_model()}; load average {os.getloadavg()[0]:.2f} at the start; "
+    print(f"{cpu_description()['cpu']}; load average {os.getloadavg()[0]:.2f} at the start; "
           f"cores {sorted(os.sched_getaffinity(0))}")  # fmt: skip
     print()
     print("| n | controller | episodes | median (ms) | p99 (ms) | max (ms) | deadline misses "
