@@ -116,8 +116,9 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     sizes = QUICK.agent.sizes if args.sizes == "quick" else None
+    load = os.getloadavg()[0]
     print(f"{cpu_description()['cpu']}; torch {torch.__version__}, "
-          f"{torch.get_num_threads()} thread; load average {os.getloadavg()[0]:.2f} at the start")  # fmt: skip
+          f"{torch.get_num_threads()} thread; load average {load:.2f} at the start")  # fmt: skip
     print(f"TDRQN, {args.sizes} sizes, {args.episodes} test episodes of {EPISODE_LENGTH} steps")
     print()
     print("| n | controller | median (ms) | p99 (ms) | max (ms) | over 1 ms |")
