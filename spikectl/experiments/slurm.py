@@ -140,20 +140,25 @@ class TrialJob:
     """One task of a sweep as a submitit job: ``function(*args)`` (``run_trial`` or
     ``run_trials``), checkpointable as a ``submitit.helpers.Checkpointable`` is (a callable
     whose ``checkpoint()`` returns its own resubmission): requeued after a preemption or
-    its time limit, it runs the same task again, which resumes the trials exactly."""
+    its time limit, it runs the same task again, which resumes the trials exactly.
+    ``returned``: the errors that come back as the job's result (the sweep's trial
+    errors), not raised: submitit would keep only a raised error's traceback text, and
+    the sweep reports these in one line each (a bug keeps its traceback)."""
 
-    def __init__(self, function: Callable[..., Any], args: tuple) -> None:
+    def __init__(
+        self,
+        function: Callable[..., Any],
+        args: tuple,
+        returned: tuple[type[BaseException], ...] = (),
+    ) -> None:
         self.function = function
         self.args = tuple(args)
+        self.returned = tuple(returned)
 
     def __call__(self) -> Any:
-        from spikectl.experiments.sweep import TRIAL_ERRORS
-
         try:
             return self.function(*self.args)
-        except TRIAL_ERRORS as error:
-            # Returned, not raised: submitit would keep only a raised error's traceback
-            # text, and the sweep reports these in one line each (bugs keep theirs).
+        except self.returned as error:
             return error
 
     def checkpoint(self, *args: Any, **kwargs: Any):
@@ -169,16 +174,20 @@ def run_with_slurm(
     sweep_dir: Path,
     settings: SlurmSettings,
     parallelism: int | None,
+    trial_errors: tuple[type[BaseException], ...],
     echo: Callable[[str], None] = print,
 ) -> Iterator[Any]:
     """Submit ``tasks`` ((function, args, run_dir) each) as one job array and yield each
-    job's result, or its error with ``run_dir`` set on it, as the jobs end."""
+    job's result, or its error with ``run_dir`` set on it, as the jobs end (a task's
+    ``trial_errors`` come back as its job's result)."""
     submitit = import_submitit()
     from submitit.core.utils import UncompletedJobError
 
     folder = sweep_dir / SLURM_DIR
     executor = settings.executor(folder, f"spikectl-{sweep_dir.name}", parallelism)
-    jobs = executor.submit_array([TrialJob(function, args) for function, args, _ in tasks])
+    jobs = executor.submit_array(
+        [TrialJob(function, args, trial_errors) for function, args, _ in tasks]
+    )
     run_dirs = {id(job): run_dir for job, (_, _, run_dir) in zip(jobs, tasks, strict=True)}
     first, last = jobs[0].job_id, jobs[-1].job_id
     echo(f"submitted {len(jobs)} job(s) ({first}{f' to {last}' if last != first else ''}); "

@@ -328,7 +328,7 @@ def run_sweep(
         tasks = [(run_trial, (config, run_dir), run_dir) for config, run_dir in jobs]
     failures: list[tuple[str, BaseException]] = []
     if backend == "slurm":
-        outcomes = run_with_slurm(tasks, sweep_dir, slurm, parallelism, echo)
+        outcomes = run_with_slurm(tasks, sweep_dir, slurm, parallelism, TRIAL_ERRORS, echo)
     elif backend == "ray":
         outcomes = _run_with_ray(tasks, address, workers)
     else:
