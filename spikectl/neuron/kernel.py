@@ -72,6 +72,50 @@ def integrate(v, v_rest, leak, drive):
 _integrate = numba.njit(inline="always")(integrate)
 
 
+def _step_neuron(
+    j, v_j, refractory_j, since_j, synaptic_j, action, model, threshold_j, leak_j,
+    stochastic, may_release_j, input_j,
+):  # fmt: skip
+    """Neuron ``j``'s part of :func:`step_network`, from its state (``v_j``,
+    ``refractory_j``, ``since_j``) and its summed synaptic input ``synaptic_j``: returns
+    its new state ``(v, refractory_left, steps_since_release, released)`` and what is
+    observed ``(potential before reset, spiked)``. No other neuron enters: the action
+    only through ``action == j``, the others only through ``synaptic_j``.
+
+    ``threshold_j``, ``leak_j``: its threshold (V_th less the tolerance) and dt / RC;
+    ``stochastic``: whether release is stochastic, and then ``may_release_j`` whether a
+    spike may release now; ``input_j``: extra input in mV, or None. (Scalars in, scalars
+    out: arrays passed per neuron cost reference counting that made the kernel 5x slower.)
+    """
+    v_rest, _, _, stimulus_step_mV, synaptic_step_mV = model[:5]
+    refractory_steps, min_release_interval = model[5:]
+    since = since_j
+    if since < SINCE_RELEASE_CAP:
+        since += 1
+    if refractory_j > 0:  # held at V_r: no integration, no spike
+        return v_rest, refractory_j - 1, since, False, v_rest, False
+    drive = synaptic_step_mV * synaptic_j
+    if action == j:
+        drive += stimulus_step_mV
+    if input_j is not None:
+        drive += input_j
+    v_out = _integrate(v_j, v_rest, leak_j, drive)
+    if v_out < threshold_j:
+        return v_out, 0, since, False, v_out, False
+    release = False
+    if not stochastic:
+        if since >= min_release_interval:
+            release = True
+            since = 0
+    elif may_release_j:
+        release = True
+        since = 0
+    return v_rest, refractory_steps, since, release, v_out, True
+
+
+step_neuron = numba.njit(inline="always", cache=True, nogil=True)(_step_neuron)
+
+
 def _step_network(
     w,  # [n, n] int8 or float64: the network's signed weights
     action,  # int: the neuron stimulated, -1 = do nothing
@@ -98,8 +142,6 @@ def _step_network(
     at compile time. (The constants come unpacked, once per call of the kernel:
     unpacked at every step they cost 40 % of a step of 8 neurons.)
     """
-    v_rest, v_spike, leak_per_step, stimulus_step_mV, synaptic_step_mV = model[:5]
-    refractory_steps, min_release_interval = model[5:]
     n = v.shape[0]
     synaptic_input[:] = 0.0
     for i in range(n):
@@ -107,45 +149,50 @@ def _step_network(
             for j in range(n):
                 synaptic_input[j] += w[i, j]
     for j in range(n):
-        since = steps_since_release[j]
-        if since < SINCE_RELEASE_CAP:
-            since += 1
-        spiked = False
-        if refractory_left[j] > 0:
-            refractory_left[j] -= 1
-            v_j = v_rest
+        # The paper's threshold and leak are model constants: the same arithmetic.
+        if threshold is None:
+            threshold_j, leak_j = model[1], model[2]
         else:
-            v_j = v[j]
-            drive = synaptic_step_mV * synaptic_input[j]
-            if action == j:
-                drive += stimulus_step_mV
-            if input_mV is not None:
-                drive += input_mV[b, t, j]
-            if threshold is None:
-                v_j = _integrate(v_j, v_rest, leak_per_step, drive)
-                spiked = v_j >= v_spike
-            else:
-                v_j = _integrate(v_j, v_rest, leak[j], drive)
-                spiked = v_j >= threshold[j]
-        out_voltage[b, t, j] = v_j
-        out_spikes[b, t, j] = spiked
-        release = False
-        if spiked:
-            v_j = v_rest
-            refractory_left[j] = refractory_steps
-            if may_release is None:
-                if since >= min_release_interval:
-                    release = True
-                    since = 0
-            elif may_release[j]:
-                release = True
-                since = 0
-        v[j] = v_j
-        steps_since_release[j] = since
-        released[j] = release
+            threshold_j, leak_j = threshold[j], leak[j]
+        if may_release is None:
+            stochastic, may_release_j = False, False
+        else:
+            stochastic, may_release_j = True, may_release[j]
+        if input_mV is None:
+            (v[j], refractory_left[j], steps_since_release[j], released[j],
+             out_voltage[b, t, j], out_spikes[b, t, j]) = step_neuron(
+                j, v[j], refractory_left[j], steps_since_release[j], synaptic_input[j], action,
+                model, threshold_j, leak_j, stochastic, may_release_j, None,
+            )  # fmt: skip
+        else:
+            (v[j], refractory_left[j], steps_since_release[j], released[j],
+             out_voltage[b, t, j], out_spikes[b, t, j]) = step_neuron(
+                j, v[j], refractory_left[j], steps_since_release[j], synaptic_input[j], action,
+                model, threshold_j, leak_j, stochastic, may_release_j, input_mV[b, t, j],
+            )  # fmt: skip
 
 
 step_network = numba.njit(inline="always", cache=True, nogil=True)(_step_network)
+
+
+def _predict_neuron(w, action, v, refractory_left, released, model, j, threshold, leak):
+    """(potential before reset, spiked) of neuron ``j`` at the next step of one network,
+    which is not changed: what :func:`step_network` would write for it (its synaptic
+    input summed over the released neurons in the same ascending order), at the cost of
+    one neuron. The planners ask it whether the target spikes next step."""
+    synaptic_j = 0.0
+    for i in range(v.shape[0]):
+        if released[i]:
+            synaptic_j += w[i, j]
+    if threshold is None:
+        threshold_j, leak_j = model[1], model[2]
+    else:
+        threshold_j, leak_j = threshold[j], leak[j]
+    return step_neuron(j, v[j], refractory_left[j], 0, synaptic_j, action, model, threshold_j,
+                       leak_j, False, False, None)[4:]  # fmt: skip
+
+
+predict_neuron = numba.njit(inline="always", cache=True, nogil=True)(_predict_neuron)
 
 
 def _step_constants(constants):
