@@ -119,6 +119,20 @@ def take_states(state: SimulatorState, rows: np.ndarray) -> SimulatorState:
     )  # fmt: skip
 
 
+_REWARDS: dict[bytes, tuple[np.ndarray, np.ndarray]] = {}
+
+
+def _step_rewards(pattern: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`step_rewards` of a pattern, kept (a controller re-plans one pattern often)."""
+    key = pattern.tobytes()
+    rewards = _REWARDS.get(key)
+    if rewards is None:
+        if len(_REWARDS) >= 1024:
+            _REWARDS.clear()
+        rewards = _REWARDS[key] = step_rewards(pattern)
+    return rewards
+
+
 _MULTIPLIERS: dict[int, np.ndarray] = {}
 
 
@@ -163,7 +177,7 @@ def beam_search(
     if not 0 <= start_step < episode_length:
         raise ValueError(f"start_step must lie in 0..{episode_length - 1}, got {start_step}")
     end = episode_length if horizon is None else min(episode_length, start_step + horizon)
-    reward_if_spike, reward_if_silent = step_rewards(pattern)
+    reward_if_spike, reward_if_silent = _step_rewards(pattern)
     constants = kernel_constants(model.params)
     n = model.n_neurons
     if model.neurons is None:  # the paper's neurons: the same numbers for every neuron
@@ -232,6 +246,10 @@ def _search(
     committed = np.empty((k, most), dtype=np.bool_)
     depolarisation = np.empty((k, most))
     none_hash = np.empty(width, dtype=np.int64)
+    # What duplicates are merged on (state_signature_rows): the do-nothing children's
+    # [K, width, 4, n], and the stimulated neuron's [K, children, 4] (filled when scanned).
+    none_key = np.empty((k, width, 4, n))
+    act_key = np.empty((k, most, 4))
     reward = np.empty(most)
     child_score = np.empty(most)
     ranking = np.empty(most)
@@ -242,11 +260,17 @@ def _search(
     rewards_kept = np.empty((horizon, width))
     kept = np.empty(width, dtype=np.int64)
     kept_hash = np.empty(width, dtype=np.int64)
+    idle = np.empty(most, dtype=np.bool_)
+    candidates = np.empty(most, dtype=np.int64)
+    nothing_first = n_actions > 0 and actions[0] == DO_NOTHING
     size = 1
     for t in range(start_step, end):
         n_children = size * n_actions
         look_ahead = t + 1 < end
         none_hash[:size] = 0
+        # A child whose action changed nothing (a refractory neuron stimulated) is its
+        # do-nothing sibling again, with the same rank and a higher index: never kept.
+        idle[:n_children] = nothing_first
         for h in range(k):
             w = weights[h]
             for e in range(size):
@@ -264,7 +288,8 @@ def _search(
                     none_r[h, e, j] = r[j]
                     none_s[h, e, j] = since[j]
                     none_x[h, e, j] = x[j]
-                    term = _term(h * n + j, v[j], r[j], since[j], x[j], interval, multipliers)
+                    _signature(v[j], r[j], since[j], x[j], interval, none_key[h, e, :, j])
+                    term = _term(h * n + j, none_key[h, e, :, j], multipliers)
                     none_hash[e] = (none_hash[e] + term) & _HASH_MASK
                 none_spiked = out_s[0, 0, target]
                 none_depolarisation = min(max(v[target] - resting, -20.0), 20.0)
@@ -289,6 +314,8 @@ def _search(
                         synaptic_input[a], a, model, threshold[a], leak[a], False, False, None,
                     )  # fmt: skip
                     act_v[h, c], act_r[h, c], act_s[h, c], act_x[h, c] = v_a, r_a, since_a, x_a
+                    if a == target or (v_a, r_a, since_a, x_a) != (v[a], r[a], since[a], x[a]):
+                        idle[c] = False
                     if a == target:
                         spiked[h, c] = spiked_a
                         depolarisation[h, c] = min(max(v_a - resting, -20.0), 20.0)
@@ -298,7 +325,12 @@ def _search(
                         committed[h, c] = predict_neuron(w, DO_NOTHING, v, r, x, model, target,
                                                          threshold, leak)[1]  # fmt: skip
                         v[a], r[a], since[a], x[a] = kept_a
+        count = 0
         for c in range(n_children):
+            if idle[c] and actions[c % n_actions] != DO_NOTHING:
+                continue
+            candidates[count] = c
+            count += 1
             total = 0.0
             for h in range(k):
                 total += reward_if_spike[t] if spiked[h, c] else reward_if_silent[t]
@@ -317,25 +349,24 @@ def _search(
                 total += depolarisation[h, c]
             ranking[c] += _TIE_BREAK * (total / k)
         # The first `width` distinct states in ranking order (duplicates merged).
-        order = np.argsort(-ranking[:n_children], kind="mergesort")
+        order = np.argsort(-ranking[candidates[:count]], kind="mergesort")
         found = 0
-        for c in order:
+        for index in order:
+            c = candidates[index]
             e, a = c // n_actions, actions[c % n_actions]
             signature = none_hash[e]
             if a != DO_NOTHING:
                 for h in range(k):
-                    signature += _term(h * n + a, act_v[h, c], act_r[h, c], act_s[h, c],
-                                       act_x[h, c], interval, multipliers)  # fmt: skip
-                    signature -= _term(h * n + a, none_v[h, e, a], none_r[h, e, a],
-                                       none_s[h, e, a], none_x[h, e, a], interval,
-                                       multipliers)  # fmt: skip
+                    _signature(act_v[h, c], act_r[h, c], act_s[h, c], act_x[h, c], interval,
+                               act_key[h, c])  # fmt: skip
+                    signature += _term(h * n + a, act_key[h, c], multipliers)
+                    signature -= _term(h * n + a, none_key[h, e, :, a], multipliers)
                     signature &= _HASH_MASK
             duplicate = False
             for i in range(found):
                 if kept_hash[i] == signature and _same_child(
-                    c, kept[i], actions, none_v, none_r, none_s, none_x, act_v, act_r, act_s,
-                    act_x, interval,
-                ):  # fmt: skip
+                    c, kept[i], actions, none_key, act_key
+                ):
                     duplicate = True
                     break
             if not duplicate:
@@ -381,44 +412,42 @@ _HASH_MASK = 2**61 - 1
 _HASH_VOLTAGE_CAP = 4e18  # rounded potentials are clipped here to fit an int64
 
 
-def _term(position, v, refractory, since, released, interval, multipliers):
-    """The hash term of one neuron's state (what state_signature_rows keeps of it)."""
-    q = min(max(np.rint(v / _VOLTAGE_RESOLUTION_MV), -_HASH_VOLTAGE_CAP), _HASH_VOLTAGE_CAP)
-    u = int(q) * 1000003 + int(refractory)
-    u = u * 1000003 + int(min(since, interval))
-    u = u * 2 + int(released)
+def _signature(v, refractory, since, released, interval, out):
+    """Write into ``out`` [4] what state_signature_rows keeps of one neuron's state."""
+    out[0] = np.rint(v / _VOLTAGE_RESOLUTION_MV)
+    out[1] = refractory
+    out[2] = min(since, interval)
+    out[3] = released
+
+
+def _term(position, key, multipliers):
+    """The hash term of one neuron's :func:`_signature` ``key`` at ``position``."""
+    q = min(max(key[0], -_HASH_VOLTAGE_CAP), _HASH_VOLTAGE_CAP)
+    u = int(q) * 1000003 + int(key[1])
+    u = u * 1000003 + int(key[2])
+    u = u * 2 + int(key[3])
     return (u * int(multipliers[position])) & _HASH_MASK
 
 
-def _same_child(
-    c, d, actions, none_v, none_r, none_s, none_x, act_v, act_r, act_s, act_x, interval
-):  # fmt: skip
-    """Whether children c and d have equal :func:`state_signature_rows` rows."""
-    n_actions, n = actions.shape[0], none_v.shape[2]
+def _same_child(c, d, actions, none_key, act_key):
+    """Whether children c and d have equal :func:`state_signature_rows` rows: only the
+    stimulated neurons can differ between children of one entry."""
+    n_actions, n = actions.shape[0], none_key.shape[3]
     e_c, a_c = c // n_actions, actions[c % n_actions]
     e_d, a_d = d // n_actions, actions[d % n_actions]
-    for h in range(none_v.shape[0]):
+    for h in range(none_key.shape[0]):
         for j in range(n):
-            if j == a_c:
-                v_c, r_c, s_c, x_c = act_v[h, c], act_r[h, c], act_s[h, c], act_x[h, c]
-            else:
-                v_c, r_c = none_v[h, e_c, j], none_r[h, e_c, j]
-                s_c, x_c = none_s[h, e_c, j], none_x[h, e_c, j]
-            if j == a_d:
-                v_d, r_d, s_d, x_d = act_v[h, d], act_r[h, d], act_s[h, d], act_x[h, d]
-            else:
-                v_d, r_d = none_v[h, e_d, j], none_r[h, e_d, j]
-                s_d, x_d = none_s[h, e_d, j], none_x[h, e_d, j]
-            if (
-                np.rint(v_c / _VOLTAGE_RESOLUTION_MV) != np.rint(v_d / _VOLTAGE_RESOLUTION_MV)
-                or r_c != r_d
-                or min(s_c, interval) != min(s_d, interval)
-                or x_c != x_d
-            ):
-                return False
+            if e_c == e_d and j != a_c and j != a_d:
+                continue
+            for f in range(4):
+                key_c = act_key[h, c, f] if j == a_c else none_key[h, e_c, f, j]
+                key_d = act_key[h, d, f] if j == a_d else none_key[h, e_d, f, j]
+                if key_c != key_d:
+                    return False
     return True
 
 
+_signature = numba.njit(inline="always")(_signature)
 _term = numba.njit(inline="always")(_term)
 _same_child = numba.njit(cache=True, nogil=True)(_same_child)
 _search = numba.njit(cache=True, nogil=True)(_search)

@@ -79,6 +79,8 @@ class DiscreteConnectivityEstimate:
         self.residual_sd = max(float(residual_sd), MIN_RESIDUAL_SD)
         self._row_sign = np.zeros(n, dtype=np.int8)
         self.observations = 0
+        self.version = 0
+        """Counts the changes of the posterior (what may be cached against it)."""
         self._cache: tuple[np.ndarray, np.ndarray] | None = None
 
     def add(self, released: np.ndarray, residual: np.ndarray, observed: np.ndarray) -> None:
@@ -96,6 +98,7 @@ class DiscreteConnectivityEstimate:
         self.log_weights[observed] += np.logaddexp(gaussian, outlier)
         self.log_weights[observed] -= self.log_weights[observed].max(axis=1, keepdims=True)
         self.observations += int(observed.sum())
+        self.version += 1
         self._cache = None
         self._apply_dale()
 

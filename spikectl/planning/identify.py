@@ -62,6 +62,8 @@ class ConnectivityEstimate:
         self.precision[:, index, index] = (1.0 / prior_variance).T
         self.moment = np.zeros((n, n))  # [post j, pre]
         self.observations = 0
+        self.version = 0
+        """Counts the changes of the posterior (what may be cached against it)."""
         self._cache: tuple[np.ndarray, np.ndarray] | None = None
 
     def add(self, released: np.ndarray, residual: np.ndarray, observed: np.ndarray) -> None:
@@ -73,6 +75,7 @@ class ConnectivityEstimate:
         self.precision[observed] += np.outer(released, released) * weight  # [n, n]
         self.moment[observed] += residual[observed, None] * released[None, :] * weight
         self.observations += int(observed.sum())
+        self.version += 1
         self._cache = None
 
     def posterior(self) -> tuple[np.ndarray, np.ndarray]:
@@ -146,6 +149,7 @@ class KnownConnectivity:
     def __init__(self, weights: np.ndarray) -> None:
         self._weights = np.asarray(weights, dtype=np.int8)
         self.n_neurons = self._weights.shape[0]
+        self.version = 0  # never changes
 
     def add(self, released: np.ndarray, residual: np.ndarray, observed: np.ndarray) -> None:
         """Nothing to learn."""

@@ -203,6 +203,11 @@ class IdentifyAndPlan:
         self._plan_start = 0
         self._planned_weights: np.ndarray | None = None
         self._predicted_spikes: np.ndarray | None = None
+        # The planning weights of the estimate's last version, and what each step of the
+        # plan has still ahead that it misses (both pure functions, kept: issue 24).
+        self._weights_of: tuple[int, int] | None = None
+        self._weights_cache: tuple[np.ndarray, np.ndarray] | None = None
+        self._misses_from: np.ndarray | None = None
         self.probes = 0
         self.gambles = 0
         self.replans = 0
@@ -262,7 +267,14 @@ class IdentifyAndPlan:
         the others 0 (``plan_on="known"``) or their posterior mean (``"mean"``), which
         carries what is known of neurons that only ever released together (their
         summed effect) at 0.01 w_in resolution (so that tiny changes of the mean do
-        not force a re-plan)."""
+        not force a re-plan). Computed again only when the estimate has changed."""
+        of = (id(self.estimate), self.estimate.version)  # reset() forgets it
+        if of != self._weights_of:
+            self._weights_cache = self._compute_planning_weights()
+            self._weights_of = of
+        return self._weights_cache
+
+    def _compute_planning_weights(self) -> tuple[np.ndarray, np.ndarray]:
         signs, known = self.estimate.weights(self.known_sd)
         plan_on = self.plan_on
         if plan_on == "auto":
@@ -291,6 +303,10 @@ class IdentifyAndPlan:
         )
         self._plan_start = step
         self._planned_weights = weights
+        # Whether the plan misses a wanted spike from each of its steps on.
+        wanted = pattern[step : step + self._plan.rewards.shape[0]]
+        missing = wanted & (self._plan.rewards == 0)
+        self._misses_from = np.logical_or.accumulate(missing[::-1])[::-1]
         self._model_cache = model
         self.replans += 1
 
@@ -308,10 +324,9 @@ class IdentifyAndPlan:
         return PlanningModel(weights[None].copy(), target, actions, self.params)
 
     def _misses_wanted_spikes(self, pattern: np.ndarray, offset: int) -> bool:
-        """True when the current plan does not hit every wanted spike still ahead."""
-        rewards = self._plan.rewards[offset:]
-        wanted = pattern[self._plan_start + offset : self._plan_start + offset + rewards.shape[0]]
-        return bool(np.any(wanted & (rewards == 0)))
+        """True when the current plan does not hit every wanted spike still ahead
+        (the pattern is the episode's, the one the plan was made for)."""
+        return bool(self._misses_from[offset])
 
     def _ready(self) -> np.ndarray:
         """[n] neurons that release if they spike now (not refractory, vesicles back)."""
