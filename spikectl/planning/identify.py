@@ -48,23 +48,35 @@ class ConnectivityEstimate:
     each observation of j and y the residuals over 20 mV.
     """
 
+    # The prior of each size and its posterior: (prior variance, precision, (mean, sd)),
+    # computed once (a controller starts an estimate every episode; issue 24).
+    _PRIORS: dict[int, tuple[np.ndarray, np.ndarray, tuple[np.ndarray, np.ndarray]]] = {}
+
     def __init__(self, n_neurons: int, residual_sd: float) -> None:
         if residual_sd <= 0:
             raise ValueError(f"residual_sd must be > 0, got {residual_sd}")
         n = n_neurons
-        index = np.arange(n)
-        prior_variance = connection_probability(np.abs(index[:, None] - index[None, :]))
-        np.fill_diagonal(prior_variance, 1e-9)  # no self-connections
         self.n_neurons = n
-        self.prior_variance = prior_variance  # [n (pre), n (post)]
         self._noise_precision = 1.0 / residual_sd**2
-        self.precision = np.zeros((n, n, n))  # [post j, pre, pre]
-        self.precision[:, index, index] = (1.0 / prior_variance).T
         self.moment = np.zeros((n, n))  # [post j, pre]
         self.observations = 0
         self.version = 0
         """Counts the changes of the posterior (what may be cached against it)."""
-        self._cache: tuple[np.ndarray, np.ndarray] | None = None
+        self._weights: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        prior = self._PRIORS.get(n)
+        if prior is None:
+            index = np.arange(n)
+            prior_variance = connection_probability(np.abs(index[:, None] - index[None, :]))
+            np.fill_diagonal(prior_variance, 1e-9)  # no self-connections
+            self.prior_variance = prior_variance  # [n (pre), n (post)]
+            self.precision = np.zeros((n, n, n))  # [post j, pre, pre]
+            self.precision[:, index, index] = (1.0 / prior_variance).T
+            self._cache: tuple[np.ndarray, np.ndarray] | None = None
+            prior = (prior_variance.copy(), self.precision.copy(), self.posterior())
+            self._PRIORS[n] = prior
+        self.prior_variance = prior[0].copy()
+        self.precision = prior[1].copy()
+        self._cache = (prior[2][0].copy(), prior[2][1].copy())
 
     def add(self, released: np.ndarray, residual: np.ndarray, observed: np.ndarray) -> None:
         """One step's evidence: ``released`` [n] (0/1, or release probabilities) of the
@@ -77,6 +89,7 @@ class ConnectivityEstimate:
         self.observations += int(observed.sum())
         self.version += 1
         self._cache = None
+        self._weights.clear()
 
     def posterior(self) -> tuple[np.ndarray, np.ndarray]:
         """(mean, standard deviation) of G, both [n (pre), n (post)]."""
@@ -95,12 +108,16 @@ class ConnectivityEstimate:
         value: no connection). Rows follow Dale's law: once a row's known nonzero
         entries agree on a sign, entries of the other sign are dropped.
         """
+        cached = self._weights.get(known_sd)
+        if cached is not None:
+            return cached
         mean, sd = self.posterior()
         known = sd < known_sd
         signs = np.where(known, np.clip(np.rint(mean), -1, 1), 0.0)
         row_sign = np.sign(signs.sum(axis=1, keepdims=True))  # [n, 1]
         signs = np.where((row_sign != 0) & (signs != row_sign), 0.0, signs)
-        return signs.astype(np.int8), known
+        result = self._weights[known_sd] = (signs.astype(np.int8), known)
+        return result
 
     def sample(
         self, known_sd: float, connection_uniforms: np.ndarray, sign_uniforms: np.ndarray
