@@ -18,7 +18,7 @@ same machine); the report adds the ratios baseline / current and whether the two
 the same actions in every episode.
 
 The benchmark pins itself (and its workers) to one core, ``--core`` (default: the last
-one it may use), with one Numba thread.
+one it may use), with one Numba and one BLAS thread.
 
     python benchmarks/bench_identify_and_plan.py [--episodes 10] [--n 8 32]
         [--baseline REV] [--core C]
@@ -93,7 +93,8 @@ def worker() -> None:
 
 class Worker:
     def __init__(self, pythonpath: str | None) -> None:
-        env = dict(os.environ, NUMBA_NUM_THREADS="1", OMP_NUM_THREADS="1")
+        threads = ("NUMBA", "OMP", "OPENBLAS", "MKL")
+        env = dict(os.environ, **{f"{name}_NUM_THREADS": "1" for name in threads})
         env.pop("PYTHONPATH", None)
         if pythonpath is not None:
             env["PYTHONPATH"] = pythonpath
@@ -156,8 +157,8 @@ def main() -> None:
         implementations = {f"baseline {args.baseline}": Worker(folder.name), **implementations}
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO,
                             capture_output=True, text=True).stdout.strip()  # fmt: skip
-    print(f"{cpu_model()}; {pinned}, one Numba thread; HEAD {commit} (+ working tree); "
-          f"load average {os.getloadavg()[0]:.2f} at the start")  # fmt: skip
+    print(f"{cpu_model()}; {pinned}, one Numba and one BLAS thread; HEAD {commit} "
+          f"(+ working tree); load average {os.getloadavg()[0]:.2f} at the start")  # fmt: skip
     print(f"IdentifyAndPlan() (defaults), {args.episodes} test episodes per n, one decision "
           "timed at a time")  # fmt: skip
     print()

@@ -1,12 +1,14 @@
 """Beam search over action sequences with the simulator's own step (the planner's core).
 
-The planner never has its own copy of the dynamics: every candidate step is one call
-of the kernel's :func:`spikectl.neuron.kernel.step_network` (the step
-:func:`spikectl.neuron.simulator.advance` runs), one per (beam entry, action) pair. The
+The planner never has its own copy of the dynamics: it steps each beam entry with the
+kernel's :func:`spikectl.neuron.kernel.step_network` (the step
+:func:`spikectl.neuron.simulator.advance` runs), doing nothing, and every other action
+with :func:`spikectl.neuron.kernel.step_neuron` on the stimulated neuron (an action
+enters the step only through its own neuron). The
 search is one compiled function (Numba), :func:`_search`: the same search as the NumPy
 one it replaced (issue 24, part 4; the same plans, tests/test_planning_reference.py),
 without NumPy's per-call overhead, which was nearly all of its time (a re-plan of 20
-steps took ~9 ms at n = 8, now ~0.2 ms; docs/benchmarks.md). Two facts of the model
+steps at width 32: 8.0 ms -> 0.33 ms at n = 8; docs/benchmarks.md). Two facts of the model
 (docs/model.md) make a beam search strong here:
 
 * an action at step t reaches the target no earlier than step t + 1 (the target is
