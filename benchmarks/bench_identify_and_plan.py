@@ -30,7 +30,6 @@ import argparse
 import io
 import json
 import os
-import platform
 import subprocess
 import sys
 import tarfile
@@ -41,17 +40,6 @@ from pathlib import Path
 import numpy as np
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def cpu_model() -> str:
-    try:
-        with open("/proc/cpuinfo") as handle:
-            for line in handle:
-                if line.startswith("model name"):
-                    return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or "unknown"
 
 
 class Player:
@@ -106,10 +94,16 @@ class Worker:
     def episode(self, n: int, index: int) -> dict:
         self.process.stdin.write(json.dumps({"n": n, "episode": index}) + "\n")
         self.process.stdin.flush()
-        return json.loads(self.process.stdout.readline())
+        line = self.process.stdout.readline()
+        if not line:
+            raise RuntimeError("a worker exited (its error is printed above)")
+        return json.loads(line)
 
     def close(self) -> None:
-        self.process.stdin.close()
+        try:
+            self.process.stdin.close()
+        except BrokenPipeError:
+            pass
         self.process.wait()
 
 
@@ -138,6 +132,9 @@ def main() -> None:
     if args.worker:
         worker()
         return
+    # Imported here: a worker may run another revision's spikectl.
+    from spikectl.training.machine import cpu_description
+
     if hasattr(os, "sched_setaffinity"):
         core = max(os.sched_getaffinity(0)) if args.core is None else args.core
         os.sched_setaffinity(0, {core})  # the workers inherit it
@@ -157,7 +154,7 @@ def main() -> None:
         implementations = {f"baseline {args.baseline}": Worker(folder.name), **implementations}
     commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=REPO,
                             capture_output=True, text=True).stdout.strip()  # fmt: skip
-    print(f"{cpu_model()}; {pinned}, one Numba and one BLAS thread; HEAD {commit} "
+    print(f"{cpu_description()['cpu']}; {pinned}, one Numba and one BLAS thread; HEAD {commit} "
           f"(+ working tree); load average {os.getloadavg()[0]:.2f} at the start")  # fmt: skip
     print(f"IdentifyAndPlan() (defaults), {args.episodes} test episodes per n, one decision "
           "timed at a time")  # fmt: skip
