@@ -13,7 +13,7 @@ import torch
 
 from spikectl.config_errors import ConfigError
 from spikectl.contexts import make_splits
-from spikectl.envs.controller import RandomLegal
+from spikectl.envs.controller import RandomLegal, batched
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning import IdentifyAndPlan
@@ -67,7 +67,7 @@ def contexts():
 
 def test_labels_of_the_teachers_own_episodes_are_its_actions(contexts):
     """Played beside an episode it played itself, the teacher says what it did."""
-    episodes = evaluate_policy(contexts, IdentifyAndPlan().vector_policy(len(contexts)))
+    episodes = evaluate_policy(contexts, batched(IdentifyAndPlan()))
     labels = teacher_labels(episodes, list(contexts), "identify", NeuronParams())
     np.testing.assert_array_equal(labels, episodes.actions)
     episodes = evaluate_policy(contexts, told_weights_policy(contexts))
@@ -101,7 +101,7 @@ def test_teachers_label_other_trajectories_legally(contexts):
 def test_told_weights_loop_scores_near_the_oracle():
     contexts = make_splits(12, 1, seed=5, n_val=0)[0]
     told = evaluate_policy(contexts, told_weights_policy(contexts)).returns
-    identify = evaluate_policy(contexts, IdentifyAndPlan().vector_policy(len(contexts))).returns
+    identify = evaluate_policy(contexts, batched(IdentifyAndPlan())).returns
     assert told.mean() >= 0.97 and told.mean() > identify.mean()
 
 

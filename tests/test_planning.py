@@ -12,6 +12,7 @@ from conftest import spike_pattern
 import spikectl
 from spikectl import IdentifyAndPlan, NeuronParams, make_context, plan_episode
 from spikectl.cli import main
+from spikectl.envs.controller import batched
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.planning import ConnectivityEstimate, DiscreteConnectivityEstimate, ObservedState
 from spikectl.planning.baselines import run_baselines
@@ -140,7 +141,7 @@ def test_discrete_identification_refuses_large_networks():
 
 def test_every_entry_identification_calls_known_is_exact(splits):
     train, _ = splits
-    policy = IdentifyAndPlan().vector_policy(10)
+    policy = batched(IdentifyAndPlan())
     evaluate_policy(train[:10], policy)
     for context, copy in zip(train[:10], policy.copies, strict=True):
         signs, known = copy.estimate.weights(copy.known_sd)
@@ -155,7 +156,7 @@ def test_discrete_identification_knows_more_and_is_rarely_wrong(splits):
     train, _ = splits
     known_counts, wrong = {}, 0
     for identification in ("gaussian", "discrete"):
-        policy = IdentifyAndPlan(identification=identification).vector_policy(10)
+        policy = batched(IdentifyAndPlan(identification=identification))
         evaluate_policy(train[:10], policy)
         known_counts[identification] = 0
         for context, copy in zip(train[:10], policy.copies, strict=True):
@@ -225,7 +226,7 @@ def test_beam_search_ranks_by_the_mean_over_hypotheses():
 
 def test_identify_and_plan_beats_the_reference_policies(splits):
     train, _ = splits
-    returns = evaluate_policy(train, IdentifyAndPlan().vector_policy(len(train))).returns
+    returns = evaluate_policy(train, batched(IdentifyAndPlan())).returns
     assert returns.mean() > 0.75  # random ~0.51, do nothing 0.5
     assert returns.min() >= 0.0 and returns.max() <= 1.0 + 1e-12
 
@@ -271,8 +272,8 @@ def test_identify_and_plan_never_takes_an_illegal_action(env_id, extensions, hyp
 @pytest.mark.parametrize("hypotheses", [1, 4])
 def test_identify_and_plan_is_deterministic(splits, hypotheses):
     train, _ = splits
-    first = evaluate_policy(train[:6], IdentifyAndPlan(hypotheses=hypotheses).vector_policy(6))
-    second = evaluate_policy(train[:6], IdentifyAndPlan(hypotheses=hypotheses).vector_policy(6))
+    first = evaluate_policy(train[:6], batched(IdentifyAndPlan(hypotheses=hypotheses)))
+    second = evaluate_policy(train[:6], batched(IdentifyAndPlan(hypotheses=hypotheses)))
     assert np.array_equal(first.actions, second.actions)
     assert np.array_equal(first.returns, second.returns)
 

@@ -10,6 +10,7 @@ from conftest import spike_pattern
 
 from spikectl import IdentifyAndPlan, NeuronParams, make_splits
 from spikectl.contexts.generation import legal_actions
+from spikectl.envs.controller import batched
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.neuron.simulator import SimulatorState
 from spikectl.planning import PlanningModel, beam_search
@@ -110,9 +111,9 @@ def test_synapse_entropy_by_hand():
 def test_gamble_option_is_legal_deterministic_and_checked(splits):
     train, _ = splits
     policy = IdentifyAndPlan(gamble_networks=4, gamble_width=4, gamble_horizon=5)
-    vector = policy.vector_policy(4)
+    vector = batched(policy)
     first = evaluate_policy(train[:4], vector)  # the environment raises on illegal actions
-    second = evaluate_policy(train[:4], policy.vector_policy(4))
+    second = evaluate_policy(train[:4], batched(policy))
     assert np.array_equal(first.actions, second.actions)
     assert np.array_equal(first.returns, second.returns)
     assert sum(copy.gambles for copy in vector.copies) > 0  # the option was exercised
@@ -128,7 +129,7 @@ def test_gamble_values_a_subset_of_actions_on_larger_networks():
     train, _ = make_splits(3, 3, 16, seed=1)
     policy = IdentifyAndPlan(width=8, gamble_networks=4, gamble_width=2, gamble_horizon=4,
                              gamble_candidates=4)  # fmt: skip
-    vector = policy.vector_policy(3)
+    vector = batched(policy)
     episodes = evaluate_policy(train, vector)
     assert sum(copy.gambles for copy in vector.copies) > 0
     assert np.all((episodes.returns >= 0) & (episodes.returns <= 1 + 1e-12))

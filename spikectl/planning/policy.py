@@ -44,7 +44,7 @@ IDENTIFICATIONS = ("gaussian", "discrete")
 exact posterior over {-1, 0, +1} (n <= 11)."""
 
 # The constructor's arguments besides ``params``, each kept as an attribute of that name
-# (what :meth:`IdentifyAndPlan.vector_policy` copies).
+# (what :meth:`IdentifyAndPlan.spawn` copies).
 _SETTINGS = (
     "width", "horizon", "known_sd", "noise_mV", "hypotheses", "seed", "probe",
     "identification", "plan_on", "spike_margin_sd", "gamble_networks",
@@ -72,7 +72,8 @@ class IdentifyAndPlan:
             reproduce that result.
         seed: seeds the hypotheses' draws (one draw per episode: ``seed`` and the
             number of episodes this policy has started); copies made by
-            :meth:`vector_policy` get ``seed + index``.
+            :meth:`spawn` (one per sub-environment of a vector environment) get
+            ``seed + index``.
         probe: whether to probe when the plan misses wanted spikes.
         identification: ``"gaussian"`` (ridge regression, any n) or ``"discrete"``
             (the exact posterior over {-1, 0, +1}, n <= 11; it knows more entries but
@@ -376,21 +377,8 @@ class IdentifyAndPlan:
         advance(state, np.ascontiguousarray(weights[None]), actions, self.params, voltage, spikes)
         self._predicted_spikes = spikes[0, 0]
 
-    def vector_policy(self, num_envs: int):
-        """A batched policy ``policy(observations, action_mask) -> actions`` for
-        :func:`spikectl.envs.rollout.run_episodes`: one independent copy per environment."""
+    def spawn(self, index: int) -> IdentifyAndPlan:
+        """A fresh copy with the same settings, seeded ``seed + index``: what
+        :func:`spikectl.envs.controller.batched` plays in sub-environment ``index``."""
         settings = {name: getattr(self, name) for name in _SETTINGS}
-        copies = [
-            IdentifyAndPlan(self.params, **{**settings, "seed": self.seed + index})
-            for index in range(num_envs)
-        ]
-
-        def policy(observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
-            actions = np.empty(num_envs, dtype=np.int64)
-            for index, copy in enumerate(copies):
-                observation = {key: value[index] for key, value in observations.items()}
-                actions[index] = copy.act(observation, {"action_mask": action_mask[index]})
-            return actions
-
-        policy.copies = copies
-        return policy
+        return IdentifyAndPlan(self.params, **{**settings, "seed": self.seed + index})

@@ -119,7 +119,7 @@ def _told_the_weights(contexts):
 
 def _play(contexts, policy):
     started = time.process_time()
-    episodes = evaluate_policy(contexts, policy.vector_policy(len(contexts)))
+    episodes = evaluate_policy(contexts, policy)
     return episodes, (time.process_time() - started) / len(contexts)
 
 
