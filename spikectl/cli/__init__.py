@@ -3,7 +3,7 @@
 One module per concept: ``training`` (``spikectl train``: the presets as subcommands, the
 run or seed group), ``context_sets`` (``demo``, ``contexts``), ``runs`` (``evaluate``,
 ``sweep``, ``plot``), ``baseline_policies`` (``baselines``), ``realtime`` (the 1 kHz
-rig) and ``errors`` (how a refusal
+rig), ``benchmark`` (the frozen suite) and ``errors`` (how a refusal
 becomes one line naming the flag). This module holds the command table and ``main``.
 """
 
@@ -16,6 +16,7 @@ from typing import Annotated, Union
 import tyro
 
 from spikectl.cli.baseline_policies import BaselinesCommand, baselines
+from spikectl.cli.benchmark import BenchmarkCommand, benchmark
 from spikectl.cli.context_sets import ContextsConfig, DemoConfig, contexts, demo
 from spikectl.cli.errors import (
     USER_ERRORS,
@@ -32,9 +33,9 @@ from spikectl.config_errors import ConfigError
 from spikectl.files import describe_os_error
 
 __all__ = [
-    "COMMANDS", "USER_ERRORS", "BaselinesCommand", "ContextsConfig", "DemoConfig",
-    "EvaluateCommand", "PlotCommand", "RealtimeCommand", "SweepCommand", "TrainCommand",
-    "flag_for", "main",
+    "COMMANDS", "USER_ERRORS", "BaselinesCommand", "BenchmarkCommand", "ContextsConfig",
+    "DemoConfig", "EvaluateCommand", "PlotCommand", "RealtimeCommand", "SweepCommand",
+    "TrainCommand", "flag_for", "main",
     "parse_error_line",
 ]  # fmt: skip
 
@@ -47,6 +48,7 @@ COMMANDS = {
     "contexts": (contexts, ContextsConfig),
     "baselines": (baselines, BaselinesCommand),
     "realtime": (realtime, RealtimeCommand),
+    "benchmark": (benchmark, BenchmarkCommand),
 }
 
 

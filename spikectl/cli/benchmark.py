@@ -1,0 +1,155 @@
+"""``spikectl benchmark``: a controller on the frozen suite's tasks (docs/benchmark.md)."""
+
+from __future__ import annotations
+
+import csv
+import io
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Annotated, Any, Literal
+
+import tyro
+
+
+@dataclass(frozen=True)
+class BenchmarkCommand:
+    """Score a controller on the frozen benchmark suite: raw and normalised returns."""
+
+    controller: Annotated[str, tyro.conf.Positional]
+    """A run directory, a compiled policy file (.npz), or one of do-nothing, random,
+    identify-and-plan, oracle, witness."""
+    task: tuple[str, ...] = ("all",)
+    """The suite's tasks to play (paper n16 n32 noise1 noise2 noise4 hidden25 stochastic
+    heterogeneous background), or all."""
+    split: Literal["test", "validation"] = "test"
+    """Which frozen set to play: report on test, choose settings on validation."""
+    model: Literal["final", "best"] = "final"
+    """A run's weights: the final model.pt, or best_model.pt (best validation return)."""
+    compiled: bool = False
+    """Run a run directory's network as its compiled policy instead of PyTorch."""
+    random_seeds: int = 10
+    """Seeds 0 .. N-1 of the random controller (its score is the mean over them); the
+    other controllers are deterministic and play once."""
+    torch_threads: int = 1
+    """PyTorch threads of a run's network (CPU seconds are counted over all threads)."""
+    out: Path | None = None
+    """Write one CSV row per task (raw, normalised, references, CPU seconds) here."""
+
+
+CSV_FIELDS = (
+    "suite_version", "task", "split", "controller", "model", "seeds", "mean_return",
+    "sd_over_seeds", "normalised", "do_nothing", "oracle", "cpu_seconds", "contexts",
+)  # fmt: skip
+
+
+def benchmark(command: BenchmarkCommand) -> None:
+    """Print the controller's mean return and normalised score on each task."""
+    from spikectl.experiments import suite
+
+    if command.random_seeds < 1:
+        raise ValueError(f"--random-seeds must be an integer >= 1, got {command.random_seeds}")
+    if command.torch_threads < 1:
+        raise ValueError(f"--torch-threads must be an integer >= 1, got {command.torch_threads}")
+    names = list(suite.TASKS) if "all" in command.task else list(dict.fromkeys(command.task))
+    if not names:
+        raise ValueError("--task: give at least one task, or all")
+    for name in names:
+        suite.task(name)  # an unknown task is refused before anything is played
+    make = controller_factory(command, names)
+    seeds = command.random_seeds if command.controller == "random" else 1
+    print(f"benchmark suite v{suite.SUITE_VERSION}, {command.split} sets "
+          f"({suite.SET_SIZE} contexts each, environment seed {suite.ENV_SEED}); "
+          f"controller {command.controller}"
+          + (f" (mean over seeds 0..{seeds - 1})" if seeds > 1 else ""))  # fmt: skip
+    print(f"{'task':<15}{'mean return':>18}{'normalised':>12}{'do nothing':>12}"
+          f"{'oracle':>9}{'CPU s':>9}")  # fmt: skip
+    rows, normalised = [], {}
+    for name in names:
+        result = suite.score(name, command.split, make(name), seeds)
+        nothing, oracle = suite.references(name, command.split)
+        normalised[name] = suite.normalise(result.mean_return, nothing, oracle)
+        sd = float(result.seed_means.std(ddof=1)) if seeds > 1 else float("nan")
+        raw = f"{result.mean_return:.3f}" + (f" +- {sd:.3f}" if seeds > 1 else "")
+        print(f"{name:<15}{raw:>18}{normalised[name]:>12.3f}{nothing:>12.3f}{oracle:>9.3f}"
+              f"{result.cpu_seconds:>9.2f}")  # fmt: skip
+        rows.append({
+            "suite_version": suite.SUITE_VERSION, "task": name, "split": command.split,
+            "controller": command.controller, "model": model_label(command), "seeds": seeds,
+            "mean_return": f"{result.mean_return:.6f}",
+            "sd_over_seeds": "" if seeds == 1 else f"{sd:.6f}",
+            "normalised": f"{normalised[name]:.6f}", "do_nothing": f"{nothing:.6f}",
+            "oracle": f"{oracle:.6f}", "cpu_seconds": f"{result.cpu_seconds:.3f}",
+            "contexts": len(result.returns),
+        })  # fmt: skip
+    if len(names) > 1:
+        print(f"mean normalised score over {len(names)} tasks: "
+              f"{suite.mean_normalised(normalised):.3f}")  # fmt: skip
+    if command.out is not None:
+        print(f"wrote {write_rows(rows, command.out)}")
+
+
+def model_label(command: BenchmarkCommand) -> str:
+    """Which weights of a run played ("" for the other controllers)."""
+    if not Path(command.controller).is_dir():
+        return ""
+    return command.model + (" compiled" if command.compiled else "")
+
+
+def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
+    """task name -> (seed -> a fresh controller for that task); refuses at once a run
+    that cannot play one of ``names`` (another neuron model, or a fixed-size network
+    on another n)."""
+    from spikectl.experiments import suite
+    from spikectl.training.controllers import NAMED_CONTROLLERS, load_agent, load_controller
+
+    source = Path(command.controller)
+    if command.controller in NAMED_CONTROLLERS:
+
+        def named(name: str):
+            from spikectl.envs.env import NeuronControlEnv
+
+            contexts = suite.load_split(name, command.split)
+            env = NeuronControlEnv(contexts=contexts, params=contexts.params,
+                                   extensions=suite.task(name).extensions)  # fmt: skip
+            return lambda seed: load_controller(command.controller, env=env, seed=seed)
+
+        return named
+    if source.is_dir():
+        from spikectl.training.run_files import read_config
+
+        config = read_config(source)
+        for name in names:
+            try:
+                suite.check_run_fits(config, name)
+            except ValueError as error:
+                raise ValueError(f"{source} cannot play task {name!r}: {error}") from None
+        import torch
+
+        torch.set_num_threads(command.torch_threads)
+
+        def trained(name: str):
+            from spikectl.agents.greedy import GreedyController
+
+            network = load_agent(source, n_neurons=suite.task(name).n_observed,
+                                 model=command.model)  # fmt: skip
+            if command.compiled:
+                from spikectl.agents.compiled import CompiledPolicy
+
+                policy = CompiledPolicy.from_network(network)
+                return lambda seed: policy
+            return lambda seed: GreedyController(network)
+
+        return trained
+    controller = load_controller(command.controller)  # a compiled policy file, or refused
+    return lambda name: lambda seed: controller
+
+
+def write_rows(rows: list[dict], path: Path) -> Path:
+    """The rows as CSV, atomically."""
+    from spikectl.files import atomic_write_text
+
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=CSV_FIELDS, lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(rows)
+    return atomic_write_text(path, buffer.getvalue())

@@ -1,0 +1,340 @@
+"""The frozen benchmark suite (docs/benchmark.md): tasks, context sets pinned by checksum,
+one evaluation protocol and the normalised score.
+
+Each task is a registered environment (``spikectl/NeuronControl-v0`` or one of its
+variants, with a few settings changed) and a network size. Its train, validation and
+test sets are ``make_splits(100, 100, n, seed=TASK.seed, extensions=..., n_val=100)``,
+generated on demand (a fraction of a second each) and checked against the SHA-256
+checksums pinned in :data:`CHECKSUMS` for :data:`SUITE_VERSION`: a generator that drew
+other networks raises :class:`SuiteChecksumError` naming the task and the version,
+never plays other networks under the suite's name.
+
+The protocol (:func:`score`): the controller is greedy (deterministic), plays every
+context of the split once, through the vector environment whose generator (measurement
+noise, stochastic release, background input) is seeded with :data:`ENV_SEED`. A score
+is the mean return R and its normalised form (R - R_nothing) / (R_oracle - R_nothing):
+do nothing is 0 and the oracle planner (the privileged planner that knows the network)
+is 1, both played under the same protocol on the same split.
+"""
+
+from __future__ import annotations
+
+import functools
+import hashlib
+import json
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from spikectl.contexts import ContextSet, make_splits
+from spikectl.envs.controller import Controller
+from spikectl.envs.registration import ENV_ID, VARIANTS
+from spikectl.envs.rollout import evaluate_policy
+from spikectl.neuron.extensions import Extensions
+from spikectl.neuron.params import NeuronParams
+
+SUITE_VERSION = 1
+"""Bumped whenever a task or one of its sets changes; results of two versions do not compare."""
+SET_SIZE = 100
+"""Contexts in each of a task's train, validation and test sets."""
+EPISODE_LENGTH = 60
+"""Steps per episode (the paper's)."""
+ENV_SEED = 0
+"""Seed of the environments' generators in the protocol (noise, release, background)."""
+SPLITS = ("train", "validation", "test")
+
+_REALISTIC = VARIANTS["spikectl/NeuronControlRealistic-v0"]["extensions"]
+"""The moderate strengths of the registered all-in-one variant, reused one at a time."""
+
+
+@dataclass(frozen=True)
+class Task:
+    """One task of the suite: a registered environment, its overrides and a seed."""
+
+    name: str
+    """The task's name on the command line and in tables."""
+    env_id: str
+    """The registered environment id the task is a setting of."""
+    overrides: dict[str, Any]
+    """Extension fields changed from the registered environment's (JSON-ready)."""
+    n_neurons: int
+    """Network size n."""
+    seed: int
+    """The generation seed of make_splits."""
+    description: str
+    """One line for tables and docs."""
+
+    @property
+    def extensions(self) -> Extensions:
+        """Every extension of the task: the registered environment's, then the overrides."""
+        registered = {ENV_ID: {}, **VARIANTS}[self.env_id].get("extensions", {})
+        return Extensions.coerce({**registered, **self.overrides})
+
+    @property
+    def n_observed(self) -> int:
+        """k, the neurons an agent sees (n less the hidden ones)."""
+        return self.n_neurons - self.extensions.hidden_count(self.n_neurons)
+
+
+def _task(name, env_id, n, description, **overrides) -> Task:
+    # Seed 0 for every task: the paper's sets (every table of docs/baselines.md plays
+    # make_splits(100, 100, seed=0, n_val=100)), and the environment-level variants play
+    # the very networks of `paper`, so that their differences are the variant's alone.
+    return Task(name, env_id, dict(overrides), n, 0, description)
+
+
+TASKS: dict[str, Task] = {
+    task.name: task
+    for task in (
+        _task("paper", ENV_ID, 8, "the paper's task, n = 8"),
+        _task("n16", ENV_ID, 16, "n = 16 neurons, the same topology rule"),
+        _task("n32", "spikectl/NeuronControl32-v0", 32, "n = 32 neurons"),
+        _task("noise1", "spikectl/NeuronControlNoisy-v0", 8, "measurement noise 1 mV",
+              observation_noise_mV=1.0),
+        _task("noise2", "spikectl/NeuronControlNoisy-v0", 8, "measurement noise 2 mV"),
+        _task("noise4", "spikectl/NeuronControlNoisy-v0", 8, "measurement noise 4 mV",
+              observation_noise_mV=4.0),
+        _task("hidden25", "spikectl/NeuronControlPartial-v0", 8,
+              "25% of the neurons hidden (2 of 8)"),
+        _task("stochastic", ENV_ID, 8, "stochastic release",
+              stochastic_release=_REALISTIC["stochastic_release"]),
+        _task("heterogeneous", ENV_ID, 8, "heterogeneous neurons and synapses (spreads 0.1)",
+              **{name: _REALISTIC[name] for name in
+                 ("threshold_spread", "time_constant_spread", "synaptic_spread")}),
+        _task("background", ENV_ID, 8, "background activity (0.005 inputs / neuron / step)",
+              background_rate=_REALISTIC["background_rate"]),
+    )  # fmt: skip
+}
+"""The tasks of :data:`SUITE_VERSION`, in table order."""
+
+CHECKSUMS: dict[str, dict[str, str]] = {
+    "paper": {
+        "train": "00ee973f9674dc4460caf25ef3b5885c8c7e9afef38f8d619ea8793f046b1ace",
+        "validation": "5c27c6c35310247441630db88f873c9293a24e04800b03959ebdc6007348cbb0",
+        "test": "dc88ff6a9d753378e77df8afca8b52e90f554c7d2f3df73bedeb9c653ccc9db7",
+    },
+    "n16": {
+        "train": "14526d2af1eee55c18a0020bdae58a912e7ce0c387d6529de1d7ae31ed7c9d43",
+        "validation": "95e39a6a8472d9aa4064fa57aef07c624a4c300d39225e767d64b1ab115623cf",
+        "test": "f75d537e73ba28c7140f7829ab7b37c68ce8a37c9adb837abd872cdd2c8a59c8",
+    },
+    "n32": {
+        "train": "5e04e7e8dfa284603c7cc7def7516f7349b901422ce581de4552a8ae1ff1e7b7",
+        "validation": "caa9022a18e83b00d9521ee6572fc1146f98a741a4cdd7d51eff3d2ad30b9736",
+        "test": "16c50e98a7d99dcee97df36d05b15eadb52cb7fd4e8a8dc98ac2335ab1213290",
+    },
+    "noise1": {
+        "train": "00ee973f9674dc4460caf25ef3b5885c8c7e9afef38f8d619ea8793f046b1ace",
+        "validation": "5c27c6c35310247441630db88f873c9293a24e04800b03959ebdc6007348cbb0",
+        "test": "dc88ff6a9d753378e77df8afca8b52e90f554c7d2f3df73bedeb9c653ccc9db7",
+    },
+    "noise2": {
+        "train": "00ee973f9674dc4460caf25ef3b5885c8c7e9afef38f8d619ea8793f046b1ace",
+        "validation": "5c27c6c35310247441630db88f873c9293a24e04800b03959ebdc6007348cbb0",
+        "test": "dc88ff6a9d753378e77df8afca8b52e90f554c7d2f3df73bedeb9c653ccc9db7",
+    },
+    "noise4": {
+        "train": "00ee973f9674dc4460caf25ef3b5885c8c7e9afef38f8d619ea8793f046b1ace",
+        "validation": "5c27c6c35310247441630db88f873c9293a24e04800b03959ebdc6007348cbb0",
+        "test": "dc88ff6a9d753378e77df8afca8b52e90f554c7d2f3df73bedeb9c653ccc9db7",
+    },
+    "hidden25": {
+        "train": "fd1a74b84ad9f9f84dfe3c6daa96380a6773928ecd48198d171e16d3f77b6067",
+        "validation": "707d4353041a5fb3a3785cce66ea375209bccec03649a78e137fb9264446914c",
+        "test": "5dcda571880413fc68af3f1dba6e3b3d03be08d9527ef54b10891c0563c29ce6",
+    },
+    "stochastic": {
+        "train": "00ee973f9674dc4460caf25ef3b5885c8c7e9afef38f8d619ea8793f046b1ace",
+        "validation": "5c27c6c35310247441630db88f873c9293a24e04800b03959ebdc6007348cbb0",
+        "test": "dc88ff6a9d753378e77df8afca8b52e90f554c7d2f3df73bedeb9c653ccc9db7",
+    },
+    "heterogeneous": {
+        "train": "1525109a51e9f90004f164d2335e6499e2d933fb9a29ea6e438003f82b0acd0d",
+        "validation": "cdcfcd48b5be349ded78545dafa4265f4e9012e3775a4e1e39669d5f704c4e8d",
+        "test": "5407c26afeac3a5f535b32542571ec62d36a5620df14e7bc6e64ae6a3a4e83d7",
+    },
+    "background": {
+        "train": "00ee973f9674dc4460caf25ef3b5885c8c7e9afef38f8d619ea8793f046b1ace",
+        "validation": "5c27c6c35310247441630db88f873c9293a24e04800b03959ebdc6007348cbb0",
+        "test": "dc88ff6a9d753378e77df8afca8b52e90f554c7d2f3df73bedeb9c653ccc9db7",
+    },
+}  # fmt: skip
+"""task -> split -> :func:`suite_checksum` of the set, pinned for :data:`SUITE_VERSION`
+(the environment-level variants share the paper's networks, hence its checksums)."""
+
+
+class SuiteChecksumError(ValueError):
+    """A generated set is not the one the suite pinned: the generator changed."""
+
+
+def suite_checksum(contexts: ContextSet) -> str:
+    """SHA-256 of what defines a set: its shape, its integer and boolean arrays (weights,
+    targets, patterns, witnesses, hidden neurons) and the heterogeneous parameters
+    rounded to 1e-9 as integers, the neuron parameters and context-level extensions.
+    Exact values only, so it holds on any machine whose generator draws the same."""
+    digest = hashlib.sha256()
+    digest.update(f"n={contexts.n_neurons};N={contexts.episode_length}".encode())
+    for name, array in sorted(contexts.arrays().items()):
+        array = np.asarray(array)
+        if array.dtype.kind == "f":
+            array = np.round(array * 1e9).astype(np.int64)
+        elif array.dtype.kind == "b":
+            array = array.astype(np.uint8)
+        array = np.ascontiguousarray(array.astype(array.dtype.newbyteorder("<")))
+        digest.update(f"{name}{array.shape}{array.dtype.str}".encode())
+        digest.update(array.tobytes())
+    digest.update(json.dumps(contexts.params.to_dict(), sort_keys=True).encode())
+    digest.update(
+        json.dumps(contexts.extensions.to_dict(only_changed=True), sort_keys=True).encode()
+    )
+    return digest.hexdigest()
+
+
+def task(name: str) -> Task:
+    """The task called ``name``; an unknown name is a ValueError listing the known ones."""
+    if name not in TASKS:
+        raise ValueError(
+            f"unknown task {name!r} of benchmark suite v{SUITE_VERSION}; tasks: "
+            f"{', '.join(TASKS)} (or all)"
+        )
+    return TASKS[name]
+
+
+def generate_splits(name: str) -> dict[str, ContextSet]:
+    """A task's three sets as generated by today's code, unchecked (see :func:`load_splits`)."""
+    spec = task(name)
+    train, test, validation = make_splits(
+        SET_SIZE, SET_SIZE, spec.n_neurons, EPISODE_LENGTH, seed=spec.seed,
+        extensions=spec.extensions.context_part(), n_val=SET_SIZE,
+    )  # fmt: skip
+    return {"train": train, "validation": validation, "test": test}
+
+
+@functools.cache
+def load_splits(name: str) -> dict[str, ContextSet]:
+    """A task's train, validation and test sets, each checked against its pinned checksum;
+    a set that differs raises :class:`SuiteChecksumError` naming the task and version."""
+    sets = generate_splits(name)
+    for split, contexts in sets.items():
+        expected = CHECKSUMS.get(name, {}).get(split)
+        actual = suite_checksum(contexts)
+        if actual != expected:
+            raise SuiteChecksumError(
+                f"benchmark suite v{SUITE_VERSION}, task {name!r}, {split} set: the generated "
+                f"networks do not match the pinned checksum ({actual[:12]}... instead of "
+                f"{(expected or 'none')[:12]}...): the context generator has changed, so these "
+                "are not the suite's networks and their scores would not compare; a changed "
+                "generator needs a new SUITE_VERSION with new checksums"
+            )
+    return sets
+
+
+def load_split(name: str, split: str = "test") -> ContextSet:
+    """One checked set of a task (``split``: train, validation or test)."""
+    if split not in SPLITS:
+        raise ValueError(f"split must be one of {', '.join(SPLITS)}, got {split!r}")
+    return load_splits(name)[split]
+
+
+@dataclass(frozen=True)
+class Score:
+    """One controller on one task's split under the protocol."""
+
+    task: str
+    """The task's name."""
+    split: str
+    """The split played."""
+    returns: np.ndarray
+    """[S] return per context (a stochastic controller's: the mean over its seeds)."""
+    seed_means: np.ndarray
+    """[seeds] mean return per controller seed (one entry for a deterministic one)."""
+    cpu_seconds: float
+    """Process CPU seconds of the controller's episodes (all threads, all seeds)."""
+
+    @property
+    def mean_return(self) -> float:
+        return float(self.seed_means.mean())
+
+
+def play(name: str, split: str, controller: Controller) -> tuple[np.ndarray, float]:
+    """(returns [S], CPU seconds): ``controller`` on every context of the split once,
+    with the task's extensions and the environment generator seeded with ENV_SEED."""
+    contexts = load_split(name, split)
+    started = time.process_time()
+    episodes = evaluate_policy(
+        contexts, controller, contexts.params, task(name).extensions, seed=ENV_SEED
+    )
+    return episodes.returns, time.process_time() - started
+
+
+def score(name: str, split: str, make_controller, seeds: int = 1) -> Score:
+    """Score ``make_controller(seed)`` (a controller for each of seeds 0 .. seeds - 1;
+    seeds > 1 only for a stochastic controller) on a task's split."""
+    if seeds < 1:
+        raise ValueError(f"seeds must be >= 1, got {seeds}")
+    played = [play(name, split, make_controller(seed)) for seed in range(seeds)]
+    returns = np.stack([returns for returns, _ in played])
+    return Score(name, split, returns.mean(axis=0), returns.mean(axis=1),
+                 sum(seconds for _, seconds in played))  # fmt: skip
+
+
+@functools.cache
+def references(name: str, split: str = "test") -> tuple[float, float]:
+    """(R_nothing, R_oracle): the mean returns of do nothing and of the oracle planner
+    on a task's split under the protocol, the 0 and 1 of the normalised score."""
+    from spikectl.envs.controller import DoNothing
+    from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
+
+    contexts = load_split(name, split)
+    nothing, _ = play(name, split, DoNothing())
+    oracle = OraclePlanner(contexts, contexts.params, DEFAULT_ORACLE_WIDTH,
+                           task(name).extensions.allow_target_action)  # fmt: skip
+    planned, _ = play(name, split, oracle)
+    return float(nothing.mean()), float(planned.mean())
+
+
+def normalise(mean_return: float, nothing: float, oracle: float) -> float:
+    """(R - R_nothing) / (R_oracle - R_nothing): 0 for doing nothing, 1 for the oracle."""
+    if not oracle > nothing:
+        raise ValueError(
+            f"the oracle ({oracle:.6f}) does not beat doing nothing ({nothing:.6f}): "
+            "no normalised score"
+        )
+    return (mean_return - nothing) / (oracle - nothing)
+
+
+def mean_normalised(scores: dict[str, float]) -> float:
+    """The suite's summary: the unweighted mean over tasks of each task's normalised score."""
+    if not scores:
+        raise ValueError("no task scores to average")
+    return float(np.mean(list(scores.values())))
+
+
+PER_NEURON_ARCHS = ("tdrqn", "ddrqn")
+"""Architectures whose weights do not depend on n (shared per-neuron blocks)."""
+
+
+def check_run_fits(config: Any, name: str) -> None:
+    """Refuse a trained run (its saved config) that cannot play task ``name``: another
+    neuron model or episode length, or a fixed-size network (DRQN, DMDRQN) trained on
+    another number of observed neurons. A per-neuron network (TDRQN, DDRQN) plays any n."""
+    spec = task(name)
+    if config.env.params != NeuronParams():
+        raise ValueError(
+            f"the run was trained with other neuron parameters than task {name!r} (the "
+            "suite's are the defaults, Table 1): its scores would be on another model"
+        )
+    if config.env.episode_length != EPISODE_LENGTH:
+        raise ValueError(
+            f"the run was trained on episodes of {config.env.episode_length} steps; the "
+            f"suite's are {EPISODE_LENGTH}"
+        )
+    fixed_size = config.agent.arch.lower() not in PER_NEURON_ARCHS
+    if fixed_size and config.env.n_observed != spec.n_observed:
+        raise ValueError(
+            f"a {config.agent.arch.upper()} has a fixed input of {config.env.n_observed} "
+            f"observed neurons; task {name!r} shows {spec.n_observed}: only per-neuron "
+            f"networks ({', '.join(a.upper() for a in PER_NEURON_ARCHS)}) run on another n"
+        )

@@ -1,0 +1,161 @@
+"""The frozen benchmark suite (spikectl.experiments.suite) and ``spikectl benchmark``."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import pytest
+
+from spikectl import cli
+from spikectl.contexts import ContextSet
+from spikectl.experiments import suite
+
+SMOKE_RUN = Path(__file__).parent / "data" / "format2-smoke-run"
+
+
+@pytest.fixture
+def fresh_cache():
+    """load_splits caches what it checked: start and end each test without that cache."""
+    suite.load_splits.cache_clear()
+    yield
+    suite.load_splits.cache_clear()
+
+
+@pytest.mark.parametrize("name", list(suite.TASKS))
+def test_every_task_builds_the_pinned_sets(name, fresh_cache):
+    # All 10 tasks x 3 sets take about 4 s: checked in the default run.
+    sets = suite.load_splits(name)
+    spec = suite.TASKS[name]
+    assert set(sets) == set(suite.SPLITS) == set(suite.CHECKSUMS[name])
+    for split, contexts in sets.items():
+        assert len(contexts) == suite.SET_SIZE
+        assert contexts.n_neurons == spec.n_neurons
+        assert contexts.n_observed == spec.n_observed
+        assert contexts.episode_length == suite.EPISODE_LENGTH
+        assert contexts.extensions == spec.extensions.context_part()
+        assert suite.suite_checksum(contexts) == suite.CHECKSUMS[name][split]
+    # No topology shared between the splits.
+    assert not sets["test"].duplicate_topologies(sets["train"])
+    assert not sets["validation"].duplicate_topologies(sets["test"])
+
+
+def test_tasks_are_the_registered_variants():
+    assert suite.SUITE_VERSION == 1
+    assert list(suite.TASKS) == [
+        "paper", "n16", "n32", "noise1", "noise2", "noise4", "hidden25", "stochastic",
+        "heterogeneous", "background",
+    ]  # fmt: skip
+    assert [suite.TASKS[f"noise{s}"].extensions.observation_noise_mV for s in (1, 2, 4)] == [
+        1.0, 2.0, 4.0,
+    ]  # fmt: skip
+    assert suite.TASKS["hidden25"].n_observed == 6
+    assert suite.TASKS["stochastic"].extensions.stochastic_release
+    assert suite.TASKS["background"].extensions.background_rate == 0.005
+    assert suite.TASKS["heterogeneous"].extensions.heterogeneous
+    assert suite.TASKS["paper"].extensions == suite.TASKS["n32"].extensions.__class__()
+
+
+def test_a_changed_generator_is_refused(monkeypatch, fresh_cache):
+    real = suite.make_splits
+
+    def drifted(*args, **kwargs):  # a generator that now draws other networks
+        return real(*args, **{**kwargs, "seed": kwargs["seed"] + 1})
+
+    monkeypatch.setattr(suite, "make_splits", drifted)
+    with pytest.raises(suite.SuiteChecksumError, match=r"suite v1, task 'n16', train set"):
+        suite.load_split("n16", "test")
+
+
+def test_a_tampered_set_is_refused(monkeypatch, fresh_cache):
+    sets = suite.generate_splits("paper")
+    contexts = list(sets["validation"])
+    contexts[0], contexts[1] = contexts[1], contexts[0]  # the same networks, another order
+    tampered = {**sets, "validation": ContextSet(contexts, sets["validation"].params)}
+    monkeypatch.setattr(suite, "generate_splits", lambda name: tampered)
+    expected = "task 'paper', validation set.*SUITE_VERSION"
+    with pytest.raises(suite.SuiteChecksumError, match=expected):
+        suite.load_split("paper", "test")
+
+
+def test_the_checksum_sees_every_defining_array():
+    contexts = suite.generate_splits("hidden25")["test"][:3]
+    base = suite.suite_checksum(contexts)
+    first = contexts[0]
+    other_pattern = first.pattern.copy()
+    other_pattern[0] = not other_pattern[0]
+    changed = type(first)(first.weights, first.target, other_pattern, None, first.hidden)
+    assert suite.suite_checksum(ContextSet([changed, *contexts[1:]], contexts.params)) != base
+
+
+def test_normalisation_on_hand_values():
+    assert suite.normalise(0.5, 0.5, 0.9) == 0.0
+    assert suite.normalise(0.9, 0.5, 0.9) == pytest.approx(1.0)
+    assert suite.normalise(0.75, 0.5, 1.0) == pytest.approx(0.5)
+    assert suite.normalise(0.4, 0.5, 1.0) == pytest.approx(-0.2)  # worse than nothing
+    assert suite.mean_normalised({"paper": 0.2, "n32": 0.6}) == pytest.approx(0.4)
+    with pytest.raises(ValueError, match="does not beat doing nothing"):
+        suite.normalise(0.5, 0.5, 0.5)
+
+
+def run_main(argv: list[str], capsys) -> tuple[int, str, str]:
+    try:
+        cli.main(argv)
+        code = 0
+    except SystemExit as exit_:
+        code = exit_.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err
+
+
+def test_benchmark_do_nothing_on_paper(capsys, tmp_path):
+    out = tmp_path / "scores.csv"
+    code, stdout, _ = run_main(["benchmark", "do-nothing", "--task", "paper", "--out",
+                                str(out)], capsys)  # fmt: skip
+    assert code == 0
+    row = next(line for line in stdout.splitlines() if line.startswith("paper"))
+    assert row.split()[1:3] == ["0.500", "0.000"]
+    assert "suite v1" in stdout
+    lines = out.read_text().splitlines()
+    assert lines[0].startswith("suite_version,task,split,controller")
+    assert lines[1].startswith("1,paper,test,do-nothing,")
+
+
+@pytest.mark.parametrize(
+    ("argv", "message"),
+    [
+        (["do-nothing", "--task", "n64"], "unknown task 'n64' of benchmark suite v1"),
+        (["no-such-controller", "--task", "paper"], "no controller 'no-such-controller'"),
+        (["random", "--task", "paper", "--random-seeds", "0"], "--random-seeds must be"),
+    ],
+)
+def test_benchmark_refuses_bad_input_in_one_line(argv, message, capsys):
+    code, _, stderr = run_main(["benchmark", *argv], capsys)
+    assert code == 2
+    assert stderr.count("\n") == 1 and message in stderr
+
+
+def copied_run(tmp_path, **env_changes) -> tuple[Path, dict]:
+    run = tmp_path / "run"
+    shutil.copytree(SMOKE_RUN, run)
+    config = json.loads((run / "config.json").read_text())
+    config["env"].update(env_changes)
+    return run, config
+
+
+def test_benchmark_refuses_a_fixed_size_network_on_another_n(tmp_path, capsys):
+    run, config = copied_run(tmp_path, n_neurons=8, episode_length=60)
+    config["agent"]["arch"] = "drqn"
+    (run / "config.json").write_text(json.dumps(config))
+    code, _, stderr = run_main(["benchmark", str(run), "--task", "n32"], capsys)
+    assert code == 2 and stderr.count("\n") == 1
+    assert "cannot play task 'n32'" in stderr and "DRQN has a fixed input of 8" in stderr
+    # Another neuron model, or another episode length, is refused whatever the network.
+    config["agent"]["arch"] = "tdrqn"
+    config["env"]["params"]["stimulus_current_pA"] = 900.0
+    (run / "config.json").write_text(json.dumps(config))
+    code, _, stderr = run_main(["benchmark", str(run), "--task", "paper"], capsys)
+    assert code == 2 and "other neuron parameters" in stderr
+    code, _, stderr = run_main(["benchmark", str(SMOKE_RUN), "--task", "n32"], capsys)
+    assert code == 2 and "episodes of 20 steps" in stderr
