@@ -1,0 +1,15 @@
+#!/usr/bin/env bash
+# The commands that produced the CSVs of docs/benchmark.md (suite v1, test sets), run from
+# the repository root with the package installed. One BLAS / PyTorch thread each.
+set -euo pipefail
+out=docs/results/suite
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+for controller in do-nothing random identify-and-plan oracle; do
+    spikectl benchmark "$controller" --task all --out "$out/$controller.csv"
+done
+# Size transfer: the quick preset's TDRQN (trained at n = 8 on the paper's task, runs not
+# committed), best_model.pt, zero-shot at n = 8, 16 and 32.
+for seed in 0 1 2; do
+    spikectl benchmark "runs/quick-this-machine/trials/seed=$seed" --model best \
+        --task paper n16 n32 --out "$out/tdrqn-quick-seed$seed.csv"
+done
