@@ -20,7 +20,7 @@ controllers (docs/environment.md, "Controllers").
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping, Sequence
+from collections.abc import Mapping
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -175,7 +175,7 @@ def play_episode(env: Any, controller: Controller, context: int, seed: int | Non
     return np.array(actions, dtype=np.int64), total
 
 
-__all__: Sequence[str] = (
+__all__ = [
     "BatchController", "Controller", "Copies", "DoNothing", "RandomLegal", "Witness",
     "batched", "play_episode",
-)  # fmt: skip
+]  # fmt: skip
