@@ -159,3 +159,13 @@ def test_benchmark_refuses_a_fixed_size_network_on_another_n(tmp_path, capsys):
     assert code == 2 and "other neuron parameters" in stderr
     code, _, stderr = run_main(["benchmark", str(SMOKE_RUN), "--task", "n32"], capsys)
     assert code == 2 and "episodes of 20 steps" in stderr
+
+
+def test_a_per_neuron_network_may_play_any_n(tmp_path):
+    from spikectl.training.run_files import read_config
+
+    run, config = copied_run(tmp_path, n_neurons=8, episode_length=60)
+    (run / "config.json").write_text(json.dumps(config))
+    assert config["agent"]["arch"] == "tdrqn"
+    for name in ("paper", "n16", "n32", "hidden25"):
+        suite.check_run_fits(read_config(run), name)  # no refusal
