@@ -20,8 +20,6 @@ is 1, both played under the same protocol on the same split.
 from __future__ import annotations
 
 import functools
-import hashlib
-import json
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -111,54 +109,54 @@ TASKS: dict[str, Task] = {
 
 CHECKSUMS: dict[str, dict[str, str]] = {
     "paper": {
-        "train": "00ee973f9674dc4460caf25ef3b5885c8c7e9afef38f8d619ea8793f046b1ace",
-        "validation": "5c27c6c35310247441630db88f873c9293a24e04800b03959ebdc6007348cbb0",
-        "test": "dc88ff6a9d753378e77df8afca8b52e90f554c7d2f3df73bedeb9c653ccc9db7",
+        "train": "6e29cda2628b80eca90418f3b3ac7368b9149b24906d699e0996befae3b491e6",
+        "validation": "bc6a85715aeab6a1418b714191997cf5b47495ce008d18caeaac81d390e18d0c",
+        "test": "0f108c061d011e451cb9b28f9c3583bdb59e9733ecc90cee5ea9a182d02dffd7",
     },
     "n16": {
-        "train": "14526d2af1eee55c18a0020bdae58a912e7ce0c387d6529de1d7ae31ed7c9d43",
-        "validation": "95e39a6a8472d9aa4064fa57aef07c624a4c300d39225e767d64b1ab115623cf",
-        "test": "f75d537e73ba28c7140f7829ab7b37c68ce8a37c9adb837abd872cdd2c8a59c8",
+        "train": "6ccd03fea2ed4fb51dad990c98cecfaaeb45b0da647e703cfbda41e3304b77d5",
+        "validation": "5e2ba51c75224b1d2d951c028bd95ecfc21a56694f8f933d069961d9d84549fd",
+        "test": "6a0f803e8251aedbc5fe3c8c4c991897dcb2122a783ca0c4cd777d15a5755af9",
     },
     "n32": {
-        "train": "5e04e7e8dfa284603c7cc7def7516f7349b901422ce581de4552a8ae1ff1e7b7",
-        "validation": "caa9022a18e83b00d9521ee6572fc1146f98a741a4cdd7d51eff3d2ad30b9736",
-        "test": "16c50e98a7d99dcee97df36d05b15eadb52cb7fd4e8a8dc98ac2335ab1213290",
+        "train": "c98e9c77be03c6bfcfa9c8b0241731aa443b4af0da3d68589a9cc30e69676251",
+        "validation": "7afd9239cfcdba9fe174173326dea501183e4d425f9e41eaa12884d7fc20ba46",
+        "test": "267aed93f155bc1d45cb5b681ad3c38a70dd847682a2841fbb84cf2bfd534598",
     },
     "noise1": {
-        "train": "00ee973f9674dc4460caf25ef3b5885c8c7e9afef38f8d619ea8793f046b1ace",
-        "validation": "5c27c6c35310247441630db88f873c9293a24e04800b03959ebdc6007348cbb0",
-        "test": "dc88ff6a9d753378e77df8afca8b52e90f554c7d2f3df73bedeb9c653ccc9db7",
+        "train": "6e29cda2628b80eca90418f3b3ac7368b9149b24906d699e0996befae3b491e6",
+        "validation": "bc6a85715aeab6a1418b714191997cf5b47495ce008d18caeaac81d390e18d0c",
+        "test": "0f108c061d011e451cb9b28f9c3583bdb59e9733ecc90cee5ea9a182d02dffd7",
     },
     "noise2": {
-        "train": "00ee973f9674dc4460caf25ef3b5885c8c7e9afef38f8d619ea8793f046b1ace",
-        "validation": "5c27c6c35310247441630db88f873c9293a24e04800b03959ebdc6007348cbb0",
-        "test": "dc88ff6a9d753378e77df8afca8b52e90f554c7d2f3df73bedeb9c653ccc9db7",
+        "train": "6e29cda2628b80eca90418f3b3ac7368b9149b24906d699e0996befae3b491e6",
+        "validation": "bc6a85715aeab6a1418b714191997cf5b47495ce008d18caeaac81d390e18d0c",
+        "test": "0f108c061d011e451cb9b28f9c3583bdb59e9733ecc90cee5ea9a182d02dffd7",
     },
     "noise4": {
-        "train": "00ee973f9674dc4460caf25ef3b5885c8c7e9afef38f8d619ea8793f046b1ace",
-        "validation": "5c27c6c35310247441630db88f873c9293a24e04800b03959ebdc6007348cbb0",
-        "test": "dc88ff6a9d753378e77df8afca8b52e90f554c7d2f3df73bedeb9c653ccc9db7",
+        "train": "6e29cda2628b80eca90418f3b3ac7368b9149b24906d699e0996befae3b491e6",
+        "validation": "bc6a85715aeab6a1418b714191997cf5b47495ce008d18caeaac81d390e18d0c",
+        "test": "0f108c061d011e451cb9b28f9c3583bdb59e9733ecc90cee5ea9a182d02dffd7",
     },
     "hidden25": {
-        "train": "fd1a74b84ad9f9f84dfe3c6daa96380a6773928ecd48198d171e16d3f77b6067",
-        "validation": "707d4353041a5fb3a3785cce66ea375209bccec03649a78e137fb9264446914c",
-        "test": "5dcda571880413fc68af3f1dba6e3b3d03be08d9527ef54b10891c0563c29ce6",
+        "train": "4ed60bbbc42c04fc13ff829f47595da80ee2c78d54fb0b8b9fa9cd895ef21f6a",
+        "validation": "80f4364ca9a2f696c2cab8e71816bea457adab572f6642a1c5c1063346880f83",
+        "test": "ebb850b1c88658436703f38517144124cdb79164e6496eb2666aaba9a711d643",
     },
     "stochastic": {
-        "train": "00ee973f9674dc4460caf25ef3b5885c8c7e9afef38f8d619ea8793f046b1ace",
-        "validation": "5c27c6c35310247441630db88f873c9293a24e04800b03959ebdc6007348cbb0",
-        "test": "dc88ff6a9d753378e77df8afca8b52e90f554c7d2f3df73bedeb9c653ccc9db7",
+        "train": "6e29cda2628b80eca90418f3b3ac7368b9149b24906d699e0996befae3b491e6",
+        "validation": "bc6a85715aeab6a1418b714191997cf5b47495ce008d18caeaac81d390e18d0c",
+        "test": "0f108c061d011e451cb9b28f9c3583bdb59e9733ecc90cee5ea9a182d02dffd7",
     },
     "heterogeneous": {
-        "train": "1525109a51e9f90004f164d2335e6499e2d933fb9a29ea6e438003f82b0acd0d",
-        "validation": "cdcfcd48b5be349ded78545dafa4265f4e9012e3775a4e1e39669d5f704c4e8d",
-        "test": "5407c26afeac3a5f535b32542571ec62d36a5620df14e7bc6e64ae6a3a4e83d7",
+        "train": "9e60fbbf136024a6de28291a10ff0d25863043f335733bc4f0781a1938786ab7",
+        "validation": "51e2414b84807b5b9fdde0ab517c128281f0e0fd41e885048421d13e711ceced",
+        "test": "3baca2cdfba3cf78de757e280f492f6ce2600ae5b00ec00e34e048c24037bd6d",
     },
     "background": {
-        "train": "00ee973f9674dc4460caf25ef3b5885c8c7e9afef38f8d619ea8793f046b1ace",
-        "validation": "5c27c6c35310247441630db88f873c9293a24e04800b03959ebdc6007348cbb0",
-        "test": "dc88ff6a9d753378e77df8afca8b52e90f554c7d2f3df73bedeb9c653ccc9db7",
+        "train": "6e29cda2628b80eca90418f3b3ac7368b9149b24906d699e0996befae3b491e6",
+        "validation": "bc6a85715aeab6a1418b714191997cf5b47495ce008d18caeaac81d390e18d0c",
+        "test": "0f108c061d011e451cb9b28f9c3583bdb59e9733ecc90cee5ea9a182d02dffd7",
     },
 }  # fmt: skip
 """task -> split -> :func:`suite_checksum` of the set, pinned for :data:`SUITE_VERSION`
@@ -170,26 +168,10 @@ class SuiteChecksumError(ValueError):
 
 
 def suite_checksum(contexts: ContextSet) -> str:
-    """SHA-256 of what defines a set: its shape, its integer and boolean arrays (weights,
-    targets, patterns, witnesses, hidden neurons) and the heterogeneous parameters
-    rounded to 1e-9 as integers, the neuron parameters and context-level extensions.
-    Exact values only, so it holds on any machine whose generator draws the same."""
-    digest = hashlib.sha256()
-    digest.update(f"n={contexts.n_neurons};N={contexts.episode_length}".encode())
-    for name, array in sorted(contexts.arrays().items()):
-        array = np.asarray(array)
-        if array.dtype.kind == "f":
-            array = np.round(array * 1e9).astype(np.int64)
-        elif array.dtype.kind == "b":
-            array = array.astype(np.uint8)
-        array = np.ascontiguousarray(array.astype(array.dtype.newbyteorder("<")))
-        digest.update(f"{name}{array.shape}{array.dtype.str}".encode())
-        digest.update(array.tobytes())
-    digest.update(json.dumps(contexts.params.to_dict(), sort_keys=True).encode())
-    digest.update(
-        json.dumps(contexts.extensions.to_dict(only_changed=True), sort_keys=True).encode()
-    )
-    return digest.hexdigest()
+    """SHA-256 of what defines a set (``ContextSet.checksum`` with the heterogeneous
+    parameters rounded to 1e-9 as integers): exact values only, so it holds on any
+    machine whose generator draws the same."""
+    return contexts.checksum(round_floats=True)
 
 
 def task(name: str) -> Task:
