@@ -37,6 +37,25 @@ def assert_same_weights() -> Callable[[Path, Path], None]:
     return _assert_same_weights
 
 
+def _assert_same_trials(dir_a: Path, dir_b: Path) -> None:
+    from spikectl.experiments.sweep import trial_dirs
+    from spikectl.training.run_files import read_metrics
+
+    names = sorted(path.name for path in trial_dirs(dir_a))
+    assert names == sorted(path.name for path in trial_dirs(dir_b)) and names
+    for name in names:
+        a, b = dir_a / "trials" / name, dir_b / "trials" / name
+        assert _comparable(read_metrics(a)) == _comparable(read_metrics(b))
+        _assert_same_weights(a / "model.pt", b / "model.pt")
+
+
+@pytest.fixture
+def assert_same_trials() -> Callable[[Path, Path], None]:
+    """Assert that two sweep directories hold the same trials with the same metrics (but
+    the clocks) and bit-identical final weights."""
+    return _assert_same_trials
+
+
 def _run_cli(*args: str, check: bool = True, env: dict | None = None):
     return subprocess.run(
         [sys.executable, "-m", "spikectl.cli", *args], capture_output=True, text=True,

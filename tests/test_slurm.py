@@ -17,24 +17,14 @@ import pytest
 
 from spikectl.config_errors import MissingExtraError
 from spikectl.experiments.slurm import SlurmSettings, TrialJob
-from spikectl.experiments.sweep import Sweep, SweepError, run_sweep, run_trial, trial_dirs
+from spikectl.experiments.sweep import Sweep, SweepError, run_sweep, run_trial
 from spikectl.files import LOCK_FILE
 from spikectl.training.presets import SMOKE
-from spikectl.training.run_files import read_metrics
 
 TINY = SMOKE.with_changes(total_env_steps=8 * 20 * 4, eval_every_episodes=16,
                            checkpoint_every_episodes=16)  # fmt: skip
 LOCAL = SlurmSettings(cluster="local")
 quiet = lambda line: None  # noqa: E731
-
-
-def same_trials(dir_a, dir_b, comparable, assert_same_weights):
-    names = sorted(path.name for path in trial_dirs(dir_a))
-    assert names == sorted(path.name for path in trial_dirs(dir_b)) and names
-    for name in names:
-        a, b = dir_a / "trials" / name, dir_b / "trials" / name
-        assert comparable(read_metrics(a)) == comparable(read_metrics(b))
-        assert_same_weights(a / "model.pt", b / "model.pt")
 
 
 def test_without_submitit_the_slurm_backend_is_one_line_naming_the_extra(
@@ -109,9 +99,7 @@ def test_the_jobs_go_to_sbatch_as_one_array_with_the_settings(tmp_path, monkeypa
     assert "gpus" not in script and sys.executable in script
 
 
-def test_the_slurm_backend_gives_the_local_backends_results(
-    tmp_path, comparable, assert_same_weights
-):
+def test_the_slurm_backend_gives_the_local_backends_results(tmp_path, assert_same_trials):
     """Seed groups as a job array of submitit's local executor, against the local pool
     training each trial alone: the same metrics and bit-identical weights."""
     pytest.importorskip("submitit")
@@ -122,7 +110,7 @@ def test_the_slurm_backend_gives_the_local_backends_results(
                         group_seeds=True, echo=lines.append)  # fmt: skip
     assert [r["status"] for r in results] == ["trained in a group of 2"] * 4
     assert lines[1].startswith("submitted 2 job(s)")
-    same_trials(tmp_path / "local", tmp_path / "slurm", comparable, assert_same_weights)
+    assert_same_trials(tmp_path / "local", tmp_path / "slurm")
     assert sorted(p.name for p in (tmp_path / "slurm/slurm").glob("*_result.pkl"))
 
 
@@ -149,9 +137,7 @@ def _interrupt_when_checkpointed(run_dir: Path, signum: int, sent: list) -> thre
     return thread
 
 
-def test_a_preempted_job_resumes_exactly_and_a_killed_one_with_the_same_command(
-    tmp_path, comparable, assert_same_weights
-):
+def test_a_preempted_job_resumes_exactly_and_a_killed_one_with_the_same_command(tmp_path, assert_same_trials):
     """Two trials as jobs of submitit's local executor. One is sent submitit's preemption
     signal (USR2) mid-run: the job is requeued, calls the same trial again, and it resumes
     from its checkpoint. The other is killed (SIGKILL: no signal to catch, as on a node
@@ -179,4 +165,4 @@ def test_a_preempted_job_resumes_exactly_and_a_killed_one_with_the_same_command(
     assert "this job is preempted" in logs and "Requeued job" in logs
     again = run_sweep(sweep, tmp_path / "slurm", backend="slurm", slurm=LOCAL, echo=quiet)
     assert [r["status"] for r in again] == ["skipped (done)", "resumed"]
-    same_trials(tmp_path / "local", tmp_path / "slurm", comparable, assert_same_weights)
+    assert_same_trials(tmp_path / "local", tmp_path / "slurm")

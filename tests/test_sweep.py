@@ -181,25 +181,14 @@ def test_figure3_contexts_are_regenerated_when_a_trial_kept_only_its_metrics(tmp
     assert training_contexts(run_dir, read_config(run_dir).to_dict()) == saved
 
 
-def same_trials(dir_a, dir_b, comparable, assert_same_weights):
-    names = sorted(path.name for path in trial_dirs(dir_a))
-    assert names == sorted(path.name for path in trial_dirs(dir_b)) and names
-    for name in names:
-        a, b = dir_a / "trials" / name, dir_b / "trials" / name
-        assert comparable(read_metrics(a)) == comparable(read_metrics(b))
-        assert_same_weights(a / "model.pt", b / "model.pt")
-
-
 @pytest.mark.slow
-def test_ray_backend_gives_the_same_results_as_the_local_pool(
-    tmp_path, comparable, assert_same_weights
-):
+def test_ray_backend_gives_the_same_results_as_the_local_pool(tmp_path, assert_same_trials):
     pytest.importorskip("ray")
     sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "seed": [0]})
     run_sweep(sweep, tmp_path / "local", workers=2, echo=lambda line: None)
     results = run_sweep(sweep, tmp_path / "ray", workers=2, backend="ray", echo=lambda line: None)
     assert [r["status"] for r in results] == ["trained", "trained"]
-    same_trials(tmp_path / "local", tmp_path / "ray", comparable, assert_same_weights)
+    assert_same_trials(tmp_path / "local", tmp_path / "ray")
 
 
 def test_unknown_backend():
