@@ -137,7 +137,9 @@ def _interrupt_when_checkpointed(run_dir: Path, signum: int, sent: list) -> thre
     return thread
 
 
-def test_a_preempted_job_resumes_exactly_and_a_killed_one_with_the_same_command(tmp_path, assert_same_trials):
+def test_a_preempted_job_resumes_exactly_and_a_killed_one_with_the_same_command(
+    tmp_path, assert_same_trials
+):
     """Two trials as jobs of submitit's local executor. One is sent submitit's preemption
     signal (USR2) mid-run: the job is requeued, calls the same trial again, and it resumes
     from its checkpoint. The other is killed (SIGKILL: no signal to catch, as on a node
