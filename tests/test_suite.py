@@ -169,3 +169,45 @@ def test_a_per_neuron_network_may_play_any_n(tmp_path):
     assert config["agent"]["arch"] == "tdrqn"
     for name in ("paper", "n16", "n32", "hidden25"):
         suite.check_run_fits(read_config(run), name)  # no refusal
+
+
+@pytest.mark.parametrize("name", list(suite.TASKS))
+def test_train_task_flag_trains_on_the_tasks_pinned_sets(name):
+    """``spikectl train --task T`` generates exactly the suite's training, test and
+    validation sets of T (their pinned checksums), with T's environment and extensions,
+    and trained_on recognises the run as T's (and no other task's)."""
+    from spikectl.cli.training import parse_train
+    from spikectl.training.contexts import generated_contexts, make_validation_set
+
+    config = parse_train(["quick", "--task", name, "--seed", "3"]).config
+    env, spec = config.env, suite.task(name)
+    assert (env.id, env.n_neurons, env.extensions) == (spec.env_id, spec.n_neurons,
+                                                       spec.extensions)  # fmt: skip
+    train, test = generated_contexts(config)
+    validation = make_validation_set(
+        env.n_val, (train, test), env.n_neurons, env.episode_length, env.context_seed,
+        params=env.params, extensions=env.extensions,
+    )  # fmt: skip
+    for split, contexts in (("train", train), ("test", test), ("validation", validation)):
+        assert suite.suite_checksum(contexts) == suite.CHECKSUMS[name][split], split
+    assert suite.trained_on(config, train) == name
+
+
+def test_train_task_flag_is_overridden_by_later_flags_and_checked():
+    from spikectl.cli.training import parse_train
+    from spikectl.training.contexts import generated_contexts
+
+    config = parse_train(["guided", "--task=noise1", "--extensions.observation-noise-mV",
+                          "3"]).config  # fmt: skip
+    assert config.env.extensions.observation_noise_mV == 3.0
+    assert config.learner.name == "guided"
+    # Off the suite: no task recognises the run.
+    train, _ = generated_contexts(config)
+    assert suite.trained_on(config, train) is None
+    for argv, message in (
+        (["--task", "n64"], "unknown task 'n64' of benchmark suite v1"),
+        (["--task", "paper", "--task", "n16"], "one task per run"),
+        (["--task"], "give a task of the benchmark suite"),
+    ):
+        with pytest.raises(ValueError, match=message):
+            parse_train(argv)

@@ -39,6 +39,7 @@ class BenchmarkCommand:
 CSV_FIELDS = (
     "suite_version", "task", "split", "controller", "model", "seeds", "mean_return",
     "sd_over_seeds", "normalised", "do_nothing", "oracle", "cpu_seconds", "contexts",
+    "trained_on",
 )  # fmt: skip
 
 
@@ -56,11 +57,13 @@ def benchmark(command: BenchmarkCommand) -> None:
     for name in names:
         suite.task(name)  # an unknown task is refused before anything is played
     make = controller_factory(command, names)
+    origin = training_task(command)
     seeds = command.random_seeds if command.controller == "random" else 1
     print(f"benchmark suite v{suite.SUITE_VERSION}, {command.split} sets "
           f"({suite.SET_SIZE} contexts each, environment seed {suite.ENV_SEED}); "
           f"controller {command.controller}"
-          + (f" (mean over seeds 0..{seeds - 1})" if seeds > 1 else ""))  # fmt: skip
+          + (f" (mean over seeds 0..{seeds - 1})" if seeds > 1 else "")
+          + (f"; trained on task {origin!r}" if origin else ""))  # fmt: skip
     print(f"{'task':<15}{'mean return':>18}{'normalised':>12}{'do nothing':>12}"
           f"{'oracle':>9}{'CPU s':>9}")  # fmt: skip
     rows, normalised = [], {}
@@ -79,13 +82,29 @@ def benchmark(command: BenchmarkCommand) -> None:
             "sd_over_seeds": "" if seeds == 1 else f"{sd:.6f}",
             "normalised": f"{normalised[name]:.6f}", "do_nothing": f"{nothing:.6f}",
             "oracle": f"{oracle:.6f}", "cpu_seconds": f"{result.cpu_seconds:.3f}",
-            "contexts": len(result.returns),
+            "contexts": len(result.returns), "trained_on": origin or "",
         })  # fmt: skip
     if len(names) > 1:
         print(f"mean normalised score over {len(names)} tasks: "
               f"{suite.mean_normalised(normalised):.3f}")  # fmt: skip
     if command.out is not None:
         print(f"wrote {write_rows(rows, command.out)}")
+
+
+def training_task(command: BenchmarkCommand) -> str | None:
+    """The suite task a run directory trained on (None for anything else, or a run
+    trained off the suite): on any other task its scores are a transfer."""
+    source = Path(command.controller)
+    if not source.is_dir():
+        return None
+    from spikectl.contexts import ContextSet
+    from spikectl.experiments import suite
+    from spikectl.training.contexts import TRAIN_FILE
+    from spikectl.training.run_files import read_config
+
+    if not (source / TRAIN_FILE).is_file():
+        return None
+    return suite.trained_on(read_config(source), ContextSet.load(source / TRAIN_FILE))
 
 
 def model_label(command: BenchmarkCommand) -> str:

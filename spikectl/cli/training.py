@@ -230,7 +230,9 @@ the {name} preset's: {help}
 The preset (paper, quick, guided or smoke; quick when none is given) sets every default, and
 the flags override them: `spikectl train paper --help` shows the paper's. --env picks
 a registered environment (spikectl/NeuronControlNoisy-v0, ...) whose settings become
-the defaults of --n-neurons, --params.* and --extensions.*."""
+the defaults of --n-neurons, --params.* and --extensions.*. --task T trains on task T of
+the frozen benchmark suite (docs/benchmark.md): its environment, n and extensions, whose
+default context sets are the task's training and validation sets."""
 
 
 def _train_presets(env_id: str | None = None) -> Any:
@@ -261,9 +263,43 @@ def parse_train(argv: list[str], command_types: tuple[type, ...] = ()) -> TrainC
         )
     if not argv or argv[0] not in PRESETS:
         argv = ["quick", *argv]
+    argv = _expand_task_flag(argv)
     kwargs = {"args": argv, "prog": "spikectl train", "command_types": command_types}
     env_id = _env_flag(argv)
     return run_tyro(_train_presets(env_id), default=_quick(env_id), **kwargs)
+
+
+def _expand_task_flag(argv: list[str]) -> list[str]:
+    """``--task T`` / ``--task=T`` replaced by the suite task's own flags (--env,
+    --n-neurons, --extensions.*), placed right after the preset so that every flag
+    given on the command line still overrides them. One task at most."""
+    tasks, rest = [], [argv[0]]
+    index = 1
+    while index < len(argv):
+        arg = argv[index]
+        if arg == "--task":
+            if index + 1 >= len(argv) or argv[index + 1].startswith("--"):
+                raise ValueError("--task: give a task of the benchmark suite, e.g. --task noise2")
+            tasks.append(argv[index + 1])
+            index += 2
+            continue
+        if arg.startswith("--task="):
+            tasks.append(arg.split("=", 1)[1])
+        else:
+            rest.append(arg)
+        index += 1
+    if not tasks:
+        return argv
+    if len(tasks) > 1:
+        raise ValueError(f"--task: one task per run, got {', '.join(tasks)}")
+    from spikectl.experiments import suite
+
+    if tasks[0] not in suite.TASKS:
+        raise ValueError(
+            f"--task: unknown task {tasks[0]!r} of benchmark suite v{suite.SUITE_VERSION}; "
+            f"tasks: {', '.join(suite.TASKS)}"
+        )
+    return [rest[0], *suite.train_arguments(tasks[0]), *rest[1:]]
 
 
 def _env_flag(argv: list[str]) -> str | None:
