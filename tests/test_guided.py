@@ -220,3 +220,55 @@ def test_cli_guided_preset_flags_and_errors(capsys):
     with pytest.raises(SystemExit) as exit_info:
         main(["train", "quick", "--teacher", "identify", "--run-dir", "unused"])
     assert exit_info.value.code == 2
+
+
+def test_teacher_plays_its_episodes_and_the_student_the_others(contexts):
+    """DAgger's mixing, per episode: where the teacher plays, the episode is identify-and-
+    plan's own; elsewhere it is the student's, draws and all; the teacher's episodes are
+    labelled with their actions without playing the teacher again."""
+    from spikectl.training.learners.teachers import TeacherMixedPolicy
+
+    plays = np.array([True, False, True, False])
+    student = batched(RandomLegal(5))
+    student.reset()
+    mixed = TeacherMixedPolicy(
+        lambda observations, mask: student.act_batch(observations, {"action_mask": mask}),
+        plays, IdentifyAndPlan,
+    )  # fmt: skip
+    episodes = evaluate_policy(contexts, mixed)
+    teacher_alone = evaluate_policy(contexts, batched(IdentifyAndPlan()))
+    student_alone = evaluate_policy(contexts, batched(RandomLegal(5)))
+    np.testing.assert_array_equal(episodes.actions[plays], teacher_alone.actions[plays])
+    np.testing.assert_array_equal(episodes.actions[~plays], student_alone.actions[~plays])
+    assert mixed.teacher_seconds > 0
+    labels = teacher_labels(episodes, list(contexts), "identify", NeuronParams(), played=plays)
+    np.testing.assert_array_equal(labels, teacher_labels(episodes, list(contexts), "identify",
+                                                         NeuronParams()))  # fmt: skip
+
+
+def test_teacher_episodes_schedule_and_checks():
+    config = GuidedConfig(teacher_episodes=0.5, imitation_anneal_fraction=0.5)
+    assert [config.teacher_share_at(e, 100) for e in (0, 25, 50, 90)] == [0.5, 0.25, 0.0, 0.0]
+    assert GuidedConfig().teacher_share_at(0, 100) == 0.0
+    with pytest.raises(ConfigError, match="teacher_episodes"):
+        GuidedConfig(teacher_episodes=1.5)
+    with pytest.raises(ConfigError, match="only teacher 'identify' can play"):
+        GuidedConfig(teacher="told-weights", teacher_episodes=0.5)
+
+
+def test_run_with_teacher_episodes_resumes_exactly(tmp_path, interrupt_after_rounds):
+    config = dataclasses.replace(
+        SHORT, learner=dataclasses.replace(SHORT.learner, teacher="identify",
+                                           teacher_episodes=1.0)  # fmt: skip
+    )
+    reference = train(config, tmp_path / "reference")
+    # The teacher played the first rounds: its time is counted.
+    assert reference[1]["teacher_seconds"] > 0
+    restore = interrupt_after_rounds(3)
+    with pytest.raises(KeyboardInterrupt):
+        train(config, tmp_path / "killed")
+    restore()
+    resumed = train(config, tmp_path / "killed", resume=True)
+    drop = lambda rows: [{k: v for k, v in row.items() if k not in CLOCKS and not  # noqa: E731
+                          (isinstance(v, float) and math.isnan(v))} for row in rows]  # fmt: skip
+    assert drop(resumed) == drop(reference)

@@ -32,7 +32,11 @@ from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.training.learners.dqn import DQNLearner
 from spikectl.training.learners.dqn_losses import training_losses
-from spikectl.training.learners.teachers import teacher_labels
+from spikectl.training.learners.teachers import (
+    TeacherMixedPolicy,
+    make_teacher,
+    teacher_labels,
+)
 
 
 def large_margin_loss(
@@ -84,18 +88,41 @@ class GuidedDQNLearner(DQNLearner):
                 f"{config.env.id} hides some (use teacher 'identify')"
             )
         self.teacher_seconds = 0.0
+        self.num_envs = config.train.num_envs
+        self.teacher_plays = np.zeros(self.num_envs, dtype=bool)
+        self.mixed_policy: TeacherMixedPolicy | None = None
         self.imitation_loss_sum, self.agreement_sum, self.imitation_count = 0.0, 0.0, 0
 
     def imitation_weight(self, episode: int) -> float:
         return self.settings.imitation_weight_at(episode, self.total_episodes)
 
+    def collection_policy(self, episode: int):
+        student = super().collection_policy(episode)
+        share = self.settings.teacher_share_at(episode, self.total_episodes)
+        self.teacher_plays = np.zeros(self.num_envs, dtype=bool)
+        self.mixed_policy = None
+        if share <= 0:
+            return student
+        # Drawn only while the teacher plays, so runs without it keep their draws.
+        self.teacher_plays = self.rng.random(self.num_envs) < share  # [S]
+        self.mixed_policy = TeacherMixedPolicy(
+            student, self.teacher_plays,
+            lambda: make_teacher("identify", self.contexts[0], self.params, self.noise_mV,
+                                 self.settings.teacher_width),
+        )  # fmt: skip
+        return self.mixed_policy
+
     def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
+        if self.mixed_policy is not None:  # the teacher's own episodes count too
+            self.teacher_seconds += self.mixed_policy.teacher_seconds
+            self.mixed_policy = None
         labels = None
         if self.imitation_weight(self.replay.added) > 0:
             started = time.process_time()
             labels = teacher_labels(
                 episodes, [self.contexts[i] for i in contexts], self.settings.teacher,
                 self.params, self.noise_mV, self.settings.teacher_width,
+                played=self.teacher_plays,
             )  # fmt: skip
             self.teacher_seconds += time.process_time() - started
         self.replay.add(

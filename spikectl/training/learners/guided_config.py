@@ -41,6 +41,9 @@ class GuidedConfig(DQNConfig):
     """Fraction of all episodes over which the weight moves linearly to its end value."""
     imitation_margin: float = 0.05
     """Margin (in units of return) by which the teacher's action should lead every other."""
+    teacher_episodes: float = 0.0
+    """Share of the episodes the teacher plays itself at the start (DAgger's mixing),
+    decaying linearly to 0 over the imitation anneal; its episodes are labelled for free."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -50,17 +53,29 @@ class GuidedConfig(DQNConfig):
             )
         check_int("teacher_width", self.teacher_width, 1, what="a positive integer")
         for name in ("imitation_weight", "imitation_weight_end", "imitation_anneal_fraction",
-                     "imitation_margin"):  # fmt: skip
+                     "imitation_margin", "teacher_episodes"):  # fmt: skip
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ConfigError(name, f"must be a number, got {value!r}")
             if not (math.isfinite(value) and value >= 0):
                 raise ConfigError(name, f"must be a finite number >= 0, got {value!r}")
-        if self.imitation_anneal_fraction > 1:
+        for name in ("imitation_anneal_fraction", "teacher_episodes"):
+            if getattr(self, name) > 1:
+                raise ConfigError(name, f"must lie in [0, 1], got {getattr(self, name)}")
+        if self.teacher_episodes > 0 and self.teacher != "identify":
             raise ConfigError(
-                "imitation_anneal_fraction",
-                f"must lie in [0, 1], got {self.imitation_anneal_fraction}",
+                "teacher_episodes",
+                f"only teacher 'identify' can play episodes itself, not {self.teacher!r} "
+                "(set teacher_episodes to 0)",
             )
+
+    def teacher_share_at(self, episode: int, total_episodes: int) -> float:
+        """The share of episodes the teacher plays after ``episode`` episodes: linear from
+        teacher_episodes to 0 over the imitation anneal (0 without an anneal)."""
+        anneal = self.imitation_anneal_fraction * total_episodes
+        if anneal <= 0 or self.teacher_episodes <= 0:
+            return 0.0
+        return self.teacher_episodes * max(1.0 - episode / anneal, 0.0)
 
     def imitation_weight_at(self, episode: int, total_episodes: int) -> float:
         """The imitation loss's weight after ``episode`` episodes: linear from

@@ -10,7 +10,8 @@ on nothing but those observations (and, for the privileged teacher, the weights)
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+import time
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
@@ -38,6 +39,29 @@ def make_teacher(
     raise ValueError(f"unknown teacher {teacher!r}: 'identify' or 'told-weights'")
 
 
+class TeacherMixedPolicy:
+    """A round's collection policy where the teacher plays some episodes itself (DAgger's
+    mixture of the teacher and the student, drawn per episode): ``teacher_plays[s]``
+    says whether sub-environment s's episode is the teacher's. The student's policy
+    still steps on every observation (its draws and recurrent state stay those of a
+    round without a teacher); the teacher's actions replace its own where it plays."""
+
+    def __init__(self, student, teacher_plays: np.ndarray, make: Callable[[], IdentifyAndPlan]):
+        self.student, self.teacher_plays = student, teacher_plays
+        self.teachers = {int(s): make() for s in np.flatnonzero(teacher_plays)}
+        self.teacher_seconds = 0.0
+        """CPU seconds the teacher spent choosing (part of the learner's)."""
+
+    def __call__(self, observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
+        actions = self.student(observations, action_mask)  # [S]
+        started = time.process_time()
+        for s, teacher in self.teachers.items():
+            observation = {key: value[s] for key, value in observations.items()}
+            actions[s] = teacher.act(observation, {"action_mask": action_mask[s]})
+        self.teacher_seconds += time.process_time() - started
+        return actions
+
+
 def teacher_labels(
     episodes: EpisodeBatch,
     contexts: Sequence[Context],
@@ -45,14 +69,20 @@ def teacher_labels(
     params: NeuronParams,
     noise_mV: float = 0.0,
     width: int = 32,
+    played: np.ndarray | None = None,
 ) -> np.ndarray:
     """[S, N] int16: the teacher's action at every step of each of the S episodes
-    (episode s played ``contexts[s]``), in the agent's indexing (-1 = do nothing)."""
+    (episode s played ``contexts[s]``), in the agent's indexing (-1 = do nothing).
+    Episodes the teacher played itself (``played[s]``) are labelled with their actions
+    (what it would do again), without playing it a second time."""
     count, length = episodes.actions.shape
     if len(contexts) != count:
         raise ValueError(f"{count} episodes but {len(contexts)} contexts")
     labels = np.empty((count, length), dtype=np.int16)
     for s, context in enumerate(contexts):
+        if played is not None and played[s]:
+            labels[s] = episodes.actions[s]
+            continue
         policy = make_teacher(teacher, context, params, noise_mV, width)
         info = {"action_mask": episodes.action_mask[s]}
         pattern = np.asarray(context.pattern, dtype=np.int8)
