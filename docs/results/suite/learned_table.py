@@ -1,0 +1,66 @@
+"""The learned rows of docs/benchmark.md, from the committed results of train.sh:
+
+    python docs/results/suite/learned_table.py
+
+For every task with trained seeds (trained/PRESET/TASK/seed=S/benchmark.csv, the run's
+best_model.pt chosen on the task's validation set and scored on its test set): the mean
+test return ± sd over seeds (ddof 0), its IQM over seeds with the 95% bootstrap interval,
+the normalised score, identify-and-plan on the same test set (identify-and-plan.csv), the
+difference, and core-minutes of training (metrics.csv's last cpu_time_s, one Torch
+thread). Reads saved results only.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from spikectl.experiments.stats import bootstrap_ci, iqm
+
+HERE = Path(__file__).resolve().parent
+TASKS = ("paper", "n16", "n32", "noise1", "noise2", "noise4", "hidden25", "stochastic",
+         "heterogeneous", "background")  # fmt: skip
+
+
+def read_rows(path: Path) -> list[dict[str, str]]:
+    with open(path, newline="") as file:
+        return list(csv.DictReader(file))
+
+
+def by_task(path: Path) -> dict[str, dict[str, str]]:
+    return {row["task"]: row for row in read_rows(path)}
+
+
+def core_minutes(metrics: Path) -> float:
+    return float(read_rows(metrics)[-1]["cpu_time_s"]) / 60
+
+
+def seeds_of(preset: str, task: str) -> list[Path]:
+    return sorted((HERE / "trained" / preset / task).glob("seed=*/benchmark.csv"))
+
+
+def main() -> None:
+    planner = by_task(HERE / "identify-and-plan.csv")
+    print("| task | identify-and-plan | TDRQN quick, trained on the task (seeds) | IQM [95% CI] "
+          "| normalised | learned − planner | core-minutes |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for task in TASKS:
+        files = seeds_of("quick", task)
+        if not files:
+            continue
+        rows = [by_task(path)[task] for path in files]
+        returns = np.array([float(row["mean_return"]) for row in rows])
+        normalised = np.array([float(row["normalised"]) for row in rows])
+        minutes = [core_minutes(path.parent / "metrics.csv") for path in files]
+        _, low, high = bootstrap_ci(returns, iqm)
+        reference = float(planner[task]["mean_return"])
+        print(f"| `{task}` | {reference:.3f} | {returns.mean():.3f} ± {returns.std():.3f} "
+              f"({len(files)}) | {iqm(returns):.3f} [{low:.3f}, {high:.3f}] "
+              f"| {normalised.mean():.3f} ± {normalised.std():.3f} "
+              f"| {returns.mean() - reference:+.3f} | {np.mean(minutes):.1f} |")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
