@@ -19,14 +19,24 @@ from spikectl.agents.features import neuron_indicator, shift_pattern
 class MLP(nn.Sequential):
     """Linear + ReLU for each hidden width, then a plain Linear to ``out_features``.
 
-    With ``out_features=None`` it ends with the last hidden ReLU.
+    With ``out_features=None`` it ends with the last hidden ReLU. ``layer_norm=True``
+    puts a LayerNorm between each hidden Linear and its ReLU (what keeps Q-learning
+    without a target network stable, PQN); off, the layers and their saved names are
+    the paper's. A LayerNorm draws nothing at initialisation, so the Linears start the
+    same either way.
     """
 
-    def __init__(self, in_features: int, hidden: Sequence[int], out_features: int | None) -> None:
+    def __init__(
+        self,
+        in_features: int,
+        hidden: Sequence[int],
+        out_features: int | None,
+        layer_norm: bool = False,
+    ) -> None:
         layers: list[nn.Module] = []
         width = in_features
         for h in hidden:
-            layers += [nn.Linear(width, h), nn.ReLU()]
+            layers += [nn.Linear(width, h), *([nn.LayerNorm(h)] if layer_norm else []), nn.ReLU()]
             width = h
         if out_features is not None:
             layers.append(nn.Linear(width, out_features))

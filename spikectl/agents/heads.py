@@ -31,14 +31,19 @@ class PerNeuronQHead(nn.Module):
     MODES = ("dueling", "pooled")
 
     def __init__(
-        self, in_features: int, hidden: Sequence[int], value_hidden: Sequence[int], mode: str
+        self,
+        in_features: int,
+        hidden: Sequence[int],
+        value_hidden: Sequence[int],
+        mode: str,
+        layer_norm: bool = False,
     ) -> None:
         super().__init__()
         if mode not in self.MODES:
             raise ValueError(f"do-nothing head mode must be one of {self.MODES}, got {mode!r}")
         self.mode = mode
-        self.advantage = MLP(in_features, hidden, 1)
-        self.value = MLP(2 * in_features, value_hidden, 1)
+        self.advantage = MLP(in_features, hidden, 1, layer_norm)
+        self.value = MLP(2 * in_features, value_hidden, 1, layer_norm)
 
     def forward(self, u: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
         a = self.advantage(u).squeeze(-1)  # [B, T, n]

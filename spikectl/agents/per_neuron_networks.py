@@ -51,6 +51,7 @@ class PerNeuronQNetwork(PerNeuronMemory):
             self.head_hidden(),
             s.value_hidden,
             s.do_nothing_head,
+            s.layer_norm,
         )
         self.feature_width = self.mix.out_features
         """Width of :meth:`encode`'s per-neuron output."""
@@ -86,7 +87,7 @@ class DDRQN(PerNeuronQNetwork):
     mix_name = "ff"
 
     def build_mix(self) -> nn.Module:
-        return MLP(self.sizes.lstm_hidden, [self.sizes.ff_hidden], None)
+        return MLP(self.sizes.lstm_hidden, [self.sizes.ff_hidden], None, self.sizes.layer_norm)
 
     def head_hidden(self) -> tuple[int, ...]:
         return self.sizes.head_hidden

@@ -138,6 +138,11 @@ def _spec_of(network: Any) -> PolicySpec:
             f"architectures: {', '.join(SUPPORTED_ARCHITECTURES)} (make_agent's TDRQN and DDRQN)"
         )
     s = network.sizes
+    if s.layer_norm:
+        raise ValueError(
+            "export_policy: the compiled policy has no LayerNorm in its MLPs "
+            "(AgentSizes.layer_norm); play this network with PyTorch"
+        )
     eps = 1e-5
     if architecture == "tdrqn":
         encoder = network.mixer.encoder

@@ -35,7 +35,9 @@ class SystemQNetwork(RecurrentQNetworkBase):
         after the memory is built, the order that gives a seed its initial weights."""
         s, n = self.sizes, self.n_neurons
         self.context = ContextEncoder(self.episode_length, s.target_embed, s.pattern_embed, n)
-        self.head = MLP(feature_width + self.context.out_features, s.head_hidden, n + 1)
+        self.head = MLP(
+            feature_width + self.context.out_features, s.head_hidden, n + 1, s.layer_norm
+        )
         self.feature_width = feature_width
         """Width of :meth:`encode`'s output."""
 
@@ -90,7 +92,8 @@ class DMDRQN(SystemQNetwork, PerNeuronMemory):
 
     def build(self) -> None:
         self.lstm = self.build_lstm()
-        self.mix = MLP(self.n_neurons * self.sizes.lstm_hidden, [self.sizes.ff_hidden], None)
+        s = self.sizes
+        self.mix = MLP(self.n_neurons * s.lstm_hidden, [s.ff_hidden], None, s.layer_norm)
         self.build_context_and_head(self.mix.out_features)
 
     def encode(
