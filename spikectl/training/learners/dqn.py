@@ -80,8 +80,8 @@ def explore(
     return np.where(exploring, random_actions, greedy)
 
 
-def build_networks(config) -> tuple[torch.nn.Module, torch.nn.Module]:
-    """Online and target networks of an Experiment, initialised from ``config.train.seed``
+def build_network(config) -> torch.nn.Module:
+    """The online network of an Experiment, initialised from ``config.train.seed``
     without touching Torch's global generator."""
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.train.seed)
@@ -89,7 +89,12 @@ def build_networks(config) -> tuple[torch.nn.Module, torch.nn.Module]:
             config.agent.arch, config.env.n_observed, config.env.episode_length,
             config.agent.sizes, params=config.env.params,
         )  # fmt: skip
-    online.to(config.train.device)
+    return online.to(config.train.device)
+
+
+def build_networks(config) -> tuple[torch.nn.Module, torch.nn.Module]:
+    """Online and target networks of an Experiment (:func:`build_network` and a copy)."""
+    online = build_network(config)
     target = copy.deepcopy(online)
     target.requires_grad_(False)
     return online, target

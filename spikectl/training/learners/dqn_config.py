@@ -14,8 +14,35 @@ from typing import ClassVar, Literal
 from spikectl.config_errors import ConfigError, check_int
 
 
+class Schedules:
+    """The exploration and learning-rate schedules of a Q-learner's config: pure
+    functions of the episode count (a resumed run needs no scheduler state), read from
+    the fields epsilon_start, epsilon_end, epsilon_anneal_fraction, learning_rate and
+    learning_rate_end_fraction."""
+
+    epsilon_start: float
+    epsilon_end: float
+    epsilon_anneal_fraction: float
+    learning_rate: float
+    learning_rate_end_fraction: float
+
+    def epsilon(self, episode: int, total_episodes: int) -> float:
+        """Exploration rate for an episode: linear from start to end, then constant."""
+        anneal = self.epsilon_anneal_fraction * total_episodes
+        if anneal <= 0:
+            return self.epsilon_end
+        fraction = min(episode / anneal, 1.0)
+        return self.epsilon_start + fraction * (self.epsilon_end - self.epsilon_start)
+
+    def learning_rate_at(self, episode: int, total_episodes: int) -> float:
+        """Adam's learning rate for the updates after the round that ends at ``episode``:
+        linear from learning_rate to learning_rate x learning_rate_end_fraction."""
+        fraction = min(episode / total_episodes, 1.0)
+        return self.learning_rate * (1.0 + fraction * (self.learning_rate_end_fraction - 1.0))
+
+
 @dataclass(frozen=True)
-class DQNConfig:
+class DQNConfig(Schedules):
     """Recurrent double Q-learning over whole episodes (paper Section 5, Table 2)."""
 
     name: ClassVar[str] = "dqn"
@@ -102,17 +129,3 @@ class DQNConfig:
                 f"must be an integer in [1, episode_length = {episode_length}], "
                 f"got {self.n_step!r}",
             )
-
-    def epsilon(self, episode: int, total_episodes: int) -> float:
-        """Exploration rate for an episode: linear from start to end, then constant."""
-        anneal = self.epsilon_anneal_fraction * total_episodes
-        if anneal <= 0:
-            return self.epsilon_end
-        fraction = min(episode / anneal, 1.0)
-        return self.epsilon_start + fraction * (self.epsilon_end - self.epsilon_start)
-
-    def learning_rate_at(self, episode: int, total_episodes: int) -> float:
-        """Adam's learning rate for the updates after the round that ends at ``episode``:
-        linear from learning_rate to learning_rate x learning_rate_end_fraction."""
-        fraction = min(episode / total_episodes, 1.0)
-        return self.learning_rate * (1.0 + fraction * (self.learning_rate_end_fraction - 1.0))

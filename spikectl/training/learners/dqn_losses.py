@@ -95,11 +95,7 @@ def losses_on_tensors(
     )  # fmt: skip
     # One online forward serves the taken-action values, the double-Q argmax and the
     # auxiliary prediction (which reads the encoder's features).
-    if predictor is None:
-        q_values, _ = online(obs_seq)  # [B, N+1, n+1]
-    else:
-        features, _ = online.encode(obs_seq)  # [B, N+1, (n,) D]
-        q_values = online.q_values(features, obs_seq)  # [B, N+1, n+1]
+    q_values, features = online_forward(online, obs_seq, with_features=predictor is not None)
     q_taken = q_values[:, :-1].gather(2, (actions + 1)[..., None]).squeeze(2)  # [B, N]
     with torch.no_grad():
         # Double Q-learning: the online network picks the action at every observation,
@@ -109,18 +105,45 @@ def losses_on_tensors(
         bootstrap = target_q_values.gather(2, best_actions[..., None]).squeeze(2)  # [B, N+1]
         bootstrap[:, -1] = 0.0  # observation N follows the terminal step
         td_target = n_step_targets(rewards, bootstrap, settings.gamma, settings.n_step)  # [B, N]
-    if settings.loss == "huber":
-        td = F.smooth_l1_loss(q_taken, td_target)
-    else:
-        td = F.mse_loss(q_taken, td_target)
+    td = td_regression_loss(q_taken, td_target, settings.loss)
     if predictor is None:
         return (td, None, q_values) if return_q_values else (td, None)
+    aux = next_voltage_loss(online, predictor, features, obs_seq, actions)
+    return (td, aux, q_values) if return_q_values else (td, aux)
+
+
+def online_forward(
+    online, obs_seq: dict[str, torch.Tensor], with_features: bool
+) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """The sequence forward from a zero state: Q-values [B, N + 1, n + 1] and, when
+    ``with_features`` (an auxiliary head reads them), the encoder's features
+    [B, N + 1, (n,) D] (else None)."""
+    if not with_features:
+        q_values, _ = online(obs_seq)  # [B, N+1, n+1]
+        return q_values, None
+    features, _ = online.encode(obs_seq)  # [B, N+1, (n,) D]
+    return online.q_values(features, obs_seq), features  # [B, N+1, n+1]
+
+
+def td_regression_loss(q_taken: torch.Tensor, td_target: torch.Tensor, loss: str) -> torch.Tensor:
+    """Mean over batch and steps of (q_taken - td_target)^2 (``"mse"``) or its Huber
+    form with delta 1 (``"huber"``)."""
+    if loss == "huber":
+        return F.smooth_l1_loss(q_taken, td_target)
+    return F.mse_loss(q_taken, td_target)
+
+
+def next_voltage_loss(
+    online, predictor, features: torch.Tensor, obs_seq: dict[str, torch.Tensor],
+    actions: torch.Tensor,
+) -> torch.Tensor:  # fmt: skip
+    """The auxiliary loss: MSE of the predictor's every-neuron next normalised voltage,
+    read from the features at t [B, N + 1, (n,) D] and the action at t [B, N]."""
     next_voltage = normalised_voltage(
         obs_seq["voltage"][:, 1:], online.v_rest_mV, online.v_threshold_mV
     )  # [B, N, n]
     predicted = predictor(features[:, :-1], actions)  # [B, N, n]
-    aux = F.mse_loss(predicted, next_voltage)
-    return (td, aux, q_values) if return_q_values else (td, aux)
+    return F.mse_loss(predicted, next_voltage)
 
 
 def td_loss(
