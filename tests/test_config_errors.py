@@ -145,7 +145,7 @@ def test_every_flag_of_the_table_is_a_flag_of_spikectl_train(capsys):
     from spikectl.cli.errors import field_flags
 
     shown = ""
-    for preset in ("smoke", "guided"):  # each learner's flags show under its preset
+    for preset in ("smoke", "guided", "pqn"):  # each learner's flags show under its preset
         with pytest.raises(SystemExit):
             main(["train", preset, "--help"])
         shown += capsys.readouterr().out

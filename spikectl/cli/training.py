@@ -227,7 +227,7 @@ def _print_group(configs: list[Experiment], run_dirs: list[Path], metrics: list[
 TRAIN_HELP = """Train an agent: spikectl train [PRESET] [FLAGS]. The defaults shown are
 the {name} preset's: {help}
 
-The preset (paper, quick, guided or smoke; quick when none is given) sets every default, and
+The preset (paper, quick, guided, pqn or smoke; quick when none is given) sets every default, and
 the flags override them: `spikectl train paper --help` shows the paper's. --env picks
 a registered environment (spikectl/NeuronControlNoisy-v0, ...) whose settings become
 the defaults of --n-neurons, --params.* and --extensions.*. --task T trains on task T of

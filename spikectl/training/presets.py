@@ -3,6 +3,8 @@
 - ``paper``: Table 2 exactly (1 M environment steps, batches of 5 episodes, ...): every
   default of the tree;
 - ``quick``: the README's main job, under 15 minutes on one CPU core;
+- ``guided``: quick with a teacher; ``pqn``: quick's run with parallel Q-learning
+  without replay;
 - ``smoke``: seconds, for tests.
 """
 
@@ -12,7 +14,7 @@ import dataclasses
 
 from spikectl.agents import AgentSizes
 from spikectl.training.config import AgentConfig, EnvConfig, Experiment, TrainConfig
-from spikectl.training.learners import DQNConfig, GuidedConfig
+from spikectl.training.learners import DQNConfig, GuidedConfig, PQNConfig
 
 PAPER = Experiment()
 
@@ -64,6 +66,29 @@ GUIDED = dataclasses.replace(
 """The quick preset's run and sizes with the teacher-guided learner (docs/training.md,
 "Learners that beat the planner")."""
 
+PQN = dataclasses.replace(
+    QUICK,
+    agent=dataclasses.replace(
+        QUICK.agent, sizes=dataclasses.replace(QUICK.agent.sizes, layer_norm=True)
+    ),
+    train=dataclasses.replace(QUICK.train, num_envs=32),
+    learner=PQNConfig(
+        epochs=16,
+        minibatch_size=8,
+        q_lambda=0.65,
+        learning_rate=1e-3,
+        learning_rate_end_fraction=0.1,
+        gamma=0.9,
+        aux_voltage_weight=1.0,
+        explore_do_nothing=0.75,
+    ),
+)
+"""The quick preset's environment, network (plus LayerNorm) and environment steps with
+parallel Q-learning without replay (docs/training.md, "Parallel Q-learning without
+replay"): 32 episodes a round (137 rounds, 4 384 episodes), 16 epochs of minibatches of
+8 episodes over each round (8 768 updates of 8 episodes, as quick's 8 800), Q(0.65)
+returns, the auxiliary loss and exploration of quick, lr 1e-3 decaying to 1e-4."""
+
 SMOKE = Experiment(
     env=EnvConfig(episode_length=20, n_neurons=5, n_train=6, n_test=6, n_val=6),
     agent=AgentConfig(
@@ -101,12 +126,14 @@ PRESETS: dict[str, Experiment] = {
     "paper": PAPER,
     "quick": QUICK,
     "guided": GUIDED,
+    "pqn": PQN,
     "smoke": SMOKE,
 }
 PRESET_HELP: dict[str, str] = {
     "paper": "Table 2 exactly: 1 M environment steps, the paper's network sizes (days on a CPU).",
     "quick": "The main job: n-step targets, auxiliary loss, half-width networks (~15 min, 1 core).",
     "guided": "The quick preset's run with a teacher: identify-and-plan labels the agent's states.",
+    "pqn": "The quick run with PQN: Q(lambda) on parallel episodes, no replay, LayerNorm.",
     "smoke": "Seconds: 5-neuron networks, 20-step episodes, tiny networks (for tests).",
 }
 """One line per preset, for ``spikectl train --help``."""

@@ -49,7 +49,7 @@ from spikectl.training.contexts import (
 )
 from spikectl.training.greedy import greedy_returns
 from spikectl.training.group import check_group, prepare_group, seed_dirs
-from spikectl.training.learners import make_learners
+from spikectl.training.learners import check_stacked, make_learners
 from spikectl.training.learners.protocol import LossDiverged
 from spikectl.training.machine import record_machine
 from spikectl.training.run_files import (
@@ -120,6 +120,8 @@ def train_runs(
     directory then holds the checkpoint of all K)."""
     run_dirs = [Path(d) for d in run_dirs]
     check_group(configs, run_dirs)
+    if stacked:
+        check_stacked(configs)  # before any directory is made
     configs = [recorded_config(c, d, resume) for c, d in zip(configs, run_dirs, strict=True)]
     check_device(configs[0].train.device)
     if group_dir is None and len(configs) > 1:
