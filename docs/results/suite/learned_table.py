@@ -41,8 +41,25 @@ def seeds_of(preset: str, task: str) -> list[Path]:
     return sorted((HERE / "trained" / preset / task).glob("seed=*/benchmark.csv"))
 
 
+def transfer_rows() -> dict[str, np.ndarray]:
+    """task -> the paper-trained seeds' test returns on it (transfer.csv of each seed)."""
+    files = sorted((HERE / "trained" / "quick" / "paper").glob("seed=*/transfer.csv"))
+    tables = [by_task(path) for path in files]
+    return {task: np.array([float(t[task]["mean_return"]) for t in tables]) for task in TASKS}
+
+
 def main() -> None:
     planner = by_task(HERE / "identify-and-plan.csv")
+    transfer = transfer_rows()
+    print("| task | identify-and-plan | TDRQN quick trained on `paper` (transfer, 3 seeds) "
+          "| learned − planner |")
+    print("|---|---:|---:|---:|")
+    for task in TASKS:
+        reference = float(planner[task]["mean_return"])
+        returns = transfer[task]
+        print(f"| `{task}` | {reference:.3f} | {returns.mean():.3f} ± {returns.std():.3f} "
+              f"| {returns.mean() - reference:+.3f} |")
+    print()
     print("| task | identify-and-plan | TDRQN quick, trained on the task (seeds) | IQM [95% CI] "
           "| normalised | learned − planner | core-minutes |")
     print("|---|---:|---:|---:|---:|---:|---:|")

@@ -1,7 +1,9 @@
-"""Draw docs/images/suite_realism.png from the saved CSVs of this folder (run.sh wrote them):
-the normalised score and the raw return of each training-free controller against measurement
-noise (tasks paper, noise1, noise2, noise4) and against the hidden fraction (paper,
-hidden25). Reads only saved results; run from the repository root:
+"""Draw docs/images/suite_realism.png from the saved CSVs of this folder (run.sh and train.sh
+wrote them): the raw return of each training-free controller, of the quick TDRQN trained on
+`paper` (transfer; mean and sd over its seeds) and of the quick TDRQN trained on the task
+itself (where trained) against measurement noise (tasks paper, noise1, noise2, noise4) and
+against the hidden fraction (paper, hidden25). Reads only saved results; run from the
+repository root:
 
     python docs/results/suite/plot_suite.py
 """
@@ -12,6 +14,7 @@ import csv
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
@@ -29,8 +32,32 @@ def rows(controller: str) -> dict[str, dict[str, str]]:
         return {row["task"]: row for row in csv.DictReader(file)}
 
 
+def seed_returns(pattern: str, tasks: dict[str, float]) -> tuple[list, np.ndarray]:
+    """(x of each task with results, [tasks, 2] mean and sd over seeds) from trained/quick CSVs;
+    ``pattern`` is a glob under trained/quick with {task} in it."""
+    xs, returns = [], []
+    for task, x in tasks.items():
+        files = sorted((HERE / "trained" / "quick").glob(pattern.format(task=task)))
+        values = [float(row["mean_return"]) for path in files for row in
+                  csv.DictReader(open(path, newline="")) if row["task"] == task]  # fmt: skip
+        if values:
+            xs.append(x)
+            returns.append((np.mean(values), np.std(values)))
+    return xs, np.array(returns).reshape(-1, 2)
+
+
 def main() -> None:
-    figure, axes = plt.subplots(1, 2, figsize=(9, 3.6), sharey=True)
+    figure, axes = plt.subplots(1, 2, figsize=(9, 4.2), sharey=True)
+    for pattern, label, style, colour in (
+        ("paper/seed=*/transfer.csv", "TDRQN quick, trained on paper", "s--", "tab:purple"),
+        ("{task}/seed=*/benchmark.csv", "TDRQN quick, trained on the task", "D-", "tab:brown"),
+    ):
+        for index, (axis, tasks) in enumerate(zip(axes, (NOISE, HIDDEN), strict=True)):
+            xs, stats = seed_returns(pattern, tasks)
+            if xs:
+                axis.errorbar(xs, stats[:, 0], yerr=stats[:, 1], fmt=style, capsize=3,
+                              color=colour,
+                              label=label if index == 0 else None)  # fmt: skip
     for controller, label in CONTROLLERS.items():
         table = rows(controller)
         for axis, tasks in zip(axes, (NOISE, HIDDEN), strict=True):
@@ -43,8 +70,9 @@ def main() -> None:
     axes[1].set_xticks(list(HIDDEN.values()))
     for axis in axes:
         axis.grid(alpha=0.3)
-    axes[0].legend(fontsize=8, loc="lower right", bbox_to_anchor=(1.0, 0.1))
-    figure.tight_layout()
+    figure.legend(*axes[0].get_legend_handles_labels(), fontsize=8, loc="lower center",
+                  ncol=3, frameon=False)  # fmt: skip
+    figure.tight_layout(rect=(0, 0.14, 1, 1))
     figure.savefig(OUT, dpi=120)
     print(f"wrote {OUT}")
 

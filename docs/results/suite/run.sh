@@ -13,3 +13,9 @@ for seed in 0 1 2; do
     spikectl benchmark "runs/quick-this-machine/trials/seed=$seed" --model best \
         --task paper n16 n32 --out "$out/tdrqn-quick-seed$seed.csv"
 done
+# The same three TDRQNs on every task (transfer from `paper`): runs/suite/quick/paper/seed=S
+# is a link to runs/quick-this-machine/trials/seed=S (train.sh paper S made benchmark.csv).
+for seed in 0 1 2; do
+    spikectl benchmark "runs/suite/quick/paper/seed=$seed" --model best --task all \
+        --out "$out/trained/quick/paper/seed=$seed/transfer.csv"
+done
