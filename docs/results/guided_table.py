@@ -24,6 +24,11 @@ GROUPS = {
     "TDRQN, quick preset (`spikectl train quick`)": "quick-this-machine",
     "guided, teacher identify-and-plan (`spikectl train guided`)": "guided-identify",
     "guided, teacher told the weights (pilot, 1 seed)": "guided-told-weights-pilot",
+    "guided, teacher identify-and-plan compiled (2026-11-24; the same numbers)": "guided-compiled",
+    "guided, teacher plays 50% → 0 of the episodes (`--teacher-episodes 0.5`)": "guided-mix50",
+    "guided, imitation floor 0.2 (`--imitation-weight-end 0.2`)": "guided-floor20",
+    "guided, floor 0.2 and teacher plays 50% → 0": "guided-floor20-mix50",
+    "PQN (`spikectl train pqn`)": "pqn",
 }
 
 

@@ -27,6 +27,10 @@ GROUPS = {
     "TDRQN, quick preset": "quick-this-machine",
     "guided, teacher identify-and-plan": "guided-identify",
     "guided, teacher told the weights (pilot)": "guided-told-weights-pilot",
+    "guided, teacher plays 50% -> 0": "guided-mix50",
+    "guided, imitation floor 0.2": "guided-floor20",
+    "guided, floor 0.2 + teacher plays 50% -> 0": "guided-floor20-mix50",
+    "PQN": "pqn",
 }
 
 
