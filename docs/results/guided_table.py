@@ -22,12 +22,13 @@ from spikectl.training.run import best_on_validation
 GROUPS = {
     "TDRQN, quick preset, committed (made on another CPU kind)": "learn-fast-pooled-decay",
     "TDRQN, quick preset (`spikectl train quick`)": "quick-this-machine",
-    "guided, teacher identify-and-plan (`spikectl train guided`)": "guided-identify",
+    "guided, weaned to 0 (the guided preset until 2026-11-24)": "guided-identify",
     "guided, teacher told the weights (pilot, 1 seed)": "guided-told-weights-pilot",
     "guided, teacher identify-and-plan compiled (2026-11-24; the same numbers)": "guided-compiled",
     "guided, teacher plays 50% → 0 of the episodes (`--teacher-episodes 0.5`)": "guided-mix50",
-    "guided, imitation floor 0.2 (`--imitation-weight-end 0.2`)": "guided-floor20",
+    "guided, imitation floor 0.2 (`spikectl train guided`, the main job)": "guided-floor20",
     "guided, floor 0.2 and teacher plays 50% → 0": "guided-floor20-mix50",
+    "guided, imitation floor 0.5": "guided-floor50",
     "PQN (`spikectl train pqn`)": "pqn",
 }
 

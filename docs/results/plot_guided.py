@@ -25,11 +25,12 @@ IDENTIFY_AND_PLAN = {"val_return": 0.866, "test_return": 0.837}  # docs/baseline
 GROUPS = {
     "TDRQN, quick preset (committed, another CPU kind)": "learn-fast-pooled-decay",
     "TDRQN, quick preset": "quick-this-machine",
-    "guided, teacher identify-and-plan": "guided-identify",
+    "guided, weaned to 0 (teacher before compilation)": "guided-identify",
     "guided, teacher told the weights (pilot)": "guided-told-weights-pilot",
     "guided, teacher plays 50% -> 0": "guided-mix50",
-    "guided, imitation floor 0.2": "guided-floor20",
+    "guided, imitation floor 0.2 (the main job)": "guided-floor20",
     "guided, floor 0.2 + teacher plays 50% -> 0": "guided-floor20-mix50",
+    "guided, imitation floor 0.5": "guided-floor50",
     "PQN": "pqn",
 }
 
@@ -48,7 +49,7 @@ def curve(run_dirs: list[Path], column: str) -> tuple[np.ndarray, np.ndarray, np
 
 
 def main(results: Path, out: Path) -> None:
-    figure, axes = subplots(1, 2, figsize=(11.0, 4.0), sharey=True)
+    figure, axes = subplots(1, 2, figsize=(11.0, 5.6), sharey=True)
     for axis, column, title in zip(axes, ("val_return", "test_return"),
                                    ("validation networks", "unseen test networks")):  # fmt: skip
         for label, folder in GROUPS.items():
@@ -64,7 +65,9 @@ def main(results: Path, out: Path) -> None:
         axis.set_title(title)
         axis.set_xlabel("core-minutes (process CPU time, teacher included)")
     axes[0].set_ylabel("greedy return (n = 8)")
-    axes[1].legend(loc="lower right", fontsize=7)
+    figure.legend(*axes[1].get_legend_handles_labels(), loc="lower center", ncol=3, fontsize=7,
+                  frameon=False)  # fmt: skip
+    figure.tight_layout(rect=(0, 0.17, 1, 1))
     save_figure(figure, out)
 
 

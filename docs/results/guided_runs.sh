@@ -1,0 +1,25 @@
+#!/usr/bin/env bash
+# The commands behind the 2026-11-24 rows of docs/training.md's guided-learner table (and
+# the PQN row), run from the repository root on the project's 2-core AMD EPYC, one Torch
+# thread each, two at a time. Each run's config.json and metrics.csv are committed under
+# docs/results/<folder>/trials/seed=S (the weights are not):
+#
+#     bash docs/results/guided_runs.sh FOLDER SEED
+#
+# then copy RUN/{config.json,metrics.csv,baselines.json,machine.json} into
+# docs/results/FOLDER/trials/seed=SEED and redraw with guided_table.py / plot_guided.py.
+set -euo pipefail
+folder=$1 seed=$2
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+case $folder in
+    # The guided preset of the day (floor 0.2) is what these were made with, so each
+    # command pins the setting that differs from it.
+    guided-compiled)      flags=(--imitation-weight-end 0) ;;   # the pre-2026-11-24 preset
+    guided-mix50)         flags=(--imitation-weight-end 0 --teacher-episodes 0.5) ;;
+    guided-floor20)       flags=() ;;                           # the guided preset itself
+    guided-floor20-mix50) flags=(--teacher-episodes 0.5) ;;
+    guided-floor50)       flags=(--imitation-weight-end 0.5) ;;
+    pqn)                  exec spikectl train pqn --seed "$seed" --run-dir "runs/$folder/seed=$seed" ;;
+    *) echo "unknown folder $folder" >&2; exit 2 ;;
+esac
+spikectl train guided "${flags[@]}" --seed "$seed" --run-dir "runs/$folder/seed=$seed"
