@@ -118,6 +118,21 @@ def set_learning_rate(optimizer: torch.optim.Optimizer, learning_rate: float) ->
         group["lr"] = learning_rate
 
 
+def loss_metrics(learner: Any, episode: int) -> dict[str, float]:
+    """The metrics row of a learner that keeps running sums of its TD and auxiliary
+    losses (``updates``, ``epsilon``, and the means since the last row, NaN without
+    updates), then starts the sums again: the double-Q learner's and PQN's."""
+    n = learner.loss_count
+    row = {
+        "updates": learner.updates,
+        "epsilon": learner.epsilon(episode),
+        "loss": learner.loss_sum / n if n else math.nan,
+        "aux_loss": learner.aux_loss_sum / n if n and learner.predictor is not None else math.nan,
+    }
+    learner.loss_sum, learner.aux_loss_sum, learner.loss_count = 0.0, 0.0, 0
+    return row
+
+
 class DQNLearner:
     """One seed's recurrent double-Q learner (``Experiment.learner`` a DQNConfig)."""
 
@@ -197,15 +212,7 @@ class DQNLearner:
         return td if aux is None else td + self.settings.aux_voltage_weight * aux
 
     def row_metrics(self, episode: int) -> dict[str, float]:
-        n = self.loss_count
-        row = {
-            "updates": self.updates,
-            "epsilon": self.epsilon(episode),
-            "loss": self.loss_sum / n if n else math.nan,
-            "aux_loss": self.aux_loss_sum / n if n and self.predictor is not None else math.nan,
-        }
-        self.loss_sum, self.aux_loss_sum, self.loss_count = 0.0, 0.0, 0
-        return row
+        return loss_metrics(self, episode)
 
     def progress(self, episode: int) -> dict[str, str]:
         return {"eps": f"{self.epsilon(episode):.2f}"}

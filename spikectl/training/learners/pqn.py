@@ -24,7 +24,6 @@ from the run's generator.
 
 from __future__ import annotations
 
-import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -38,6 +37,7 @@ from spikectl.training.learners.dqn import (
     EpsilonGreedyPolicy,
     build_network,
     build_predictor,
+    loss_metrics,
     set_learning_rate,
 )
 from spikectl.training.learners.dqn_losses import (
@@ -190,15 +190,7 @@ class PQNLearner:
         self.round = None  # no replay: the episodes are used up
 
     def row_metrics(self, episode: int) -> dict[str, float]:
-        n = self.loss_count
-        row = {
-            "updates": self.updates,
-            "epsilon": self.epsilon(episode),
-            "loss": self.loss_sum / n if n else math.nan,
-            "aux_loss": self.aux_loss_sum / n if n and self.predictor is not None else math.nan,
-        }
-        self.loss_sum, self.aux_loss_sum, self.loss_count = 0.0, 0.0, 0
-        return row
+        return loss_metrics(self, episode)
 
     def progress(self, episode: int) -> dict[str, str]:
         return {"eps": f"{self.epsilon(episode):.2f}"}
