@@ -41,24 +41,26 @@ def seeds_of(preset: str, task: str) -> list[Path]:
     return sorted((HERE / "trained" / preset / task).glob("seed=*/benchmark.csv"))
 
 
-def transfer_rows() -> dict[str, np.ndarray]:
-    """task -> the paper-trained seeds' test returns on it (transfer.csv of each seed)."""
-    files = sorted((HERE / "trained" / "quick" / "paper").glob("seed=*/transfer.csv"))
+def transfer_rows(preset: str) -> dict[str, np.ndarray]:
+    """task -> the test returns on it of the seeds of ``preset`` trained on ``paper``
+    (their transfer.csv)."""
+    files = sorted((HERE / "trained" / preset / "paper").glob("seed=*/transfer.csv"))
     tables = [by_task(path) for path in files]
     return {task: np.array([float(t[task]["mean_return"]) for t in tables]) for task in TASKS}
 
 
 def main() -> None:
     planner = by_task(HERE / "identify-and-plan.csv")
-    transfer = transfer_rows()
-    print("| task | identify-and-plan | TDRQN quick trained on `paper` (transfer, 3 seeds) "
-          "| learned − planner |")
-    print("|---|---:|---:|---:|")
+    transfer = {preset: transfer_rows(preset) for preset in ("quick", "guided")}
+    print("| task | identify-and-plan | TDRQN `quick` | − planner | TDRQN `guided` | − planner |")
+    print("|---|---:|---:|---:|---:|---:|")
     for task in TASKS:
         reference = float(planner[task]["mean_return"])
-        returns = transfer[task]
-        print(f"| `{task}` | {reference:.3f} | {returns.mean():.3f} ± {returns.std():.3f} "
-              f"| {returns.mean() - reference:+.3f} |")
+        cells = []
+        for returns in (transfer["quick"][task], transfer["guided"][task]):
+            cells += [f"{returns.mean():.3f} ± {returns.std():.3f}",
+                      f"{returns.mean() - reference:+.3f}"]  # fmt: skip
+        print(f"| `{task}` | {reference:.3f} | " + " | ".join(cells) + " |")
     print()
     print("| task | identify-and-plan | TDRQN quick, trained on the task (seeds) | IQM [95% CI] "
           "| normalised | learned − planner | core-minutes |")

@@ -19,3 +19,11 @@ for seed in 0 1 2; do
     spikectl benchmark "runs/suite/quick/paper/seed=$seed" --model best --task all \
         --out "$out/trained/quick/paper/seed=$seed/transfer.csv"
 done
+# The main job's TDRQNs (`spikectl train guided`, seeds 0-2, trained on `paper`:
+# runs/suite/guided/paper/seed=S links to runs/guided-floor20/seed=S, made by
+# docs/results/guided_runs.sh guided-floor20 S) on every task.
+for seed in 0 1 2; do
+    bash docs/results/suite/train.sh paper "$seed" guided
+    spikectl benchmark "runs/suite/guided/paper/seed=$seed" --model best --task all \
+        --out "$out/trained/guided/paper/seed=$seed/transfer.csv"
+done
