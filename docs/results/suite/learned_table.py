@@ -49,6 +49,26 @@ def transfer_rows(preset: str) -> dict[str, np.ndarray]:
     return {task: np.array([float(t[task]["mean_return"]) for t in tables]) for task in TASKS}
 
 
+def print_leaderboard() -> None:
+    """Mean normalised score over the ten tasks: training-free controllers from their
+    CSVs, the trained ones per seed (from transfer.csv), mean ± sd over seeds."""
+    print("| controller | training (core-minutes per seed) | mean normalised score, 10 tasks |")
+    print("|---|---|---:|")
+    for name, label in (("oracle", "oracle planner (knows the network)"),
+                        ("identify-and-plan", "identify-and-plan"),
+                        ("random", "random (10 seeds)"), ("do-nothing", "do nothing")):  # fmt: skip
+        table = by_task(HERE / f"{name}.csv")
+        score = np.mean([float(table[task]["normalised"]) for task in TASKS])
+        print(f"| {label} | none | {score:.3f} |")
+    for preset in ("guided", "quick"):
+        files = sorted((HERE / "trained" / preset / "paper").glob("seed=*/transfer.csv"))
+        scores = [np.mean([float(by_task(path)[task]["normalised"]) for task in TASKS])
+                  for path in files]  # fmt: skip
+        minutes = np.mean([core_minutes(path.parent / "metrics.csv") for path in files])
+        print(f"| TDRQN `{preset}`, trained on `paper` ({len(files)} seeds) | {minutes:.1f} | "
+              f"{np.mean(scores):.3f} ± {np.std(scores):.3f} |")
+
+
 def main() -> None:
     planner = by_task(HERE / "identify-and-plan.csv")
     transfer = {preset: transfer_rows(preset) for preset in ("quick", "guided")}
@@ -61,6 +81,8 @@ def main() -> None:
             cells += [f"{returns.mean():.3f} ± {returns.std():.3f}",
                       f"{returns.mean() - reference:+.3f}"]  # fmt: skip
         print(f"| `{task}` | {reference:.3f} | " + " | ".join(cells) + " |")
+    print()
+    print_leaderboard()
     print()
     print("| task | identify-and-plan | TDRQN quick, trained on the task (seeds) | IQM [95% CI] "
           "| normalised | learned − planner | core-minutes |")

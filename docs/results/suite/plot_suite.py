@@ -1,9 +1,9 @@
 """Draw docs/images/suite_realism.png from the saved CSVs of this folder (run.sh and train.sh
-wrote them): the raw return of each training-free controller, of the quick TDRQN trained on
-`paper` (transfer; mean and sd over its seeds) and of the quick TDRQN trained on the task
-itself (where trained) against measurement noise (tasks paper, noise1, noise2, noise4) and
-against the hidden fraction (paper, hidden25). Reads only saved results; run from the
-repository root:
+wrote them): the raw return of each training-free controller, of the quick and guided
+TDRQNs trained on `paper` (transfer; mean and sd over their seeds) and of the quick TDRQN
+trained on the task itself (where trained) against measurement noise (tasks paper,
+noise1, noise2, noise4) and against the hidden fraction (paper, hidden25). Reads only
+saved results; run from the repository root:
 
     python docs/results/suite/plot_suite.py
 """
@@ -33,11 +33,11 @@ def rows(controller: str) -> dict[str, dict[str, str]]:
 
 
 def seed_returns(pattern: str, tasks: dict[str, float]) -> tuple[list, np.ndarray]:
-    """(x of each task with results, [tasks, 2] mean and sd over seeds) from trained/quick CSVs;
-    ``pattern`` is a glob under trained/quick with {task} in it."""
+    """(x of each task with results, [tasks, 2] mean and sd over seeds) from the trained/
+    CSVs; ``pattern`` is a glob under trained/ with {task} in it."""
     xs, returns = [], []
     for task, x in tasks.items():
-        files = sorted((HERE / "trained" / "quick").glob(pattern.format(task=task)))
+        files = sorted((HERE / "trained").glob(pattern.format(task=task)))
         values = [float(row["mean_return"]) for path in files for row in
                   csv.DictReader(open(path, newline="")) if row["task"] == task]  # fmt: skip
         if values:
@@ -49,8 +49,11 @@ def seed_returns(pattern: str, tasks: dict[str, float]) -> tuple[list, np.ndarra
 def main() -> None:
     figure, axes = plt.subplots(1, 2, figsize=(9, 4.2), sharey=True)
     for pattern, label, style, colour in (
-        ("paper/seed=*/transfer.csv", "TDRQN quick, trained on paper", "s--", "tab:purple"),
-        ("{task}/seed=*/benchmark.csv", "TDRQN quick, trained on the task", "D-", "tab:brown"),
+        ("quick/paper/seed=*/transfer.csv", "TDRQN quick, trained on paper", "s--", "tab:purple"),
+        ("quick/{task}/seed=*/benchmark.csv", "TDRQN quick, trained on the task", "D-",
+         "tab:brown"),
+        ("guided/paper/seed=*/transfer.csv", "TDRQN guided (main job), trained on paper", "^-",
+         "tab:pink"),
     ):
         for index, (axis, tasks) in enumerate(zip(axes, (NOISE, HIDDEN), strict=True)):
             xs, stats = seed_returns(pattern, tasks)
