@@ -2,11 +2,14 @@
 `paper`, seeds 0-2) above identify-and-plan on a task beyond the networks' sampling noise?
 
     python docs/results/suite/paired.py [TASK ...]       # needs runs/suite/guided/paper
+    python docs/results/suite/paired.py --trained-on-task stochastic noise2 hidden25
 
 For each task it plays identify-and-plan and each seed's best_model.pt on the task's 100
 test networks under the suite's protocol, takes the per-network difference (the seeds'
 mean return minus the planner's), and gives its mean with a 95% bootstrap interval over
-the networks (10 000 resamples, seed 0). Writes paired.csv beside this file.
+the networks (10 000 resamples, seed 0). The seeds are those of runs/suite/guided/paper
+(paired.csv beside this file), or with --trained-on-task those of
+runs/suite/quick/TASK (paired-trained-on-task.csv).
 """
 
 from __future__ import annotations
@@ -23,10 +26,10 @@ from spikectl.experiments import suite
 from spikectl.training.controllers import load_agent, load_controller
 
 HERE = Path(__file__).resolve().parent
-RUNS = [Path(f"runs/suite/guided/paper/seed={seed}") for seed in (0, 1, 2)]
+SEEDS = (0, 1, 2)
 
 
-def main(tasks: list[str]) -> None:
+def main(tasks: list[str], trained_on_task: bool = False) -> None:
     rows = []
     for name in tasks:
         spec = suite.task(name)
@@ -35,10 +38,12 @@ def main(tasks: list[str]) -> None:
         env = NeuronControlEnv(contexts=contexts, params=contexts.params,
                                extensions=spec.extensions)  # fmt: skip
         planner, _ = suite.play(name, "test", load_controller("identify-and-plan", env=env))
+        folder = f"runs/suite/quick/{name}" if trained_on_task else "runs/suite/guided/paper"
+        runs = [Path(f"{folder}/seed={seed}") for seed in SEEDS]
         learned = np.mean([
             suite.play(name, "test", GreedyController(
                 load_agent(run, n_neurons=spec.n_observed, model="best")))[0]
-            for run in RUNS
+            for run in runs
         ], axis=0)  # fmt: skip
         difference = learned - planner  # [100]
         resampled = np.random.default_rng(0).integers(0, difference.size, (10_000, difference.size))
@@ -49,11 +54,15 @@ def main(tasks: list[str]) -> None:
                      "networks_better": int((difference > 0).sum()),
                      "networks_worse": int((difference < 0).sum())})  # fmt: skip
         print(rows[-1])
-    with open(HERE / "paired.csv", "w", newline="") as file:
+    out = HERE / ("paired-trained-on-task.csv" if trained_on_task else "paired.csv")
+    with open(out, "w", newline="") as file:
         writer = csv.DictWriter(file, fieldnames=list(rows[0]), lineterminator="\n")
         writer.writeheader()
         writer.writerows(rows)
 
 
 if __name__ == "__main__":
-    main(sys.argv[1:] or list(suite.TASKS))
+    arguments = sys.argv[1:]
+    on_task = "--trained-on-task" in arguments
+    arguments = [a for a in arguments if a != "--trained-on-task"]
+    main(arguments or list(suite.TASKS), on_task)
