@@ -261,8 +261,17 @@ def test_run_with_teacher_episodes_resumes_exactly(tmp_path, interrupt_after_rou
         SHORT, learner=dataclasses.replace(SHORT.learner, teacher="identify",
                                            teacher_episodes=1.0)  # fmt: skip
     )
+    # The first round is all the teacher's, the last (past the anneal) all the student's.
+    from spikectl.training.learners.guided import GuidedDQNLearner
+    from spikectl.training.learners.teachers import TeacherMixedPolicy
+
+    learner = GuidedDQNLearner(config, make_splits(6, 1, 5, 20, seed=0, n_val=0)[0],
+                               np.random.default_rng(0))  # fmt: skip
+    first = learner.collection_policy(0)
+    assert isinstance(first, TeacherMixedPolicy) and first.teacher_plays.all()
+    assert not isinstance(learner.collection_policy(config.total_episodes - 1),
+                          TeacherMixedPolicy)  # fmt: skip
     reference = train(config, tmp_path / "reference")
-    # The teacher played the first rounds: its time is counted.
     assert reference[1]["teacher_seconds"] > 0
     restore = interrupt_after_rounds(3)
     with pytest.raises(KeyboardInterrupt):

@@ -294,12 +294,10 @@ def _expand_task_flag(argv: list[str]) -> list[str]:
         raise ValueError(f"--task: one task per run, got {', '.join(tasks)}")
     from spikectl.experiments import suite
 
-    if tasks[0] not in suite.TASKS:
-        raise ValueError(
-            f"--task: unknown task {tasks[0]!r} of benchmark suite v{suite.SUITE_VERSION}; "
-            f"tasks: {', '.join(suite.TASKS)}"
-        )
-    return [rest[0], *suite.train_arguments(tasks[0]), *rest[1:]]
+    try:
+        return [rest[0], *suite.train_arguments(tasks[0]), *rest[1:]]
+    except ValueError as error:
+        raise ValueError(f"--task: {error}") from None
 
 
 def _env_flag(argv: list[str]) -> str | None:

@@ -179,7 +179,7 @@ def task(name: str) -> Task:
     if name not in TASKS:
         raise ValueError(
             f"unknown task {name!r} of benchmark suite v{SUITE_VERSION}; tasks: "
-            f"{', '.join(TASKS)} (or all)"
+            f"{', '.join(TASKS)}"
         )
     return TASKS[name]
 

@@ -19,6 +19,7 @@ run's, and metrics.csv reports it (``teacher_seconds``).
 
 from __future__ import annotations
 
+import functools
 import math
 import time
 from collections.abc import Mapping
@@ -30,13 +31,10 @@ import torch
 from spikectl.agents import masked_q
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
+from spikectl.planning import IdentifyAndPlan
 from spikectl.training.learners.dqn import DQNLearner
 from spikectl.training.learners.dqn_losses import training_losses
-from spikectl.training.learners.teachers import (
-    TeacherMixedPolicy,
-    make_teacher,
-    teacher_labels,
-)
+from spikectl.training.learners.teachers import TeacherMixedPolicy, teacher_labels
 
 
 def large_margin_loss(
@@ -89,8 +87,8 @@ class GuidedDQNLearner(DQNLearner):
             )
         self.teacher_seconds = 0.0
         self.num_envs = config.train.num_envs
-        self.teacher_plays = np.zeros(self.num_envs, dtype=bool)
         self.mixed_policy: TeacherMixedPolicy | None = None
+        """This round's policy when the teacher plays some of its episodes, else None."""
         self.imitation_loss_sum, self.agreement_sum, self.imitation_count = 0.0, 0.0, 0
 
     def imitation_weight(self, episode: int) -> float:
@@ -99,30 +97,29 @@ class GuidedDQNLearner(DQNLearner):
     def collection_policy(self, episode: int):
         student = super().collection_policy(episode)
         share = self.settings.teacher_share_at(episode, self.total_episodes)
-        self.teacher_plays = np.zeros(self.num_envs, dtype=bool)
         self.mixed_policy = None
         if share <= 0:
             return student
         # Drawn only while the teacher plays, so runs without it keep their draws.
-        self.teacher_plays = self.rng.random(self.num_envs) < share  # [S]
-        self.mixed_policy = TeacherMixedPolicy(
-            student, self.teacher_plays,
-            lambda: make_teacher("identify", self.contexts[0], self.params, self.noise_mV,
-                                 self.settings.teacher_width),
-        )  # fmt: skip
+        teacher_plays = self.rng.random(self.num_envs) < share  # [S]
+        # Only the realisable teacher plays (GuidedConfig refuses the other).
+        teacher = functools.partial(IdentifyAndPlan, self.params, width=self.settings.teacher_width,
+                                    noise_mV=self.noise_mV)  # fmt: skip
+        self.mixed_policy = TeacherMixedPolicy(student, teacher_plays, teacher)
         return self.mixed_policy
 
     def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
+        played = None
         if self.mixed_policy is not None:  # the teacher's own episodes count too
             self.teacher_seconds += self.mixed_policy.teacher_seconds
-            self.mixed_policy = None
+            played, self.mixed_policy = self.mixed_policy.teacher_plays, None
         labels = None
         if self.imitation_weight(self.replay.added) > 0:
             started = time.process_time()
             labels = teacher_labels(
                 episodes, [self.contexts[i] for i in contexts], self.settings.teacher,
                 self.params, self.noise_mV, self.settings.teacher_width,
-                played=self.teacher_plays,
+                played=played,
             )  # fmt: skip
             self.teacher_seconds += time.process_time() - started
         self.replay.add(
