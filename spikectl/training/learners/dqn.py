@@ -118,6 +118,15 @@ def set_learning_rate(optimizer: torch.optim.Optimizer, learning_rate: float) ->
         group["lr"] = learning_rate
 
 
+def epsilon_greedy_collection(learner: Any, episode: int) -> EpsilonGreedyPolicy:
+    """A round's collection policy for a learner with an epsilon schedule: epsilon-greedy
+    on its online network, drawing from its generator (the double-Q learner's and PQN's)."""
+    return EpsilonGreedyPolicy(
+        learner.network, learner.epsilon(episode), learner.rng, learner.device,
+        learner.settings.explore_do_nothing,
+    )  # fmt: skip
+
+
 def loss_metrics(learner: Any, episode: int) -> dict[str, float]:
     """The metrics row of a learner that keeps running sums of its TD and auxiliary
     losses (``updates``, ``epsilon``, and the means since the last row, NaN without
@@ -167,10 +176,7 @@ class DQNLearner:
         return self.settings.epsilon(episode, self.total_episodes)
 
     def collection_policy(self, episode: int) -> EpsilonGreedyPolicy:
-        return EpsilonGreedyPolicy(
-            self.network, self.epsilon(episode), self.rng, self.device,
-            self.settings.explore_do_nothing,
-        )  # fmt: skip
+        return epsilon_greedy_collection(self, episode)
 
     def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
         self.replay.add(

@@ -37,6 +37,7 @@ from spikectl.training.learners.dqn import (
     EpsilonGreedyPolicy,
     build_network,
     build_predictor,
+    epsilon_greedy_collection,
     loss_metrics,
     set_learning_rate,
 )
@@ -155,10 +156,7 @@ class PQNLearner:
         return self.settings.epsilon(episode, self.total_episodes)
 
     def collection_policy(self, episode: int) -> EpsilonGreedyPolicy:
-        return EpsilonGreedyPolicy(
-            self.network, self.epsilon(episode), self.rng, self.device,
-            self.settings.explore_do_nothing,
-        )  # fmt: skip
+        return epsilon_greedy_collection(self, episode)
 
     def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
         self.round = episode_arrays(episodes, self.targets[contexts], self.patterns[contexts])
