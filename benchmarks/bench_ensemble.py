@@ -17,7 +17,7 @@ batched/separate throughput ratio, median over ``--repeats`` interleaved repeats
 losses, backward, clip, Adam) and one acting step (16 episodes) of K stacked seeds
 against K times one plain network's, one thread, at the sizes of ``--preset`` (quick
 by default; paper is Table 2) on ``--device`` (cpu by default; cuda times the GPU path,
-synchronising before each clock read).
+synchronising before each clock read, eager and replayed as CUDA graphs).
 
     python benchmarks/bench_ensemble.py               # K = 2, 5, 10, 3 rounds
     python benchmarks/bench_ensemble.py --quick       # K = 2, 1 round of 4 updates
@@ -125,60 +125,43 @@ def micro(seeds: list[int], repeats: int, preset: str, device: str) -> None:
     print(f"{preset} sizes on {device}, batch {config.learner.batch_size} episodes of {N} steps, "
           f"{n} neurons, {config.agent.arch}")  # fmt: skip
     print(f"one plain network: update {single:.0f} ms, acting step {single_step:.1f} ms")
-    print(f"{'K':>3}{'update ms':>11}{'per seed':>10}{'vs K plain':>12}"
+    graphs = [False, True] if config.train.device.startswith("cuda") else [False]
+    print(f"{'K':>3} {'how':<7}{'update ms':>11}{'per seed':>10}{'vs K plain':>12}"
           f"{'step ms':>9}{'vs K plain':>12}")  # fmt: skip
     for K in seeds:
-        update, step = stacked_timings(config, K, replay, rng, observation, timed, repeats)
-        print(f"{K:>3}{update:>11.0f}{update / K:>10.0f}{K * single / update:>11.2f}x"
-              f"{step:>9.1f}{K * single_step / step:>11.2f}x")  # fmt: skip
+        for cuda_graphs in graphs:
+            update, step = stacked_timings(config, K, replay, rng, observation, timed, repeats,
+                                           cuda_graphs)  # fmt: skip
+            how = "graph" if cuda_graphs else "eager"
+            print(f"{K:>3} {how:<7}{update:>11.1f}{update / K:>10.1f}"
+                  f"{K * single / update:>11.2f}x{step:>9.2f}{K * single_step / step:>11.2f}x")
 
 
 def stacked_timings(
-    config, K: int, replay, rng, observation, timed, repeats: int
+    config, K: int, replay, rng, observation, timed, repeats: int, cuda_graphs: bool = False
 ) -> tuple[float, float]:
-    """Milliseconds of one update and one acting step of K stacked seeds of ``config``."""
+    """Milliseconds of one update and one acting step of K stacked seeds of ``config``
+    (the learner's own ``StackedDQN.update`` and ``acting_step``; with ``cuda_graphs``
+    both replayed as CUDA graphs, captured before the clock starts)."""
 
-    import torch
+    import numpy as np
 
-    from spikectl.agents.stacked import StackedNetworks
-    from spikectl.training.learners.dqn import build_networks, build_predictor
-    from spikectl.training.learners.dqn_losses import batch_tensors, losses_on_tensors
-    from spikectl.training.stacked_update import clip_grad_norm_per_seed, stack_seeds
+    from spikectl.training.contexts import generated_contexts
+    from spikectl.training.learners.dqn_stacked import StackedDQN
 
-    pairs = [build_networks(config.with_changes(seed=s)) for s in range(K)]
-    stacked = StackedNetworks([pair[0] for pair in pairs])
-    targets = StackedNetworks([pair[1] for pair in pairs], trainable=False)
-    predictors = [build_predictor(config, pair[0]) for pair in pairs]
-    heads = None if predictors[0] is None else StackedNetworks(predictors)
-    trained = stacked.parameters() + (heads.parameters() if heads else [])
-    adam = torch.optim.Adam(trained, lr=config.learner.learning_rate)
-
-    def seed_losses(online_params, target_params, head_params, tensors):
-        td, aux = losses_on_tensors(
-            stacked.bound(online_params), targets.bound(target_params), tensors, config.learner,
-            None if heads is None else heads.bound(head_params),
-        )  # fmt: skip
-        return td, (torch.zeros_like(td) if aux is None else aux)
-
-    batched = torch.func.vmap(seed_losses, in_dims=(0, 0, 0 if heads else None, 0))
-
-    def update() -> None:
-        device = config.train.device
-        seeds_tensors = [batch_tensors(replay.sample(config.learner.batch_size, rng), device)
-                         for _ in range(K)]  # fmt: skip
-        tensors = stack_seeds(seeds_tensors)
-        td, aux = batched(stacked.params, targets.params, heads.params if heads else None, tensors)
-        adam.zero_grad()
-        (td + config.learner.aux_voltage_weight * aux).sum().backward()
-        clip_grad_norm_per_seed(trained, config.learner.max_grad_norm)
-        adam.step()
+    config = config.with_changes(updates_per_round=1, learning_starts=1, cuda_graphs=cuda_graphs)
+    train_set = generated_contexts(config)[0]
+    group = StackedDQN([config.with_changes(seed=s) for s in range(K)], [train_set] * K,
+                       [np.random.default_rng(s) for s in range(K)])  # fmt: skip
+    for seed in group.seeds:
+        seed.replay = replay
 
     obs = observation((K, 16))
-    state = pairs[0][0].initial_state(16, config.env.n_neurons, device=config.train.device)
+    device = config.train.device
+    state = group.online.template.initial_state(16, config.env.n_neurons, device=device)
     state = tuple(s.expand(K, *s.shape).clone() for s in state)
-    with torch.no_grad():
-        step = timed(lambda: stacked.call("step", obs, state), 10 * repeats)
-    return timed(update, 3 * repeats), step
+    step = timed(lambda: group.acting_step(obs, state), 10 * repeats)
+    return timed(lambda: group.update(0), 3 * repeats), step
 
 
 def main() -> None:

@@ -207,6 +207,8 @@ class TrainConfig:
     (docs/benchmarks.md); bit-identical reruns need the same number."""
     progress: bool = True
     """Show a progress bar."""
+    cuda_graphs: bool = True
+    """Replay a stacked group's update and acting step as CUDA graphs (--stacked on CUDA)."""
 
     def __post_init__(self) -> None:
         for name in ("total_env_steps", "num_envs", "eval_every_episodes",

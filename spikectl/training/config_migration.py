@@ -26,7 +26,8 @@ from spikectl.training.learners.dqn_config import DQNConfig
 
 SECTIONS = ("env", "agent", "train", "learner")
 RUN_FIELDS = ("seed", "total_env_steps", "num_envs", "eval_every_episodes",
-              "checkpoint_every_episodes", "device", "torch_threads", "progress")  # fmt: skip
+              "checkpoint_every_episodes", "device", "torch_threads", "progress",
+              "cuda_graphs")  # fmt: skip
 """The fields of today's ``train`` section (the run); every other field of the old
 ``train`` section is the learner's."""
 LEARNER_FIELDS = tuple(field.name for field in dataclasses.fields(DQNConfig))

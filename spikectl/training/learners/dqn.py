@@ -112,10 +112,14 @@ def build_predictor(config, online: torch.nn.Module) -> torch.nn.Module | None:
 
 
 def set_learning_rate(optimizer: torch.optim.Optimizer, learning_rate: float) -> None:
-    """Set every parameter group's learning rate (the schedule is a pure function of the
-    episode count, so a resumed run needs no scheduler state)."""
+    """Set every parameter group's learning rate, in place where it is a device tensor
+    that a CUDA graph reads (``spikectl.training.cuda_graphs``). The schedule is a pure
+    function of the episode count, so a resumed run needs no scheduler state."""
     for group in optimizer.param_groups:
-        group["lr"] = learning_rate
+        if isinstance(group["lr"], torch.Tensor):
+            group["lr"].fill_(learning_rate)
+        else:
+            group["lr"] = learning_rate
 
 
 def epsilon_greedy_collection(learner: Any, episode: int) -> EpsilonGreedyPolicy:
@@ -251,7 +255,7 @@ class DQNLearner:
     def load_counters_and_replay(self, state: Mapping[str, Any]) -> None:
         """Restore the buffer and the counters of :meth:`state_dict`."""
         self.replay.load_state_dict(
-            {name: value.numpy() if torch.is_tensor(value) else value
+            {name: value.cpu().numpy() if torch.is_tensor(value) else value
              for name, value in state["replay"].items()}
         )  # fmt: skip
         self.updates, self.loss_count = int(state["updates"]), int(state["loss_count"])

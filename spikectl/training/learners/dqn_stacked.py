@@ -26,6 +26,12 @@ import torch
 from spikectl.agents import greedy_action, make_agent
 from spikectl.agents.stacked import StackedNetworks
 from spikectl.envs.rollout import EpisodeBatch
+from spikectl.training.cuda_graphs import (
+    CapturedCall,
+    eager_optimizer_state,
+    make_capturable,
+    update_snapshot,
+)
 from spikectl.training.learners.dqn import DQNLearner, explore, set_learning_rate
 from spikectl.training.learners.dqn_losses import batch_tensors, losses_on_tensors
 from spikectl.training.learners.protocol import LossDiverged
@@ -54,6 +60,10 @@ class StackedDQN:
             self.predictor.parameters() if self.predictor is not None else []
         )
         self.optimizer = torch.optim.Adam(self.trained, lr=self.settings.learning_rate)
+        # CUDA graphs (spikectl.training.cuda_graphs), captured at the first update / step.
+        self.cuda_graphs = configs[0].train.cuda_graphs and torch.device(self.device).type == "cuda"
+        self._captured_update: CapturedCall | None = None
+        self._captured_steps: dict[tuple, CapturedCall] = {}
         self.batched_losses = torch.func.vmap(
             self._seed_losses, in_dims=(0, 0, 0 if self.predictor is not None else None, 0)
         )
@@ -85,28 +95,77 @@ class StackedDQN:
                 batch_tensors(seed.replay.sample(settings.batch_size, seed.rng), self.device)
                 for seed in self.seeds
             ])  # fmt: skip  # every tensor [K, B, ...]
-            td, aux = self.batched_losses(
-                self.online.params, self.target.params,
-                self.predictor.params if self.predictor is not None else None, tensors,
-            )  # fmt: skip  # td, aux: [K]
-            losses = td if self.predictor is None else td + settings.aux_voltage_weight * aux
-            finite = torch.isfinite(losses)
-            if not bool(finite.all()):
-                k = int((~finite).nonzero()[0, 0])
-                raise LossDiverged(losses[k].item(), self.seeds[k].updates + 1, k)
-            self.optimizer.zero_grad(set_to_none=True)
-            losses.sum().backward()  # seeds' gradients stay apart: d(sum)/d(loss_k) = 1
-            if settings.max_grad_norm > 0:
-                clip_grad_norm_per_seed(self.trained, settings.max_grad_norm)
-            self.optimizer.step()
-            with torch.no_grad():
-                for name in self.target.names:
-                    self.target.params[name].lerp_(self.online.params[name], settings.tau)
+            if self.cuda_graphs:
+                if self._captured_update is None:
+                    self._captured_update = self._capture_update(tensors)
+                # The step is in the graph, so a diverged loss is caught after it; the run
+                # stops and keeps its last checkpoint either way.
+                td, aux = self._captured_update(tensors)
+                self._check_finite(td, aux)
+            else:
+                td, aux = self._losses(tensors)
+                self._check_finite(td, aux)  # before the step: the weights stay finite
+                self._step(td, aux)
             for seed, td_k, aux_k in zip(self.seeds, td.tolist(), aux.tolist(), strict=True):
                 seed.updates += 1
                 seed.loss_sum += td_k
                 seed.aux_loss_sum += aux_k
                 seed.loss_count += 1
+
+    def _losses(self, tensors: dict) -> tuple[torch.Tensor, torch.Tensor]:
+        """Every seed's TD and auxiliary losses, each [K]."""
+        return self.batched_losses(
+            self.online.params, self.target.params,
+            self.predictor.params if self.predictor is not None else None, tensors,
+        )  # fmt: skip
+
+    def _total(self, td: torch.Tensor, aux: torch.Tensor) -> torch.Tensor:
+        return td if self.predictor is None else td + self.settings.aux_voltage_weight * aux
+
+    def _check_finite(self, td: torch.Tensor, aux: torch.Tensor) -> None:
+        losses = self._total(td, aux)
+        finite = torch.isfinite(losses)
+        if not bool(finite.all()):
+            k = int((~finite).nonzero()[0, 0])
+            raise LossDiverged(losses[k].item(), self.seeds[k].updates + 1, k)
+
+    def _step(self, td: torch.Tensor, aux: torch.Tensor) -> None:
+        """Backward, per-seed clip, Adam and the soft target update (no host sync)."""
+        self.optimizer.zero_grad(set_to_none=True)
+        self._total(td, aux).sum().backward()  # seeds' gradients stay apart: d(sum)/d(l_k) = 1
+        if self.settings.max_grad_norm > 0:
+            clip_grad_norm_per_seed(self.trained, self.settings.max_grad_norm)
+        self.optimizer.step()
+        with torch.no_grad():
+            for name in self.target.names:
+                self.target.params[name].lerp_(self.online.params[name], self.settings.tau)
+
+    def _update_and_losses(self, tensors: dict) -> tuple[torch.Tensor, torch.Tensor]:
+        td, aux = self._losses(tensors)
+        self._step(td, aux)
+        return td.detach(), aux.detach()
+
+    def _capture_update(self, tensors: dict) -> CapturedCall:
+        make_capturable(self.optimizer, self.device)
+        changed = self.trained + self.target.parameters()
+        return CapturedCall(
+            self._update_and_losses, (tensors,),
+            snapshot=lambda: update_snapshot(changed, self.optimizer),
+        )  # fmt: skip
+
+    @torch.no_grad()
+    def acting_step(self, obs: dict, state: tuple) -> tuple[torch.Tensor, tuple]:
+        """Every seed's step forward on [K, E, ...] observations: (Q-values [K, E, n+1],
+        next state). Captured in a CUDA graph per input shape where graphs are on; its
+        outputs are then the graph's, valid until the next step."""
+        if not self.cuda_graphs:
+            return self.online.call("step", obs, state)
+        shape = tuple(obs["voltage"].shape)
+        if shape not in self._captured_steps:
+            self._captured_steps[shape] = CapturedCall(
+                torch.no_grad()(lambda o, s: self.online.call("step", o, s)), (obs, state)
+            )
+        return self._captured_steps[shape](obs, state)
 
     def network(self, seed: int) -> torch.nn.Module:
         """Seed ``seed``'s current weights in a plain network (nn.LSTM and all), so it is
@@ -134,7 +193,7 @@ class StackedDQN:
                 "online": self.online.stacked_state(),
                 "target": self.target.stacked_state(),
                 "predictor": None if self.predictor is None else self.predictor.stacked_state(),
-                "optimizer": self.optimizer.state_dict(),
+                "optimizer": eager_optimizer_state(self.optimizer),
             },
             "seeds": [_counters_and_replay(seed) for seed in self.seeds],
         }
@@ -146,6 +205,7 @@ class StackedDQN:
         if self.predictor is not None:
             self.predictor.load_stacked_state(stacked["predictor"])
         self.optimizer.load_state_dict(stacked["optimizer"])
+        self._captured_update = None  # the graph read the optimizer state just replaced
         for seed, entry in zip(self.seeds, state["seeds"], strict=True):
             seed.load_counters_and_replay(entry)
 
@@ -179,7 +239,7 @@ class StackedPolicy:
             E, n = obs["voltage"].shape[1:]
             state = group.online.template.initial_state(E, n, device=device)
             self.state = tuple(s.expand(K, *s.shape).clone() for s in state)  # [K, E, ...]
-        q_values, self.state = group.online.call("step", obs, self.state)  # [K, E, n+1]
+        q_values, self.state = group.acting_step(obs, self.state)  # [K, E, n+1]
         legal = torch.as_tensor(action_mask, device=q_values.device).unflatten(0, (K, -1))
         greedy = greedy_action(q_values, legal).cpu().numpy()  # [K, E]
         if self.epsilon <= 0:
