@@ -19,6 +19,8 @@ case $folder in
     guided-floor20)       flags=() ;;                           # the guided preset itself
     guided-floor20-mix50) flags=(--teacher-episodes 0.5) ;;
     guided-floor50)       flags=(--imitation-weight-end 0.5) ;;
+    # Four times the environment steps (about 60 core-minutes, issue 23's budget).
+    guided-floor20-mix50-4x) flags=(--teacher-episodes 0.5 --total-env-steps 1056000) ;;
     pqn)                  exec spikectl train pqn --seed "$seed" --run-dir "runs/$folder/seed=$seed" ;;
     *) echo "unknown folder $folder" >&2; exit 2 ;;
 esac
