@@ -31,6 +31,7 @@ GROUPS = {
     "guided, imitation floor 0.2 (the main job)": "guided-floor20",
     "guided, floor 0.2 + teacher plays 50% -> 0": "guided-floor20-mix50",
     "guided, imitation floor 0.5": "guided-floor50",
+    "guided, floor 0.2 + teacher plays 50% -> 0, 4x steps": "guided-floor20-mix50-4x",
     "PQN": "pqn",
 }
 
