@@ -25,6 +25,21 @@ RESULTS=${RESULTS:-/tmp/gpu-results}
 OUT=${OUT:-/tmp/gpu-out}
 SWEEPS="fig4-fast:4 fig5-quick-n20:1 fig4-paper-gpu:4"
 
+# launch "NAME:WORKERS ..." [FLAG ...]: each sweep $RESULTS/NAME.json as seed groups, detached
+# (setsid: they outlive the command), and nvidia-smi's log of GPU use.
+launch() {
+  nohup nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv -l 15 \
+    > "$RESULTS/gpu-use.csv" 2>&1 < /dev/null &
+  local entry name
+  for entry in $1; do
+    name=${entry%%:*}
+    setsid nohup python3 -m spikectl.cli sweep --config "$RESULTS/$name.json" \
+      --sweep-dir "$RESULTS/$name" --group-seeds "${@:2}" --workers "${entry##*:}" \
+      > "$RESULTS/$name.log" 2>&1 < /dev/null &
+  done
+  sleep 5
+}
+
 for step in "$@"; do
   case $step in
     setup)
@@ -55,15 +70,7 @@ paper = {"base": "paper", "overrides": {"device": "cuda"},
          "grid": {"arch": archs, "seed": list(range(10))}}
 (root / "fig4-paper-gpu.json").write_text(json.dumps(paper))
 PY
-      nohup nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv -l 15 \
-        > "$RESULTS/gpu-use.csv" 2>&1 < /dev/null &
-      for entry in $SWEEPS; do
-        name=${entry%%:*}
-        setsid nohup python3 -m spikectl.cli sweep --config "$RESULTS/$name.json" \
-          --sweep-dir "$RESULTS/$name" --group-seeds --workers "${entry##*:}" \
-          > "$RESULTS/$name.log" 2>&1 < /dev/null &
-      done
-      sleep 5
+      launch "$SWEEPS"
       ;;
     protocol)
       mkdir -p "$RESULTS"
@@ -80,15 +87,7 @@ for name, grid in sweeps.items():
     sweep = {"base": "paper", "overrides": {"device": "cuda"}, "grid": grid}
     (root / f"{name}.json").write_text(json.dumps(sweep))
 PY
-      nohup nvidia-smi --query-gpu=timestamp,utilization.gpu,memory.used --format=csv -l 15 \
-        > "$RESULTS/gpu-use.csv" 2>&1 < /dev/null &
-      for entry in fig4-table2:4 fig5-table2-n10:1 fig5-table2-n20:1 fig5-table2-n40:1; do
-        name=${entry%%:*}
-        setsid nohup python3 -m spikectl.cli sweep --config "$RESULTS/$name.json" \
-          --sweep-dir "$RESULTS/$name" --group-seeds --stacked --workers "${entry##*:}" \
-          > "$RESULTS/$name.log" 2>&1 < /dev/null &
-      done
-      sleep 5
+      launch "fig4-table2:4 fig5-table2-n10:1 fig5-table2-n20:1 fig5-table2-n40:1" --stacked
       ;;
     status)
       date -u

@@ -101,11 +101,11 @@ def test_a_captured_call_replays_on_new_inputs_and_refuses_other_shapes():
         call(torch.ones(3, 3, device="cuda"))
 
 
-def _stacked_group(cuda_graphs: bool, seeds=(0, 1)):
+def _stacked_group(cuda_graphs: bool, seeds=(0, 1), device: str = "cuda"):
     from spikectl.training.contexts import generated_contexts
     from spikectl.training.learners.dqn_stacked import StackedDQN
 
-    config = TINY.with_changes(device="cuda", cuda_graphs=cuda_graphs, aux_voltage_weight=1.0)
+    config = TINY.with_changes(device=device, cuda_graphs=cuda_graphs, aux_voltage_weight=1.0)
     configs = [config.with_changes(seed=s) for s in seeds]
     train_set = generated_contexts(config)[0]
     rngs = [np.random.default_rng(s) for s in seeds]
@@ -122,6 +122,28 @@ def _fill_replay(group, episodes: int = 16) -> None:
             rng.integers(0, n, episodes), rng.integers(0, 2, (episodes, N)).astype(np.int8),
             np.ones((episodes, n + 1), dtype=bool),
         )  # fmt: skip
+
+
+def test_a_stacked_group_names_the_seed_whose_loss_diverged_and_keeps_its_weights():
+    """The seeds' losses come to the host in one transfer per update: a NaN in seed 1's
+    is reported as seed 1's first update, before any weight moves."""
+    from spikectl.training.learners.protocol import LossDiverged
+
+    group = _stacked_group(False, device="cpu")
+    _fill_replay(group)
+    losses = group._losses
+
+    def seed_1_diverges(tensors):
+        td, aux = losses(tensors)
+        return td * torch.tensor([1.0, float("nan")]), aux
+
+    group._losses = seed_1_diverges
+    before = {name: value.detach().clone() for name, value in group.online.params.items()}
+    with pytest.raises(LossDiverged) as error:
+        group.update(0)
+    assert (error.value.seed, error.value.update) == (1, 1)
+    assert all(torch.equal(group.online.params[k], before[k]) for k in before)
+    assert [seed.updates for seed in group.seeds] == [0, 0]
 
 
 @needs_cuda

@@ -17,6 +17,8 @@ device idle (docs/benchmarks.md), not on a CPU.
 
 from __future__ import annotations
 
+import functools
+import math
 from collections.abc import Mapping
 from typing import Any
 
@@ -100,13 +102,12 @@ class StackedDQN:
                     self._captured_update = self._capture_update(tensors)
                 # The step is in the graph, so a diverged loss is caught after it; the run
                 # stops and keeps its last checkpoint either way.
-                td, aux = self._captured_update(tensors)
-                self._check_finite(td, aux)
+                td_values, aux_values = self._checked_losses(*self._captured_update(tensors))
             else:
                 td, aux = self._losses(tensors)
-                self._check_finite(td, aux)  # before the step: the weights stay finite
+                td_values, aux_values = self._checked_losses(td, aux)  # the weights stay finite
                 self._step(td, aux)
-            for seed, td_k, aux_k in zip(self.seeds, td.tolist(), aux.tolist(), strict=True):
+            for seed, td_k, aux_k in zip(self.seeds, td_values, aux_values, strict=True):
                 seed.updates += 1
                 seed.loss_sum += td_k
                 seed.aux_loss_sum += aux_k
@@ -122,12 +123,15 @@ class StackedDQN:
     def _total(self, td: torch.Tensor, aux: torch.Tensor) -> torch.Tensor:
         return td if self.predictor is None else td + self.settings.aux_voltage_weight * aux
 
-    def _check_finite(self, td: torch.Tensor, aux: torch.Tensor) -> None:
-        losses = self._total(td, aux)
-        finite = torch.isfinite(losses)
-        if not bool(finite.all()):
-            k = int((~finite).nonzero()[0, 0])
-            raise LossDiverged(losses[k].item(), self.seeds[k].updates + 1, k)
+    @torch.no_grad()
+    def _checked_losses(self, td: torch.Tensor, aux: torch.Tensor) -> tuple[list, list]:
+        """The seeds' TD and auxiliary losses on the host, in one transfer (the update's
+        only sync); LossDiverged for the first seed whose total loss is not finite."""
+        td_values, aux_values, totals = torch.stack((td, aux, self._total(td, aux))).tolist()
+        for k, total in enumerate(totals):
+            if not math.isfinite(total):
+                raise LossDiverged(total, self.seeds[k].updates + 1, k)
+        return td_values, aux_values
 
     def _step(self, td: torch.Tensor, aux: torch.Tensor) -> None:
         """Backward, per-seed clip, Adam and the soft target update (no host sync)."""
@@ -162,8 +166,9 @@ class StackedDQN:
             return self.online.call("step", obs, state)
         shape = tuple(obs["voltage"].shape)
         if shape not in self._captured_steps:
+            # Captured under this method's no_grad, so the graph records no autograd work.
             self._captured_steps[shape] = CapturedCall(
-                torch.no_grad()(lambda o, s: self.online.call("step", o, s)), (obs, state)
+                functools.partial(self.online.call, "step"), (obs, state)
             )
         return self._captured_steps[shape](obs, state)
 
