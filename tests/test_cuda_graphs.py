@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 
+from spikectl.config_errors import ConfigError
 from spikectl.training.config import Experiment
 from spikectl.training.cuda_graphs import (
     CapturedCall,
@@ -88,6 +89,11 @@ def test_the_config_switch_reads_from_old_configs_and_the_flat_form():
     del old["train"]["cuda_graphs"]
     assert Experiment.from_dict(old).train.cuda_graphs is True
     assert TINY.with_changes(cuda_graphs=False).train.cuda_graphs is False
+    for name in ("cuda_graphs", "progress"):  # a string would be truthy: refused
+        quoted = TINY.to_dict()
+        quoted["train"][name] = "no"
+        with pytest.raises(ConfigError, match=f"{name}.*must be true or false, got 'no'"):
+            Experiment.from_dict(quoted)
 
 
 @needs_cuda

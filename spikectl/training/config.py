@@ -221,6 +221,9 @@ class TrainConfig:
             raise ConfigError(
                 "device", f"must be a string such as cpu or cuda, got {self.device!r}"
             )
+        for name in ("progress", "cuda_graphs"):
+            if not isinstance(getattr(self, name), bool):
+                raise ConfigError(name, f"must be true or false, got {getattr(self, name)!r}")
 
 
 @dataclass(frozen=True)
