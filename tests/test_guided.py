@@ -258,8 +258,10 @@ def test_teacher_episodes_schedule_and_checks():
 
 def test_run_with_teacher_episodes_resumes_exactly(tmp_path, interrupt_after_rounds):
     config = dataclasses.replace(
-        SHORT, learner=dataclasses.replace(SHORT.learner, teacher="identify",
-                                           teacher_episodes=1.0)  # fmt: skip
+        SHORT,
+        learner=dataclasses.replace(
+            SHORT.learner, teacher="identify", teacher_episodes=1.0
+        ),  # fmt: skip
     )
     # The first round is all the teacher's, the last (past the anneal) all the student's.
     from spikectl.training.learners.guided import GuidedDQNLearner
@@ -281,3 +283,90 @@ def test_run_with_teacher_episodes_resumes_exactly(tmp_path, interrupt_after_rou
     drop = lambda rows: [{k: v for k, v in row.items() if k not in CLOCKS and not  # noqa: E731
                           (isinstance(v, float) and math.isnan(v))} for row in rows]  # fmt: skip
     assert drop(resumed) == drop(reference)
+
+
+def test_connectivity_loss_by_hand_and_head_shapes():
+    from spikectl.agents import make_agent, make_connectivity_predictor
+    from spikectl.training.learners.dqn_losses import connectivity_loss
+
+    class Constant(torch.nn.Module):
+        def forward(self, features):  # logits favouring "excitatory" by ln 2
+            logits = torch.zeros(*features.shape[:3], 3)
+            logits[..., 2] = math.log(2.0)
+            return logits
+
+    features = torch.zeros(1, 2, 2, 5)  # [B, T, n, D]
+    target_inputs = torch.tensor([[1, -1]])  # neuron 0 excites the target, 1 inhibits it
+    # p(excitatory) = 2/4, p(inhibitory) = 1/4: mean of -ln(1/2) and -ln(1/4) at both steps.
+    expected = (math.log(2.0) + math.log(4.0)) / 2
+    loss = connectivity_loss(Constant(), features, target_inputs)
+    assert loss.item() == pytest.approx(expected)
+    for arch, n in (("tdrqn", 5), ("drqn", 4)):
+        network = make_agent(arch, n, 6)
+        obs_seq = {
+            "voltage": torch.full((2, 3, n), -70.0),
+            "last_action": torch.full((2, 3), -1),
+            "step": torch.arange(3).expand(2, -1),
+            "target": torch.zeros(2, 3, dtype=torch.long),
+            "pattern": torch.zeros(2, 3, 6),
+        }
+        encoded, _ = network.encode(obs_seq)
+        assert make_connectivity_predictor(network)(encoded).shape == (2, 3, n, 3)
+
+
+def test_privileged_replay_round_trip_and_mismatch():
+    replay = EpisodeReplay(4, 3, 5, privileged=True)
+    args = (np.zeros((2, 6, 3), np.float32), np.full((2, 5), -1), np.zeros((2, 5)),
+            np.zeros(2, int), np.zeros((2, 5)), np.ones((2, 4), bool))  # fmt: skip
+    replay.add(*args, target_inputs=np.array([[1, 0, -1], [0, 1, 0]], np.int8))
+    copy = EpisodeReplay(4, 3, 5, privileged=True)
+    copy.load_state_dict(replay.state_dict())
+    np.testing.assert_array_equal(copy.target_inputs[:2], [[1, 0, -1], [0, 1, 0]])
+    assert copy.sample(3, np.random.default_rng(0)).target_inputs.shape == (3, 3)
+    with pytest.raises(ValueError, match="needs target_inputs"):
+        replay.add(*args)
+    with pytest.raises(ValueError, match="target_inputs must have shape"):
+        replay.add(*args, target_inputs=np.zeros((2, 4), np.int8))
+    with pytest.raises(ValueError, match="keeps the target's inputs"):
+        EpisodeReplay(4, 3, 5).load_state_dict(replay.state_dict())
+    state = replay.state_dict()
+    state["target_inputs"][0, 0] = 2
+    with pytest.raises(ValueError, match="target_inputs lie outside"):
+        EpisodeReplay(4, 3, 5, privileged=True).load_state_dict(state)
+
+
+def test_connectivity_labels_are_the_target_column_of_the_observed_neurons():
+    from spikectl.training.learners.guided import GuidedDQNLearner
+
+    train_set = make_splits(3, 1, 5, 20, seed=0, n_val=0)[0]
+    config = guided(SMOKE.with_changes(n_neurons=5), connectivity_weight=0.5)
+    learner = GuidedDQNLearner(config, train_set, np.random.default_rng(0))
+    for row, context in zip(learner.target_inputs, train_set, strict=True):
+        np.testing.assert_array_equal(row, np.sign(context.weights[:, context.target]))
+    assert learner.replay.target_inputs is not None
+    assert any(p is q for p in learner.trained for q in learner.connectivity_head.parameters())
+    with pytest.raises(ConfigError, match="connectivity_weight"):
+        GuidedConfig(connectivity_weight=-0.1)
+    plain = GuidedDQNLearner(guided(SMOKE.with_changes(n_neurons=5)), train_set,
+                             np.random.default_rng(0))  # fmt: skip
+    assert plain.connectivity_head is None and plain.replay.target_inputs is None
+
+
+def test_connectivity_loss_learns_and_the_run_resumes_exactly(tmp_path, interrupt_after_rounds):
+    """The head learns the target's inputs (its loss falls well below the uniform
+    guess's ln 3 = 1.10) and a run with it resumes bit for bit."""
+    config = dataclasses.replace(
+        SHORT, learner=dataclasses.replace(SHORT.learner, connectivity_weight=1.0)
+    )
+    reference = train(config, tmp_path / "reference")
+    losses = [row["connectivity_loss"] for row in reference[1:]]
+    assert losses[0] < 1.10 and losses[-1] < losses[0] - 0.1
+    restore = interrupt_after_rounds(3)
+    with pytest.raises(KeyboardInterrupt):
+        train(config, tmp_path / "killed")
+    restore()
+    resumed = train(config, tmp_path / "killed", resume=True)
+    drop = lambda rows: [{k: v for k, v in row.items() if k not in CLOCKS and not  # noqa: E731
+                          (isinstance(v, float) and math.isnan(v))} for row in rows]  # fmt: skip
+    assert drop(resumed) == drop(reference)
+    assert all(math.isnan(row["connectivity_loss"]) for row in train(SHORT, tmp_path / "off"))

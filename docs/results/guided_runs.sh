@@ -21,6 +21,10 @@ case $folder in
     guided-floor50)       flags=(--imitation-weight-end 0.5) ;;
     # Four times the environment steps (about 60 core-minutes, issue 23's budget).
     guided-floor20-mix50-4x) flags=(--teacher-episodes 0.5 --total-env-steps 1056000) ;;
+    # The privileged connectivity loss (2026-11-24, second stop of the day).
+    guided-conn1)         flags=(--connectivity-weight 1) ;;
+    guided-conn01)        flags=(--connectivity-weight 0.1) ;;
+    guided-conn01-4x)     flags=(--connectivity-weight 0.1 --total-env-steps 1056000) ;;
     pqn)                  exec spikectl train pqn --seed "$seed" --run-dir "runs/$folder/seed=$seed" ;;
     *) echo "unknown folder $folder" >&2; exit 2 ;;
 esac

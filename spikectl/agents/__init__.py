@@ -30,6 +30,7 @@ _HOMES = {
     "export_policy": "compiled",
     "greedy_action": "heads",
     "make_agent": "networks",
+    "make_connectivity_predictor": "networks",
     "make_voltage_predictor": "networks",
     "masked_q": "heads",
     "observation_batch": "observation",

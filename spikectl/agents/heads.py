@@ -89,6 +89,38 @@ class NextVoltagePredictor(nn.Module):
         return self.mlp(x)  # [B, T, n]
 
 
+class ConnectivityPredictor(nn.Module):
+    """Auxiliary head: each observed neuron's synapse onto the target (inhibitory, none,
+    excitatory) from the features at t (not in the paper; the guided learner's
+    ``connectivity_weight``).
+
+    Whether stimulating neuron i can make the target spike is the sign of its synapse
+    onto the target, so asking every step's features to say it asks the encoder to
+    identify, and to keep until the episode ends, what the Q-values of stimulating i
+    need. The labels come from the training networks' weights: privileged information
+    that only the training loss reads; the controller never sees it.
+
+    ``n_neurons=None`` (per-neuron features [B, T, n, D], DDRQN and TDRQN): one shared
+    MLP per neuron → [B, T, n, 3]. ``n_neurons=n`` (system features [B, T, D], DRQN and
+    DMDRQN): MLP → [B, T, n, 3]. Logits ordered inhibitory, none, excitatory.
+    """
+
+    CLASSES = 3
+
+    def __init__(self, feature_width: int, n_neurons: int | None, hidden: int = 64) -> None:
+        super().__init__()
+        self.n_neurons = n_neurons
+        outputs = self.CLASSES * (1 if n_neurons is None else n_neurons)
+        self.mlp = MLP(feature_width, [hidden], outputs)
+
+    def forward(self, features: torch.Tensor) -> torch.Tensor:
+        """features [B, T, (n,) D] → logits [B, T, n, 3]."""
+        logits = self.mlp(features)  # [B, T, n, 3] or [B, T, 3n]
+        if self.n_neurons is None:
+            return logits
+        return logits.unflatten(-1, (self.n_neurons, self.CLASSES))  # [B, T, n, 3]
+
+
 def masked_q(
     q: torch.Tensor, action_mask: torch.Tensor, fill: float = float("-inf")
 ) -> torch.Tensor:

@@ -23,7 +23,7 @@ from dataclasses import fields, replace
 import torch
 from torch import nn
 
-from spikectl.agents.heads import NextVoltagePredictor
+from spikectl.agents.heads import ConnectivityPredictor, NextVoltagePredictor
 from spikectl.agents.per_neuron_networks import DDRQN, TDRQN
 from spikectl.agents.per_neuron_networks import PerNeuronQNetwork as PerNeuronQNetwork
 from spikectl.agents.recurrent import Observation as Observation
@@ -71,6 +71,13 @@ def make_voltage_predictor(network: nn.Module) -> NextVoltagePredictor:
     """The auxiliary next-voltage head that reads ``network.encode``'s features."""
     n_fixed = None if network.equivariant else network.n_neurons
     return NextVoltagePredictor(network.feature_width, n_fixed)
+
+
+def make_connectivity_predictor(network: nn.Module) -> ConnectivityPredictor:
+    """The auxiliary head that reads ``network.encode``'s features and says each observed
+    neuron's synapse onto the target (the guided learner's ``connectivity_weight``)."""
+    n_fixed = None if network.equivariant else network.n_neurons
+    return ConnectivityPredictor(network.feature_width, n_fixed)
 
 
 def count_parameters(module: nn.Module) -> int:

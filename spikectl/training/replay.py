@@ -36,6 +36,10 @@ class EpisodeBatchArrays:
     labels: np.ndarray | None = None
     """[B, N] int64 a teacher's action at every step (NO_LABEL where none was asked), in
     a buffer made with ``labelled=True``; None otherwise."""
+    target_inputs: np.ndarray | None = None
+    """[B, n] int8 each observed neuron's synapse onto the target (-1, 0, +1), read from
+    the training network's weights (privileged), in a buffer made with
+    ``privileged=True``; None otherwise."""
 
 
 NO_LABEL = -2
@@ -46,7 +50,12 @@ class EpisodeReplay:
     """A ring buffer of ``capacity`` whole episodes of length ``episode_length``."""
 
     def __init__(
-        self, capacity: int, n_neurons: int, episode_length: int, labelled: bool = False
+        self,
+        capacity: int,
+        n_neurons: int,
+        episode_length: int,
+        labelled: bool = False,
+        privileged: bool = False,
     ) -> None:
         if capacity < 1:
             raise ValueError(f"replay capacity must be >= 1 episode, got {capacity}")
@@ -55,7 +64,7 @@ class EpisodeReplay:
             * (
                 (episode_length + 1) * n_neurons * 4
                 + episode_length * (7 + 2 * labelled)
-                + n_neurons
+                + n_neurons * (1 + privileged)
                 + 9
             ),
             f"a replay buffer of {capacity:,} episodes of {episode_length} steps and "
@@ -74,6 +83,7 @@ class EpisodeReplay:
         self.labels = (
             np.full((capacity, episode_length), NO_LABEL, dtype=np.int16) if labelled else None
         )
+        self.target_inputs = np.zeros((capacity, n_neurons), dtype=np.int8) if privileged else None
         self.size = 0
         """Episodes currently held."""
         self.added = 0
@@ -91,16 +101,27 @@ class EpisodeReplay:
         patterns: np.ndarray,
         action_masks: np.ndarray,
         labels: np.ndarray | None = None,
+        target_inputs: np.ndarray | None = None,
     ) -> None:
         """Add E finished episodes: voltage [E, N + 1, n], actions/rewards/patterns [E, N],
         targets [E], action_masks [E, n + 1]; in a labelled buffer, labels [E, N] (None:
-        NO_LABEL everywhere)."""
+        NO_LABEL everywhere); in a privileged buffer, target_inputs [E, n] (required)."""
         count = voltage.shape[0]
         expected = (count, self.episode_length + 1, self.n_neurons)
         if voltage.shape != expected or actions.shape != (count, self.episode_length):
             raise ValueError(
                 f"episodes must be voltage {expected} and actions {(count, self.episode_length)}, "
                 f"got {voltage.shape} and {actions.shape}"
+            )
+        if (self.target_inputs is None) != (target_inputs is None):
+            raise ValueError(
+                "a privileged replay buffer needs target_inputs with every episode, "
+                "any other buffer refuses them"
+            )
+        if target_inputs is not None and target_inputs.shape != (count, self.n_neurons):
+            raise ValueError(
+                f"target_inputs must have shape {(count, self.n_neurons)}, "
+                f"got {target_inputs.shape}"
             )
         slots = (self.added + np.arange(count)) % self.capacity
         self.voltage[slots] = voltage
@@ -109,6 +130,8 @@ class EpisodeReplay:
         self.targets[slots] = targets
         self.patterns[slots] = patterns
         self.action_masks[slots] = action_masks
+        if self.target_inputs is not None:
+            self.target_inputs[slots] = target_inputs
         if self.labels is not None:
             if labels is not None and labels.shape != actions.shape:
                 raise ValueError(f"labels must have shape {actions.shape}, got {labels.shape}")
@@ -131,14 +154,19 @@ class EpisodeReplay:
             patterns=self.patterns[slots],
             action_masks=self.action_masks[slots],
             labels=None if self.labels is None else self.labels[slots].astype(np.int64),
+            target_inputs=None if self.target_inputs is None else self.target_inputs[slots],
         )
 
     def state_dict(self) -> dict[str, np.ndarray | int]:
         """Everything needed to restore the buffer exactly (only the filled slots)."""
         held = slice(0, self.size)
-        labels = {} if self.labels is None else {"labels": self.labels[held].copy()}
+        optional = {
+            name: getattr(self, name)[held].copy()
+            for name in ("labels", "target_inputs")
+            if getattr(self, name) is not None
+        }
         return {
-            **labels,
+            **optional,
             "capacity": self.capacity,
             "size": self.size,
             "added": self.added,
@@ -168,13 +196,24 @@ class EpisodeReplay:
                 f"the checkpointed replay buffer holds {size} episodes of "
                 f"{state['added']} added, capacity {self.capacity}"
             )
+        if (self.target_inputs is None) != ("target_inputs" not in state):
+            raise ValueError(
+                "the checkpointed replay buffer "
+                + ("keeps" if "target_inputs" in state else "does not keep")
+                + " the target's inputs (privileged), the configured one "
+                + ("does" if self.target_inputs is not None else "does not")
+            )
         names = ("voltage", "actions", "rewards", "targets", "patterns", "action_masks")
-        for name in names + (("labels",) if self.labels is not None else ()):
+        optional = tuple(n for n in ("labels", "target_inputs") if getattr(self, n) is not None)
+        for name in names + optional:
             getattr(self, name)[:size] = state[name]
         # Indices the networks and the sampler use must lie in range (a crafted file's
         # would fail deep inside the first update).
         for name, low, high in (("actions", DO_NOTHING, self.n_neurons - 1),
-                                ("targets", 0, self.n_neurons - 1)):  # fmt: skip
+                                ("targets", 0, self.n_neurons - 1),
+                                ("target_inputs", -1, 1)):  # fmt: skip
+            if getattr(self, name) is None:
+                continue
             held = getattr(self, name)[:size]
             if held.size and not (low <= held.min() and held.max() <= high):
                 raise ValueError(

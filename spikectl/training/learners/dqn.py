@@ -163,18 +163,27 @@ class DQNLearner:
         self.rng = rng
         self.network, self.target = build_networks(config)
         self.predictor = build_predictor(config, self.network)
-        self.trained = list(self.network.parameters()) + (
-            list(self.predictor.parameters()) if self.predictor is not None else []
-        )
+        self.connectivity_head = self.build_connectivity_head(config)
+        self.trained = [
+            parameter
+            for module in (self.network, self.predictor, self.connectivity_head)
+            if module is not None
+            for parameter in module.parameters()
+        ]
         self.optimizer = torch.optim.Adam(self.trained, lr=self.settings.learning_rate)
         self.replay = EpisodeReplay(
             self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
-            labelled=self.labelled_replay,
+            labelled=self.labelled_replay, privileged=self.connectivity_head is not None,
         )  # fmt: skip
         self.targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
         self.patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
         self.updates, self.loss_count = 0, 0
         self.loss_sum, self.aux_loss_sum = 0.0, 0.0
+
+    def build_connectivity_head(self, config) -> torch.nn.Module | None:
+        """A privileged auxiliary head trained beside the network (the guided learner's
+        ``connectivity_weight``); None here."""
+        return None
 
     def epsilon(self, episode: int) -> float:
         return self.settings.epsilon(episode, self.total_episodes)

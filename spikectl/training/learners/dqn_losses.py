@@ -62,12 +62,16 @@ def training_losses(
     predictor: torch.nn.Module | None = None,
     device: str = "cpu",
     return_q_values: bool = False,
+    return_features: bool = False,
 ) -> tuple[torch.Tensor, ...]:
     """The double-Q TD loss over every step of the sampled episodes and, with a
     ``predictor``, the auxiliary next-voltage loss (None without one); with
-    ``return_q_values`` also the online Q-values [B, N + 1, n + 1] they were made from."""
+    ``return_q_values`` also the online Q-values [B, N + 1, n + 1] they were made from,
+    with ``return_features`` (last) the encoder's features [B, N + 1, (n,) D]."""
     tensors = batch_tensors(batch, device)
-    return losses_on_tensors(online, target, tensors, settings, predictor, return_q_values)
+    return losses_on_tensors(
+        online, target, tensors, settings, predictor, return_q_values, return_features
+    )
 
 
 def batch_tensors(batch: EpisodeBatchArrays, device: str) -> dict[str, torch.Tensor]:
@@ -87,6 +91,7 @@ def losses_on_tensors(
     settings: DQNConfig,
     predictor=None,
     return_q_values: bool = False,
+    return_features: bool = False,
 ) -> tuple[torch.Tensor, ...]:
     """:func:`training_losses` on :func:`batch_tensors`' output; the networks may be
     modules or one seed's view of stacked networks (inside vmap)."""
@@ -95,7 +100,9 @@ def losses_on_tensors(
     )  # fmt: skip
     # One online forward serves the taken-action values, the double-Q argmax and the
     # auxiliary prediction (which reads the encoder's features).
-    q_values, features = online_forward(online, obs_seq, with_features=predictor is not None)
+    q_values, features = online_forward(
+        online, obs_seq, with_features=predictor is not None or return_features
+    )
     q_taken = q_values[:, :-1].gather(2, (actions + 1)[..., None]).squeeze(2)  # [B, N]
     with torch.no_grad():
         # Double Q-learning: the online network picks the action at every observation,
@@ -106,10 +113,14 @@ def losses_on_tensors(
         bootstrap[:, -1] = 0.0  # observation N follows the terminal step
         td_target = n_step_targets(rewards, bootstrap, settings.gamma, settings.n_step)  # [B, N]
     td = td_regression_loss(q_taken, td_target, settings.loss)
-    if predictor is None:
-        return (td, None, q_values) if return_q_values else (td, None)
-    aux = next_voltage_loss(online, predictor, features, obs_seq, actions)
-    return (td, aux, q_values) if return_q_values else (td, aux)
+    aux = None
+    if predictor is not None:
+        aux = next_voltage_loss(online, predictor, features, obs_seq, actions)
+    return (
+        (td, aux)
+        + ((q_values,) if return_q_values else ())
+        + ((features,) if return_features else ())
+    )
 
 
 def online_forward(
@@ -144,6 +155,18 @@ def next_voltage_loss(
     )  # [B, N, n]
     predicted = predictor(features[:, :-1], actions)  # [B, N, n]
     return F.mse_loss(predicted, next_voltage)
+
+
+def connectivity_loss(
+    head: torch.nn.Module, features: torch.Tensor, target_inputs: torch.Tensor
+) -> torch.Tensor:
+    """The privileged auxiliary loss: cross-entropy of the head's every-step guess of each
+    observed neuron's synapse onto the target, from the features [B, N + 1, (n,) D],
+    against the training network's signs ``target_inputs`` [B, n] (-1, 0, +1), averaged
+    over episodes, steps and neurons."""
+    logits = head(features)  # [B, N+1, n, 3]
+    classes = (target_inputs.long() + 1)[:, None].expand(-1, logits.shape[1], -1)  # [B, N+1, n]
+    return F.cross_entropy(logits.flatten(0, 2), classes.flatten())
 
 
 def td_loss(

@@ -28,12 +28,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from spikectl.agents import masked_q
+from spikectl.agents import make_connectivity_predictor, masked_q
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.planning import IdentifyAndPlan
 from spikectl.training.learners.dqn import DQNLearner
-from spikectl.training.learners.dqn_losses import training_losses
+from spikectl.training.learners.dqn_losses import connectivity_loss, training_losses
 from spikectl.training.learners.teachers import TeacherMixedPolicy, teacher_labels
 
 
@@ -68,6 +68,7 @@ class GuidedDQNLearner(DQNLearner):
 
     metric_fields = DQNLearner.metric_fields + (
         "imitation_weight", "imitation_loss", "teacher_agreement", "teacher_seconds",
+        "connectivity_loss",
     )  # fmt: skip
 
     labelled_replay = True
@@ -90,6 +91,22 @@ class GuidedDQNLearner(DQNLearner):
         self.mixed_policy: TeacherMixedPolicy | None = None
         """This round's policy when the teacher plays some of its episodes, else None."""
         self.imitation_loss_sum, self.agreement_sum, self.imitation_count = 0.0, 0.0, 0
+        self.connectivity_loss_sum, self.connectivity_count = 0.0, 0
+        # Each training network's observed neurons' synapses onto its target: [C, n].
+        self.target_inputs = np.stack(
+            [np.sign(c.weights[c.observable, c.target]) for c in train_set]
+        ).astype(np.int8)
+
+    def build_connectivity_head(self, config) -> torch.nn.Module | None:
+        """The privileged connectivity head when ``connectivity_weight > 0``, seeded from
+        ``config.train.seed`` on a stream of its own (the networks' initialisation and the
+        voltage head's are unchanged)."""
+        if config.learner.connectivity_weight <= 0:
+            return None
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(np.random.SeedSequence([config.train.seed, 2]).generate_state(1)[0])
+            head = make_connectivity_predictor(self.network)
+        return head.to(config.train.device)
 
     def imitation_weight(self, episode: int) -> float:
         return self.settings.imitation_weight_at(episode, self.total_episodes)
@@ -122,19 +139,30 @@ class GuidedDQNLearner(DQNLearner):
                 played=played,
             )  # fmt: skip
             self.teacher_seconds += time.process_time() - started
+        privileged = None if self.connectivity_head is None else self.target_inputs[contexts]
         self.replay.add(
             episodes.voltage, episodes.actions, episodes.rewards, self.targets[contexts],
-            self.patterns[contexts], episodes.action_mask, labels,
+            self.patterns[contexts], episodes.action_mask, labels, privileged,
         )  # fmt: skip
 
     def batch_loss(self, batch, episode: int) -> torch.Tensor:
         weight = self.imitation_weight(episode)
-        if weight <= 0:
+        privileged = self.connectivity_head is not None
+        if weight <= 0 and not privileged:
             return super().batch_loss(batch, episode)
-        td, aux, q_values = training_losses(
+        td, aux, q_values, *features = training_losses(
             self.network, self.target, batch, self.settings, self.predictor, self.device,
-            return_q_values=True,
+            return_q_values=True, return_features=privileged,
         )  # fmt: skip
+        loss = self.td_and_aux_loss(td, aux)
+        if privileged:
+            target_inputs = torch.as_tensor(batch.target_inputs, device=self.device)  # [B, n]
+            connectivity = connectivity_loss(self.connectivity_head, features[0], target_inputs)
+            self.connectivity_loss_sum += connectivity.item()
+            self.connectivity_count += 1
+            loss = loss + self.settings.connectivity_weight * connectivity
+        if weight <= 0:
+            return loss
         labels = torch.as_tensor(batch.labels, device=self.device)  # [B, N]
         legal = torch.as_tensor(batch.action_masks, device=self.device)[:, None]  # [B, 1, n+1]
         imitation, agreement = large_margin_loss(
@@ -143,7 +171,7 @@ class GuidedDQNLearner(DQNLearner):
         self.imitation_loss_sum += imitation.item()
         self.agreement_sum += agreement.item()
         self.imitation_count += 1
-        return self.td_and_aux_loss(td, aux) + weight * imitation
+        return loss + weight * imitation
 
     def row_metrics(self, episode: int) -> dict[str, float]:
         # Means over the updates since the last row that imitated (the row where the
@@ -155,8 +183,13 @@ class GuidedDQNLearner(DQNLearner):
             "imitation_loss": self.imitation_loss_sum / n if n else math.nan,
             "teacher_agreement": self.agreement_sum / n if n else math.nan,
             "teacher_seconds": self.teacher_seconds,
-        }
+            "connectivity_loss": (
+                self.connectivity_loss_sum / self.connectivity_count
+                if self.connectivity_count else math.nan
+            ),
+        }  # fmt: skip
         self.imitation_loss_sum, self.agreement_sum, self.imitation_count = 0.0, 0.0, 0
+        self.connectivity_loss_sum, self.connectivity_count = 0.0, 0
         return row
 
     def progress(self, episode: int) -> dict[str, str]:
@@ -169,6 +202,11 @@ class GuidedDQNLearner(DQNLearner):
             "imitation_loss_sum": float(self.imitation_loss_sum),
             "agreement_sum": float(self.agreement_sum),
             "imitation_count": int(self.imitation_count),
+            "connectivity_head": (
+                None if self.connectivity_head is None else self.connectivity_head.state_dict()
+            ),
+            "connectivity_loss_sum": float(self.connectivity_loss_sum),
+            "connectivity_count": int(self.connectivity_count),
         }
 
     def load_state_dict(self, state: Mapping[str, Any]) -> None:
@@ -177,6 +215,11 @@ class GuidedDQNLearner(DQNLearner):
         self.imitation_loss_sum = float(state["imitation_loss_sum"])
         self.agreement_sum = float(state["agreement_sum"])
         self.imitation_count = int(state["imitation_count"])
+        if self.connectivity_head is not None:
+            self.connectivity_head.load_state_dict(state["connectivity_head"])
+        # Checkpoints of guided runs from before the connectivity head have no sums.
+        self.connectivity_loss_sum = float(state.get("connectivity_loss_sum", 0.0))
+        self.connectivity_count = int(state.get("connectivity_count", 0))
 
 
 __all__ = ["GuidedDQNLearner", "large_margin_loss"]

@@ -44,6 +44,10 @@ class GuidedConfig(DQNConfig):
     teacher_episodes: float = 0.0
     """Share of the episodes the teacher plays itself at the start (DAgger's mixing),
     decaying linearly to 0 over the imitation anneal; its episodes are labelled for free."""
+    connectivity_weight: float = 0.0
+    """Weight of an auxiliary loss asking the features to say, at every step, each observed
+    neuron's synapse onto the target, labelled from the training networks' weights
+    (privileged, read only by the loss; 0 = off)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -53,7 +57,7 @@ class GuidedConfig(DQNConfig):
             )
         check_int("teacher_width", self.teacher_width, 1, what="a positive integer")
         for name in ("imitation_weight", "imitation_weight_end", "imitation_anneal_fraction",
-                     "imitation_margin", "teacher_episodes"):  # fmt: skip
+                     "imitation_margin", "teacher_episodes", "connectivity_weight"):  # fmt: skip
             value = getattr(self, name)
             if isinstance(value, bool) or not isinstance(value, (int, float)):
                 raise ConfigError(name, f"must be a number, got {value!r}")
