@@ -12,19 +12,20 @@ set -euo pipefail
 folder=$1 seed=$2
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 case $folder in
-    # The guided preset of the day (floor 0.2) is what these were made with, so each
-    # command pins the setting that differs from it.
-    guided-compiled)      flags=(--imitation-weight-end 0) ;;   # the pre-2026-11-24 preset
-    guided-mix50)         flags=(--imitation-weight-end 0 --teacher-episodes 0.5) ;;
-    guided-floor20)       flags=() ;;                           # the guided preset itself
-    guided-floor20-mix50) flags=(--teacher-episodes 0.5) ;;
-    guided-floor50)       flags=(--imitation-weight-end 0.5) ;;
+    # Each command pins the settings that differ from the guided preset of the day. The
+    # preset had the imitation floor 0.2 from 2026-11-24 and the connectivity loss (0.1)
+    # from the second stop of that day; the rows made before pin it off.
+    guided-compiled)      flags=(--connectivity-weight 0 --imitation-weight-end 0) ;;   # the pre-2026-11-24 preset
+    guided-mix50)         flags=(--connectivity-weight 0 --imitation-weight-end 0 --teacher-episodes 0.5) ;;
+    guided-floor20)       flags=(--connectivity-weight 0) ;;
+    guided-floor20-mix50) flags=(--connectivity-weight 0 --teacher-episodes 0.5) ;;
+    guided-floor50)       flags=(--connectivity-weight 0 --imitation-weight-end 0.5) ;;
     # Four times the environment steps (about 60 core-minutes, issue 23's budget).
-    guided-floor20-mix50-4x) flags=(--teacher-episodes 0.5 --total-env-steps 1056000) ;;
+    guided-floor20-mix50-4x) flags=(--connectivity-weight 0 --teacher-episodes 0.5 --total-env-steps 1056000) ;;
     # The privileged connectivity loss (2026-11-24, second stop of the day).
+    guided-conn01)        flags=() ;;                           # the guided preset itself
     guided-conn1)         flags=(--connectivity-weight 1) ;;
-    guided-conn01)        flags=(--connectivity-weight 0.1) ;;
-    guided-conn01-4x)     flags=(--connectivity-weight 0.1 --total-env-steps 1056000) ;;
+    guided-conn01-4x)     flags=(--total-env-steps 1056000) ;;
     pqn)                  exec spikectl train pqn --seed "$seed" --run-dir "runs/$folder/seed=$seed" ;;
     *) echo "unknown folder $folder" >&2; exit 2 ;;
 esac

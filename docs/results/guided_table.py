@@ -26,10 +26,12 @@ GROUPS = {
     "guided, teacher told the weights (pilot, 1 seed)": "guided-told-weights-pilot",
     "guided, teacher identify-and-plan compiled (2026-11-24; the same numbers)": "guided-compiled",
     "guided, teacher plays 50% → 0 of the episodes (`--teacher-episodes 0.5`)": "guided-mix50",
-    "guided, imitation floor 0.2 (`spikectl train guided`, the main job)": "guided-floor20",
+    "guided, imitation floor 0.2 (the main job before the connectivity loss)": "guided-floor20",
     "guided, floor 0.2 and teacher plays 50% → 0": "guided-floor20-mix50",
     "guided, imitation floor 0.5": "guided-floor50",
     "guided, floor 0.2 and teacher plays 50% → 0, 4x the steps": "guided-floor20-mix50-4x",
+    "guided + connectivity loss 0.1 (`spikectl train guided`, the main job)": "guided-conn01",
+    "guided + connectivity loss 0.1, 4x the steps": "guided-conn01-4x",
     "PQN (`spikectl train pqn`)": "pqn",
 }
 

@@ -28,10 +28,12 @@ GROUPS = {
     "guided, weaned to 0 (teacher before compilation)": "guided-identify",
     "guided, teacher told the weights (pilot)": "guided-told-weights-pilot",
     "guided, teacher plays 50% -> 0": "guided-mix50",
-    "guided, imitation floor 0.2 (the main job)": "guided-floor20",
+    "guided, imitation floor 0.2": "guided-floor20",
     "guided, floor 0.2 + teacher plays 50% -> 0": "guided-floor20-mix50",
     "guided, imitation floor 0.5": "guided-floor50",
     "guided, floor 0.2 + teacher plays 50% -> 0, 4x steps": "guided-floor20-mix50-4x",
+    "guided + connectivity loss 0.1 (the main job)": "guided-conn01",
+    "guided + connectivity loss 0.1, 4x steps": "guided-conn01-4x",
     "PQN": "pqn",
 }
 

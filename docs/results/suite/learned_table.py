@@ -24,6 +24,16 @@ TASKS = ("paper", "n16", "n32", "noise1", "noise2", "noise4", "hidden25", "stoch
          "heterogeneous", "background")  # fmt: skip
 
 
+TRANSFER_PRESETS = {
+    "quick": "`quick`",
+    "guided": "`guided`, floor 0.2",
+    "guided-conn": "`guided` + connectivity loss",
+}
+"""The folders of trained/ whose seeds, trained on `paper`, were played on every task
+(transfer.csv) → their label: the quick preset, the guided preset before the connectivity
+loss (runs of docs/results/guided-floor20) and the guided preset since (guided-conn01)."""
+
+
 def read_rows(path: Path) -> list[dict[str, str]]:
     with open(path, newline="") as file:
         return list(csv.DictReader(file))
@@ -60,32 +70,39 @@ def print_leaderboard() -> None:
         table = by_task(HERE / f"{name}.csv")
         score = np.mean([float(table[task]["normalised"]) for task in TASKS])
         print(f"| {label} | none | {score:.3f} |")
-    for preset in ("guided", "quick"):
+    for preset in reversed(list(TRANSFER_PRESETS)):
         files = sorted((HERE / "trained" / preset / "paper").glob("seed=*/transfer.csv"))
         scores = [np.mean([float(by_task(path)[task]["normalised"]) for task in TASKS])
                   for path in files]  # fmt: skip
         minutes = np.mean([core_minutes(path.parent / "metrics.csv") for path in files])
-        print(f"| TDRQN `{preset}`, trained on `paper` ({len(files)} seeds) | {minutes:.1f} | "
-              f"{np.mean(scores):.3f} ± {np.std(scores):.3f} |")
+        print(
+            f"| TDRQN {TRANSFER_PRESETS[preset]}, trained on `paper` ({len(files)} seeds) "
+            f"| {minutes:.1f} | "
+            f"{np.mean(scores):.3f} ± {np.std(scores):.3f} |"
+        )
 
 
 def main() -> None:
     planner = by_task(HERE / "identify-and-plan.csv")
-    transfer = {preset: transfer_rows(preset) for preset in ("quick", "guided")}
-    print("| task | identify-and-plan | TDRQN `quick` | − planner | TDRQN `guided` | − planner |")
-    print("|---|---:|---:|---:|---:|---:|")
+    transfer = {preset: transfer_rows(preset) for preset in TRANSFER_PRESETS}
+    print("| task | identify-and-plan | "
+          + " | ".join(f"TDRQN {label} | − planner" for label in TRANSFER_PRESETS.values())
+          + " |")  # fmt: skip
+    print("|---|---:|" + "---:|---:|" * len(TRANSFER_PRESETS))
     for task in TASKS:
         reference = float(planner[task]["mean_return"])
         cells = []
-        for returns in (transfer["quick"][task], transfer["guided"][task]):
+        for returns in (transfer[preset][task] for preset in TRANSFER_PRESETS):
             cells += [f"{returns.mean():.3f} ± {returns.std():.3f}",
                       f"{returns.mean() - reference:+.3f}"]  # fmt: skip
         print(f"| `{task}` | {reference:.3f} | " + " | ".join(cells) + " |")
     print()
     print_leaderboard()
     print()
-    print("| task | identify-and-plan | TDRQN quick, trained on the task (seeds) | IQM [95% CI] "
-          "| normalised | learned − planner | core-minutes |")
+    print(
+        "| task | identify-and-plan | TDRQN quick, trained on the task (seeds) | IQM [95% CI] "
+        "| normalised | learned − planner | core-minutes |"
+    )
     print("|---|---:|---:|---:|---:|---:|---:|")
     for task in TASKS:
         files = seeds_of("quick", task)

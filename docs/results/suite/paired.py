@@ -3,13 +3,16 @@
 
     python docs/results/suite/paired.py [TASK ...]       # needs runs/suite/guided/paper
     python docs/results/suite/paired.py --trained-on-task stochastic noise2 hidden25
+    python docs/results/suite/paired.py --connectivity [TASK ...]  # runs/suite/guided-conn/paper
 
 For each task it plays identify-and-plan and each seed's best_model.pt on the task's 100
 test networks under the suite's protocol, takes the per-network difference (the seeds'
 mean return minus the planner's), and gives its mean with a 95% bootstrap interval over
 the networks (10 000 resamples, seed 0). The seeds are those of runs/suite/guided/paper
 (paired.csv beside this file), or with --trained-on-task those of
-runs/suite/quick/TASK (paired-trained-on-task.csv).
+runs/suite/quick/TASK (paired-trained-on-task.csv), or with --connectivity those of the
+guided preset with the connectivity loss, runs/suite/guided-conn/paper (links to
+runs/guided-conn01/seed=S; paired-guided-conn.csv).
 """
 
 from __future__ import annotations
@@ -29,7 +32,7 @@ HERE = Path(__file__).resolve().parent
 SEEDS = (0, 1, 2)
 
 
-def main(tasks: list[str], trained_on_task: bool = False) -> None:
+def main(tasks: list[str], trained_on_task: bool = False, connectivity: bool = False) -> None:
     rows = []
     for name in tasks:
         spec = suite.task(name)
@@ -38,7 +41,11 @@ def main(tasks: list[str], trained_on_task: bool = False) -> None:
         env = NeuronControlEnv(contexts=contexts, params=contexts.params,
                                extensions=spec.extensions)  # fmt: skip
         planner, _ = suite.play(name, "test", load_controller("identify-and-plan", env=env))
-        folder = f"runs/suite/quick/{name}" if trained_on_task else "runs/suite/guided/paper"
+        folder = (
+            f"runs/suite/quick/{name}"
+            if trained_on_task
+            else f"runs/suite/{'guided-conn' if connectivity else 'guided'}/paper"
+        )
         runs = [Path(f"{folder}/seed={seed}") for seed in SEEDS]
         learned = np.mean([
             suite.play(name, "test", GreedyController(
@@ -54,7 +61,13 @@ def main(tasks: list[str], trained_on_task: bool = False) -> None:
                      "networks_better": int((difference > 0).sum()),
                      "networks_worse": int((difference < 0).sum())})  # fmt: skip
         print(rows[-1])
-    out = HERE / ("paired-trained-on-task.csv" if trained_on_task else "paired.csv")
+    out = HERE / (
+        "paired-trained-on-task.csv"
+        if trained_on_task
+        else "paired-guided-conn.csv"
+        if connectivity
+        else "paired.csv"
+    )
     with open(out, "w", newline="") as file:
         writer = csv.DictWriter(file, fieldnames=list(rows[0]), lineterminator="\n")
         writer.writeheader()
@@ -63,6 +76,8 @@ def main(tasks: list[str], trained_on_task: bool = False) -> None:
 
 if __name__ == "__main__":
     arguments = sys.argv[1:]
-    on_task = "--trained-on-task" in arguments
-    arguments = [a for a in arguments if a != "--trained-on-task"]
-    main(arguments or list(suite.TASKS), on_task)
+    flags = {"--trained-on-task", "--connectivity"}
+    tasks = [a for a in arguments if a not in flags]
+    main(
+        tasks or list(suite.TASKS), "--trained-on-task" in arguments, "--connectivity" in arguments
+    )
