@@ -52,8 +52,10 @@ def main() -> None:
         ("quick/paper/seed=*/transfer.csv", "TDRQN quick, trained on paper", "s--", "tab:purple"),
         ("quick/{task}/seed=*/benchmark.csv", "TDRQN quick, trained on the task", "D-",
          "tab:brown"),
-        ("guided/paper/seed=*/transfer.csv", "TDRQN guided (main job), trained on paper", "^-",
+        ("guided/paper/seed=*/transfer.csv", "TDRQN guided, floor 0.2, trained on paper", "^-",
          "tab:pink"),
+        ("guided-conn/paper/seed=*/transfer.csv",
+         "TDRQN guided + connectivity loss (main job), trained on paper", "v-", "tab:olive"),
     ):
         for index, (axis, tasks) in enumerate(zip(axes, (NOISE, HIDDEN), strict=True)):
             xs, stats = seed_returns(pattern, tasks)

@@ -27,3 +27,15 @@ for seed in 0 1 2; do
     spikectl benchmark "runs/suite/guided/paper/seed=$seed" --model best --task all \
         --out "$out/trained/guided/paper/seed=$seed/transfer.csv"
 done
+# The main job since the second stop of 2026-11-24 (`spikectl train guided`, with the
+# connectivity loss; runs/suite/guided-conn/paper/seed=S links to runs/guided-conn01/seed=S,
+# made by docs/results/guided_runs.sh guided-conn01 S) on every task, and network by
+# network against identify-and-plan (paired-guided-conn.csv).
+for seed in 0 1 2; do
+    mkdir -p "$out/trained/guided-conn/paper/seed=$seed"
+    cp "runs/suite/guided-conn/paper/seed=$seed/config.json" \
+        "runs/suite/guided-conn/paper/seed=$seed/metrics.csv" "$out/trained/guided-conn/paper/seed=$seed/"
+    spikectl benchmark "runs/suite/guided-conn/paper/seed=$seed" --model best --task all \
+        --out "$out/trained/guided-conn/paper/seed=$seed/transfer.csv"
+done
+python docs/results/suite/paired.py --connectivity
