@@ -273,16 +273,28 @@ def test_run_with_teacher_episodes_resumes_exactly(tmp_path, interrupt_after_rou
     assert isinstance(first, TeacherMixedPolicy) and first.teacher_plays.all()
     assert not isinstance(learner.collection_policy(config.total_episodes - 1),
                           TeacherMixedPolicy)  # fmt: skip
-    reference = train(config, tmp_path / "reference")
+    reference, resumed = trained_and_resumed(config, tmp_path, interrupt_after_rounds)
     assert reference[1]["teacher_seconds"] > 0
+    assert without_clocks_or_nan(resumed) == without_clocks_or_nan(reference)
+
+
+def trained_and_resumed(config, tmp_path, interrupt_after_rounds):
+    """The metrics of a run trained in one go and of the same run killed after 3 rounds
+    and resumed."""
+    reference = train(config, tmp_path / "reference")
     restore = interrupt_after_rounds(3)
     with pytest.raises(KeyboardInterrupt):
         train(config, tmp_path / "killed")
     restore()
-    resumed = train(config, tmp_path / "killed", resume=True)
-    drop = lambda rows: [{k: v for k, v in row.items() if k not in CLOCKS and not  # noqa: E731
-                          (isinstance(v, float) and math.isnan(v))} for row in rows]  # fmt: skip
-    assert drop(resumed) == drop(reference)
+    return reference, train(config, tmp_path / "killed", resume=True)
+
+
+def without_clocks_or_nan(rows):
+    return [
+        {k: v for k, v in row.items()
+         if k not in CLOCKS and not (isinstance(v, float) and math.isnan(v))}
+        for row in rows
+    ]  # fmt: skip
 
 
 def test_connectivity_loss_by_hand_and_head_shapes():
@@ -358,15 +370,8 @@ def test_connectivity_loss_learns_and_the_run_resumes_exactly(tmp_path, interrup
     config = dataclasses.replace(
         SHORT, learner=dataclasses.replace(SHORT.learner, connectivity_weight=1.0)
     )
-    reference = train(config, tmp_path / "reference")
+    reference, resumed = trained_and_resumed(config, tmp_path, interrupt_after_rounds)
     losses = [row["connectivity_loss"] for row in reference[1:]]
     assert losses[0] < 1.10 and losses[-1] < losses[0] - 0.1
-    restore = interrupt_after_rounds(3)
-    with pytest.raises(KeyboardInterrupt):
-        train(config, tmp_path / "killed")
-    restore()
-    resumed = train(config, tmp_path / "killed", resume=True)
-    drop = lambda rows: [{k: v for k, v in row.items() if k not in CLOCKS and not  # noqa: E731
-                          (isinstance(v, float) and math.isnan(v))} for row in rows]  # fmt: skip
-    assert drop(resumed) == drop(reference)
+    assert without_clocks_or_nan(resumed) == without_clocks_or_nan(reference)
     assert all(math.isnan(row["connectivity_loss"]) for row in train(SHORT, tmp_path / "off"))
