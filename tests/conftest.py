@@ -13,8 +13,11 @@ import torch
 
 
 def _comparable(rows: list[dict]) -> list[dict]:
-    clocks = ("wall_time_s", "cpu_time_s")
-    return [{k: None if v != v else v for k, v in row.items() if k not in clocks} for row in rows]
+    from spikectl.training.run import CLOCK_FIELDS
+
+    return [
+        {k: None if v != v else v for k, v in row.items() if k not in CLOCK_FIELDS} for row in rows
+    ]
 
 
 def _assert_same_weights(path_a: Path, path_b: Path) -> None:

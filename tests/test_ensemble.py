@@ -20,12 +20,12 @@ from spikectl.agents import ARCHITECTURES, make_agent
 from spikectl.agents.stacked import StackableLSTM, StackedNetworks
 from spikectl.training.learners.dqn import build_networks
 from spikectl.training.presets import SMOKE
-from spikectl.training.run import train, train_group, train_seeds
+from spikectl.training.run import CLOCK_FIELDS, train, train_group, train_seeds
 from spikectl.training.run_files import RunDirError, read_metrics
 from spikectl.training.stacked_update import clip_grad_norm_per_seed
 from spikectl.training.torch_files import load_model_weights
 
-TIMES = ("wall_time_s", "cpu_time_s")
+TIMES = CLOCK_FIELDS
 TINY = SMOKE.with_changes(total_env_steps=24 * 20 * 8, eval_every_episodes=64,
                           checkpoint_every_episodes=64,
                           learning_rate_end_fraction=0.5)  # fmt: skip

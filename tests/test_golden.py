@@ -8,6 +8,7 @@ tests skip and say so (numerics differ between CPU kinds: docs/reliability.md)."
 from __future__ import annotations
 
 import json
+import math
 import os
 import signal
 import subprocess
@@ -85,7 +86,11 @@ def test_a_run_of_the_double_q_trainer_before_the_refactor_resumes_exactly(tmp_p
     config's train section). Resumed today, it ends as the uninterrupted run did."""
     import shutil
 
+    from spikectl.training.run_files import read_metrics
+
     run_dir = tmp_path / "run"
     shutil.copytree(Path(__file__).parent / "data" / "format2-smoke-run", run_dir)
     run_cli("train", "--resume", str(run_dir))
     assert record(run_dir) == GOLDEN["runs"]["smoke-seed0"]
+    # It had no evaluation clock, and says so rather than counting from zero.
+    assert all(math.isnan(row["eval_cpu_time_s"]) for row in read_metrics(run_dir))

@@ -23,9 +23,9 @@ from spikectl.training.learners.guided import large_margin_loss
 from spikectl.training.learners.teachers import teacher_labels
 from spikectl.training.presets import PRESETS, SMOKE
 from spikectl.training.replay import NO_LABEL, EpisodeReplay
-from spikectl.training.run import train
+from spikectl.training.run import CLOCK_FIELDS, train
 
-CLOCKS = ("wall_time_s", "cpu_time_s", "teacher_seconds")
+CLOCKS = (*CLOCK_FIELDS, "teacher_seconds")
 
 
 def guided(config: Experiment = SMOKE, **changes) -> Experiment:

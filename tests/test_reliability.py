@@ -37,7 +37,7 @@ from spikectl.files import FileWriteError
 from spikectl.training.checkpoint import read_checkpoint
 from spikectl.training.config import EnvConfig
 from spikectl.training.presets import SMOKE
-from spikectl.training.run import train
+from spikectl.training.run import CLOCK_FIELDS, train
 from spikectl.training.run_files import RunDirError, run_lock
 from spikectl.training.torch_files import load_model_weights, payload_checksum, save_model
 
@@ -515,7 +515,7 @@ def test_full_or_read_only_disk_is_one_line_and_no_trap(name, code, tmp_path, ca
 
 def metric_rows(run: Path) -> list[list[str]]:
     rows = [line.split(",") for line in (run / "metrics.csv").read_text().splitlines()]
-    clocks = {rows[0].index("wall_time_s"), rows[0].index("cpu_time_s")}
+    clocks = {rows[0].index(clock) for clock in CLOCK_FIELDS}
     return [[v for i, v in enumerate(row) if i not in clocks] for row in rows]  # no clocks
 
 

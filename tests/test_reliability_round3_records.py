@@ -133,6 +133,7 @@ CRAFTED = {
     "seeds out of lockstep": lambda p: p["runs"][1].update(episodes=8),
     "an episode past the end": lambda p: [run.update(episodes=10**9) for run in p["runs"]],
     "a clock of NaN": lambda p: p["runs"][0].update(wall_time_s=float("nan")),
+    "a negative evaluation clock": lambda p: p["runs"][0].update(eval_cpu_time_s=-1.0),
     "an extra entry": lambda p: p.update(surprise=torch.zeros(3)),
     "an extra learner entry": lambda p: _seed0(p).update(extra=1),
     "no replay buffer": lambda p: _seed0(p).pop("replay"),

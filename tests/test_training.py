@@ -5,6 +5,7 @@ from __future__ import annotations
 import errno
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -130,6 +131,11 @@ def test_two_runs_with_one_seed_are_bit_identical(tmp_path, comparable, assert_s
     assert [row["episode"] for row in rows] == [0, 80, 160, 240, 320]
     assert rows[-1]["env_steps"] == SMOKE.total_episodes * SMOKE.env.episode_length
     assert math.isnan(rows[0]["loss"]) and rows[-1]["loss"] > 0
+    # The evaluation clock: zero before the first evaluation, then growing, and a part
+    # of the run's core-seconds.
+    evaluating = [row["eval_cpu_time_s"] for row in rows]
+    assert evaluating[0] == 0.0 and all(b > a for a, b in zip(evaluating, evaluating[1:]))
+    assert all(row["eval_cpu_time_s"] < row["cpu_time_s"] for row in rows[1:])
     for name in ("config.json", "baselines.json", "checkpoint.pt", "train_contexts.npz",
                  "test_contexts.npz", "tensorboard"):  # fmt: skip
         assert (tmp_path / "a" / name).exists(), name
@@ -351,6 +357,7 @@ def test_cli_train_then_evaluate(tmp_path, run_cli):
     out = run_cli("train", "smoke", "--arch", "ddrqn", "--total-env-steps", "1600",
                   "--run-dir", str(run))  # fmt: skip
     assert "do-nothing" in out.stdout and (run / "learning_curve.png").exists()
+    assert re.search(r"core minutes, \d+\.\d of them evaluating\)", out.stdout), out.stdout
     evaluated = run_cli("evaluate", str(run)).stdout
     assert "train" in evaluated and "test" in evaluated and "do nothing 0.500" in evaluated
     # Evaluate on a set the user brings: a per-neuron agent runs on 7-neuron networks.

@@ -31,6 +31,7 @@ GROUPS = {
     "guided, imitation floor 0.5": "guided-floor50",
     "guided, floor 0.2 and teacher plays 50% → 0, 4x the steps": "guided-floor20-mix50-4x",
     "guided + connectivity loss 0.1 (`spikectl train guided`, the main job)": "guided-conn01",
+    "guided + connectivity loss 1": "guided-conn1",
     "guided + connectivity loss 0.1, 4x the steps": "guided-conn01-4x",
     "PQN (`spikectl train pqn`)": "pqn",
 }

@@ -191,9 +191,11 @@ def _print_run(config: Experiment, run_dir: Path, metrics: list[dict]) -> None:
             f"{'best_model.pt' if _holds_best(run_dir, best['episode']) else 'not kept'})"
         )
     minutes, core_minutes = final["wall_time_s"] / 60, final["cpu_time_s"] / 60
+    evaluating = final.get("eval_cpu_time_s", math.nan) / 60
+    of_which = "" if math.isnan(evaluating) else f", {evaluating:.1f} of them evaluating"
     print(
         f"{final['env_steps']:,} environment steps, {final['updates']:,} updates, "
-        f"{minutes:.1f} wall minutes ({core_minutes:.1f} core minutes) on "
+        f"{minutes:.1f} wall minutes ({core_minutes:.1f} core minutes{of_which}) on "
         f"{config.train.torch_threads or torch_threads()} thread(s)"
     )
     print(f"wrote {run_dir / 'model.pt'}, {run_dir / 'metrics.csv'} and {curve}")

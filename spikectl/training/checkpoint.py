@@ -16,6 +16,7 @@ the double-Q trainer before, is read too. Format 1 is refused.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -67,6 +68,9 @@ class RunState:
     wall_time_s: float = 0.0
     cpu_time_s: float = 0.0
     """Process CPU seconds (all threads) spent on this seed: its core-seconds."""
+    eval_cpu_time_s: float = 0.0
+    """The part of ``cpu_time_s`` spent in the greedy evaluations (every set, every
+    ``eval_every_episodes``): core-seconds that measure the run, not train it."""
     metrics: list[dict] = field(default_factory=list)
     baselines: dict[str, dict[str, float]] = field(default_factory=dict)
     contexts: dict[str, str] = field(default_factory=dict)
@@ -83,6 +87,7 @@ class RunState:
             "episodes": int(self.episodes),
             "wall_time_s": float(self.wall_time_s),
             "cpu_time_s": float(self.cpu_time_s),
+            "eval_cpu_time_s": float(self.eval_cpu_time_s),
             "metrics": [
                 {key: _plain(value) for key, value in row.items()} for row in self.metrics
             ],  # fmt: skip
@@ -101,6 +106,8 @@ class RunState:
             wall_time_s=entry["wall_time_s"],
             # Checkpoints of spikectl before the cpu_time_s column have no CPU clock yet.
             cpu_time_s=float(entry.get("cpu_time_s", 0.0)),
+            # ... and those before 2026-11-24 no evaluation clock (NaN: not measured).
+            eval_cpu_time_s=float(entry.get("eval_cpu_time_s", math.nan)),
             metrics=entry["metrics"],
             baselines=entry["baselines"],
             contexts={str(k): str(v) for k, v in dict(entry.get("contexts", {})).items()},

@@ -22,8 +22,8 @@ from spikectl.training.run_files import RunDirError
 
 TOP_ENTRIES = {"format", "format_version", "spikectl_version", "configs", "stacked",
                "learners", "runs", "checksum"}  # fmt: skip
-RUN_ENTRIES = {"rng", "episodes", "wall_time_s", "cpu_time_s", "metrics", "baselines",
-               "contexts", "best_model"}  # fmt: skip
+RUN_ENTRIES = {"rng", "episodes", "wall_time_s", "cpu_time_s", "eval_cpu_time_s", "metrics",
+               "baselines", "contexts", "best_model"}  # fmt: skip
 ROW_NEEDS = ("episode", "env_steps", "train_return", "test_return")
 BASELINES = ("do_nothing", "random")
 
@@ -56,9 +56,11 @@ def check_runs(path: Path, runs: list[dict[str, Any]], total_episodes: list[int]
         seed = f"run {k}: " if len(runs) > 1 else ""
         if not 0 <= run["episodes"] <= total:
             raise _damaged(path, f"{seed}episode {run['episodes']} is outside 0..{total}")
-        for clock in ("wall_time_s", "cpu_time_s"):
+        for clock in ("wall_time_s", "cpu_time_s", "eval_cpu_time_s"):
             value = run.get(clock, 0.0)
-            if not _is_number(value) or not math.isfinite(value) or value < 0:
+            # A run resumed from a checkpoint before the evaluation clock never has one.
+            unmeasured = clock == "eval_cpu_time_s" and _is_number(value) and math.isnan(value)
+            if not unmeasured and (not _is_number(value) or not math.isfinite(value) or value < 0):
                 raise _damaged(path, f"{seed}{clock} is not a time in seconds: {value!r}")
         _check_metrics(path, seed, run["metrics"], run["episodes"])
         baselines = run["baselines"]
