@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import errno
+import itertools
 import json
 import math
 import re
@@ -134,7 +135,7 @@ def test_two_runs_with_one_seed_are_bit_identical(tmp_path, comparable, assert_s
     # The evaluation clock: zero before the first evaluation, then growing, and a part
     # of the run's core-seconds.
     evaluating = [row["eval_cpu_time_s"] for row in rows]
-    assert evaluating[0] == 0.0 and all(b > a for a, b in zip(evaluating, evaluating[1:]))
+    assert evaluating[0] == 0.0 and all(b > a for a, b in itertools.pairwise(evaluating))
     assert all(row["eval_cpu_time_s"] < row["cpu_time_s"] for row in rows[1:])
     for name in ("config.json", "baselines.json", "checkpoint.pt", "train_contexts.npz",
                  "test_contexts.npz", "tensorboard"):  # fmt: skip
