@@ -25,7 +25,6 @@ from spikectl.training.run_files import RunDirError, read_metrics
 from spikectl.training.stacked_update import clip_grad_norm_per_seed
 from spikectl.training.torch_files import load_model_weights
 
-TIMES = CLOCK_FIELDS
 TINY = SMOKE.with_changes(total_env_steps=24 * 20 * 8, eval_every_episodes=64,
                           checkpoint_every_episodes=64,
                           learning_rate_end_fraction=0.5)  # fmt: skip
@@ -35,7 +34,8 @@ TINY = SMOKE.with_changes(total_env_steps=24 * 20 * 8, eval_every_episodes=64,
 def comparable(rows: list[dict]) -> list[dict]:
     """Rows without the clocks, NaN as a string (so that equal rows compare equal)."""
     return [
-        {k: "nan" if v != v else float(v) for k, v in row.items() if k not in TIMES} for row in rows
+        {k: "nan" if v != v else float(v) for k, v in row.items() if k not in CLOCK_FIELDS}
+        for row in rows
     ]
 
 
@@ -221,7 +221,8 @@ def test_group_resume_after_sigkill_is_exact_and_seeds_evaluate(tmp_path, run_cl
              "--total-env-steps", str(20 * 8 * 24),
              "--checkpoint-every-episodes", "64")  # fmt: skip
     reference = tmp_path / "reference"
-    run_cli(*flags, "--run-dir", str(reference))
+    finished = run_cli(*flags, "--run-dir", str(reference)).stdout
+    assert "of them evaluating) for the whole group" in finished, finished
     killed = tmp_path / "killed"
     process = subprocess.Popen(
         [sys.executable, "-m", "spikectl.cli", *flags, "--run-dir", str(killed)],

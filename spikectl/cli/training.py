@@ -158,6 +158,14 @@ def _holds_best(run_dir: Path, episode: int) -> bool:
         return False
 
 
+def _core_minutes(final: dict) -> str:
+    """The last metrics row's core-minutes, and the part spent evaluating where the run
+    measured it (NaN in runs resumed from checkpoints before that clock)."""
+    evaluating = final.get("eval_cpu_time_s", math.nan) / 60
+    of_which = "" if math.isnan(evaluating) else f", {evaluating:.1f} of them evaluating"
+    return f"{final['cpu_time_s'] / 60:.1f} core minutes{of_which}"
+
+
 def _print_run(config: Experiment, run_dir: Path, metrics: list[dict]) -> None:
     """A single run's final returns, its baselines and its best network on validation."""
     from spikectl.experiments.figures import plot_learning_curve
@@ -190,12 +198,9 @@ def _print_run(config: Experiment, run_dir: Path, metrics: list[dict]) -> None:
             f"  (validation {best['val_return']:.3f}, episode {best['episode']:,}: "
             f"{'best_model.pt' if _holds_best(run_dir, best['episode']) else 'not kept'})"
         )
-    minutes, core_minutes = final["wall_time_s"] / 60, final["cpu_time_s"] / 60
-    evaluating = final.get("eval_cpu_time_s", math.nan) / 60
-    of_which = "" if math.isnan(evaluating) else f", {evaluating:.1f} of them evaluating"
     print(
         f"{final['env_steps']:,} environment steps, {final['updates']:,} updates, "
-        f"{minutes:.1f} wall minutes ({core_minutes:.1f} core minutes{of_which}) on "
+        f"{final['wall_time_s'] / 60:.1f} wall minutes ({_core_minutes(final)}) on "
         f"{config.train.torch_threads or torch_threads()} thread(s)"
     )
     print(f"wrote {run_dir / 'model.pt'}, {run_dir / 'metrics.csv'} and {curve}")
@@ -221,7 +226,7 @@ def _print_group(configs: list[Experiment], run_dirs: list[Path], metrics: list[
     print(
         f"{len(configs)} x {final['env_steps']:,} environment steps, {final['updates']:,} "
         f"updates each, {final['wall_time_s'] / 60:.1f} wall minutes "
-        f"({final['cpu_time_s'] / 60:.1f} core minutes) for the whole group"
+        f"({_core_minutes(final)}) for the whole group"
     )
     print(f"wrote model.pt and metrics.csv in {', '.join(str(d) for d in run_dirs)}")
 

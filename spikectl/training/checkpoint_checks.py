@@ -58,9 +58,9 @@ def check_runs(path: Path, runs: list[dict[str, Any]], total_episodes: list[int]
             raise _damaged(path, f"{seed}episode {run['episodes']} is outside 0..{total}")
         for clock in ("wall_time_s", "cpu_time_s", "eval_cpu_time_s"):
             value = run.get(clock, 0.0)
-            # A run resumed from a checkpoint before the evaluation clock never has one.
-            unmeasured = clock == "eval_cpu_time_s" and _is_number(value) and math.isnan(value)
-            if not unmeasured and (not _is_number(value) or not math.isfinite(value) or value < 0):
+            if clock == "eval_cpu_time_s" and _is_number(value) and math.isnan(value):
+                continue  # a run resumed from a checkpoint before this clock never has one
+            if not _is_number(value) or not math.isfinite(value) or value < 0:
                 raise _damaged(path, f"{seed}{clock} is not a time in seconds: {value!r}")
         _check_metrics(path, seed, run["metrics"], run["episodes"])
         baselines = run["baselines"]
