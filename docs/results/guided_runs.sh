@@ -26,6 +26,10 @@ case $folder in
     guided-conn01)        flags=() ;;                           # the guided preset itself
     guided-conn1)         flags=(--connectivity-weight 1) ;;
     guided-conn01-4x)     flags=(--total-env-steps 1056000) ;;
+    # Fewer gradient updates per round, to fit the main job in 15 core-minutes (2026-11-24,
+    # fourth stop of the day; chosen on validation).
+    guided-upr24)         flags=(--updates-per-round 24) ;;
+    guided-upr28)         flags=(--updates-per-round 28) ;;
     pqn)                  exec spikectl train pqn --seed "$seed" --run-dir "runs/$folder/seed=$seed" ;;
     *) echo "unknown folder $folder" >&2; exit 2 ;;
 esac

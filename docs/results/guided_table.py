@@ -30,9 +30,12 @@ GROUPS = {
     "guided, floor 0.2 and teacher plays 50% → 0": "guided-floor20-mix50",
     "guided, imitation floor 0.5": "guided-floor50",
     "guided, floor 0.2 and teacher plays 50% → 0, 4x the steps": "guided-floor20-mix50-4x",
-    "guided + connectivity loss 0.1 (`spikectl train guided`, the main job)": "guided-conn01",
+    "guided + connectivity loss 0.1 (the main job until 2026-11-24, fourth stop)": "guided-conn01",
     "guided + connectivity loss 1": "guided-conn1",
     "guided + connectivity loss 0.1, 4x the steps": "guided-conn01-4x",
+    "guided + connectivity loss, 28 updates a round": "guided-upr28",
+    "guided + connectivity loss, 24 updates a round (`spikectl train guided`, the main job)":
+        "guided-upr24",
     "PQN (`spikectl train pqn`)": "pqn",
 }
 
@@ -56,7 +59,8 @@ def main(results: Path) -> None:
         teacher = [row.get("teacher_seconds", 0.0) / 60 for row in final]
         print(
             f"| {label} | {len(runs)} | {mean_sd([r['val_return'] for r in final])} | "
-            f"{mean_sd(tests)} | {interval.estimate:.3f} [{interval.low:.3f}, {interval.high:.3f}] | "
+            f"{mean_sd(tests)} | "
+            f"{interval.estimate:.3f} [{interval.low:.3f}, {interval.high:.3f}] | "
             f"{mean_sd([r['test_return'] for r in selected])} | "
             f"{np.mean([r['cpu_time_s'] for r in final]) / 60:.1f} | {np.mean(teacher):.1f} |"
         )

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
+from matplotlib import colormaps
 
 from spikectl.experiments.figures import save_figure, subplots
 from spikectl.experiments.sweep import trial_dirs
@@ -32,11 +33,15 @@ GROUPS = {
     "guided, floor 0.2 + teacher plays 50% -> 0": "guided-floor20-mix50",
     "guided, imitation floor 0.5": "guided-floor50",
     "guided, floor 0.2 + teacher plays 50% -> 0, 4x steps": "guided-floor20-mix50-4x",
-    "guided + connectivity loss 0.1 (the main job)": "guided-conn01",
+    "guided + connectivity loss 0.1, 32 updates a round": "guided-conn01",
     "guided + connectivity loss 1": "guided-conn1",
     "guided + connectivity loss 0.1, 4x steps": "guided-conn01-4x",
+    "guided + connectivity loss, 24 updates a round (the main job)": "guided-upr24",
     "PQN": "pqn",
 }
+
+MAIN_JOB = "guided-upr24"
+"""The folder of the README's main job, drawn thicker."""
 
 
 def curve(run_dirs: list[Path], column: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -54,15 +59,19 @@ def curve(run_dirs: list[Path], column: str) -> tuple[np.ndarray, np.ndarray, np
 
 def main(results: Path, out: Path) -> None:
     figure, axes = subplots(1, 2, figsize=(11.0, 5.6), sharey=True)
-    for axis, column, title in zip(axes, ("val_return", "test_return"),
-                                   ("validation networks", "unseen test networks")):  # fmt: skip
-        for label, folder in GROUPS.items():
+    panels = (("val_return", "validation networks"), ("test_return", "unseen test networks"))
+    for axis, (column, title) in zip(axes, panels, strict=True):
+        for index, (label, folder) in enumerate(GROUPS.items()):
             runs = trial_dirs(results / folder)
             if not runs:
                 continue
             grid, mean, sd = curve(runs, column)
-            axis.plot(grid, mean, label=f"{label} ({len(runs)} seeds)")
-            axis.fill_between(grid, mean - sd, mean + sd, alpha=0.2)
+            # tab20 keeps 14 groups apart (the default cycle repeats after 10).
+            color = colormaps["tab20"](index % 20)
+            width = 2.5 if folder == MAIN_JOB else 1.2
+            seeds = f"{len(runs)} seed{'s' if len(runs) > 1 else ''}"
+            axis.plot(grid, mean, color=color, linewidth=width, label=f"{label} ({seeds})")
+            axis.fill_between(grid, mean - sd, mean + sd, color=color, alpha=0.2)
         axis.axhline(IDENTIFY_AND_PLAN[column], color="k", linestyle="--", linewidth=1,
                      label="identify-and-plan (no training)")  # fmt: skip
         axis.axhline(0.5, color="grey", linestyle=":", linewidth=1)

@@ -64,7 +64,7 @@ do-nothing head and a constant lr (docs/results sweep files made with it pin bot
 GUIDED = dataclasses.replace(
     QUICK,
     learner=GuidedConfig(
-        **dataclasses.asdict(QUICK.learner),
+        **{**dataclasses.asdict(QUICK.learner), "updates_per_round": 24},
         teacher="identify",
         imitation_weight_end=0.2,
         connectivity_weight=0.1,
@@ -76,7 +76,9 @@ agent visits; the imitation weight falls from 1 to a floor of 0.2 over the first
 the episodes and stays there (chosen on the validation networks, 2026-11-24: 0.816 ±
 0.006 against 0.773 ± 0.002 weaned to 0), and a privileged auxiliary loss of weight 0.1
 asks the features for each neuron's synapse onto the target (validation 0.824 ± 0.005
-against 0.816 ± 0.006 without; ~15.3 core-minutes with the teacher)."""
+against 0.816 ± 0.006 without). 24 updates a round, not the quick preset's 32 (6 600
+updates in all; 2026-11-24, fourth stop): it costs about a quarter less and keeps the
+main job within 15 core-minutes, where 32 took 15.3–17.4 (docs/training.md)."""
 
 PQN = dataclasses.replace(
     QUICK,
