@@ -28,10 +28,17 @@ TRANSFER_PRESETS = {
     "quick": "`quick`",
     "guided": "`guided`, floor 0.2",
     "guided-conn": "`guided` + connectivity loss",
+    "guided-upr24": "`guided`, 24 updates a round (the main job)",
 }
 """The folders of trained/ whose seeds, trained on `paper`, were played on every task
 (transfer.csv) → their label: the quick preset, the guided preset before the connectivity
-loss (runs of docs/results/guided-floor20) and the guided preset since (guided-conn01)."""
+loss (runs of docs/results/guided-floor20), with it (guided-conn01) and with it and 24
+updates a round instead of 32 (guided-upr24, the main job since the fourth stop of
+2026-11-24)."""
+
+
+ON_TASK_PRESETS = {"quick": "`quick`", "guided-upr24": "`guided` (the main job)"}
+"""The folders of trained/ with seeds trained on a task itself (benchmark.csv) → label."""
 
 
 def read_rows(path: Path) -> list[dict[str, str]]:
@@ -100,25 +107,26 @@ def main() -> None:
     print_leaderboard()
     print()
     print(
-        "| task | identify-and-plan | TDRQN quick, trained on the task (seeds) | IQM [95% CI] "
+        "| task | identify-and-plan | learner | trained on the task (seeds) | IQM [95% CI] "
         "| normalised | learned − planner | core-minutes |"
     )
-    print("|---|---:|---:|---:|---:|---:|---:|")
+    print("|---|---:|---|---:|---:|---:|---:|---:|")
     for task in TASKS:
-        files = seeds_of("quick", task)
-        if not files:
-            continue
-        rows = [by_task(path)[task] for path in files]
-        returns = np.array([float(row["mean_return"]) for row in rows])
-        normalised = np.array([float(row["normalised"]) for row in rows])
-        minutes = [core_minutes(path.parent / "metrics.csv") for path in files]
-        _, low, high = bootstrap_ci(returns, iqm)
-        reference = float(planner[task]["mean_return"])
-        print(f"| `{task}` | {reference:.3f} | {returns.mean():.3f} ± {returns.std():.3f} "
-              f"({len(files)}) | {iqm(returns):.3f} [{low:.3f}, {high:.3f}] "
-              f"| {normalised.mean():.3f} ± {normalised.std():.3f} "
-              f"| {returns.mean() - reference:+.3f} | {np.mean(minutes):.1f} |")  # fmt: skip
-
+        for preset, label in ON_TASK_PRESETS.items():
+            files = seeds_of(preset, task)
+            if not files:
+                continue
+            rows = [by_task(path)[task] for path in files]
+            returns = np.array([float(row["mean_return"]) for row in rows])
+            normalised = np.array([float(row["normalised"]) for row in rows])
+            minutes = [core_minutes(path.parent / "metrics.csv") for path in files]
+            _, low, high = bootstrap_ci(returns, iqm)
+            reference = float(planner[task]["mean_return"])
+            print(f"| `{task}` | {reference:.3f} | {label} "
+                  f"| {returns.mean():.3f} ± {returns.std():.3f} ({len(files)}) "
+                  f"| {iqm(returns):.3f} [{low:.3f}, {high:.3f}] "
+                  f"| {normalised.mean():.3f} ± {normalised.std():.3f} "
+                  f"| {returns.mean() - reference:+.3f} | {np.mean(minutes):.1f} |")  # fmt: skip
 
 if __name__ == "__main__":
     main()

@@ -1,24 +1,27 @@
-"""Learned against planned, network by network: is the main job's TDRQN (guided, trained on
-`paper`, seeds 0-2) above identify-and-plan on a task beyond the networks' sampling noise?
+"""Learned against planned, network by network: is a trained TDRQN (seeds 0-2) above
+identify-and-plan on a task beyond the networks' sampling noise?
 
     python docs/results/suite/paired.py [TASK ...]       # needs runs/suite/guided/paper
     python docs/results/suite/paired.py --trained-on-task stochastic noise2 hidden25
     python docs/results/suite/paired.py --connectivity [TASK ...]  # runs/suite/guided-conn/paper
+    python docs/results/suite/paired.py --preset guided-upr24 [--trained-on-task] [TASK ...]
 
 For each task it plays identify-and-plan and each seed's best_model.pt on the task's 100
 test networks under the suite's protocol, takes the per-network difference (the seeds'
 mean return minus the planner's), and gives its mean with a 95% bootstrap interval over
-the networks (10 000 resamples, seed 0). The seeds are those of runs/suite/guided/paper
-(paired.csv beside this file), or with --trained-on-task those of
-runs/suite/quick/TASK (paired-trained-on-task.csv), or with --connectivity those of the
-guided preset with the connectivity loss, runs/suite/guided-conn/paper (links to
-runs/guided-conn01/seed=S; paired-guided-conn.csv).
+the networks (10 000 resamples, seed 0). The seeds are those of runs/suite/PRESET/paper
+(trained on `paper`, played on the task), or with --trained-on-task those of
+runs/suite/PRESET/TASK (trained on the task itself). PRESET is `guided` by default
+(paired.csv beside this file; the guided preset of docs/results/guided-floor20) and
+`quick` with --trained-on-task (paired-trained-on-task.csv); --connectivity stands for
+--preset guided-conn (links to runs/guided-conn01/seed=S; paired-guided-conn.csv); any
+other preset writes paired-PRESET.csv or paired-PRESET-trained-on-task.csv.
 """
 
 from __future__ import annotations
 
+import argparse
 import csv
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -32,7 +35,15 @@ HERE = Path(__file__).resolve().parent
 SEEDS = (0, 1, 2)
 
 
-def main(tasks: list[str], trained_on_task: bool = False, connectivity: bool = False) -> None:
+def output_name(preset: str, trained_on_task: bool) -> str:
+    """The CSV beside this file for ``preset``'s seeds (the names of the first tables kept)."""
+    known = {("guided", False): "paired.csv", ("quick", True): "paired-trained-on-task.csv",
+             ("guided-conn", False): "paired-guided-conn.csv"}  # fmt: skip
+    suffix = "-trained-on-task" if trained_on_task else ""
+    return known.get((preset, trained_on_task), f"paired-{preset}{suffix}.csv")
+
+
+def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:
     rows = []
     for name in tasks:
         spec = suite.task(name)
@@ -41,11 +52,7 @@ def main(tasks: list[str], trained_on_task: bool = False, connectivity: bool = F
         env = NeuronControlEnv(contexts=contexts, params=contexts.params,
                                extensions=spec.extensions)  # fmt: skip
         planner, _ = suite.play(name, "test", load_controller("identify-and-plan", env=env))
-        folder = (
-            f"runs/suite/quick/{name}"
-            if trained_on_task
-            else f"runs/suite/{'guided-conn' if connectivity else 'guided'}/paper"
-        )
+        folder = f"runs/suite/{preset}/{name if trained_on_task else 'paper'}"
         runs = [Path(f"{folder}/seed={seed}") for seed in SEEDS]
         learned = np.mean([
             suite.play(name, "test", GreedyController(
@@ -61,13 +68,7 @@ def main(tasks: list[str], trained_on_task: bool = False, connectivity: bool = F
                      "networks_better": int((difference > 0).sum()),
                      "networks_worse": int((difference < 0).sum())})  # fmt: skip
         print(rows[-1])
-    out = HERE / (
-        "paired-trained-on-task.csv"
-        if trained_on_task
-        else "paired-guided-conn.csv"
-        if connectivity
-        else "paired.csv"
-    )
+    out = HERE / output_name(preset, trained_on_task)
     with open(out, "w", newline="") as file:
         writer = csv.DictWriter(file, fieldnames=list(rows[0]), lineterminator="\n")
         writer.writeheader()
@@ -75,9 +76,16 @@ def main(tasks: list[str], trained_on_task: bool = False, connectivity: bool = F
 
 
 if __name__ == "__main__":
-    arguments = sys.argv[1:]
-    flags = {"--trained-on-task", "--connectivity"}
-    tasks = [a for a in arguments if a not in flags]
-    main(
-        tasks or list(suite.TASKS), "--trained-on-task" in arguments, "--connectivity" in arguments
-    )
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("tasks", nargs="*", help="suite tasks (all by default)")
+    parser.add_argument("--preset", help="the folder under runs/suite whose seeds to play")
+    parser.add_argument("--trained-on-task", action="store_true",
+                        help="the seeds trained on each task itself, not on `paper`")
+    parser.add_argument("--connectivity", action="store_true",
+                        help="the same as --preset guided-conn")
+    arguments = parser.parse_args()
+    if arguments.connectivity and arguments.preset not in (None, "guided-conn"):
+        parser.error("--connectivity means --preset guided-conn; give one of them")
+    default = "quick" if arguments.trained_on_task else "guided"
+    preset = "guided-conn" if arguments.connectivity else arguments.preset or default
+    main(arguments.tasks or list(suite.TASKS), preset, arguments.trained_on_task)

@@ -39,3 +39,16 @@ for seed in 0 1 2; do
         --out "$out/trained/guided-conn/paper/seed=$seed/transfer.csv"
 done
 python docs/results/suite/paired.py --connectivity
+# The main job since the fourth stop of 2026-11-24 (the same with 24 updates a round;
+# runs/suite/guided-upr24/paper/seed=S links to runs/guided-upr24/seed=S, made by
+# docs/results/guided_runs.sh guided-upr24 S) on every task, and network by network
+# (paired-guided-upr24.csv). Its seeds trained on a task itself are train.sh's:
+# `bash docs/results/suite/train.sh TASK SEED guided guided-upr24`.
+for seed in 0 1 2; do
+    mkdir -p "$out/trained/guided-upr24/paper/seed=$seed"
+    cp "runs/suite/guided-upr24/paper/seed=$seed/config.json" \
+        "runs/suite/guided-upr24/paper/seed=$seed/metrics.csv" "$out/trained/guided-upr24/paper/seed=$seed/"
+    spikectl benchmark "runs/suite/guided-upr24/paper/seed=$seed" --model best --task all \
+        --out "$out/trained/guided-upr24/paper/seed=$seed/transfer.csv"
+done
+python docs/results/suite/paired.py --preset guided-upr24

@@ -4,14 +4,20 @@
 # scored on the task's test set, and the run's config.json / metrics.csv kept here (the
 # weights are not committed). Run from the repository root, one Torch thread per run:
 #
-#     bash docs/results/suite/train.sh TASK SEED [LEARNER-PRESET]
+#     bash docs/results/suite/train.sh TASK SEED [LEARNER-PRESET [FOLDER]]
 #
 # e.g. `bash docs/results/suite/train.sh stochastic 0`; two at a time on the 2-core machine.
+# FOLDER (the preset's name by default) names the folder under runs/suite and trained/:
+# the guided preset since the fourth stop of 2026-11-24 (connectivity loss, 24 updates a
+# round) is kept under `guided-upr24`, since trained/guided and trained/guided-conn hold
+# the runs of the guided presets before it:
+#
+#     bash docs/results/suite/train.sh hidden25 0 guided guided-upr24
 set -euo pipefail
-task=$1 seed=$2 preset=${3:-quick}
+task=$1 seed=$2 preset=${3:-quick} folder=${4:-${3:-quick}}
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
-run=runs/suite/$preset/$task/seed=$seed
-out=docs/results/suite/trained/$preset/$task/seed=$seed
+run=runs/suite/$folder/$task/seed=$seed
+out=docs/results/suite/trained/$folder/$task/seed=$seed
 if [ -f "$run/model.pt" ]; then
     :  # trained already
 elif [ -d "$run" ]; then
