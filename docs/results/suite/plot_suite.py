@@ -1,7 +1,7 @@
 """Draw docs/images/suite_realism.png from the saved CSVs of this folder (run.sh and train.sh
 wrote them): the raw return of each training-free controller, of the quick and guided
 TDRQNs trained on `paper` (transfer; mean and sd over their seeds) and of the quick TDRQN
-trained on the task itself (where trained) against measurement noise (tasks paper,
+and the main job trained on the task itself (where trained) against measurement noise (tasks paper,
 noise1, noise2, noise4) and against the hidden fraction (paper, hidden25). Reads only
 saved results; run from the repository root:
 
@@ -34,10 +34,11 @@ def rows(controller: str) -> dict[str, dict[str, str]]:
 
 def seed_returns(pattern: str, tasks: dict[str, float]) -> tuple[list, np.ndarray]:
     """(x of each task with results, [tasks, 2] mean and sd over seeds) from the trained/
-    CSVs; ``pattern`` is a glob under trained/ with {task} in it."""
+    CSVs; ``pattern`` is a glob under trained/ with {task} in it, or several joined by |."""
     xs, returns = [], []
     for task, x in tasks.items():
-        files = sorted((HERE / "trained").glob(pattern.format(task=task)))
+        files = sorted(path for part in pattern.split("|")
+                       for path in (HERE / "trained").glob(part.format(task=task)))  # fmt: skip
         values = [float(row["mean_return"]) for path in files for row in
                   csv.DictReader(open(path, newline="")) if row["task"] == task]  # fmt: skip
         if values:
@@ -55,7 +56,14 @@ def main() -> None:
         ("guided/paper/seed=*/transfer.csv", "TDRQN guided, floor 0.2, trained on paper", "^-",
          "tab:pink"),
         ("guided-conn/paper/seed=*/transfer.csv",
-         "TDRQN guided + connectivity loss (main job), trained on paper", "v-", "tab:olive"),
+         "TDRQN guided + connectivity loss, 32 updates, trained on paper", "v-", "tab:olive"),
+        ("guided-upr24/paper/seed=*/transfer.csv",
+         "TDRQN guided, 24 updates (main job), trained on paper", "P-", "tab:cyan"),
+        # Markers only: the main job is trained on some of the tasks (paper's point is
+        # its transfer.csv, the others' their benchmark.csv).
+        ("guided-upr24/{task}/seed=*/benchmark.csv|guided-upr24/{task}/seed=*/transfer.csv",
+         "TDRQN guided (main job), trained on the task",
+         "X", "black"),
     ):
         for index, (axis, tasks) in enumerate(zip(axes, (NOISE, HIDDEN), strict=True)):
             xs, stats = seed_returns(pattern, tasks)
