@@ -138,7 +138,9 @@ def check(agreement: Agreement) -> None:
 @pytest.mark.parametrize(
     "label, arch, sizes, n, episode_length, n_test, driver",
     [
-        ("tdrqn quick n=8", "tdrqn", QUICK_SIZES, 8, 60, 20, "greedy"),
+        pytest.param(
+            "tdrqn quick n=8", "tdrqn", QUICK_SIZES, 8, 60, 20, "greedy", marks=pytest.mark.slow
+        ),  # 23 s; smoke sizes play greedily below
         ("tdrqn quick n=8 random play", "tdrqn", QUICK_SIZES, 8, 60, 20, "random"),
         ("tdrqn smoke n=5", "tdrqn", SMOKE_SIZES, 5, 20, 30, "greedy"),
         ("tdrqn smoke n=5 random play", "tdrqn", SMOKE_SIZES, 5, 20, 30, "random"),

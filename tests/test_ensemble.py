@@ -117,6 +117,7 @@ def test_per_seed_gradient_clip_equals_clip_grad_norm_of_each_seed():
     ) == pytest.approx(5.0, rel=1e-5)
 
 
+@pytest.mark.slow  # 17 s
 def test_a_seed_does_not_depend_on_the_seeds_beside_it(tmp_path):
     """Seed 0 beside seed 1 and seed 0 beside seed 2: bit-identical metrics and weights."""
     first = train_seeds(TINY, [0, 1], tmp_path / "a")
@@ -152,6 +153,7 @@ def test_each_seed_of_a_group_is_the_seed_trained_alone(tmp_path):
                                 tmp_path / f"single{seed}" / name)  # fmt: skip
 
 
+@pytest.mark.slow  # 24 s
 def test_a_group_trains_each_seed_on_its_own_training_set(tmp_path):
     """Figure 5's training-set sizes in one group: each seed collects on, and is scored
     on, its own training set, shares the test set, and does not depend on its neighbours."""
@@ -213,6 +215,7 @@ def test_group_refuses_bad_groups_and_directories(tmp_path):
         train_seeds(single, [0, 1], tmp_path / "nothing", resume=True)
 
 
+@pytest.mark.slow  # 55 s; a group resumes exactly in the stacked-group test
 def test_group_resume_after_sigkill_is_exact_and_seeds_evaluate(tmp_path, run_cli, wait_until):
     """SIGKILL a group after its first checkpoint, resume it: every seed's metrics and
     weights equal an uninterrupted group's; each model.pt evaluates with the CLI."""
@@ -276,6 +279,7 @@ def test_group_trains_on_cuda_and_matches_the_cpu_group_at_the_start(tmp_path):
     network.load_state_dict(load_model_weights(tmp_path / "cuda/seed=1/model.pt"))
 
 
+@pytest.mark.slow  # 27 s
 def test_sweep_groups_trials_that_differ_only_in_seed(tmp_path):
     from spikectl.experiments.sweep import Sweep, run_sweep, trial_dirs
 

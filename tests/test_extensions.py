@@ -449,6 +449,7 @@ def test_vector_env_equals_sync_vector_env(extensions):
                 np.testing.assert_array_equal(info_a[key][present], info_b[key][present])
 
 
+@pytest.mark.slow  # 29 s; test_simulator checks the threaded kernel without extensions
 def test_threaded_kernel_equals_serial_kernel_with_extensions():
     batch = max(PARALLEL_MIN_BATCH, PARALLEL_MIN_WORK // (20 * 6)) + 4  # threaded
     rng = np.random.default_rng(14)

@@ -43,7 +43,10 @@ def _train(args: tuple[str, ...], run_dir: Path) -> None:
     )  # fmt: skip
 
 
-@pytest.mark.parametrize("name", ["quick-prefix", "smoke-seed0"])
+@pytest.mark.parametrize(
+    "name",
+    [pytest.param("quick-prefix", marks=pytest.mark.slow), "smoke-seed0"],  # 48 s and 18 s
+)
 def test_a_single_run_matches_its_golden_record(tmp_path, name):
     _train(RUNS[name], tmp_path / name)
     assert record(tmp_path / name) == GOLDEN["runs"][name]
@@ -56,15 +59,18 @@ def test_each_seed_of_a_group_matches_that_seed_trained_alone(tmp_path):
         assert record(tmp_path / "group" / f"seed={seed}") == GOLDEN["runs"][f"smoke-seed{seed}"]
 
 
+@pytest.mark.slow  # 19 s
 def test_a_stacked_group_trains_as_groups_did_before_the_refactor(tmp_path):
     """`--stacked`: the seed group of one stacked computation, exactly as it trained."""
     _train((*STACKED_GROUP, "--stacked"), tmp_path / "group")
     for seed in (0, 1):
-        assert record(tmp_path / "group" / f"seed={seed}") == GOLDEN["runs"][
-            f"smoke-stacked-group-seed{seed}"
-        ]
+        assert (
+            record(tmp_path / "group" / f"seed={seed}")
+            == GOLDEN["runs"][f"smoke-stacked-group-seed{seed}"]
+        )
 
 
+@pytest.mark.slow  # 55 s; kill-and-resume exactness stays in test_training (paper)
 def test_a_resume_after_sigkill_matches_the_golden_record(tmp_path, wait_until, run_cli):
     """Killed after its first checkpoint (episode 32 of 96), resumed: the golden record."""
     run_dir = tmp_path / "killed"
@@ -80,6 +86,7 @@ def test_a_resume_after_sigkill_matches_the_golden_record(tmp_path, wait_until, 
     assert record(run_dir) == GOLDEN["runs"]["quick-prefix"]
 
 
+@pytest.mark.slow  # 14 s
 def test_a_run_of_the_double_q_trainer_before_the_refactor_resumes_exactly(tmp_path, run_cli):
     """tests/data/format2-smoke-run: `train smoke` of the pre-refactor trainer, killed
     after its first checkpoint (checkpoint format 2, the learner's settings in the

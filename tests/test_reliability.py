@@ -592,6 +592,7 @@ def children(pid: int) -> set[int]:
     return found
 
 
+@pytest.mark.slow  # 18 s
 @pytest.mark.skipif(not Path("/proc/self/task").exists(), reason="needs Linux /proc")
 def test_killing_a_sweep_stops_its_workers(tmp_path, wait_until):
     sweep_file = tmp_path / "sweep.json"

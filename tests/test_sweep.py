@@ -91,6 +91,7 @@ def test_sweep_files_name_fields_flat_dotted_or_nested():
         assert load_sweep_file(path).trials()
 
 
+@pytest.mark.slow  # 30 s; the sweep command line stays in the default run
 def test_sweep_runs_skips_and_resumes(tmp_path):
     sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "seed": [0, 1]})
     results = run_sweep(sweep, tmp_path, workers=2, echo=lambda line: None)
@@ -153,6 +154,7 @@ def test_base_flag_keeps_the_sweep_files_overrides(tmp_path, capsys):
     assert "holds a whole base config" in capsys.readouterr().err
 
 
+@pytest.mark.slow  # 16 s
 def test_plot_a_sweep(tmp_path, capsys):
     from spikectl.cli import main
 

@@ -293,7 +293,11 @@ LEARN_FAST_FLAGS = ("--n-step", "3", "--aux-voltage-weight", "1.0", "--explore-d
                     "--sizes.target-voltage-in-input")  # fmt: skip
 
 
-@pytest.mark.parametrize("flags", [(), LEARN_FAST_FLAGS], ids=["paper", "learn-fast"])
+@pytest.mark.parametrize(
+    "flags",
+    [(), pytest.param(LEARN_FAST_FLAGS, marks=pytest.mark.slow)],  # 38 s and 42 s
+    ids=["paper", "learn-fast"],
+)
 def test_resume_after_sigkill_is_exact(
     tmp_path, flags, comparable, assert_same_weights, run_cli, wait_until
 ):
