@@ -13,7 +13,7 @@ import torch
 
 
 def _comparable(rows: list[dict]) -> list[dict]:
-    from spikectl.training.run import CLOCK_FIELDS
+    from spikectl.training.run_files import CLOCK_FIELDS
 
     return [
         {k: None if v != v else v for k, v in row.items() if k not in CLOCK_FIELDS} for row in rows

@@ -20,8 +20,8 @@ from spikectl.agents import ARCHITECTURES, make_agent
 from spikectl.agents.stacked import StackableLSTM, StackedNetworks
 from spikectl.training.learners.dqn import build_networks
 from spikectl.training.presets import SMOKE
-from spikectl.training.run import CLOCK_FIELDS, train, train_group, train_seeds
-from spikectl.training.run_files import RunDirError, read_metrics
+from spikectl.training.run import train, train_group, train_seeds
+from spikectl.training.run_files import CLOCK_FIELDS, RunDirError, read_metrics
 from spikectl.training.stacked_update import clip_grad_norm_per_seed
 from spikectl.training.torch_files import load_model_weights
 

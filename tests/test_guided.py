@@ -23,7 +23,8 @@ from spikectl.training.learners.guided import large_margin_loss
 from spikectl.training.learners.teachers import teacher_labels
 from spikectl.training.presets import PRESETS, SMOKE
 from spikectl.training.replay import NO_LABEL, EpisodeReplay
-from spikectl.training.run import CLOCK_FIELDS, train
+from spikectl.training.run import train
+from spikectl.training.run_files import CLOCK_FIELDS
 
 CLOCKS = (*CLOCK_FIELDS, "teacher_seconds")
 

@@ -18,8 +18,8 @@ from spikectl.training import run as run_module
 from spikectl.training.learners.looped import LoopedLearners
 from spikectl.training.learners.protocol import LossDiverged
 from spikectl.training.presets import SMOKE
-from spikectl.training.run import CLOCK_FIELDS, train, train_seeds
-from spikectl.training.run_files import RunDirError, read_metrics
+from spikectl.training.run import train, train_seeds
+from spikectl.training.run_files import CLOCK_FIELDS, RunDirError, read_metrics
 from spikectl.training.torch_files import load_model_weights
 
 CONFIG = SMOKE.with_changes(total_env_steps=6 * 20 * 8, eval_every_episodes=16,

@@ -37,8 +37,8 @@ from spikectl.files import FileWriteError
 from spikectl.training.checkpoint import read_checkpoint
 from spikectl.training.config import EnvConfig
 from spikectl.training.presets import SMOKE
-from spikectl.training.run import CLOCK_FIELDS, train
-from spikectl.training.run_files import RunDirError, run_lock
+from spikectl.training.run import train
+from spikectl.training.run_files import CLOCK_FIELDS, RunDirError, run_lock
 from spikectl.training.torch_files import load_model_weights, payload_checksum, save_model
 
 TINY = SMOKE.with_changes(

@@ -18,7 +18,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from spikectl.training.run_files import RunDirError
+from spikectl.training.run_files import CLOCK_FIELDS, RunDirError
 
 TOP_ENTRIES = {"format", "format_version", "spikectl_version", "configs", "stacked",
                "learners", "runs", "checksum"}  # fmt: skip
@@ -56,7 +56,7 @@ def check_runs(path: Path, runs: list[dict[str, Any]], total_episodes: list[int]
         seed = f"run {k}: " if len(runs) > 1 else ""
         if not 0 <= run["episodes"] <= total:
             raise _damaged(path, f"{seed}episode {run['episodes']} is outside 0..{total}")
-        for clock in ("wall_time_s", "cpu_time_s", "eval_cpu_time_s"):
+        for clock in CLOCK_FIELDS:
             value = run.get(clock, 0.0)
             if clock == "eval_cpu_time_s" and _is_number(value) and math.isnan(value):
                 continue  # a run resumed from a checkpoint before this clock never has one

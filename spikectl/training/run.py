@@ -68,8 +68,6 @@ METRIC_FIELDS = (
     "wall_time_s", "val_return", "aux_loss", "cpu_time_s", "eval_cpu_time_s",
 )  # fmt: skip
 """metrics.csv's columns; a learner's other ``metric_fields`` follow them."""
-CLOCK_FIELDS = ("wall_time_s", "cpu_time_s", "eval_cpu_time_s")
-"""The columns that measure time: the only ones a bit-identical rerun may change."""
 SPLITS = ("train", "test", "val")
 
 

@@ -41,6 +41,9 @@ BEST_MODEL_FILE = "best_model.pt"
 METRICS_FILE = "metrics.csv"
 BASELINES_FILE = "baselines.json"
 MACHINE_FILE = "machine.json"
+CLOCK_FIELDS = ("wall_time_s", "cpu_time_s", "eval_cpu_time_s")
+"""The clocks of metrics.csv and of a checkpoint's runs: the only values a bit-identical
+rerun may change."""
 UNSTARTED_LEFTOVERS = (
     METRICS_FILE, BASELINES_FILE, "train_contexts.npz", "test_contexts.npz", "tensorboard",
     "learning_curve.png", BEST_MODEL_FILE, MACHINE_FILE,

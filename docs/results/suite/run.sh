@@ -27,28 +27,25 @@ for seed in 0 1 2; do
     spikectl benchmark "runs/suite/guided/paper/seed=$seed" --model best --task all \
         --out "$out/trained/guided/paper/seed=$seed/transfer.csv"
 done
-# The main job since the second stop of 2026-11-24 (`spikectl train guided`, with the
-# connectivity loss; runs/suite/guided-conn/paper/seed=S links to runs/guided-conn01/seed=S,
-# made by docs/results/guided_runs.sh guided-conn01 S) on every task, and network by
-# network against identify-and-plan (paired-guided-conn.csv).
-for seed in 0 1 2; do
-    mkdir -p "$out/trained/guided-conn/paper/seed=$seed"
-    cp "runs/suite/guided-conn/paper/seed=$seed/config.json" \
-        "runs/suite/guided-conn/paper/seed=$seed/metrics.csv" "$out/trained/guided-conn/paper/seed=$seed/"
-    spikectl benchmark "runs/suite/guided-conn/paper/seed=$seed" --model best --task all \
-        --out "$out/trained/guided-conn/paper/seed=$seed/transfer.csv"
-done
+# A preset's seeds trained on `paper` (runs/suite/PRESET/paper/seed=S, links to the runs of
+# docs/results/guided_runs.sh) played on every task: their config, metrics and transfer.csv.
+transfer_from_paper() {
+    local preset=$1 seed run kept
+    for seed in 0 1 2; do
+        run=runs/suite/$preset/paper/seed=$seed kept=$out/trained/$preset/paper/seed=$seed
+        mkdir -p "$kept"
+        cp "$run/config.json" "$run/metrics.csv" "$kept/"
+        spikectl benchmark "$run" --model best --task all --out "$kept/transfer.csv"
+    done
+}
+# The main job from the second to the fourth stop of 2026-11-24 (`spikectl train guided`
+# with the connectivity loss, 32 updates a round; links to runs/guided-conn01/seed=S) on
+# every task, and network by network against identify-and-plan (paired-guided-conn.csv).
+transfer_from_paper guided-conn
 python docs/results/suite/paired.py --connectivity
-# The main job since the fourth stop of 2026-11-24 (the same with 24 updates a round;
-# runs/suite/guided-upr24/paper/seed=S links to runs/guided-upr24/seed=S, made by
-# docs/results/guided_runs.sh guided-upr24 S) on every task, and network by network
-# (paired-guided-upr24.csv). Its seeds trained on a task itself are train.sh's:
-# `bash docs/results/suite/train.sh TASK SEED guided guided-upr24`.
-for seed in 0 1 2; do
-    mkdir -p "$out/trained/guided-upr24/paper/seed=$seed"
-    cp "runs/suite/guided-upr24/paper/seed=$seed/config.json" \
-        "runs/suite/guided-upr24/paper/seed=$seed/metrics.csv" "$out/trained/guided-upr24/paper/seed=$seed/"
-    spikectl benchmark "runs/suite/guided-upr24/paper/seed=$seed" --model best --task all \
-        --out "$out/trained/guided-upr24/paper/seed=$seed/transfer.csv"
-done
+# The main job since the fourth stop (the same with 24 updates a round; links to
+# runs/guided-upr24/seed=S, made by docs/results/guided_runs.sh guided-upr24 S), and
+# network by network (paired-guided-upr24.csv). Its seeds trained on a task itself are
+# train.sh's: `bash docs/results/suite/train.sh TASK SEED guided guided-upr24`.
+transfer_from_paper guided-upr24
 python docs/results/suite/paired.py --preset guided-upr24
