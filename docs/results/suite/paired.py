@@ -15,7 +15,8 @@ runs/suite/PRESET/TASK (trained on the task itself). PRESET is `guided` by defau
 (paired.csv beside this file; the guided preset of docs/results/guided-floor20) and
 `quick` with --trained-on-task (paired-trained-on-task.csv); --connectivity stands for
 --preset guided-conn (links to runs/guided-conn01/seed=S; paired-guided-conn.csv); any
-other preset writes paired-PRESET.csv or paired-PRESET-trained-on-task.csv.
+other preset writes paired-PRESET.csv or paired-PRESET-trained-on-task.csv. Rows of
+tasks already in that CSV and not named this time are kept (in the suite's task order).
 """
 
 from __future__ import annotations
@@ -69,10 +70,19 @@ def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:
                      "networks_worse": int((difference < 0).sum())})  # fmt: skip
         print(rows[-1])
     out = HERE / output_name(preset, trained_on_task)
-    with open(out, "w", newline="") as file:
+    # The tasks not played this time keep their rows: a CSV grows task by task.
+    kept = {}
+    if out.exists():
+        with open(out, newline="") as file:
+            kept = {row["task"]: row for row in csv.DictReader(file)}
+    kept.update({row["task"]: row for row in rows})
+    ordered = [kept[name] for name in suite.TASKS if name in kept]
+    partial = out.with_suffix(".csv.partial")
+    with open(partial, "w", newline="") as file:
         writer = csv.DictWriter(file, fieldnames=list(rows[0]), lineterminator="\n")
         writer.writeheader()
-        writer.writerows(rows)
+        writer.writerows(ordered)
+    partial.replace(out)
 
 
 if __name__ == "__main__":
