@@ -40,6 +40,19 @@ def test_committed_results_table_is_what_its_trials_say():
         assert (sweep_dir / "results.md").read_text() == markdown, sweep_dir.name
 
 
+def test_benchmark_page_learned_tables_are_what_the_committed_csvs_say(capsys):
+    """docs/benchmark.md's learned rows are learned_table.py's output, not edited by hand."""
+    import runpy
+
+    runpy.run_path(str(ROOT / "docs" / "results" / "suite" / "learned_table.py"),
+                   run_name="__main__")  # fmt: skip
+    page = (ROOT / "docs" / "benchmark.md").read_text().splitlines()
+    printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]
+    assert len(printed) > 20
+    missing = [line for line in printed if line not in page]
+    assert not missing, f"docs/benchmark.md lacks {len(missing)} printed rows: {missing[:3]}"
+
+
 MADE_WITH_AN_EARLIER_QUICK_PRESET = {
     "ddrqn-paper-update-ratio", "fig4-quick", "tdrqn-paper-update-ratio"
 }  # fmt: skip

@@ -87,6 +87,32 @@ def print_leaderboard() -> None:
             f"| {minutes:.1f} | "
             f"{np.mean(scores):.3f} ± {np.std(scores):.3f} |"
         )
+    print_specialists("guided-upr24", ON_TASK_PRESETS["guided-upr24"])
+
+
+def print_specialists(preset: str, label: str) -> None:
+    """The leaderboard row of ``preset`` trained on each task it has seeds on, played
+    zero-shot from its `paper` seeds elsewhere; printed only when every seed of `paper`
+    has a counterpart on every task it was trained on (seed S of each task)."""
+    transfer_files = sorted((HERE / "trained" / preset / "paper").glob("seed=*/transfer.csv"))
+    trained_tasks = [task for task in TASKS if task != "paper" and seeds_of(preset, task)]
+    scores, minutes = [], []
+    for path in transfer_files:
+        seed = path.parent.name
+        own = {task: HERE / "trained" / preset / task / seed / "benchmark.csv"
+               for task in trained_tasks}  # fmt: skip
+        if not all(file.exists() for file in own.values()):
+            return
+        table = {**by_task(path), **{task: by_task(file)[task] for task, file in own.items()}}
+        scores.append(np.mean([float(table[task]["normalised"]) for task in TASKS]))
+        minutes += [core_minutes(file.parent / "metrics.csv") for file in [path, *own.values()]]
+    zero_shot = [task for task in TASKS if task not in trained_tasks]
+    print(
+        f"| TDRQN {label}, trained on each task but {', '.join(f'`{t}`' for t in zero_shot[1:])}"
+        f" (played from `paper`; {len(scores)} seeds) "
+        f"| {np.mean(minutes):.1f} on each of {len(trained_tasks) + 1} tasks | "
+        f"{np.mean(scores):.3f} ± {np.std(scores):.3f} |"
+    )
 
 
 def main() -> None:
