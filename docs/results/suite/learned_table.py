@@ -91,18 +91,20 @@ def print_leaderboard() -> None:
 
 
 def print_specialists(preset: str, label: str) -> None:
-    """The leaderboard row of ``preset`` trained on each task it has seeds on, played
-    zero-shot from its `paper` seeds elsewhere; printed only when every seed of `paper`
-    has a counterpart on every task it was trained on (seed S of each task)."""
+    """The leaderboard row of ``preset`` as a specialist: seed S trained on each task
+    where every seed of its `paper` runs has a counterpart (seed S of that task), and its
+    `paper` seed S played zero-shot on the other tasks (a task with fewer seeds, a pilot,
+    counts as not trained on)."""
     transfer_files = sorted((HERE / "trained" / preset / "paper").glob("seed=*/transfer.csv"))
-    trained_tasks = [task for task in TASKS if task != "paper" and seeds_of(preset, task)]
+    seeds = [path.parent.name for path in transfer_files]
+    trained_tasks = [
+        task for task in TASKS if task != "paper" and all(
+            (HERE / "trained" / preset / task / seed / "benchmark.csv").exists() for seed in seeds)
+    ]  # fmt: skip
     scores, minutes = [], []
-    for path in transfer_files:
-        seed = path.parent.name
+    for path, seed in zip(transfer_files, seeds, strict=True):
         own = {task: HERE / "trained" / preset / task / seed / "benchmark.csv"
                for task in trained_tasks}  # fmt: skip
-        if not all(file.exists() for file in own.values()):
-            return
         table = {**by_task(path), **{task: by_task(file)[task] for task, file in own.items()}}
         scores.append(np.mean([float(table[task]["normalised"]) for task in TASKS]))
         minutes += [core_minutes(file.parent / "metrics.csv") for file in [path, *own.values()]]
