@@ -95,22 +95,24 @@ def print_specialists(preset: str, label: str) -> None:
     where every seed of its `paper` runs has a counterpart (seed S of that task), and its
     `paper` seed S played zero-shot on the other tasks (a task with fewer seeds, a pilot,
     counts as not trained on)."""
+
+    def on_task(task: str, seed: str) -> Path:
+        return HERE / "trained" / preset / task / seed / "benchmark.csv"
+
     transfer_files = sorted((HERE / "trained" / preset / "paper").glob("seed=*/transfer.csv"))
     seeds = [path.parent.name for path in transfer_files]
-    trained_tasks = [
-        task for task in TASKS if task != "paper" and all(
-            (HERE / "trained" / preset / task / seed / "benchmark.csv").exists() for seed in seeds)
-    ]  # fmt: skip
+    trained_tasks = [task for task in TASKS if task != "paper"
+                     and all(on_task(task, seed).exists() for seed in seeds)]  # fmt: skip
     scores, minutes = [], []
     for path, seed in zip(transfer_files, seeds, strict=True):
-        own = {task: HERE / "trained" / preset / task / seed / "benchmark.csv"
-               for task in trained_tasks}  # fmt: skip
-        table = {**by_task(path), **{task: by_task(file)[task] for task, file in own.items()}}
+        own = {task: on_task(task, seed) for task in trained_tasks}
+        table = by_task(path)  # `paper` and the zero-shot tasks
+        table.update({task: by_task(file)[task] for task, file in own.items()})
         scores.append(np.mean([float(table[task]["normalised"]) for task in TASKS]))
         minutes += [core_minutes(file.parent / "metrics.csv") for file in [path, *own.values()]]
-    zero_shot = [task for task in TASKS if task not in trained_tasks]
+    zero_shot = [task for task in TASKS if task != "paper" and task not in trained_tasks]
     print(
-        f"| TDRQN {label}, trained on each task but {', '.join(f'`{t}`' for t in zero_shot[1:])}"
+        f"| TDRQN {label}, trained on each task but {', '.join(f'`{t}`' for t in zero_shot)}"
         f" (played from `paper`; {len(scores)} seeds) "
         f"| {np.mean(minutes):.1f} on each of {len(trained_tasks) + 1} tasks | "
         f"{np.mean(scores):.3f} ± {np.std(scores):.3f} |"

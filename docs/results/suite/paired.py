@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import csv
+import io
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +31,7 @@ import numpy as np
 from spikectl.agents.greedy import GreedyController
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.experiments import suite
+from spikectl.files import atomic_write_text
 from spikectl.training.controllers import load_agent, load_controller
 
 HERE = Path(__file__).resolve().parent
@@ -77,12 +79,11 @@ def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:
             kept = {row["task"]: row for row in csv.DictReader(file)}
     kept.update({row["task"]: row for row in rows})
     ordered = [kept[name] for name in suite.TASKS if name in kept]
-    partial = out.with_suffix(".csv.partial")
-    with open(partial, "w", newline="") as file:
-        writer = csv.DictWriter(file, fieldnames=list(rows[0]), lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(ordered)
-    partial.replace(out)
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
+    writer.writeheader()
+    writer.writerows(ordered)
+    atomic_write_text(out, buffer.getvalue())
 
 
 if __name__ == "__main__":
