@@ -87,6 +87,38 @@ def test_committed_sweeps_rerun_their_trials_exactly():
             assert trials == saved, f"{description.relative_to(ROOT)} does not rerun its trials"
 
 
+def test_guided_runs_script_reruns_its_trials_exactly():
+    """docs/results/guided_runs.sh FOLDER SEED gives the config of every committed
+    docs/results/FOLDER/trials/seed=SEED it names, with today's presets: a preset that
+    changes must be pinned back in the rows made before it."""
+    import json
+    import shlex
+
+    from spikectl.cli.training import parse_train
+    from spikectl.training.config import Experiment
+
+    script = (ROOT / "docs" / "results" / "guided_runs.sh").read_text()
+    pinned = re.search(r"^u32=\((.*?)\)$", script, flags=re.MULTILINE)
+    u32 = pinned.group(1) if pinned else ""
+    commands = {}
+    for folder, flags, preset in re.findall(
+        r"^\s*([\w-]+)\)\s+(?:flags=\((.*?)\)|exec spikectl train (\w+))", script, re.MULTILINE
+    ):
+        if preset:
+            commands[folder] = [preset]
+        else:
+            commands[folder] = ["guided", *shlex.split(flags.replace('"${u32[@]}"', u32))]
+    assert len(commands) >= 10, "guided_runs.sh's cases were not read"
+    for folder, argv in commands.items():
+        trials = sorted((ROOT / "docs" / "results" / folder / "trials").glob("seed=*"))
+        assert trials, f"guided_runs.sh names {folder}, which has no committed trials"
+        for trial in trials:
+            seed = trial.name.removeprefix("seed=")
+            rerun = parse_train([*argv, "--seed", seed]).config
+            saved = Experiment.from_dict(json.loads((trial / "config.json").read_text()))
+            assert rerun == saved, f"guided_runs.sh {folder} {seed} does not rerun {trial}"
+
+
 def doc_pages() -> list[Path]:
     return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 

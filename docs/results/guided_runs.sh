@@ -10,22 +10,24 @@
 # docs/results/FOLDER/trials/seed=SEED and redraw with guided_table.py / plot_guided.py.
 set -euo pipefail
 folder=$1 seed=$2
+u32=(--updates-per-round 32)
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 case $folder in
     # Each command pins the settings that differ from the guided preset of the day. The
-    # preset had the imitation floor 0.2 from 2026-11-24 and the connectivity loss (0.1)
-    # from the second stop of that day; the rows made before pin it off.
-    guided-compiled)      flags=(--connectivity-weight 0 --imitation-weight-end 0) ;;   # the pre-2026-11-24 preset
-    guided-mix50)         flags=(--connectivity-weight 0 --imitation-weight-end 0 --teacher-episodes 0.5) ;;
-    guided-floor20)       flags=(--connectivity-weight 0) ;;
-    guided-floor20-mix50) flags=(--connectivity-weight 0 --teacher-episodes 0.5) ;;
-    guided-floor50)       flags=(--connectivity-weight 0 --imitation-weight-end 0.5) ;;
+    # preset had the imitation floor 0.2 from 2026-11-24, the connectivity loss (0.1)
+    # from the second stop of that day and 24 updates a round from the fourth; the rows
+    # made before pin them off (`${u32[@]}`: the 32 updates a round of those rows).
+    guided-compiled)      flags=("${u32[@]}" --connectivity-weight 0 --imitation-weight-end 0) ;;   # the pre-2026-11-24 preset
+    guided-mix50)         flags=("${u32[@]}" --connectivity-weight 0 --imitation-weight-end 0 --teacher-episodes 0.5) ;;
+    guided-floor20)       flags=("${u32[@]}" --connectivity-weight 0) ;;
+    guided-floor20-mix50) flags=("${u32[@]}" --connectivity-weight 0 --teacher-episodes 0.5) ;;
+    guided-floor50)       flags=("${u32[@]}" --connectivity-weight 0 --imitation-weight-end 0.5) ;;
     # Four times the environment steps (about 60 core-minutes, issue 23's budget).
-    guided-floor20-mix50-4x) flags=(--connectivity-weight 0 --teacher-episodes 0.5 --total-env-steps 1056000) ;;
+    guided-floor20-mix50-4x) flags=("${u32[@]}" --connectivity-weight 0 --teacher-episodes 0.5 --total-env-steps 1056000) ;;
     # The privileged connectivity loss (2026-11-24, second stop of the day).
-    guided-conn01)        flags=() ;;                           # the guided preset itself
-    guided-conn1)         flags=(--connectivity-weight 1) ;;
-    guided-conn01-4x)     flags=(--total-env-steps 1056000) ;;
+    guided-conn01)        flags=("${u32[@]}") ;;  # the guided preset of the second and third stops
+    guided-conn1)         flags=("${u32[@]}" --connectivity-weight 1) ;;
+    guided-conn01-4x)     flags=("${u32[@]}" --total-env-steps 1056000) ;;
     # Fewer gradient updates per round, to fit the main job in 15 core-minutes (2026-11-24,
     # fourth stop of the day; chosen on validation).
     guided-upr24)         flags=(--updates-per-round 24) ;;
