@@ -119,6 +119,30 @@ def test_guided_runs_script_reruns_its_trials_exactly():
             assert rerun == saved, f"guided_runs.sh {folder} {seed} does not rerun {trial}"
 
 
+def test_suite_train_script_reruns_its_trials_exactly():
+    """docs/results/suite/train.sh TASK SEED [PRESET FOLDER] gives the config of every
+    committed run trained on a suite task: `quick` under trained/quick, the main job
+    under trained/guided-upr24 (the progress bar aside: `paper`'s quick seeds are a
+    sweep's, which draws none)."""
+    import dataclasses
+    import json
+
+    from spikectl.cli.training import parse_train
+    from spikectl.training.config import Experiment
+
+    for folder, preset in [("quick", "quick"), ("guided-upr24", "guided")]:
+        trials = sorted((ROOT / "docs/results/suite/trained" / folder).glob("*/seed=*"))
+        assert len(trials) >= 26, f"trained/{folder} has {len(trials)} runs"
+        for trial in trials:
+            argv = [preset, "--task", trial.parent.name, "--seed", trial.name.removeprefix("seed=")]
+            rerun = parse_train(argv).config
+            saved = Experiment.from_dict(json.loads((trial / "config.json").read_text()))
+            saved = dataclasses.replace(
+                saved, train=dataclasses.replace(saved.train, progress=rerun.train.progress)
+            )
+            assert rerun == saved, f"train.sh {' '.join(argv)} does not rerun {trial}"
+
+
 def doc_pages() -> list[Path]:
     return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
 
