@@ -111,10 +111,15 @@ def print_specialists(preset: str, label: str) -> None:
         scores.append(np.mean([float(table[task]["normalised"]) for task in TASKS]))
         minutes += [core_minutes(file.parent / "metrics.csv") for file in [path, *own.values()]]
     zero_shot = [task for task in TASKS if task != "paper" and task not in trained_tasks]
+    trained_on, detail = "each task", f"{len(scores)} seeds"
+    if zero_shot:
+        trained_on += f" but {', '.join(f'`{t}`' for t in zero_shot)}"
+        detail = f"played from `paper`; {detail}"
+    runs = len(trained_tasks) + 1
     print(
-        f"| TDRQN {label}, trained on each task but {', '.join(f'`{t}`' for t in zero_shot)}"
-        f" (played from `paper`; {len(scores)} seeds) "
-        f"| {np.mean(minutes):.1f} on each of {len(trained_tasks) + 1} tasks | "
+        f"| TDRQN {label}, trained on {trained_on} ({detail}) "
+        f"| {np.sum(minutes) / len(scores):.0f} in all, {runs} runs of "
+        f"{np.min(minutes):.1f}–{np.max(minutes):.1f} | "
         f"{np.mean(scores):.3f} ± {np.std(scores):.3f} |"
     )
 
