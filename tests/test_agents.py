@@ -224,13 +224,15 @@ def test_masked_q_and_greedy_action() -> None:
 
 
 @pytest.mark.parametrize("do_nothing_head", ["dueling", "pooled"])
-@pytest.mark.parametrize("target_in_input", [True, False])
+@pytest.mark.parametrize(
+    "inputs",
+    [dict(target_in_input=True), dict(target_in_input=False),
+     dict(target_voltage_in_input=True, others_spiking_in_input=True)],
+)  # fmt: skip
 @pytest.mark.parametrize("name", EQUIVARIANT)
-def test_permutation_equivariance(name: str, target_in_input: bool, do_nothing_head: str) -> None:
+def test_permutation_equivariance(name: str, inputs: dict, do_nothing_head: str) -> None:
     B, T, n = 3, 9, 6
-    net = small_agent(
-        name, n, target_in_input=target_in_input, do_nothing_head=do_nothing_head
-    ).double()
+    net = small_agent(name, n, do_nothing_head=do_nothing_head, **inputs).double()
     assert net.equivariant
     obs = random_obs(B, T, n, seed=1)
     q, _ = net(obs)
@@ -311,6 +313,31 @@ def test_paper_literal_tdrqn_builds_and_runs() -> None:
     obs["target"] = (obs["target"] + 1) % 5
     mixed2 = literal.mixer(literal.lstm(_features(literal, obs), literal.initial_state(2, 5))[0])
     assert torch.equal(mixed, mixed2)
+
+
+def test_per_neuron_input_features_on_a_hand_computed_step() -> None:
+    from spikectl.agents.features import per_neuron_features
+
+    # V_r = -70 mV, V_th = -50 mV; neurons 0 and 2 show a spike (V >= V_th, within
+    # float32 rounding), 3 is 1 mV short of it; neuron 2 was stimulated, 1 is the target.
+    obs = dict(
+        voltage=torch.tensor([[-50.0, -60.0, -30.0, -51.0]]),
+        last_action=torch.tensor([2]),
+        target=torch.tensor([1]),
+    )
+    x = per_neuron_features(obs, v_rest_mV=-70.0, v_threshold_mV=-50.0, with_target=True,
+                            with_target_voltage=True, with_others_spiking=True,
+                            dtype=torch.float32)  # fmt: skip
+    expected = [
+        # v_norm, stimulated, is target, target's v_norm, others showing a spike
+        [1.0, 0.0, 0.0, 0.5, 1.0],
+        [0.5, 0.0, 1.0, 0.5, 2.0],
+        [2.0, 1.0, 0.0, 0.5, 1.0],
+        [0.95, 0.0, 0.0, 0.5, 2.0],
+    ]
+    torch.testing.assert_close(x, torch.tensor([expected]), atol=1e-6, rtol=0)
+    net = small_agent("tdrqn", 4, target_voltage_in_input=True, others_spiking_in_input=True)
+    assert net.lstm.lstm.input_size == 5
 
 
 def _features(net: torch.nn.Module, obs: dict[str, torch.Tensor]) -> torch.Tensor:

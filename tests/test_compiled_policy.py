@@ -164,6 +164,8 @@ def test_compiled_policy_picks_the_networks_actions(
         dict(target_in_input=False),
         dict(target_voltage_in_input=False, attn_heads=2),
         dict(lstm_hidden=24),  # lstm_hidden != attn_width: the projection
+        dict(others_spiking_in_input=True),
+        dict(others_spiking_in_input=True, target_voltage_in_input=False, target_in_input=False),
     ],
 )
 def test_every_option_of_the_forward_matches(options):
@@ -295,6 +297,20 @@ def test_other_versions_and_architectures_are_refused_by_name(policy_file):
         CompiledPolicy.load(rewrite(policy_file, {"format_version": 99}))
     with pytest.raises(PolicyFileError, match="architecture 'drqn'; supported: tdrqn, ddrqn"):
         CompiledPolicy.load(rewrite(policy_file, {"architecture": "drqn"}))
+
+
+def test_files_written_before_the_others_spiking_input_still_load(policy_file):
+    # Version-1 files made before AgentSizes.others_spiking_in_input existed lack the key.
+    with np.load(policy_file, allow_pickle=False) as data:
+        arrays = {name: data[name] for name in data.files}
+    header = json.loads(str(arrays["metadata"]))
+    assert header.pop("others_spiking_in_input") is False
+    arrays["metadata"] = np.array(json.dumps(header))
+    older = policy_file.with_name("older.npz")
+    np.savez(older, **arrays)
+    assert CompiledPolicy.load(older).spec == CompiledPolicy.load(policy_file).spec
+    with pytest.raises(PolicyFileError, match="others_spiking_in_input is 1"):
+        CompiledPolicy.load(rewrite(policy_file, {"others_spiking_in_input": 1}))
 
 
 def test_weights_that_do_not_match_the_header_are_named(policy_file):

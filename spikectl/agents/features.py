@@ -11,6 +11,8 @@ from collections.abc import Mapping
 import torch
 import torch.nn.functional as F
 
+from spikectl.agents.policy_file import VISIBLE_SPIKE_LEVEL
+
 
 def normalised_voltage(
     voltage: torch.Tensor, v_rest_mV: float, v_threshold_mV: float
@@ -50,13 +52,16 @@ def per_neuron_features(
     with_target: bool,
     dtype: torch.dtype,
     with_target_voltage: bool = False,
+    with_others_spiking: bool = False,
 ) -> torch.Tensor:
     """Per-neuron LSTM input [..., n, F]: normalised V, stimulated at t-1, (is target),
-    (the target's normalised V).
+    (the target's normalised V), (how many other neurons show a spike).
 
-    F = 2 + with_target + with_target_voltage (docs/agents.md). The target's voltage, the same
-    for every neuron, keeps the input permutation equivariant and lets each neuron's
-    memory relate its own spikes to the target's response.
+    F = 2 + with_target + with_target_voltage + with_others_spiking (docs/agents.md). The
+    target's voltage, the same for every neuron, keeps the input permutation equivariant
+    and lets each neuron's memory relate its own spikes to the target's response; the
+    count of the others' visible spikes tells that memory whether a response that
+    follows its own spike may have come from another neuron's.
     """
     voltage = normalised_voltage(obs["voltage"].to(dtype), v_rest_mV, v_threshold_mV)  # [..., n]
     n = voltage.shape[-1]
@@ -66,6 +71,9 @@ def per_neuron_features(
     if with_target_voltage:
         target_voltage = torch.gather(voltage, -1, obs["target"].unsqueeze(-1))  # [..., 1]
         columns.append(target_voltage.expand_as(voltage))  # [..., n]
+    if with_others_spiking:
+        spiking = (voltage >= VISIBLE_SPIKE_LEVEL).to(dtype)  # [..., n]
+        columns.append(spiking.sum(-1, keepdim=True) - spiking)  # [..., n]
     return torch.stack(columns, dim=-1)  # [..., n, F]
 
 

@@ -27,6 +27,12 @@ SUPPORTED_ARCHITECTURES = ("tdrqn", "ddrqn")
 """What :func:`export_policy` compiles: the per-neuron networks (any n). DRQN and DMDRQN,
 fixed-n system networks, are not supported."""
 HEADER_KEY = "metadata"
+VISIBLE_SPIKE_LEVEL = 1.0 - 1e-4
+"""A normalised potential (V - V_r) / (V_th - V_r) at or above this is a visible spike in
+the networks' input features (V >= V_th, docs/model.md, with room for float32 rounding:
+1e-4 of V_th - V_r is 2 µV at the defaults); the PyTorch and compiled forwards share it."""
+OPTIONAL_HEADER_FIELDS = {"others_spiking_in_input": False}
+"""Header fields added after format version 1 and their value in files written before."""
 
 
 class PolicyFileError(ValueError):
@@ -64,11 +70,14 @@ class PolicySpec:
     do_nothing_head: str
     target_in_input: bool
     target_voltage_in_input: bool
+    others_spiking_in_input: bool = False
 
     @property
     def input_features(self) -> int:
-        """F: [v_norm, stimulated, (is target), (target's v_norm)]."""
-        return 2 + self.target_in_input + self.target_voltage_in_input
+        """F: [v_norm, stimulated, (is target), (target's v_norm), (others spiking)]."""
+        return (
+            2 + self.target_in_input + self.target_voltage_in_input + self.others_spiking_in_input
+        )
 
     @property
     def mix_width(self) -> int:
@@ -175,6 +184,7 @@ def _spec_of(network: Any) -> PolicySpec:
         do_nothing_head=s.do_nothing_head,
         target_in_input=s.target_in_input,
         target_voltage_in_input=s.target_voltage_in_input,
+        others_spiking_in_input=s.others_spiking_in_input,
     )
 
 
@@ -244,10 +254,10 @@ def _parse_header(where: str, raw: np.ndarray) -> PolicySpec:
             f"{', '.join(SUPPORTED_ARCHITECTURES)}"
         )
     names = [field.name for field in fields(PolicySpec)]
-    missing = [name for name in names if name not in header]
+    missing = [name for name in names if name not in header and name not in OPTIONAL_HEADER_FIELDS]
     if missing:
         raise PolicyFileError(f"{where}: the header lacks {missing}")
-    values = {name: header[name] for name in names}
+    values = {name: header.get(name, OPTIONAL_HEADER_FIELDS.get(name)) for name in names}
     for field in fields(PolicySpec):
         value = values[field.name]
         if field.type == "int":

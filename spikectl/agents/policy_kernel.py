@@ -15,12 +15,12 @@ from collections.abc import Mapping
 import numba
 import numpy as np
 
-from spikectl.agents.policy_file import PolicySpec
+from spikectl.agents.policy_file import VISIBLE_SPIKE_LEVEL, PolicySpec
 
 _ARCH_CODES = {"tdrqn": 0, "ddrqn": 1}
 # ints: the layout's counts and the options, by index.
 _I_ARCH, _I_H, _I_PROJECT, _I_LAYERS, _I_HEADS, _I_ADV, _I_VALUE = range(7)
-_I_DUELING, _I_TARGET_IN, _I_TARGET_V, _I_SIZE = 7, 8, 9, 10
+_I_DUELING, _I_TARGET_IN, _I_TARGET_V, _I_OTHERS, _I_SIZE = 7, 8, 9, 10, 11
 
 
 def _layout(
@@ -78,10 +78,12 @@ def _layout(
     ints[_I_DUELING] = spec.do_nothing_head == "dueling"
     ints[_I_TARGET_IN] = spec.target_in_input
     ints[_I_TARGET_V] = spec.target_voltage_in_input
+    ints[_I_OTHERS] = spec.others_spiking_in_input
     floats = np.array(
-        [spec.v_rest_mV, spec.v_threshold_mV - spec.v_rest_mV, spec.layer_norm_eps],
+        [spec.v_rest_mV, spec.v_threshold_mV - spec.v_rest_mV, spec.layer_norm_eps,
+         VISIBLE_SPIKE_LEVEL],
         dtype=np.float64,
-    )
+    )  # fmt: skip
     params = np.concatenate(chunks).astype(np.float32)
     return params, np.array(rows, dtype=np.int64), ints, floats
 
@@ -247,13 +249,17 @@ def _decide(
     H = ints[_I_H]
     N = pattern.shape[0]
     # Per-neuron features x [n, F]: (V - V_r) / (V_th - V_r), stimulated at t-1, (is
-    # target), (the target's normalised V).
-    width = 2 + ints[_I_TARGET_IN] + ints[_I_TARGET_V]
+    # target), (the target's normalised V), (how many other neurons show a spike).
+    width = 2 + ints[_I_TARGET_IN] + ints[_I_TARGET_V] + ints[_I_OTHERS]
     x = np.zeros((n, width), dtype=np.float32)
     v_rest, v_scale = np.float32(floats[0]), np.float32(floats[1])
+    spike_level = np.float32(floats[3])
     v_target = (voltage[target] - v_rest) / v_scale
+    spiking = 0
     for i in range(n):
         x[i, 0] = (voltage[i] - v_rest) / v_scale
+        spiking += x[i, 0] >= spike_level
+    for i in range(n):
         x[i, 1] = 1.0 if i == last_action else 0.0
         column = 2
         if ints[_I_TARGET_IN]:
@@ -261,6 +267,9 @@ def _decide(
             column += 1
         if ints[_I_TARGET_V]:
             x[i, column] = v_target
+            column += 1
+        if ints[_I_OTHERS]:
+            x[i, column] = spiking - (x[i, 0] >= spike_level)
     # LSTM cell, gates [n, 4H] in PyTorch's order: input, forget, cell, output.
     gates = np.empty((n, 4 * H), dtype=np.float32)
     _linear(params, rows[0], x, gates, False, False)

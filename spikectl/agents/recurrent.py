@@ -153,7 +153,8 @@ class PerNeuronMemory(RecurrentQNetworkBase):
     def build_lstm(self) -> PerNeuronLSTM:
         """The LSTM, for ``build`` to register as ``lstm``, first."""
         s = self.sizes
-        return PerNeuronLSTM(2 + s.target_in_input + s.target_voltage_in_input, s.lstm_hidden)
+        features = 2 + s.target_in_input + s.target_voltage_in_input + s.others_spiking_in_input
+        return PerNeuronLSTM(features, s.lstm_hidden)
 
     def state_shape(self, batch_size: int, n_neurons: int) -> tuple[int, ...]:
         return batch_size, n_neurons, self.sizes.lstm_hidden
@@ -169,6 +170,7 @@ class PerNeuronMemory(RecurrentQNetworkBase):
             v_threshold_mV=self.v_threshold_mV,
             with_target=s.target_in_input,
             with_target_voltage=s.target_voltage_in_input,
+            with_others_spiking=s.others_spiking_in_input,
             dtype=self.param_dtype(),
         )  # [B, T, n, F]
         return self.lstm(x, state)  # [B, T, n, H], (h, c)

@@ -49,6 +49,8 @@ class AgentSizes:
     """Target indicator also in each neuron's LSTM input; False = paper-literal (only after)."""
     target_voltage_in_input: bool = False
     """The target's normalised voltage also in each neuron's LSTM input (not in the paper)."""
+    others_spiking_in_input: bool = False
+    """How many other neurons show a spike, also in each neuron's LSTM input (not in the paper)."""
     layer_norm: bool = False
     """LayerNorm in every hidden layer of the Q heads and FF blocks (PQN; not in the paper)."""
 
@@ -78,7 +80,12 @@ class AgentSizes:
                 "do_nothing_head", f"must be one of {PerNeuronQHead.MODES}, got "
                 f"{self.do_nothing_head!r}", label="AgentSizes.do_nothing_head",
             )  # fmt: skip
-        for name in ("target_in_input", "target_voltage_in_input", "layer_norm"):
+        for name in (
+            "target_in_input",
+            "target_voltage_in_input",
+            "others_spiking_in_input",
+            "layer_norm",
+        ):
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(name, f"must be a bool, got {getattr(self, name)!r}",
                                   label=f"AgentSizes.{name}")  # fmt: skip
