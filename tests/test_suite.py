@@ -2,10 +2,12 @@
 
 from __future__ import annotations
 
+import csv
 import json
 import shutil
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from spikectl import cli
@@ -121,6 +123,27 @@ def test_benchmark_do_nothing_on_paper(capsys, tmp_path):
     assert lines[0].startswith("suite_version,task,split,controller")
     assert lines[1].startswith("1,paper,test,do-nothing,")
 
+
+
+def test_benchmark_writes_each_networks_return(capsys, tmp_path):
+    """--per-network: one row per test network whose mean is the task's mean return
+    (for the random controller, each network's mean over its seeds)."""
+    out, per_network = tmp_path / "scores.csv", tmp_path / "networks.csv"
+    argv = ["benchmark", "random", "--task", "paper", "--random-seeds", "2", "--out", str(out),
+            "--per-network", str(per_network)]  # fmt: skip
+    code, _, _ = run_main(argv, capsys)
+    assert code == 0
+    with open(per_network, newline="") as file:
+        rows = list(csv.DictReader(file))
+    assert [int(row["context"]) for row in rows] == list(range(suite.SET_SIZE))
+    assert {(row["task"], row["split"], row["controller"]) for row in rows} == {
+        ("paper", "test", "random")
+    }
+    returns = np.array([float(row["return"]) for row in rows])
+    with open(out, newline="") as file:
+        (summary,) = csv.DictReader(file)
+    assert float(summary["mean_return"]) == pytest.approx(returns.mean(), abs=1e-6)
+    assert 0.0 <= returns.min() < returns.max() <= 1.0
 
 @pytest.mark.parametrize(
     ("argv", "message"),

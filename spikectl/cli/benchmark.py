@@ -34,6 +34,9 @@ class BenchmarkCommand:
     """PyTorch threads of a run's network (CPU seconds are counted over all threads)."""
     out: Path | None = None
     """Write one CSV row per task (raw, normalised, references, CPU seconds) here."""
+    per_network: Path | None = None
+    """Write one CSV row per task and network (its return) here: what a network-by-network
+    comparison of two controllers reads."""
 
 
 CSV_FIELDS = (
@@ -41,6 +44,7 @@ CSV_FIELDS = (
     "sd_over_seeds", "normalised", "do_nothing", "oracle", "cpu_seconds", "contexts",
     "trained_on",
 )  # fmt: skip
+PER_NETWORK_FIELDS = ("suite_version", "task", "split", "controller", "model", "context", "return")
 
 
 def benchmark(command: BenchmarkCommand) -> None:
@@ -66,9 +70,15 @@ def benchmark(command: BenchmarkCommand) -> None:
           + (f"; trained on task {origin!r}" if origin else ""))  # fmt: skip
     print(f"{'task':<15}{'mean return':>18}{'normalised':>12}{'do nothing':>12}"
           f"{'oracle':>9}{'CPU s':>9}")  # fmt: skip
-    rows, normalised = [], {}
+    rows, per_network, normalised = [], [], {}
     for name in names:
         result = suite.score(name, command.split, make(name), seeds)
+        per_network += [
+            {"suite_version": suite.SUITE_VERSION, "task": name, "split": command.split,
+             "controller": command.controller, "model": model_label(command),
+             "context": index, "return": repr(float(value))}
+            for index, value in enumerate(result.returns)
+        ]  # fmt: skip
         nothing, oracle = suite.references(name, command.split)
         normalised[name] = suite.normalise(result.mean_return, nothing, oracle)
         sd = float(result.seed_means.std(ddof=1)) if seeds > 1 else float("nan")
@@ -89,6 +99,8 @@ def benchmark(command: BenchmarkCommand) -> None:
               f"{suite.mean_normalised(normalised):.3f}")  # fmt: skip
     if command.out is not None:
         print(f"wrote {write_rows(rows, command.out)}")
+    if command.per_network is not None:
+        print(f"wrote {write_rows(per_network, command.per_network, PER_NETWORK_FIELDS)}")
 
 
 def training_task(command: BenchmarkCommand) -> str | None:
@@ -163,12 +175,12 @@ def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
     return lambda name: lambda seed: controller
 
 
-def write_rows(rows: list[dict], path: Path) -> Path:
+def write_rows(rows: list[dict], path: Path, fields: tuple[str, ...] = CSV_FIELDS) -> Path:
     """The rows as CSV, atomically."""
     from spikectl.files import atomic_write_text
 
     buffer = io.StringIO()
-    writer = csv.DictWriter(buffer, fieldnames=CSV_FIELDS, lineterminator="\n")
+    writer = csv.DictWriter(buffer, fieldnames=fields, lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
     return atomic_write_text(path, buffer.getvalue())

@@ -17,6 +17,9 @@ runs/suite/PRESET/TASK (trained on the task itself). PRESET is `guided` by defau
 --preset guided-conn (links to runs/guided-conn01/seed=S; paired-guided-conn.csv); any
 other preset writes paired-PRESET.csv or paired-PRESET-trained-on-task.csv. Rows of
 tasks already in that CSV and not named this time are kept (in the suite's task order).
+A seed whose committed folder (trained/PRESET/TASK-or-paper/seed=S) holds a
+per_network.csv with the task's rows (`spikectl benchmark --per-network`, train.sh writes
+it) is read from it, so its run need not exist; the others are played.
 """
 
 from __future__ import annotations
@@ -36,6 +39,7 @@ from spikectl.training.controllers import load_agent, load_controller
 
 HERE = Path(__file__).resolve().parent
 SEEDS = (0, 1, 2)
+PER_NETWORK = "per_network.csv"
 
 
 def output_name(preset: str, trained_on_task: bool) -> str:
@@ -44,6 +48,15 @@ def output_name(preset: str, trained_on_task: bool) -> str:
              ("guided-conn", False): "paired-guided-conn.csv"}  # fmt: skip
     suffix = "-trained-on-task" if trained_on_task else ""
     return known.get((preset, trained_on_task), f"paired-{preset}{suffix}.csv")
+
+
+def committed_returns(folder: Path, task: str) -> np.ndarray:
+    """[100] a seed's test return on each network of ``task`` from its per_network.csv."""
+    with open(folder / PER_NETWORK, newline="") as file:
+        rows = [row for row in csv.DictReader(file) if row["task"] == task]
+    if [int(row["context"]) for row in rows] != list(range(suite.SET_SIZE)):
+        raise ValueError(f"{folder / PER_NETWORK} lacks the {suite.SET_SIZE} networks of {task}")
+    return np.array([float(row["return"]) for row in rows])
 
 
 def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:
@@ -55,12 +68,14 @@ def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:
         env = NeuronControlEnv(contexts=contexts, params=contexts.params,
                                extensions=spec.extensions)  # fmt: skip
         planner, _ = suite.play(name, "test", load_controller("identify-and-plan", env=env))
-        folder = f"runs/suite/{preset}/{name if trained_on_task else 'paper'}"
-        runs = [Path(f"{folder}/seed={seed}") for seed in SEEDS]
+        trained_on = name if trained_on_task else "paper"
         learned = np.mean([
-            suite.play(name, "test", GreedyController(
-                load_agent(run, n_neurons=spec.n_observed, model="best")))[0]
-            for run in runs
+            committed_returns(HERE / "trained" / preset / trained_on / f"seed={seed}", name)
+            if (HERE / "trained" / preset / trained_on / f"seed={seed}" / PER_NETWORK).exists()
+            else suite.play(name, "test", GreedyController(load_agent(
+                Path(f"runs/suite/{preset}/{trained_on}/seed={seed}"),
+                n_neurons=spec.n_observed, model="best")))[0]
+            for seed in SEEDS
         ], axis=0)  # fmt: skip
         difference = learned - planner  # [100]
         resampled = np.random.default_rng(0).integers(0, difference.size, (10_000, difference.size))

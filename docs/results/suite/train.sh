@@ -1,8 +1,9 @@
 #!/usr/bin/env bash
 # The learned rows of docs/benchmark.md: the quick preset's TDRQN trained on one suite task
 # (`spikectl train quick --task T`), its best_model.pt (chosen on the task's validation set)
-# scored on the task's test set, and the run's config.json / metrics.csv kept here (the
-# weights are not committed). Run from the repository root, one Torch thread per run:
+# scored on the task's test set (its mean in benchmark.csv, each network's return in
+# per_network.csv), and the run's config.json / metrics.csv kept here (the weights are
+# not committed). Run from the repository root, one Torch thread per run:
 #
 #     bash docs/results/suite/train.sh TASK SEED [LEARNER-PRESET [FOLDER]]
 #
@@ -27,4 +28,5 @@ else
 fi
 mkdir -p "$out"
 cp "$run/config.json" "$run/metrics.csv" "$out/"
-spikectl benchmark "$run" --model best --task "$task" --out "$out/benchmark.csv"
+spikectl benchmark "$run" --model best --task "$task" --out "$out/benchmark.csv" \
+    --per-network "$out/per_network.csv"
