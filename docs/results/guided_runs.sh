@@ -29,9 +29,12 @@ case $folder in
     guided-conn1)         flags=("${u32[@]}" --connectivity-weight 1) ;;
     guided-conn01-4x)     flags=("${u32[@]}" --total-env-steps 1056000) ;;
     # Fewer gradient updates per round, to fit the main job in 15 core-minutes (2026-11-24,
-    # fourth stop of the day; chosen on validation).
+    # fourth stop of the day; chosen on validation). Its seeds run again on an AMD EPYC
+    # with AVX-512 (2026-11-25) are kept in docs/results/guided-upr24-avx512.
     guided-upr24)         flags=(--updates-per-round 24) ;;
     guided-upr28)         flags=(--updates-per-round 28) ;;
+    # Each neuron's memory told how many other neurons show a spike (2026-11-25).
+    guided-others)        flags=(--sizes.others-spiking-in-input) ;;
     pqn)                  exec spikectl train pqn --seed "$seed" --run-dir "runs/$folder/seed=$seed" ;;
     *) echo "unknown folder $folder" >&2; exit 2 ;;
 esac

@@ -2,11 +2,12 @@
 
     python docs/results/guided_table.py docs/results
 
-Per group (every trial on one Torch thread, on the same 2-core AMD EPYC machine, no
-AVX-512): final validation and test return (mean ± sd over seeds, ddof 0), the test
-IQM with its 95% stratified-bootstrap interval, the network selected on the validation
-set (the evaluation with the highest validation return) scored on the test set, and
-core-minutes (process CPU time) in all and in the teacher.
+Per group (every trial on one Torch thread, on the project's 2-core AMD EPYC machine,
+without AVX-512 but for the two groups that say so): final validation and test return
+(mean ± sd over seeds, ddof 0), the test IQM with its 95% stratified-bootstrap
+interval, the network selected on the validation set (the evaluation with the highest
+validation return) scored on the test set, and core-minutes (process CPU time) in all
+and in the teacher.
 """
 
 import sys
@@ -36,6 +37,8 @@ GROUPS = {
     "guided + connectivity loss, 28 updates a round": "guided-upr28",
     "guided + connectivity loss, 24 updates a round (`spikectl train guided`, the main job)":
         "guided-upr24",
+    "the main job again, on an AMD EPYC with AVX-512 (2026-11-25)": "guided-upr24-avx512",
+    "the main job + the others' spikes in each neuron's input (AVX-512 host)": "guided-others",
     "PQN (`spikectl train pqn`)": "pqn",
 }
 

@@ -37,6 +37,7 @@ GROUPS = {
     "guided + connectivity loss 1": "guided-conn1",
     "guided + connectivity loss 0.1, 4x steps": "guided-conn01-4x",
     "guided + connectivity loss, 24 updates a round (the main job)": "guided-upr24",
+    "the main job + the others' spikes in the input (AVX-512 host)": "guided-others",
     "PQN": "pqn",
 }
 
