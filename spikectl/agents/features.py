@@ -11,7 +11,7 @@ from collections.abc import Mapping
 import torch
 import torch.nn.functional as F
 
-from spikectl.agents.policy_file import VISIBLE_SPIKE_LEVEL
+from spikectl.agents.spikes import VISIBLE_SPIKE_LEVEL
 
 
 def normalised_voltage(

@@ -27,10 +27,6 @@ SUPPORTED_ARCHITECTURES = ("tdrqn", "ddrqn")
 """What :func:`export_policy` compiles: the per-neuron networks (any n). DRQN and DMDRQN,
 fixed-n system networks, are not supported."""
 HEADER_KEY = "metadata"
-VISIBLE_SPIKE_LEVEL = 1.0 - 1e-4
-"""A normalised potential (V - V_r) / (V_th - V_r) at or above this is a visible spike in
-the networks' input features (V >= V_th, docs/model.md, with room for float32 rounding:
-1e-4 of V_th - V_r is 2 µV at the defaults); the PyTorch and compiled forwards share it."""
 OPTIONAL_HEADER_FIELDS = {"others_spiking_in_input": False}
 """Header fields added after format version 1 and their value in files written before."""
 

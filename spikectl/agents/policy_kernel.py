@@ -15,7 +15,8 @@ from collections.abc import Mapping
 import numba
 import numpy as np
 
-from spikectl.agents.policy_file import VISIBLE_SPIKE_LEVEL, PolicySpec
+from spikectl.agents.policy_file import PolicySpec
+from spikectl.agents.spikes import VISIBLE_SPIKE_LEVEL
 
 _ARCH_CODES = {"tdrqn": 0, "ddrqn": 1}
 # ints: the layout's counts and the options, by index.
