@@ -13,7 +13,7 @@ import io
 import json
 import math
 from collections.abc import Mapping
-from dataclasses import asdict, dataclass, fields
+from dataclasses import MISSING, asdict, dataclass, fields
 from pathlib import Path
 from typing import Any
 
@@ -27,8 +27,6 @@ SUPPORTED_ARCHITECTURES = ("tdrqn", "ddrqn")
 """What :func:`export_policy` compiles: the per-neuron networks (any n). DRQN and DMDRQN,
 fixed-n system networks, are not supported."""
 HEADER_KEY = "metadata"
-OPTIONAL_HEADER_FIELDS = {"others_spiking_in_input": False}
-"""Header fields added after format version 1 and their value in files written before."""
 
 
 class PolicyFileError(ValueError):
@@ -66,6 +64,8 @@ class PolicySpec:
     do_nothing_head: str
     target_in_input: bool
     target_voltage_in_input: bool
+    # Fields added after format version 1 have a default: files written before them read
+    # as that default.
     others_spiking_in_input: bool = False
 
     @property
@@ -249,11 +249,11 @@ def _parse_header(where: str, raw: np.ndarray) -> PolicySpec:
             f"{where} holds architecture {header.get('architecture')!r}; supported: "
             f"{', '.join(SUPPORTED_ARCHITECTURES)}"
         )
-    names = [field.name for field in fields(PolicySpec)]
-    missing = [name for name in names if name not in header and name not in OPTIONAL_HEADER_FIELDS]
+    required = [field.name for field in fields(PolicySpec) if field.default is MISSING]
+    missing = [name for name in required if name not in header]
     if missing:
         raise PolicyFileError(f"{where}: the header lacks {missing}")
-    values = {name: header.get(name, OPTIONAL_HEADER_FIELDS.get(name)) for name in names}
+    values = {field.name: header.get(field.name, field.default) for field in fields(PolicySpec)}
     for field in fields(PolicySpec):
         value = values[field.name]
         if field.type == "int":

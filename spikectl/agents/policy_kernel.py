@@ -256,10 +256,12 @@ def _decide(
     v_rest, v_scale = np.float32(floats[0]), np.float32(floats[1])
     spike_level = np.float32(floats[3])
     v_target = (voltage[target] - v_rest) / v_scale
-    spiking = 0
     for i in range(n):
         x[i, 0] = (voltage[i] - v_rest) / v_scale
-        spiking += x[i, 0] >= spike_level
+    spiking = 0
+    if ints[_I_OTHERS]:
+        for i in range(n):
+            spiking += x[i, 0] >= spike_level
     for i in range(n):
         x[i, 1] = 1.0 if i == last_action else 0.0
         column = 2

@@ -59,6 +59,17 @@ def committed_returns(folder: Path, task: str) -> np.ndarray:
     return np.array([float(row["return"]) for row in rows])
 
 
+def seed_returns(preset: str, trained_on: str, seed: int, task: str) -> np.ndarray:
+    """[100] seed ``seed`` of ``preset`` trained on ``trained_on``, on each test network
+    of ``task``: from its committed per_network.csv, or played from its run."""
+    kept = HERE / "trained" / preset / trained_on / f"seed={seed}"
+    if (kept / PER_NETWORK).exists():
+        return committed_returns(kept, task)
+    run = Path(f"runs/suite/{preset}/{trained_on}/seed={seed}")
+    network = load_agent(run, n_neurons=suite.task(task).n_observed, model="best")
+    return suite.play(task, "test", GreedyController(network))[0]
+
+
 def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:
     rows = []
     for name in tasks:
@@ -69,14 +80,8 @@ def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:
                                extensions=spec.extensions)  # fmt: skip
         planner, _ = suite.play(name, "test", load_controller("identify-and-plan", env=env))
         trained_on = name if trained_on_task else "paper"
-        learned = np.mean([
-            committed_returns(HERE / "trained" / preset / trained_on / f"seed={seed}", name)
-            if (HERE / "trained" / preset / trained_on / f"seed={seed}" / PER_NETWORK).exists()
-            else suite.play(name, "test", GreedyController(load_agent(
-                Path(f"runs/suite/{preset}/{trained_on}/seed={seed}"),
-                n_neurons=spec.n_observed, model="best")))[0]
-            for seed in SEEDS
-        ], axis=0)  # fmt: skip
+        learned = np.mean([seed_returns(preset, trained_on, seed, name) for seed in SEEDS],
+                          axis=0)  # fmt: skip
         difference = learned - planner  # [100]
         resampled = np.random.default_rng(0).integers(0, difference.size, (10_000, difference.size))
         low, high = np.quantile(difference[resampled].mean(axis=1), [0.025, 0.975])
