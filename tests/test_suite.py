@@ -151,6 +151,8 @@ def test_benchmark_writes_each_networks_return(capsys, tmp_path):
         (["do-nothing", "--task", "n64"], "unknown task 'n64' of benchmark suite v1"),
         (["no-such-controller", "--task", "paper"], "no controller 'no-such-controller'"),
         (["random", "--task", "paper", "--random-seeds", "0"], "--random-seeds must be"),
+        (["do-nothing", "--task", "paper", "--out", "tests"], "--out tests: it is a folder"),
+        (["do-nothing", "--per-network", "tests"], "--per-network tests: it is a folder"),
     ],
 )
 def test_benchmark_refuses_bad_input_in_one_line(argv, message, capsys):

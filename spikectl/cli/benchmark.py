@@ -55,6 +55,9 @@ def benchmark(command: BenchmarkCommand) -> None:
         raise ValueError(f"--random-seeds must be an integer >= 1, got {command.random_seeds}")
     if command.torch_threads < 1:
         raise ValueError(f"--torch-threads must be an integer >= 1, got {command.torch_threads}")
+    for flag, path in (("--out", command.out), ("--per-network", command.per_network)):
+        if path is not None and path.is_dir():  # refused before the episodes, not after
+            raise ValueError(f"{flag} {path}: it is a folder, not a file")
     names = list(suite.TASKS) if "all" in command.task else list(dict.fromkeys(command.task))
     if not names:
         raise ValueError("--task: give at least one task, or all")
