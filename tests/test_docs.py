@@ -98,8 +98,9 @@ def test_guided_runs_script_reruns_its_trials_exactly():
     from spikectl.training.config import Experiment
 
     script = (ROOT / "docs" / "results" / "guided_runs.sh").read_text()
-    pinned = re.search(r"^u32=\((.*?)\)$", script, flags=re.MULTILINE)
-    u32 = pinned.group(1) if pinned else ""
+    # The script's arrays of pinned flags (u32=(...), n100=(...)), spliced where used.
+    pinned = dict(re.findall(r"^(\w+)=\((.*?)\)$", script, flags=re.MULTILINE))
+    assert {"u32", "n100"} <= pinned.keys(), "guided_runs.sh's pinned flags were not read"
     commands = {}
     for folder, flags, preset in re.findall(
         r"^\s*([\w-]+)\)\s+(?:flags=\((.*?)\)|exec spikectl train (\w+))", script, re.MULTILINE
@@ -107,7 +108,9 @@ def test_guided_runs_script_reruns_its_trials_exactly():
         if preset:
             commands[folder] = [preset]
         else:
-            commands[folder] = ["guided", *shlex.split(flags.replace('"${u32[@]}"', u32))]
+            for name, value in pinned.items():
+                flags = flags.replace(f'"${{{name}[@]}}"', value)
+            commands[folder] = ["guided", *shlex.split(flags)]
     assert len(commands) >= 10, "guided_runs.sh's cases were not read"
     for folder, argv in commands.items():
         trials = sorted((ROOT / "docs" / "results" / folder / "trials").glob("seed=*"))

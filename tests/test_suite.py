@@ -218,6 +218,21 @@ def test_train_task_flag_trains_on_the_tasks_pinned_sets(name):
     assert suite.trained_on(config, train) == name
 
 
+def test_train_task_flag_pins_the_task_sets_over_the_presets_sizes():
+    """The guided preset trains on 1 000 networks; --task still gives the task's 100
+    (its pinned training set), and a later --n-train still overrides the task."""
+    from spikectl.cli.training import parse_train
+    from spikectl.training.contexts import generated_contexts
+    from spikectl.training.presets import PRESETS
+
+    assert PRESETS["guided"].env.n_train == 1000
+    config = parse_train(["guided", "--task", "paper"]).config
+    assert (config.env.n_train, config.env.n_test, config.env.n_val) == (100, 100, 100)
+    train, _ = generated_contexts(config)
+    assert suite.suite_checksum(train) == suite.CHECKSUMS["paper"]["train"]
+    assert parse_train(["guided", "--task", "paper", "--n-train", "20"]).config.env.n_train == 20
+
+
 def test_train_task_flag_is_overridden_by_later_flags_and_checked():
     from spikectl.cli.training import parse_train
     from spikectl.training.contexts import generated_contexts

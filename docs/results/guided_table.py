@@ -39,6 +39,8 @@ GROUPS = {
         "guided-upr24",
     "the main job again, on an AMD EPYC with AVX-512 (2026-11-25)": "guided-upr24-avx512",
     "the main job + the others' spikes in each neuron's input (AVX-512 host)": "guided-others",
+    "the main job on 1 000 training networks (`--n-train 1000`, AVX-512 host)": "guided-ntrain1000",
+    "the main job on 4 000 training networks, 4x the steps (AVX-512 host)": "guided-ntrain4000-4x",
     "PQN (`spikectl train pqn`)": "pqn",
 }
 

@@ -38,6 +38,8 @@ GROUPS = {
     "guided + connectivity loss 0.1, 4x steps": "guided-conn01-4x",
     "guided + connectivity loss, 24 updates a round (the main job)": "guided-upr24",
     "the main job + the others' spikes in the input (AVX-512 host)": "guided-others",
+    "the main job on 1 000 training networks (AVX-512 host)": "guided-ntrain1000",
+    "the main job on 4 000 training networks, 4x steps (AVX-512 host)": "guided-ntrain4000-4x",
     "PQN": "pqn",
 }
 
@@ -67,7 +69,7 @@ def main(results: Path, out: Path) -> None:
             if not runs:
                 continue
             grid, mean, sd = curve(runs, column)
-            # tab20 keeps 14 groups apart (the default cycle repeats after 10).
+            # tab20 keeps up to 20 groups apart (the default cycle repeats after 10).
             color = colormaps["tab20"](index % 20)
             width = 2.5 if folder == MAIN_JOB else 1.2
             seeds = f"{len(runs)} seed{'s' if len(runs) > 1 else ''}"

@@ -185,11 +185,15 @@ def task(name: str) -> Task:
 
 
 def train_arguments(name: str) -> list[str]:
-    """The ``spikectl train`` flags that train on task ``name``: its environment, n and
-    extension overrides. With the default context flags (100 / 100 / 100 networks, context
-    seed 0) the run's training and validation sets are the task's (tested)."""
+    """The ``spikectl train`` flags that train on task ``name``: its environment, n,
+    extension overrides and its sets' sizes and seed, so that the run's training and
+    validation sets are the task's (tested) whatever the preset's own sizes (the guided
+    preset trains on 1 000 networks)."""
     spec = task(name)
     arguments = ["--env", spec.env_id, "--n-neurons", str(spec.n_neurons)]
+    for flag in ("--n-train", "--n-test", "--n-val"):
+        arguments += [flag, str(SET_SIZE)]
+    arguments += ["--context-seed", str(spec.seed)]
     for field_name, value in spec.overrides.items():
         flag = "--extensions." + field_name.replace("_", "-")
         if isinstance(value, bool):
