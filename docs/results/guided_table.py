@@ -35,11 +35,13 @@ GROUPS = {
     "guided + connectivity loss 1": "guided-conn1",
     "guided + connectivity loss 0.1, 4x the steps": "guided-conn01-4x",
     "guided + connectivity loss, 28 updates a round": "guided-upr28",
-    "guided + connectivity loss, 24 updates a round (`spikectl train guided`, the main job)":
+    "guided + connectivity loss, 24 updates a round (the main job until 2026-11-25, 100 networks)":
         "guided-upr24",
-    "the main job again, on an AMD EPYC with AVX-512 (2026-11-25)": "guided-upr24-avx512",
-    "the main job + the others' spikes in each neuron's input (AVX-512 host)": "guided-others",
-    "the main job on 1 000 training networks (`--n-train 1000`, AVX-512 host)": "guided-ntrain1000",
+    "the 100-network main job again, on an AMD EPYC with AVX-512 (2026-11-25)":
+        "guided-upr24-avx512",
+    "the 100-network main job + the others' spikes in the input (AVX-512 host)": "guided-others",
+    "the main job on 1 000 training networks (`spikectl train guided`, AVX-512 host)":
+        "guided-ntrain1000",
     "the main job on 4 000 training networks, 4x the steps (AVX-512 host)": "guided-ntrain4000-4x",
     "PQN (`spikectl train pqn`)": "pqn",
 }

@@ -36,14 +36,14 @@ GROUPS = {
     "guided + connectivity loss 0.1, 32 updates a round": "guided-conn01",
     "guided + connectivity loss 1": "guided-conn1",
     "guided + connectivity loss 0.1, 4x steps": "guided-conn01-4x",
-    "guided + connectivity loss, 24 updates a round (the main job)": "guided-upr24",
+    "guided + connectivity loss, 24 updates a round (100 networks)": "guided-upr24",
     "the main job + the others' spikes in the input (AVX-512 host)": "guided-others",
-    "the main job on 1 000 training networks (AVX-512 host)": "guided-ntrain1000",
+    "guided, 24 a round, on 1 000 networks (the main job; AVX-512 host)": "guided-ntrain1000",
     "the main job on 4 000 training networks, 4x steps (AVX-512 host)": "guided-ntrain4000-4x",
     "PQN": "pqn",
 }
 
-MAIN_JOB = "guided-upr24"
+MAIN_JOB = "guided-ntrain1000"
 """The folder of the README's main job, drawn thicker."""
 
 
