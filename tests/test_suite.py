@@ -248,6 +248,9 @@ def test_train_task_flag_is_overridden_by_later_flags_and_checked():
         (["--task", "n64"], "unknown task 'n64' of benchmark suite v1"),
         (["--task", "paper", "--task", "n16"], "one task per run"),
         (["--task"], "give a task of the benchmark suite"),
+        (["--task", "paper", "--train-contexts", "c.npz"],
+         "--task paper trains on the task's pinned sets, --train-contexts on a file"),
+        (["--task=n16", "--test-contexts=c.npz"], "--test-contexts on a file of its own"),
     ):
         with pytest.raises(ValueError, match=message):
             parse_train(argv)

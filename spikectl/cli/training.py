@@ -278,8 +278,9 @@ def parse_train(argv: list[str], command_types: tuple[type, ...] = ()) -> TrainC
 
 def _expand_task_flag(argv: list[str]) -> list[str]:
     """``--task T`` / ``--task=T`` replaced by the suite task's own flags (--env,
-    --n-neurons, --extensions.*), placed right after the preset so that every flag
-    given on the command line still overrides them. One task at most."""
+    --n-neurons, --extensions.*, its set sizes and seed), placed right after the preset
+    so that every flag given on the command line still overrides them. One task at
+    most, and not beside a context file (the task's sets are its own)."""
     tasks, rest = [], [argv[0]]
     index = 1
     while index < len(argv):
@@ -299,6 +300,12 @@ def _expand_task_flag(argv: list[str]) -> list[str]:
         return argv
     if len(tasks) > 1:
         raise ValueError(f"--task: one task per run, got {', '.join(tasks)}")
+    for flag in ("--train-contexts", "--test-contexts"):
+        if any(arg == flag or arg.startswith(flag + "=") for arg in rest):
+            raise ValueError(
+                f"--task {tasks[0]} trains on the task's pinned sets, {flag} on a file of "
+                f"its own: give one of them"
+            )
     from spikectl.experiments import suite
 
     try:
