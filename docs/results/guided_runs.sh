@@ -44,6 +44,8 @@ case $folder in
     # ... and 4x the steps on 4000 networks (each seen as often as 1000 at 1x),
     # evaluated every 800 episodes: issue 23's 60 core-minutes.
     guided-ntrain4000-4x) flags=(--n-train 4000 --total-env-steps 1056000 --eval-every-episodes 800) ;;
+    # A wider memory: each neuron's LSTM 128 wide instead of 64 (pilot, 2026-11-25).
+    guided-lstm128)       flags=(--sizes.lstm-hidden 128) ;;
     pqn)                  exec spikectl train pqn --seed "$seed" --run-dir "runs/$folder/seed=$seed" ;;
     *) echo "unknown folder $folder" >&2; exit 2 ;;
 esac

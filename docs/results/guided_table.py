@@ -43,6 +43,7 @@ GROUPS = {
     "the main job on 1 000 training networks (`spikectl train guided`, AVX-512 host)":
         "guided-ntrain1000",
     "the main job on 4 000 training networks, 4x the steps (AVX-512 host)": "guided-ntrain4000-4x",
+    "the main job with a 128-wide LSTM (pilot, 2 seeds, AVX-512 host)": "guided-lstm128",
     "PQN (`spikectl train pqn`)": "pqn",
 }
 

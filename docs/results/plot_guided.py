@@ -40,6 +40,7 @@ GROUPS = {
     "the main job + the others' spikes in the input (AVX-512 host)": "guided-others",
     "guided, 24 a round, on 1 000 networks (the main job; AVX-512 host)": "guided-ntrain1000",
     "the main job on 4 000 training networks, 4x steps (AVX-512 host)": "guided-ntrain4000-4x",
+    "the main job with a 128-wide LSTM (AVX-512 host)": "guided-lstm128",
     "PQN": "pqn",
 }
 
