@@ -51,10 +51,14 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     `Discrete(n + 1, start=-1)`: -1 does nothing, j in 0..n-1 stimulates neuron j for one
     step (+40 mV; a refractory neuron ignores it). The target neuron is illegal unless
     `allow_target_action=True`; an illegal, out-of-range or non-integer action raises
-    `ValueError`. `info["action_mask"]` marks the legal actions; `action_space.sample()`
-    draws only legal ones. With hidden neurons (an extension) the agent sees k < n
-    neurons: every n below is then k, and index i means the i-th observable neuron
-    (increasing neuron order, `Context.observable`).
+    `ValueError`. This environment is strict: for clients that send any action of the
+    space (Gymnasium's "sync"/"async" `make_vec` sample the batch without a mask), use
+    the flat ids, `spikectl/NeuronControlFlat-v0` and its twins (docs/ecosystem.md).
+    `info["action_mask"]` (int8, 1 = legal) marks the legal actions; `action_space.sample()`
+    draws only legal ones, and so does Gymnasium's `sample(mask=info["action_mask"])`.
+    With hidden neurons (an extension) the agent sees k < n neurons: every n below is
+    then k, and index i means the i-th observable neuron (increasing neuron order,
+    `Context.observable`).
 
     ## Observation Space
 
@@ -114,7 +118,7 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     an explicit `n_neurons` or `episode_length` must agree with the set.
 
     `reset(options={"context": c})` plays context `c`: an index into the set or a
-    `Context` of the same size. `info` holds `action_mask` (bool [n + 1], index a + 1
+    `Context` of the same size. `info` holds `action_mask` (int8 [n + 1], index a + 1
     for action a), `context_index` (None for a passed `Context`) and, after a step,
     `spikes` (bool [n]) and `target_spiked`.
 
@@ -128,7 +132,8 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     ```
 
     ## Version History
-    * v0: Initial version; the extensions (docs/extensions.md) off by default.
+    * v0: Initial version; the extensions (docs/extensions.md) off by default. The action
+      mask is int8 (it was bool), what Gymnasium's masked sampling takes.
     """
 
     metadata = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS}
@@ -205,7 +210,8 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         self._reward_if_silent = tables.reward_if_silent[row].tolist()
         self._legal = tables.legal[row]
         self._legal_list = self._legal.tolist()
-        self.action_space.legal_mask = self._legal.astype(np.int8)
+        self._mask = self._legal.astype(np.int8)  # info["action_mask"]: Gymnasium's int8
+        self.action_space.legal_mask = self._mask
         self._state = SimulatorState.at_rest(1, self.n_neurons, self.params)
         self._action_history.fill(DO_NOTHING)
         self._spike_history.fill(False)
@@ -220,7 +226,7 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
             "step": 0,
             "last_action": DO_NOTHING,
         }
-        info = {"action_mask": self._legal.copy(), "context_index": self._context_index}
+        info = {"action_mask": self._mask.copy(), "context_index": self._context_index}
         return observation, info
 
     def step(self, action: int) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
@@ -257,7 +263,7 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
             "last_action": action,
         }
         info = {
-            "action_mask": self._legal.copy(),
+            "action_mask": self._mask.copy(),
             "context_index": self._context_index,
             "spikes": spikes.copy(),
             "target_spiked": target_spiked,

@@ -31,9 +31,24 @@ VARIANTS: dict[str, dict[str, Any]] = {
 }
 """Registered variants: id -> keyword arguments (JSON-ready, so specs serialise)."""
 
+FLAT_ENV_ID = "spikectl/NeuronControlFlat-v0"
+"""The paper's task in generic RL libraries' conventions (spikectl.wrappers.flat_env)."""
+
+
+def flat_id(env_id: str) -> str:
+    """The flat twin of a paper id: ``spikectl/NeuronControlNoisy-v0`` ->
+    ``spikectl/NeuronControlNoisyFlat-v0``."""
+    name, version = env_id.rsplit("-", 1)
+    return f"{name}Flat-{version}"
+
+
+FLAT_VARIANTS: dict[str, dict[str, Any]] = {flat_id(i): kwargs for i, kwargs in VARIANTS.items()}
+"""The flat twins of :data:`VARIANTS`: the same keyword arguments."""
+
 
 def register_envs() -> None:
-    """Register ``spikectl/NeuronControl-v0`` and its :data:`VARIANTS`; idempotent.
+    """Register ``spikectl/NeuronControl-v0``, its :data:`VARIANTS` and their flat twins
+    (:data:`FLAT_ENV_ID`, :data:`FLAT_VARIANTS`); idempotent.
 
     ``gymnasium.make(ENV_ID, **kwargs)`` builds :class:`spikectl.envs.env.NeuronControlEnv`;
     ``gymnasium.make_vec(ENV_ID, num_envs=...)`` builds the batched
@@ -42,6 +57,13 @@ def register_envs() -> None:
     ``SyncVectorEnv`` of single environments with ``vectorization_mode="sync"``. The
     variants are the same classes with the keyword arguments of :data:`VARIANTS`
     (arguments given to ``make`` override them).
+
+    The paper ids are strict: an action outside the mask raises, so Gymnasium's "sync"
+    and "async" vector modes (whose batched ``action_space.sample()`` knows no mask) need
+    masked sampling, ``envs.action_space.sample(mask=tuple(infos["action_mask"]))``.
+    The flat ids take any action of their spaces (an illegal one does nothing), and
+    ``make_vec`` builds :class:`spikectl.wrappers.flat_vector_env.FlatNeuronControlVectorEnv`
+    on the batched simulator; see docs/ecosystem.md.
     """
     for env_id, kwargs in {ENV_ID: {}, **VARIANTS}.items():
         # Registering an id twice makes Gymnasium warn, and the package may be re-imported.
@@ -51,5 +73,14 @@ def register_envs() -> None:
             id=env_id,
             entry_point="spikectl.envs.env:NeuronControlEnv",
             vector_entry_point="spikectl.envs.vector_env:NeuronControlVectorEnv",
+            kwargs=kwargs,
+        )
+    for env_id, kwargs in {FLAT_ENV_ID: {}, **FLAT_VARIANTS}.items():
+        if env_id in gymnasium.registry:
+            continue
+        gymnasium.register(
+            id=env_id,
+            entry_point="spikectl.wrappers.flat_env:FlatNeuronControlEnv",
+            vector_entry_point="spikectl.wrappers.flat_vector_env:FlatNeuronControlVectorEnv",
             kwargs=kwargs,
         )

@@ -58,7 +58,7 @@ def _batch_actor(policy: Controller | Policy) -> Callable[[dict, dict], np.ndarr
             f"{type(policy).__name__} is neither a controller (reset() and act(observation, "
             "info)) nor a policy function (observations, action_mask) -> actions"
         )
-    return lambda observations, infos: policy(observations, infos["action_mask"])
+    return lambda observations, infos: policy(observations, infos["action_mask"].astype(bool))
 
 
 def run_episodes(
@@ -80,7 +80,7 @@ def run_episodes(
     actions = np.zeros((size, length), dtype=np.int64)
     rewards = np.zeros((size, length))
     spikes = np.zeros((size, length, n), dtype=bool)
-    action_mask = infos["action_mask"].copy()
+    action_mask = infos["action_mask"].astype(bool)  # int8 in the infos
     voltage[:, 0] = observations["voltage"]
     for t in range(length):
         actions[:, t] = act(observations, infos)

@@ -42,7 +42,7 @@ class NeuronControlVectorEnv(VectorEnv):
     """``num_envs`` copies of :class:`~spikectl.envs.env.NeuronControlEnv` stepped as one batch.
 
     Takes ``num_envs`` plus the single environment's arguments; spaces are the single
-    ones batched. Actions: int array [num_envs]. Infos: ``action_mask`` [num_envs, n + 1],
+    ones batched. Actions: int array [num_envs]. Infos: ``action_mask`` int8 [num_envs, n + 1],
     ``context_index`` [num_envs] (-1 for a passed ``Context``), ``spikes`` [num_envs, n]
     and ``target_spiked`` [num_envs], each with Gymnasium's ``_key`` mask of the
     sub-environments that report it (after an autoreset there are no spikes).
@@ -173,7 +173,7 @@ class NeuronControlVectorEnv(VectorEnv):
         self._ever_reset |= which
         self._all_reset = bool(self._ever_reset.all())
         infos = {
-            "action_mask": self._legal.copy(),
+            "action_mask": self._legal.astype(np.int8),
             "_action_mask": which.copy(),
             "context_index": self._context_index.copy(),
             "_context_index": which.copy(),
@@ -236,7 +236,7 @@ class NeuronControlVectorEnv(VectorEnv):
         self._needs_reset = terminated.copy()
         self._any_needs_reset = bool(terminated.any())
         infos = {
-            "action_mask": self._legal.copy(),
+            "action_mask": self._legal.astype(np.int8),
             "_action_mask": self._all_envs.copy(),
             "context_index": self._context_index.copy(),
             "_context_index": self._all_envs.copy(),

@@ -1,29 +1,41 @@
-"""The environment in the conventions of Stable-Baselines3 and sb3-contrib.
+"""The environment in the conventions of generic RL libraries (docs/ecosystem.md).
 
-``sb3`` holds the single-environment wrapper, ``sb3_vec_adapter`` the adapter from the
-batched environment to SB3's ``VecEnv`` (imported only when used: it needs SB3), and
-``sb3_spaces`` the spaces and observations both write.
+``conventions`` holds them in one place (zero-based actions, int8 masks, flat float32
+observations, the illegal-action rule); ``flat_env`` and ``flat_vector_env`` are the
+environments of the registered flat ids (``spikectl/NeuronControlFlat-v0``, ...);
+``sb3`` puts any single environment behind the same conventions for Stable-Baselines3,
+and ``sb3_vec_adapter`` the batched one behind SB3's ``VecEnv`` (imported only when
+used: it needs SB3).
 """
 
-from spikectl.wrappers.sb3 import (
-    SB3CompatibleEnv,
-    make_sb3_compatible,
-    sb3_compatible,
-    sb3_vec_env,
-)
-from spikectl.wrappers.sb3_spaces import (
+from spikectl.wrappers.conventions import (
     DO_NOTHING,
     ILLEGAL_ACTIONS,
+    MASK_DTYPE,
+    FlatObservation,
     SB3Observation,
     from_env_action,
     observation_for,
     to_env_action,
     voltage_bounds_mV,
 )
+from spikectl.wrappers.flat_env import FlatEnv, FlatNeuronControlEnv
+from spikectl.wrappers.flat_vector_env import FlatNeuronControlVectorEnv
+from spikectl.wrappers.sb3 import (
+    SB3CompatibleEnv,
+    make_sb3_compatible,
+    sb3_compatible,
+    sb3_vec_env,
+)
 
 __all__ = [
     "DO_NOTHING",
     "ILLEGAL_ACTIONS",
+    "MASK_DTYPE",
+    "FlatEnv",
+    "FlatNeuronControlEnv",
+    "FlatNeuronControlVectorEnv",
+    "FlatObservation",
     "SB3CompatibleEnv",
     "SB3Observation",
     "from_env_action",

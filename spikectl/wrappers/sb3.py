@@ -1,10 +1,12 @@
-"""The environment in the conventions of other RL libraries (Stable-Baselines3, sb3-contrib).
+"""The environment for Stable-Baselines3 and sb3-contrib: a thin layer over the flat conventions.
 
-The base environments keep the paper's conventions (docs/environment.md): actions
--1..n-1 with -1 = do nothing, an illegal action raises, the voltage is unbounded and
-the observation is a ``Dict`` with a ``Discrete(start=-1)`` entry. Libraries such as
-Stable-Baselines3 assume zero-based spaces, bounded boxes, legal sampling or
-``action_masks()``. :func:`sb3_compatible` wraps one environment and
+The registered flat ids (``spikectl/NeuronControlFlat-v0``, docs/ecosystem.md) already
+speak SB3's conventions; these functions put an environment built otherwise (a paper id,
+a ``NeuronControlEnv`` with a custom context set) behind the same conventions
+(:mod:`spikectl.wrappers.conventions`). The paper environments keep the paper's
+conventions (docs/environment.md): actions -1..n-1 with -1 = do nothing, an illegal
+action raises, the voltage is unbounded and the observation is a ``Dict`` with a
+``Discrete(start=-1)`` entry. :func:`sb3_compatible` wraps one environment and
 :func:`sb3_vec_env` the batched one for them; neither changes the dynamics or the
 rewards, only how actions and observations are written (docs/ecosystem.md).
 
@@ -16,7 +18,7 @@ says so) or raises (``"raise"``, the base environment's behaviour).
 
 Observations: the base ``Dict`` with ``last_action`` zero-based and the voltage clipped
 to the finite bounds of :func:`voltage_bounds_mV` (``flatten=False``), or by default one
-float32 vector (``flatten=True``, layout in :class:`SB3Observation`) that every SB3
+float32 vector (``flatten=True``, layout in :class:`FlatObservation`) that every SB3
 policy, ``VecNormalize`` and ``VecFrameStack`` accept.
 """
 
@@ -25,54 +27,28 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Any
 
 import gymnasium as gym
-import numpy as np
-from gymnasium import spaces
 from gymnasium.envs.registration import EnvSpec
 
 from spikectl.config_errors import MissingExtraError
-from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.vector_env import NeuronControlVectorEnv
-from spikectl.wrappers.sb3_spaces import (
-    DO_NOTHING,
-    check_illegal_action,
-    observation_for,
-    to_env_action,
-)
+from spikectl.wrappers.flat_env import FlatEnv
 
 if TYPE_CHECKING:
     from spikectl.wrappers.sb3_vec_adapter import SB3VecEnv
 
 
-class SB3CompatibleEnv(gym.Env):
-    """A spikectl environment with zero-based actions, masks and bounded observations.
+class SB3CompatibleEnv(FlatEnv):
+    """:class:`~spikectl.wrappers.flat_env.FlatEnv` whose ``spec`` rebuilds it.
 
-    See the module docstring and docs/ecosystem.md. Dynamics, rewards, seeding and
-    episode ends are the base environment's; ``action_masks()`` (bool [k + 1]) is the
-    mask of the current state, as sb3-contrib's ``MaskablePPO`` reads it.
-
-    It holds the base environment (``self.env``) rather than being a ``gym.Wrapper``:
-    Gymnasium's ``check_env`` warns about any wrapper, and this is a new interface to
-    the environment, not a layer over the same one. Its ``np_random`` is the base
-    environment's, so there is one generator, seeded by ``reset(seed=...)``.
+    See the module docstring and docs/ecosystem.md. ``gymnasium.make(env.spec)`` gives
+    the same wrapped environment again (SB3's ``make_vec_env`` and evaluation helpers
+    rebuild environments that way).
     """
 
     def __init__(
         self, env: gym.Env, *, flatten: bool = True, illegal_action: str = "do_nothing"
     ) -> None:
-        if not isinstance(env.unwrapped, NeuronControlEnv):
-            raise TypeError(
-                f"sb3_compatible wraps a spikectl NeuronControlEnv (or gymnasium.make of a "
-                f"spikectl id), got {type(env.unwrapped).__name__}"
-            )
-        check_illegal_action(illegal_action)
-        self.env = env
-        self.illegal_action = illegal_action
-        self.metadata = env.metadata
-        self.render_mode = env.render_mode
-        self.observation_codec = observation_for(env.unwrapped, flatten)
-        self.observation_space = self.observation_codec.space
-        self.action_space = spaces.Discrete(env.unwrapped.n_observed + 1)
-        self._mask = np.zeros(self.action_space.n, dtype=bool)
+        super().__init__(env, flatten=flatten, illegal_action=illegal_action)
         if env.spec is not None:  # gymnasium.make(self.spec) rebuilds this environment
             self.spec = EnvSpec(
                 env.spec.id,
@@ -85,52 +61,6 @@ class SB3CompatibleEnv(gym.Env):
                     "illegal_action": illegal_action,
                 },
             )
-
-    @property
-    def _np_random(self) -> np.random.Generator | None:
-        return self.env.unwrapped._np_random
-
-    @_np_random.setter
-    def _np_random(self, value: np.random.Generator | None) -> None:
-        self.env.unwrapped._np_random = value
-
-    @property
-    def np_random_seed(self) -> int:
-        return self.env.unwrapped.np_random_seed
-
-    def reset(
-        self, *, seed: int | None = None, options: dict[str, Any] | None = None
-    ) -> tuple[np.ndarray | dict[str, Any], dict[str, Any]]:
-        observation, info = self.env.reset(seed=seed, options=options)
-        self._mask = info["action_mask"].copy()
-        return self.observation_codec(observation), info
-
-    def step(
-        self, action: Any
-    ) -> tuple[np.ndarray | dict[str, Any], float, bool, bool, dict[str, Any]]:
-        if not self.action_space.contains(action):
-            raise ValueError(
-                f"action {action!r} is not in {self.action_space}: 0 does nothing, "
-                f"a in 1..{self.action_space.n - 1} stimulates neuron a - 1"
-            )
-        action = int(action)
-        illegal = not self._mask[action]
-        if illegal and self.illegal_action == "do_nothing":
-            action = DO_NOTHING
-        observation, reward, terminated, truncated, info = self.env.step(to_env_action(action))
-        self._mask = info["action_mask"].copy()
-        info["illegal_action"] = illegal
-        return self.observation_codec(observation), reward, terminated, truncated, info
-
-    def action_masks(self) -> np.ndarray:
-        """Legal actions now: bool [k + 1], entry a for zero-based action a."""
-        return self._mask.copy()
-
-    def render(self) -> str | np.ndarray | None:
-        return self.env.render()
-
-    def close(self) -> None:
-        self.env.close()
 
 
 def sb3_compatible(

@@ -23,9 +23,9 @@ from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices
 
 from spikectl.envs.vector_env import NeuronControlVectorEnv
-from spikectl.wrappers.sb3_spaces import (
-    DO_NOTHING,
+from spikectl.wrappers.conventions import (
     check_illegal_action,
+    legal_or_nothing,
     observation_for,
     to_env_action,
 )
@@ -63,7 +63,6 @@ class SB3VecEnv(VecEnv):
         self.observation_codec = observation_for(vector_env, flatten)
         k = vector_env.n_observed
         super().__init__(vector_env.num_envs, self.observation_codec.space, spaces.Discrete(k + 1))
-        self._envs = np.arange(self.num_envs)
         self._masks = np.zeros((self.num_envs, k + 1), dtype=bool)
         self._actions: np.ndarray | None = None
 
@@ -109,14 +108,8 @@ class SB3VecEnv(VecEnv):
                 f"actions must be integers in 0..{n_actions - 1} of shape ({self.num_envs},), "
                 f"got {actions.dtype} {actions.shape}: {actions.tolist()}"
             )
-        illegal = ~self._masks[self._envs, actions]
-        if illegal.any() and self.illegal_action == "raise":
-            i = int(np.argmax(illegal))
-            raise ValueError(
-                f"env {i}: action {actions[i]} stimulates the target, which is not a legal "
-                "action (see action_masks())"
-            )
-        env_actions = to_env_action(np.where(illegal, DO_NOTHING, actions))
+        actions, illegal = legal_or_nothing(actions, self._masks, self.illegal_action)
+        env_actions = to_env_action(actions)
         observation, rewards, terminated, truncated, infos = self.vector_env.step(env_actions)
         dones = terminated | truncated
         step_infos = [

@@ -1,8 +1,23 @@
-"""The zero-based spaces and observations that both SB3 adapters write.
+"""The ecosystem's conventions, in one place: what every flat id and adapter writes.
 
-Shared by :class:`~spikectl.wrappers.sb3.SB3CompatibleEnv` (one environment) and
-:class:`~spikectl.wrappers.sb3_vec_adapter.SB3VecEnv` (the batched one): the action
-offset, the finite voltage bounds and the observation codec. Needs no SB3.
+Generic RL libraries (CleanRL, TorchRL, RLlib, Stable-Baselines3) assume a zero-based
+``Discrete`` action space, a float32 ``Box`` observation with finite bounds, an int8
+action mask (what ``Discrete.sample(mask=...)`` takes) and that any action of the space
+may be sent. The paper's environment (docs/environment.md) writes actions -1..n-1, a
+``Dict`` observation with an unbounded voltage, and raises on the target neuron. This
+module is the translation, shared by the flat environments
+(:mod:`spikectl.wrappers.flat_env`, :mod:`spikectl.wrappers.flat_vector_env`) and the SB3
+adapters (:mod:`spikectl.wrappers.sb3`, :mod:`spikectl.wrappers.sb3_vec_adapter`):
+
+- actions: zero-based a is the paper's a - 1 (0 does nothing, a >= 1 stimulates
+  neuron a - 1), so mask column a is the paper's ``info["action_mask"]`` column a;
+- the action mask: int8, 1 = legal;
+- an illegal action (the target neuron): does nothing and is reported
+  (``"do_nothing"``, the default) or raises ``ValueError`` (``"raise"``);
+- observations: one float32 vector with finite bounds (:class:`FlatObservation`), or the
+  paper's ``Dict`` with zero-based ``last_action`` and a clipped voltage.
+
+Needs no other library.
 """
 
 from __future__ import annotations
@@ -18,6 +33,8 @@ DO_NOTHING = 0
 """The zero-based action that stimulates no neuron (the base environment's -1)."""
 ILLEGAL_ACTIONS = ("do_nothing", "raise")
 """What an illegal action (stimulating the target) does: nothing, or raise ValueError."""
+MASK_DTYPE = np.int8
+"""dtype of every ``info["action_mask"]``: Gymnasium's ``Discrete.sample(mask=...)`` takes int8."""
 
 
 def to_env_action(action: Any) -> Any:
@@ -73,8 +90,8 @@ def _float32_outward(low: float, high: float) -> tuple[np.float32, np.float32]:
     return low32, high32
 
 
-class SB3Observation:
-    """The wrappers' observation space and the map from the base observation to it.
+class FlatObservation:
+    """The flat observation space and the map from the paper's observation to it.
 
     Works on one observation or on a batch (leading axis, as the vector environment
     gives them). With ``flatten=False`` the base ``Dict`` with ``last_action`` in
@@ -94,6 +111,7 @@ class SB3Observation:
 
     The pattern ahead repeats what pattern and step say, aligned with the current step,
     so that a policy without memory or attention can read the next wanted spikes.
+    Every entry but the voltage lies in [0, 1] (the pattern ahead in [-1, 1]).
     """
 
     def __init__(
@@ -123,12 +141,17 @@ class SB3Observation:
                 }
             )
             return
-        size = 3 * k + 3 * length + 2
+        self.size = size = 3 * k + 3 * length + 2
         lows = np.zeros(size, dtype=np.float32)
         highs = np.ones(size, dtype=np.float32)
         lows[:k], highs[:k] = _float32_outward(self._scaled(low), self._scaled(high))
         lows[-length:] = -1.0
         self.space = spaces.Box(lows, highs, (size,), np.float32)
+        # Column offsets of the one-hot blocks and of the pattern blocks.
+        self._last_action_column = 2 * k
+        self._step_column = 3 * k + 1
+        self._pattern_column = 3 * k + length + 2
+        self._ahead_column = 3 * k + 2 * length + 2
 
     def _scaled(self, voltage_mV: Any) -> Any:
         return (voltage_mV - self.v_rest_mV) / (self.v_threshold_mV - self.v_rest_mV)
@@ -154,33 +177,56 @@ class SB3Observation:
                 else int(observation["step"]),
                 "last_action": last_action if batched else int(last_action),
             }
+        return self._flat(voltage, observation, last_action)
+
+    def _flat(
+        self, voltage: np.ndarray, observation: dict[str, Any], last_action: np.ndarray
+    ) -> np.ndarray:
+        """Write the blocks of the table into one zeroed [rows, size] array."""
         k, length = self.k, self.N
-        target = np.asarray(observation["target"])
-        step = np.asarray(observation["step"])
-        pattern = np.asarray(observation["pattern"], dtype=np.float32)  # [..., N]
-        index = step[..., None] + self._ahead  # [..., N]
-        ahead = np.where(
-            index < length,
-            np.take_along_axis(pattern, np.minimum(index, length - 1), axis=-1),
-            np.float32(-1.0),
-        )  # [..., N]
-        scaled = self._scaled(voltage)
+        single = voltage.ndim == 1
+        voltage = voltage.reshape(-1, k)  # [B, k]
+        rows = np.arange(voltage.shape[0])
+        target = np.asarray(observation["target"]).reshape(-1)  # [B]
+        step = np.asarray(observation["step"]).reshape(-1)  # [B]
+        pattern = np.asarray(observation["pattern"]).reshape(-1, length)  # [B, N]
+        out = np.zeros((rows.size, self.size), dtype=np.float32)  # [B, size]
         low, high = self.space.low[0], self.space.high[0]
-        return np.concatenate(
-            [
-                np.clip(scaled, low, high).astype(np.float32),  # [..., k]
-                _one_hot(target, k),  # [..., k]
-                _one_hot(last_action, k + 1),  # [..., k+1]
-                _one_hot(step, length + 1),  # [..., N+1]
-                pattern,  # [..., N]
-                ahead.astype(np.float32),  # [..., N]
-            ],
-            axis=-1,
+        np.clip(self._scaled(voltage), low, high, out=out[:, :k])
+        out[rows, k + target] = 1.0
+        out[rows, self._last_action_column + last_action.reshape(-1)] = 1.0
+        out[rows, self._step_column + step] = 1.0
+        out[:, self._pattern_column : self._ahead_column] = pattern
+        index = step[:, None] + self._ahead  # [B, N]
+        past_end = index >= length
+        ahead = np.take_along_axis(pattern, np.minimum(index, length - 1), axis=1)  # [B, N]
+        out[:, self._ahead_column :] = np.where(past_end, -1, ahead)
+        return out[0] if single else out
+
+
+SB3Observation = FlatObservation
+"""The name under which the SB3 adapters first exported :class:`FlatObservation`."""
+
+
+def legal_or_nothing(
+    actions: np.ndarray, legal: np.ndarray, illegal_action: str
+) -> tuple[np.ndarray, np.ndarray]:
+    """Apply the illegal-action rule to zero-based ``actions`` [B] under masks ``legal`` [B, k+1].
+
+    Returns (the actions with every illegal one replaced by :data:`DO_NOTHING`, bool [B]
+    marking them); with ``illegal_action="raise"`` an illegal action raises ValueError
+    naming the first environment that sent one.
+    """
+    illegal = legal[np.arange(actions.shape[0]), actions] == 0
+    if not illegal.any():
+        return actions, illegal
+    if illegal_action == "raise":
+        i = int(np.argmax(illegal))
+        raise ValueError(
+            f"env {i}: action {actions[i]} stimulates the target neuron, which is not a legal "
+            'action (see info["action_mask"]; illegal_action="do_nothing" makes it do nothing)'
         )
-
-
-def _one_hot(index: np.ndarray, size: int) -> np.ndarray:
-    return np.eye(size, dtype=np.float32)[index]  # [..., size]
+    return np.where(illegal, DO_NOTHING, actions), illegal
 
 
 def check_illegal_action(illegal_action: str) -> None:
@@ -189,9 +235,9 @@ def check_illegal_action(illegal_action: str) -> None:
         raise ValueError(f"illegal_action must be one of {ILLEGAL_ACTIONS}, got {illegal_action!r}")
 
 
-def observation_for(env: Any, flatten: bool) -> SB3Observation:
-    """The :class:`SB3Observation` of a (single or vector) spikectl environment."""
-    return SB3Observation(
+def observation_for(env: Any, flatten: bool) -> FlatObservation:
+    """The :class:`FlatObservation` of a (single or vector) spikectl environment."""
+    return FlatObservation(
         env.n_observed,
         env.n_neurons,
         env.episode_length,
