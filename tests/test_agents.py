@@ -213,6 +213,7 @@ def test_masked_q_and_greedy_action() -> None:
     # a [B, n+1] mask over a [B, T, n+1] sequence, broadcast over T
     q_seq = torch.randn(2, 6, 4)
     assert (greedy_action(q_seq, mask[:, None]) + 1 != torch.tensor([1, 2])[:, None]).all()
+    assert torch.equal(masked_q(q, mask.to(torch.int8)), masked)  # the envs' int8 masks
     with pytest.raises(TypeError, match="bool"):
         masked_q(q, mask.int())
     with pytest.raises(ValueError, match="n\\+1"):

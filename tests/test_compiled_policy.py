@@ -92,7 +92,7 @@ def compare(
         while not done:
             with torch.no_grad():
                 q, state = network.step(observation_batch([observation]), state)  # [1, n+1]
-            mask = info["action_mask"]
+            mask = info["action_mask"].astype(bool)  # int8 in the info: index with bool
             action = int(greedy_action(q, torch.as_tensor(mask)[None])[0])
             compiled = policy.act(observation, info)
             legal_q = np.sort(q[0].numpy()[mask])[::-1]

@@ -126,13 +126,17 @@ def masked_q(
 ) -> torch.Tensor:
     """Set the Q-values of illegal actions to ``fill`` (default -inf).
 
-    q [..., n+1] and action_mask bool [..., n+1] (True = legal) in action+1 order;
-    the mask broadcasts against q (e.g. a [B, n+1] mask over q [B, T, n+1] needs
+    q [..., n+1] and action_mask bool or int8 [..., n+1] (True / 1 = legal; int8 is what
+    the environments' ``info["action_mask"]`` holds) in action+1 order; the mask
+    broadcasts against q (e.g. a [B, n+1] mask over q [B, T, n+1] needs
     ``mask[:, None]``). Use before argmax for acting and for double-Q targets.
     """
-    if action_mask.dtype != torch.bool:
+    if action_mask.dtype == torch.int8:
+        action_mask = action_mask != 0
+    elif action_mask.dtype != torch.bool:
         raise TypeError(
-            f"masked_q: action_mask must be bool (True = legal), got {action_mask.dtype}"
+            "masked_q: action_mask must be bool or int8 (True / 1 = legal), got "
+            f"{action_mask.dtype}"
         )
     if action_mask.shape[-1] != q.shape[-1]:
         raise ValueError(

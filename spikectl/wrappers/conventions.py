@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import numba
 import numpy as np
 from gymnasium import spaces
 
@@ -129,7 +130,6 @@ class FlatObservation:
         self.v_rest_mV, self.v_threshold_mV = params.v_rest_mV, params.v_threshold_mV
         low, high = _float32_outward(*voltage_bounds_mV(params, n_neurons, stochastic_release))
         self.voltage_low_mV, self.voltage_high_mV = low, high
-        self._ahead = np.arange(length)  # [N]
         if not flatten:
             self.space = spaces.Dict(
                 {
@@ -147,11 +147,10 @@ class FlatObservation:
         lows[:k], highs[:k] = _float32_outward(self._scaled(low), self._scaled(high))
         lows[-length:] = -1.0
         self.space = spaces.Box(lows, highs, (size,), np.float32)
-        # Column offsets of the one-hot blocks and of the pattern blocks.
-        self._last_action_column = 2 * k
-        self._step_column = 3 * k + 1
-        self._pattern_column = 3 * k + length + 2
-        self._ahead_column = 3 * k + 2 * length + 2
+        self._constants = np.array(
+            [low, high, self.v_rest_mV, 1.0 / (self.v_threshold_mV - self.v_rest_mV),
+             lows[0], highs[0]],
+        )  # fmt: skip
 
     def _scaled(self, voltage_mV: Any) -> Any:
         return (voltage_mV - self.v_rest_mV) / (self.v_threshold_mV - self.v_rest_mV)
@@ -182,26 +181,64 @@ class FlatObservation:
     def _flat(
         self, voltage: np.ndarray, observation: dict[str, Any], last_action: np.ndarray
     ) -> np.ndarray:
-        """Write the blocks of the table into one zeroed [rows, size] array."""
-        k, length = self.k, self.N
         single = voltage.ndim == 1
-        voltage = voltage.reshape(-1, k)  # [B, k]
-        rows = np.arange(voltage.shape[0])
-        target = np.asarray(observation["target"]).reshape(-1)  # [B]
-        step = np.asarray(observation["step"]).reshape(-1)  # [B]
-        pattern = np.asarray(observation["pattern"]).reshape(-1, length)  # [B, N]
-        out = np.zeros((rows.size, self.size), dtype=np.float32)  # [B, size]
-        low, high = self.space.low[0], self.space.high[0]
-        np.clip(self._scaled(voltage), low, high, out=out[:, :k])
-        out[rows, k + target] = 1.0
-        out[rows, self._last_action_column + last_action.reshape(-1)] = 1.0
-        out[rows, self._step_column + step] = 1.0
-        out[:, self._pattern_column : self._ahead_column] = pattern
-        index = step[:, None] + self._ahead  # [B, N]
-        past_end = index >= length
-        ahead = np.take_along_axis(pattern, np.minimum(index, length - 1), axis=1)  # [B, N]
-        out[:, self._ahead_column :] = np.where(past_end, -1, ahead)
+        out = self.write(
+            voltage.reshape(-1, self.k),
+            np.asarray(observation["target"], dtype=np.int64).reshape(-1),
+            last_action.reshape(-1),
+            np.asarray(observation["step"], dtype=np.int64).reshape(-1),
+            np.asarray(observation["pattern"], dtype=np.int8).reshape(-1, self.N),
+        )
         return out[0] if single else out
+
+    def write(
+        self,
+        voltage_mV: np.ndarray,
+        target: np.ndarray,
+        last_action: np.ndarray,
+        step: np.ndarray,
+        pattern: np.ndarray,
+    ) -> np.ndarray:
+        """The flat observations [B, size] of a batch given as arrays: voltage [B, k] in mV,
+        target, zero-based last action and step int64 [B], pattern int8 [B, N]."""
+        out = np.empty((voltage_mV.shape[0], self.size), dtype=np.float32)
+        _write_flat(voltage_mV, target, last_action, step, pattern, self._constants, out)
+        return out
+
+
+@numba.njit(cache=True, nogil=True)
+def _write_flat(voltage_mV, target, last_action, step, pattern, constants, out):
+    """Every row of ``out`` in the layout of :class:`FlatObservation`, in one pass.
+
+    ``constants``: float64 [6], (low_mV, high_mV, V_rest, 1 / (V_th - V_rest), low, high):
+    few arguments, because the batched environment calls this at every step and numba's
+    dispatch cost grows with them.
+    """
+    rows, k = voltage_mV.shape
+    length = pattern.shape[1]
+    last_action_column = 2 * k
+    step_column = 3 * k + 1
+    pattern_column = 3 * k + length + 2
+    ahead_column = pattern_column + length
+    low_mV, high_mV = np.float32(constants[0]), np.float32(constants[1])
+    v_rest_mV, scale, low, high = constants[2], constants[3], constants[4], constants[5]
+    for b in range(rows):
+        for j in range(k):
+            # Clipped in float32 mV first, as the Dict observation is, then scaled.
+            v = min(max(np.float32(voltage_mV[b, j]), low_mV), high_mV)
+            out[b, j] = min(max((v - v_rest_mV) * scale, low), high)
+        for j in range(k, pattern_column):
+            out[b, j] = 0.0
+        out[b, k + target[b]] = 1.0
+        out[b, last_action_column + last_action[b]] = 1.0
+        t = step[b]
+        out[b, step_column + t] = 1.0
+        for j in range(length):
+            out[b, pattern_column + j] = pattern[b, j]
+        for j in range(length - t):
+            out[b, ahead_column + j] = pattern[b, t + j]
+        for j in range(max(length - t, 0), length):
+            out[b, ahead_column + j] = -1.0
 
 
 SB3Observation = FlatObservation
@@ -209,15 +246,21 @@ SB3Observation = FlatObservation
 
 
 def legal_or_nothing(
-    actions: np.ndarray, legal: np.ndarray, illegal_action: str
+    actions: np.ndarray,
+    legal: np.ndarray,
+    illegal_action: str,
+    row_offsets: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Apply the illegal-action rule to zero-based ``actions`` [B] under masks ``legal`` [B, k+1].
 
     Returns (the actions with every illegal one replaced by :data:`DO_NOTHING`, bool [B]
     marking them); with ``illegal_action="raise"`` an illegal action raises ValueError
-    naming the first environment that sent one.
+    naming the first environment that sent one. ``row_offsets``: ``arange(B) * (k + 1)``,
+    for callers that keep it.
     """
-    illegal = legal[np.arange(actions.shape[0]), actions] == 0
+    if row_offsets is None:
+        row_offsets = np.arange(0, legal.size, legal.shape[1])
+    illegal = legal.reshape(-1).take(row_offsets + actions) == 0
     if not illegal.any():
         return actions, illegal
     if illegal_action == "raise":

@@ -29,6 +29,7 @@ from spikectl.wrappers.conventions import (
     observation_for,
     to_env_action,
 )
+from spikectl.wrappers.flat_vector_env import FlatNeuronControlVectorEnv
 
 
 class SB3VecEnv(VecEnv):
@@ -56,6 +57,11 @@ class SB3VecEnv(VecEnv):
             raise TypeError(
                 "sb3_vec_env wraps a spikectl NeuronControlVectorEnv (or gymnasium.make_vec of "
                 f"a spikectl id), got {type(vector_env).__name__}"
+            )
+        if isinstance(vector_env, FlatNeuronControlVectorEnv):
+            raise TypeError(
+                "sb3_vec_env takes the batched paper environment (gymnasium.make_vec of a "
+                "paper id such as spikectl/NeuronControl-v0); the flat ids are already flat"
             )
         check_illegal_action(illegal_action)
         self.vector_env = vector_env
