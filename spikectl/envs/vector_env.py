@@ -69,6 +69,7 @@ class NeuronControlVectorEnv(VectorEnv):
         "render_fps": RENDER_FPS,
         "autoreset_mode": AutoresetMode.NEXT_STEP,
     }
+    autoreset_mode = AutoresetMode.NEXT_STEP  # as Gymnasium's vector envs say it; TorchRL reads it
 
     def __init__(
         self,

@@ -15,6 +15,8 @@ from typing import Any
 
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import ResetNeeded
+from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from spikectl.envs.vector_env import NeuronControlVectorEnv
@@ -40,15 +42,31 @@ class FlatNeuronControlVectorEnv(NeuronControlVectorEnv):
     and did nothing) and ``illegal_actions`` (int64 [num_envs], this episode's count),
     each with Gymnasium's ``_key`` mask.
 
-    Autoreset (``NEXT_STEP``: the action sent to an environment being reset is ignored),
-    seeding (sub-environment i gets ``seed + i``) and reset options (``context``,
+    Autoreset: ``autoreset_mode="NextStep"`` (default: the action sent to an environment
+    being reset is ignored) or ``"Disabled"`` (the caller resets ended environments with
+    ``reset(options={"reset_mask": ...})``, as TorchRL does; stepping one first raises).
+    Seeding (sub-environment i gets ``seed + i``) and reset options (``context``,
     ``reset_mask``) are the batched paper environment's, so with the same seeds it equals
     Gymnasium's sync and async vector environments of the flat id step by step (tested).
     """
 
-    def __init__(self, num_envs: int = 1, illegal_action: str = "do_nothing", **kwargs: Any):
+    def __init__(
+        self,
+        num_envs: int = 1,
+        illegal_action: str = "do_nothing",
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        **kwargs: Any,
+    ):
         check_illegal_action(illegal_action)
+        mode = AutoresetMode(autoreset_mode)
+        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.DISABLED):
+            raise ValueError(
+                f"autoreset_mode must be {AutoresetMode.NEXT_STEP.value!r} or "
+                f"{AutoresetMode.DISABLED.value!r}, got {autoreset_mode!r}"
+            )
         super().__init__(num_envs, **kwargs)
+        self.autoreset_mode = mode
+        self.metadata = {**self.metadata, "autoreset_mode": mode}
         self.illegal_action = illegal_action
         self.observation_codec = observation_for(self, flatten=True)
         self.single_observation_space = self.observation_codec.space
@@ -73,6 +91,12 @@ class FlatNeuronControlVectorEnv(NeuronControlVectorEnv):
     def step(
         self, actions: Any
     ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        if self._any_needs_reset and self.autoreset_mode is AutoresetMode.DISABLED:
+            ended = np.flatnonzero(self._needs_reset).tolist()
+            raise ResetNeeded(
+                f"sub-environment(s) {ended} ended: with autoreset_mode 'Disabled' reset them "
+                "with reset(options={'reset_mask': ...}) before the next step"
+            )
         observation, rewards, terminated, truncated, infos = super().step(actions)
         return observation, rewards, terminated, truncated, self._with_illegal(infos, None)
 
