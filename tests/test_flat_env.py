@@ -238,3 +238,21 @@ def test_paper_id_in_sync_mode_survives_masked_random_actions():
     for _ in range(30):
         actions = envs.action_space.sample(mask=tuple(infos["action_mask"]))
         _, _, _, _, infos = envs.step(actions)
+
+
+def test_autoreset_disabled_leaves_resets_to_the_caller():
+    """TorchRL's mode: an ended environment is reset by reset(options={"reset_mask": ...})."""
+    envs = gym.make_vec(FLAT_ENV_ID, 2, autoreset_mode="Disabled", episode_length=5, **SMALL)
+    assert envs.metadata["autoreset_mode"] == AutoresetMode.DISABLED
+    obs, _ = envs.reset(seed=0)
+    for _ in range(5):
+        obs, _, terminated, _, _ = envs.step(np.zeros(2, dtype=np.int64))
+    assert terminated.all()
+    with pytest.raises(gym.error.ResetNeeded, match=r"sub-environment\(s\) \[0, 1\] ended"):
+        envs.step(np.zeros(2, dtype=np.int64))
+    first, infos = envs.reset(options={"reset_mask": np.array([True, False])})
+    np.testing.assert_array_equal(infos["_action_mask"], [True, False])
+    np.testing.assert_array_equal(first[1], obs[1])  # the other one kept its last state
+    assert first[0, 3 * 8 + 1] == 1.0  # step 0
+    with pytest.raises(ValueError, match="autoreset_mode must be"):
+        gym.make_vec(FLAT_ENV_ID, 2, autoreset_mode="SameStep", **SMALL)

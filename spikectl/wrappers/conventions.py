@@ -223,22 +223,20 @@ def _write_flat(voltage_mV, target, last_action, step, pattern, constants, out):
     low_mV, high_mV = np.float32(constants[0]), np.float32(constants[1])
     v_rest_mV, scale, low, high = constants[2], constants[3], constants[4], constants[5]
     for b in range(rows):
+        row = out[b]  # a contiguous view: plain loops that the compiler vectorises
         for j in range(k):
             # Clipped in float32 mV first, as the Dict observation is, then scaled.
             v = min(max(np.float32(voltage_mV[b, j]), low_mV), high_mV)
-            out[b, j] = min(max((v - v_rest_mV) * scale, low), high)
-        for j in range(k, pattern_column):
-            out[b, j] = 0.0
-        out[b, k + target[b]] = 1.0
-        out[b, last_action_column + last_action[b]] = 1.0
+            row[j] = min(max((v - v_rest_mV) * scale, low), high)
+        row[k:pattern_column] = 0.0
+        row[k + target[b]] = 1.0
+        row[last_action_column + last_action[b]] = 1.0
         t = step[b]
-        out[b, step_column + t] = 1.0
-        for j in range(length):
-            out[b, pattern_column + j] = pattern[b, j]
-        for j in range(length - t):
-            out[b, ahead_column + j] = pattern[b, t + j]
-        for j in range(max(length - t, 0), length):
-            out[b, ahead_column + j] = -1.0
+        row[step_column + t] = 1.0
+        patterns = pattern[b]
+        row[pattern_column:ahead_column] = patterns
+        row[ahead_column : ahead_column + length - t] = patterns[t:]
+        row[ahead_column + length - t :] = -1.0
 
 
 SB3Observation = FlatObservation
