@@ -244,20 +244,16 @@ SB3Observation = FlatObservation
 
 
 def legal_or_nothing(
-    actions: np.ndarray,
-    legal: np.ndarray,
-    illegal_action: str,
-    row_offsets: np.ndarray | None = None,
+    actions: np.ndarray, legal: np.ndarray, illegal_action: str
 ) -> tuple[np.ndarray, np.ndarray]:
     """Apply the illegal-action rule to zero-based ``actions`` [B] under masks ``legal`` [B, k+1].
 
     Returns (the actions with every illegal one replaced by :data:`DO_NOTHING`, bool [B]
     marking them); with ``illegal_action="raise"`` an illegal action raises ValueError
-    naming the first environment that sent one. ``row_offsets``: ``arange(B) * (k + 1)``,
-    for callers that keep it.
+    naming the first environment that sent one. (The flat batched environment applies
+    the same rule in one compiled pass.)
     """
-    if row_offsets is None:
-        row_offsets = np.arange(0, legal.size, legal.shape[1])
+    row_offsets = np.arange(0, legal.size, legal.shape[1])
     illegal = legal.reshape(-1).take(row_offsets + actions) == 0
     if not illegal.any():
         return actions, illegal
