@@ -42,6 +42,7 @@ from spikectl.agents.policy_file import (
     export_policy,
 )
 from spikectl.agents.policy_kernel import _decide, _layout
+from spikectl.envs.controller import ControllerInputError, check_controller_input
 from spikectl.files import NotARegularFileError, npz_size_problem, open_regular_file
 
 
@@ -155,6 +156,7 @@ class CompiledPolicy:
         [N], step, last_action), ``info["action_mask"]`` bool [n + 1]. Step 0 starts a
         new episode (zero state); a step other than 0 continues the current one.
         """
+        check_controller_input(observation, info, "CompiledPolicy")
         voltage = np.ascontiguousarray(observation["voltage"], dtype=np.float32)
         pattern = np.ascontiguousarray(observation["pattern"], dtype=np.int8)
         mask = np.ascontiguousarray(info["action_mask"], dtype=np.bool_)
@@ -190,7 +192,7 @@ class CompiledPolicy:
             step, last_action, self._h, self._c, mask, self._q,
         )  # fmt: skip
         if best < 0:
-            raise ValueError("CompiledPolicy.act: the action mask allows no action")
+            raise ControllerInputError("CompiledPolicy.act: the action mask allows no action")
         return best - 1
 
 
