@@ -41,6 +41,12 @@ BEST_MODEL_FILE = "best_model.pt"
 METRICS_FILE = "metrics.csv"
 BASELINES_FILE = "baselines.json"
 MACHINE_FILE = "machine.json"
+RUN_FILE_NAMES = (
+    CONFIG_FILE, CHECKPOINT_FILE, MODEL_FILE, BEST_MODEL_FILE, METRICS_FILE, BASELINES_FILE,
+    MACHINE_FILE, "train_contexts.npz", "test_contexts.npz", "val_contexts.npz",
+    "learning_curve.png", "best_model.set-aside.pt", LOCK_FILE,
+)  # fmt: skip
+"""The files of a run directory: never an output of another command."""
 CLOCK_FIELDS = ("wall_time_s", "cpu_time_s", "eval_cpu_time_s")
 """The clocks of metrics.csv and of a checkpoint's runs: the only values a bit-identical
 rerun may change."""
