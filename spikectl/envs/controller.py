@@ -176,7 +176,8 @@ class Witness:
 
     def act_batch(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Any]):
         check_controller_input(observations, infos, "Witness", ("pattern", "target", "step"))
-        _context_index(infos, "Witness")
+        if "context_index" not in infos:
+            _context_index(infos, "Witness")  # the error naming what is missing
         contexts = np.asarray(infos["context_index"], dtype=np.int64)  # [S]
         self._check_context(contexts, observations)
         return self.witnesses[contexts, np.asarray(observations["step"], dtype=np.int64)]
