@@ -201,11 +201,24 @@ def write_metrics(run_dir: Path, rows: list[dict], fields: tuple[str, ...]) -> N
     atomic_write_text(run_dir / METRICS_FILE, buffer.getvalue())
 
 
+REQUIRED_METRICS = ("episode", "env_steps", "train_return", "test_return", "wall_time_s")
+"""The columns every metrics.csv spikectl wrote has, and that its readers use."""
+
+
 def read_metrics(run_dir: Path) -> list[dict[str, float]]:
+    """The rows of a run's metrics.csv as numbers; one lacking a column of
+    :data:`REQUIRED_METRICS` (renamed by hand) or holding text is a RunDirError."""
     path = Path(run_dir) / METRICS_FILE
     try:
         handle = io.StringIO(read_text_file(path), newline="")
-        return [{key: float(value) for key, value in row.items()} for row in csv.DictReader(handle)]
+        reader = csv.DictReader(handle)
+        missing = [name for name in REQUIRED_METRICS if name not in (reader.fieldnames or ())]
+        if missing:
+            raise RunDirError(f"{path} is damaged: it has no column {', '.join(missing)} "
+                              f"(its columns: {', '.join(reader.fieldnames or ())})")  # fmt: skip
+        return [{key: float(value) for key, value in row.items()} for row in reader]
+    except RunDirError:
+        raise
     except FileNotFoundError:
         raise
     except OSError as error:
