@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spikectl.files import check_fits_in_memory
+from spikectl.files import TooLargeError, check_fits_in_memory
 from spikectl.neuron.kernel import (
     PARALLEL_MIN_BATCH,
     PARALLEL_MIN_WORK,
@@ -188,6 +188,11 @@ def as_weight_batch(weights: np.ndarray | list) -> np.ndarray:
     return np.ascontiguousarray(array, dtype=np.int8)
 
 
+MAX_SIMULATE_STEPS = 10**8
+"""The most steps one :func:`simulate` call runs (1000 times the longest episode a context
+may have); longer runs go through :func:`advance` in pieces."""
+
+
 def simulate(
     weights: np.ndarray,
     actions: np.ndarray,
@@ -238,6 +243,12 @@ def simulate(
     if action_array.size and (action_array.min() < DO_NOTHING or action_array.max() >= n):
         raise ValueError(f"actions must lie in -1..{n - 1} for {n} neurons")
     batch = action_array.shape[0]
+    if action_array.shape[1] > MAX_SIMULATE_STEPS:
+        raise TooLargeError(
+            f"simulate: {action_array.shape[1]:,} steps per call is above the limit of "
+            f"{MAX_SIMULATE_STEPS:,}: simulate in pieces, carrying a SimulatorState "
+            "through advance()"
+        )
     check_fits_in_memory(
         batch * action_array.shape[1] * n * 9,  # float64 voltages and bool spikes
         f"simulating {batch:,} x {action_array.shape[1]:,} steps of {n} neurons",
