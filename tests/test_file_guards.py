@@ -196,14 +196,19 @@ def test_a_policy_header_of_a_billion_neurons_is_one_line_on_the_command_line(tm
     assert code == 2 and "n_neurons is 1000000000" in one_line(err)
 
 
-def test_simulate_and_the_vector_environment_refuse_runaway_sizes():
+def test_simulate_and_the_vector_environment_refuse_runaway_sizes(monkeypatch):
     """Class 2: simulate with 10^9 steps and num_envs=10^9 are named errors, before
     anything of that size is allocated."""
     from spikectl import simulate
     from spikectl.envs.vector_env import NeuronControlVectorEnv
 
-    with no_hang(), pytest.raises(TooLargeError, match="1,000,000,000 steps per call"):
+    with no_hang(), pytest.raises(TooLargeError, match="1,000,000,000 steps"):
         simulate(np.zeros((4, 4)), np.broadcast_to(np.int64(-1), (10**9,)))
+    # Where memory would hold it, the step limit still refuses it.
+    monkeypatch.setattr("spikectl.files.physical_memory_bytes", lambda: 2**50)
+    with no_hang(), pytest.raises(TooLargeError, match="steps per call is above the limit"):
+        simulate(np.zeros((4, 4)), np.broadcast_to(np.int64(-1), (10**9,)))
+    monkeypatch.undo()
     with no_hang(), pytest.raises(TooLargeError, match="num_envs=1,000,000,000"):
         NeuronControlVectorEnv(num_envs=10**9)
 

@@ -243,17 +243,17 @@ def simulate(
     if action_array.size and (action_array.min() < DO_NOTHING or action_array.max() >= n):
         raise ValueError(f"actions must lie in -1..{n - 1} for {n} neurons")
     batch = action_array.shape[0]
+    check_fits_in_memory(
+        batch * action_array.shape[1] * n * 9,  # float64 voltages and bool spikes
+        f"simulating {batch:,} x {action_array.shape[1]:,} steps of {n} neurons",
+        "simulate fewer steps or networks per call",
+    )
     if action_array.shape[1] > MAX_SIMULATE_STEPS:
         raise TooLargeError(
             f"simulate: {action_array.shape[1]:,} steps per call is above the limit of "
             f"{MAX_SIMULATE_STEPS:,}: simulate in pieces, carrying a SimulatorState "
             "through advance()"
         )
-    check_fits_in_memory(
-        batch * action_array.shape[1] * n * 9,  # float64 voltages and bool spikes
-        f"simulating {batch:,} x {action_array.shape[1]:,} steps of {n} neurons",
-        "simulate fewer steps or networks per call",
-    )
     if weight_batch.shape[0] not in (1, batch):
         raise ValueError(
             f"weights batch ({weight_batch.shape[0]}) does not match actions batch ({batch})"
