@@ -129,7 +129,8 @@ PROBES = [
           ["evaluate", "RUN", "--contexts", "c.npz"]),  # fmt: skip
     Probe("evaluate, config.json a FIFO", 1, "rm RUN/config.json && mkfifo RUN/config.json",
           ["evaluate", "RUN"]),  # fmt: skip
-    Probe("sweep, the sweep file a FIFO", 1, "mkfifo s.json", ["sweep", "s.json"]),
+    Probe("sweep, the sweep file a FIFO", 1, "mkfifo s.json",
+          ["sweep", "--config", "s.json", "--sweep-dir", "sw"]),  # fmt: skip
     Probe("torch file API, a FIFO", 1, CKPT_FIFO,
           "from pathlib import Path\nfrom spikectl.training.checkpoint import read_checkpoint\n"
           "read_checkpoint(Path('RUN/checkpoint.pt'))\n"),  # fmt: skip
@@ -264,12 +265,17 @@ API_WRAPPER = """
 import sys
 try:
     exec(compile(CODE, "probe", "exec"))
-except (ValueError, OSError) as error:  # every validation error is a ValueError (named)
+except Exception as error:
+    if not isinstance(error, (ValueError, OSError)) and not type(error).__module__.startswith(
+        "spikectl"
+    ):
+        raise
     print("REFUSED", type(error).__name__ + ":", " ".join(str(error).split()))
     sys.exit(2)
 """
-"""API probes: a ValueError (each of spikectl's named errors is one) or an OSError about a
-file is the API's refusal; anything else propagates as a traceback."""
+"""API probes: a ValueError (every validation error is one), an OSError about a file or
+one of spikectl's named errors (RunDirError) is the API's refusal; anything else
+propagates as a traceback."""
 
 
 def digest(path: Path) -> str | None:
@@ -339,7 +345,7 @@ def classify(probe: Probe, folder: Path, python: str) -> tuple[str, str]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--python", default=sys.executable)
-    parser.add_argument("--only", default="")
+    parser.add_argument("--only", default="", help="comma-separated words of probe names")
     args = parser.parse_args()
     counts: dict[str, int] = {}
     with tempfile.TemporaryDirectory(prefix="hostile4-") as root:
@@ -347,7 +353,7 @@ def main() -> None:
         base.mkdir()
         prepare(base, args.python)
         for index, probe in enumerate(PROBES):
-            if args.only and args.only not in probe.name:
+            if args.only and not any(word in probe.name for word in args.only.split(",")):
                 continue
             folder = Path(root) / f"probe{index}"
             shutil.copytree(base, folder, symlinks=True)
