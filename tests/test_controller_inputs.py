@@ -33,11 +33,16 @@ def start(sets):
 
 
 @pytest.fixture(scope="module")
-def controllers():
+def controllers(sets):
+    from spikectl.training.controllers import load_controller
+
     network = make_agent("tdrqn", 5, 20)
+    env = NeuronControlEnv(contexts=sets[1])
     return {"GreedyController": GreedyController(network),
             "CompiledPolicy": CompiledPolicy.from_network(network),
-            "RandomLegal": RandomLegal(0)}  # fmt: skip
+            "RandomLegal": RandomLegal(0),
+            "IdentifyAndPlan": load_controller("identify-and-plan", env=env),
+            "OraclePlanner": load_controller("oracle", env=env)}  # fmt: skip
 
 
 def nonsense(observation, info):
@@ -70,7 +75,8 @@ MASK_CASES = ("observation None", "info None", "no action mask", "mask of 2s",
 
 @pytest.mark.parametrize(
     ("who", "case"),
-    [(who, case) for who in ("GreedyController", "CompiledPolicy") for case in CASES]
+    [(who, case) for who in ("GreedyController", "CompiledPolicy", "IdentifyAndPlan",
+                             "OraclePlanner") for case in CASES]  # fmt: skip
     + [("RandomLegal", case) for case in MASK_CASES],
 )
 def test_nonsense_observations_are_one_named_error_from_every_controller(
