@@ -25,7 +25,7 @@ import json
 import os
 import stat
 import tempfile
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
 from typing import IO, Any
@@ -103,6 +103,46 @@ def open_regular_file(path: str | os.PathLike) -> Iterator[IO[bytes]]:
         raise
     with handle:
         yield handle
+
+
+def check_output_path(
+    path: str | os.PathLike, flag: str, protected: Iterable[str] = ()
+) -> None:
+    """Refuse an output path a write would damage, before any work is done: a folder,
+    an existing FIFO, device, socket or symbolic link (the writer would replace it with
+    a file), or a file whose name is in ``protected`` in a folder that holds a spikectl
+    run (``config.json`` beside it): a run's own files are never an output. ValueError
+    naming ``flag``."""
+    path = Path(path)
+    try:
+        mode = os.lstat(path).st_mode
+    except FileNotFoundError:
+        mode = None
+    except OSError as error:
+        raise ValueError(f"{flag} {path}: {describe_os_error(error)}") from None
+    if mode is not None and stat.S_ISLNK(mode):
+        raise ValueError(
+            f"{flag} {path}: it is a symbolic link; give the file it points to, or a new name"
+        )
+    if mode is not None and not stat.S_ISREG(mode):
+        raise ValueError(f"{flag} {path}: it is {_file_kind(mode)}, not a regular file")
+    if path.name in set(protected) and (path.parent / "config.json").is_file():
+        raise ValueError(
+            f"{flag} {path}: that is a file of the run in {path.parent}; writing there "
+            "would destroy it: give another name"
+        )
+
+
+def check_distinct_outputs(outputs: Iterable[tuple[str, str | os.PathLike | None]]) -> None:
+    """Refuse two output flags naming the same file (one would clobber the other)."""
+    seen: dict[str, str] = {}
+    for flag, path in outputs:
+        if path is None:
+            continue
+        key = os.path.realpath(path)
+        if key in seen:
+            raise ValueError(f"{seen[key]} and {flag} name the same file {path}: give two files")
+        seen[key] = flag
 
 
 def check_regular_file(path: str | os.PathLike) -> None:
@@ -220,6 +260,17 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], None]) ->
     if path.is_dir():
         raise FileWriteError(errno.EISDIR, f"cannot write {path}: it is a folder, not a file")
     try:
+        mode = os.lstat(path).st_mode
+    except OSError:
+        mode = None
+    if mode is not None and not stat.S_ISREG(mode):
+        # Renaming over a device node, a FIFO or a link would silently replace it.
+        kind = "a symbolic link" if stat.S_ISLNK(mode) else _file_kind(mode)
+        raise FileWriteError(
+            errno.EEXIST, f"cannot write {path}: it is {kind}, not a regular file; "
+            "refusing to replace it"
+        )
+    try:
         descriptor, temporary = tempfile.mkstemp(
             dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"
         )
@@ -287,3 +338,53 @@ def check_fits_in_memory(nbytes: int, what: str, remedy: str) -> None:
             f"{what} needs {nbytes / 2**30:,.1f} GiB, more than this machine's "
             f"{memory / 2**30:,.1f} GiB of memory: {remedy}"
         )
+
+
+MAX_COMPRESSION_RATIO = 400
+"""The most an ``.npz`` member may claim to expand by (its uncompressed size over the bytes
+it takes in the file), beyond :data:`NPZ_SLACK_BYTES`. spikectl's own files stay far below
+(a few times); deflate cannot exceed about 1032, so a member claiming more than this is a
+crafted or damaged file that would allocate gigabytes from megabytes."""
+NPZ_SLACK_BYTES = 2**20
+
+
+def npz_size_problem(source: str | os.PathLike | IO[bytes]) -> str | None:
+    """What is wrong with the sizes an ``.npz`` file declares, or None: read from the
+    array headers alone, before NumPy allocates anything. Each array's header must claim
+    exactly the bytes its member holds, no more than :data:`MAX_COMPRESSION_RATIO` times
+    what the member takes in the file, no Python objects, and all together no more than
+    half this machine's memory."""
+    import zipfile
+
+    import numpy as np
+
+    memory = physical_memory_bytes()
+    total = 0
+    with zipfile.ZipFile(source) as archive:
+        for info in archive.infolist():
+            if not info.filename.endswith(".npy"):
+                continue
+            name = info.filename[: -len(".npy")]
+            with archive.open(info) as member:
+                version = np.lib.format.read_magic(member)
+                if version == (1, 0):
+                    shape, _, dtype = np.lib.format.read_array_header_1_0(member)
+                else:
+                    shape, _, dtype = np.lib.format.read_array_header_2_0(member)
+                header_bytes = member.tell()
+            if dtype.hasobject:
+                return f"array {name!r} holds Python objects (refused)"
+            claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
+            total += claimed
+            if claimed != info.file_size - header_bytes:
+                return (f"is damaged: the header of array {name!r} claims shape "
+                        f"{tuple(shape)} ({claimed:,} bytes), the file holds "
+                        f"{info.file_size - header_bytes:,} bytes")  # fmt: skip
+            if info.file_size > MAX_COMPRESSION_RATIO * info.compress_size + NPZ_SLACK_BYTES:
+                return (f"is refused: array {name!r} claims {claimed:,} bytes from "
+                        f"{info.compress_size:,} bytes in the file (more than "
+                        f"{MAX_COMPRESSION_RATIO} times; spikectl never writes such a file)")
+    if memory and 2 * total > memory:
+        return (f"is refused: its arrays claim {total / 2**30:,.1f} GiB, more than half "
+                f"this machine's {memory / 2**30:,.1f} GiB of memory")
+    return None

@@ -293,7 +293,7 @@ def test_unreadable_files_are_refused_with_the_problem(tmp_path, policy_file):
 
 
 def test_other_versions_and_architectures_are_refused_by_name(policy_file):
-    with pytest.raises(PolicyFileError, match="format version 99; this spikectl reads version 1"):
+    with pytest.raises(PolicyFileError, match="format version 99; this spikectl reads version 2"):
         CompiledPolicy.load(rewrite(policy_file, {"format_version": 99}))
     with pytest.raises(PolicyFileError, match="architecture 'drqn'; supported: tdrqn, ddrqn"):
         CompiledPolicy.load(rewrite(policy_file, {"architecture": "drqn"}))

@@ -169,7 +169,7 @@ def test_the_realtime_command_writes_every_decision(run_cli, tmp_path):
         (["realtime", "do-nothing", "--episodes", "0"], "--episodes must be an integer >= 1"),
         (["realtime", "do-nothing", "--episodes", "101"], "has 100 contexts"),
         (["realtime", "do-nothing", "--cpu", "4096"], "--cpu 4096: this process may run on"),
-        (["realtime", "do-nothing", "--rate-hz", "0"], "--rate-hz must be a positive"),
+        (["realtime", "do-nothing", "--rate-hz", "0"], "--rate-hz must be a number in"),
         (["realtime", "no-such-controller"], "not one of do-nothing"),
         (["realtime", "random", "--env", "CartPole-v1"], "is not a spikectl environment"),
     ],

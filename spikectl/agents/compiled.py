@@ -38,10 +38,12 @@ from spikectl.agents.policy_file import (
     _mismatch,
     _parse_header,
     _policy_bytes,
+    check_policy_checksum,
     export_policy,
 )
 from spikectl.agents.policy_kernel import _decide, _layout
-from spikectl.files import check_regular_file
+from spikectl.envs.controller import ControllerInputError, check_controller_input
+from spikectl.files import NotARegularFileError, npz_size_problem, open_regular_file
 
 
 class CompiledPolicy:
@@ -81,12 +83,13 @@ class CompiledPolicy:
         if path.is_dir():
             raise PolicyFileError(f"{path} is a folder, not a compiled policy file")
         try:
-            check_regular_file(path)  # a FIFO or a device would block or never end
-        except OSError as error:
+            # One guarded open: a FIFO or a device would block or never end.
+            with open_regular_file(path) as handle:
+                return cls._from_npz(handle, str(path), warm_up)
+        except NotARegularFileError as error:
             raise PolicyFileError(
                 f"{path} is not a compiled policy file: {error.strerror}"
             ) from None
-        return cls._from_npz(path, str(path), warm_up)
 
     @classmethod
     def from_network(cls, network: Any, warm_up: bool = True) -> CompiledPolicy:
@@ -97,8 +100,15 @@ class CompiledPolicy:
     @classmethod
     def _from_npz(cls, source: Any, where: str, warm_up: bool) -> CompiledPolicy:
         try:
+            problem = npz_size_problem(source)  # before any array is allocated
+            if problem is not None:
+                separator = " " if problem.startswith("is ") else ": "
+                raise PolicyFileError(f"{where}{separator}{problem}")
+            source.seek(0)
             with np.load(source, allow_pickle=False) as data:
                 arrays = {name: data[name] for name in data.files}
+        except PolicyFileError:
+            raise
         except (zipfile.BadZipFile, OSError, ValueError, EOFError, zlib.error) as error:
             problem = str(error).splitlines()[0] if str(error) else type(error).__name__
             raise PolicyFileError(
@@ -106,7 +116,8 @@ class CompiledPolicy:
             ) from error
         if HEADER_KEY not in arrays:
             raise PolicyFileError(f"{where} is not a compiled policy (no {HEADER_KEY!r} entry)")
-        spec = _parse_header(where, arrays.pop(HEADER_KEY))
+        raw_header = arrays.pop(HEADER_KEY)
+        spec = _parse_header(where, raw_header)
         bad = sorted(name for name, array in arrays.items() if array.dtype != np.float32)
         if bad:
             raise PolicyFileError(f"{where}: weights {bad} are not float32")
@@ -114,6 +125,7 @@ class CompiledPolicy:
         if bad:
             raise PolicyFileError(f"{where}: weights {bad} hold NaN or infinite values")
         policy = cls(spec, arrays, where)
+        check_policy_checksum(where, raw_header, spec, arrays)
         if warm_up:
             policy.warm_up()
         return policy
@@ -144,6 +156,7 @@ class CompiledPolicy:
         [N], step, last_action), ``info["action_mask"]`` bool [n + 1]. Step 0 starts a
         new episode (zero state); a step other than 0 continues the current one.
         """
+        check_controller_input(observation, info, "CompiledPolicy")
         voltage = np.ascontiguousarray(observation["voltage"], dtype=np.float32)
         pattern = np.ascontiguousarray(observation["pattern"], dtype=np.int8)
         mask = np.ascontiguousarray(info["action_mask"], dtype=np.bool_)
@@ -179,7 +192,7 @@ class CompiledPolicy:
             step, last_action, self._h, self._c, mask, self._q,
         )  # fmt: skip
         if best < 0:
-            raise ValueError("CompiledPolicy.act: the action mask allows no action")
+            raise ControllerInputError("CompiledPolicy.act: the action mask allows no action")
         return best - 1
 
 

@@ -20,6 +20,7 @@ import torch
 
 from spikectl.agents.heads import greedy_action
 from spikectl.agents.observation import observation_batch
+from spikectl.envs.controller import check_controller_input
 
 
 class GreedyController:
@@ -45,10 +46,12 @@ class GreedyController:
 
     def act_batch(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Any]):
         """int64 [S]: one action per sub-environment."""
+        check_controller_input(observations, infos, "GreedyController")
         return self(dict(observations), np.asarray(infos["action_mask"], dtype=bool))
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
         """The action on one environment's observation (a batch of one)."""
+        check_controller_input(observation, info, "GreedyController")
         observations = {key: np.asarray(value)[None] for key, value in observation.items()}
         mask = np.asarray(info["action_mask"], dtype=bool)[None]  # [1, n + 1]
         return int(self(observations, mask)[0])

@@ -9,6 +9,7 @@ weight as a float32 array under its state-dict name. Reading it needs NumPy only
 
 from __future__ import annotations
 
+import hashlib
 import io
 import json
 import math
@@ -22,11 +23,18 @@ import numpy as np
 from spikectl.files import atomic_write_bytes
 
 FORMAT_NAME = "spikectl.CompiledPolicy"
-FORMAT_VERSION = 1
+FORMAT_VERSION = 2
+"""Version 2 adds ``checksum`` to the header (SHA-256 over the header's values and every
+weight). Version-1 files carry none, so a changed header over the same weights could not
+be told from the exported one: they are refused, naming how to export again."""
 SUPPORTED_ARCHITECTURES = ("tdrqn", "ddrqn")
 """What :func:`export_policy` compiles: the per-neuron networks (any n). DRQN and DMDRQN,
 fixed-n system networks, are not supported."""
 HEADER_KEY = "metadata"
+MAX_WIDTH = 4096
+"""The widest layer and the most layers a header may declare (far above any preset)."""
+MAX_POTENTIAL_MV = 1000.0
+"""The largest |V_rest| and |V_threshold| a header may declare, in mV."""
 
 
 class PolicyFileError(ValueError):
@@ -198,9 +206,22 @@ def _policy_bytes(network: Any) -> bytes:
             f"{_mismatch(expected, shapes)}"
         )
     header = {"format": FORMAT_NAME, "format_version": FORMAT_VERSION, **asdict(spec)}
+    header["checksum"] = policy_checksum(spec, weights)
     buffer = io.BytesIO()
     np.savez(buffer, **{HEADER_KEY: np.array(json.dumps(header))}, **weights)
     return buffer.getvalue()
+
+
+def policy_checksum(spec: PolicySpec, weights: Mapping[str, np.ndarray]) -> str:
+    """SHA-256 over the header's values (as read, defaults filled in) and every weight's
+    name, dtype, shape and bytes: a header changed over the same weights, or weights
+    changed under the same header, no longer match."""
+    digest = hashlib.sha256(json.dumps(asdict(spec), sort_keys=True).encode())
+    for name in sorted(weights):
+        array = np.ascontiguousarray(weights[name])
+        digest.update(f"{name}|{array.dtype.str}|{array.shape}|".encode())
+        digest.update(array.tobytes())
+    return digest.hexdigest()
 
 
 def export_policy(network: Any, path: str | Path) -> Path:
@@ -236,6 +257,8 @@ def _parse_header(where: str, raw: np.ndarray) -> PolicySpec:
         header = json.loads(str(raw))
     except (json.JSONDecodeError, TypeError) as error:
         raise PolicyFileError(f"{where} has an unreadable header: {error}") from error
+    except RecursionError:
+        raise PolicyFileError(f"{where} has an unreadable header: nested too deeply") from None
     if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
         raise PolicyFileError(f"{where} is not a compiled policy (no {FORMAT_NAME} header)")
     version = header.get("format_version")
@@ -279,6 +302,45 @@ def _parse_header(where: str, raw: np.ndarray) -> PolicySpec:
             f"{where}: attn_heads {values['attn_heads']} must divide attn_width "
             f"{values['attn_width']}, and layer_norm_eps {values['layer_norm_eps']} be > 0"
         )
-    if values["v_threshold_mV"] == values["v_rest_mV"]:
-        raise PolicyFileError(f"{where}: v_threshold_mV equals v_rest_mV")
+    _check_ranges(where, values)
     return PolicySpec(**values)
+
+
+def _check_ranges(where: str, values: dict[str, Any]) -> None:
+    """Sizes and potentials within what a network can be: checked before anything of
+    those sizes is allocated (a header claiming 10^9 neurons is one line, not 4 GB)."""
+    from spikectl.contexts.generation import MAX_EPISODE_LENGTH, MAX_N_NEURONS
+
+    limits = {"n_neurons": MAX_N_NEURONS, "episode_length": MAX_EPISODE_LENGTH,
+              "attn_layers": 64, "attn_heads": MAX_WIDTH}  # fmt: skip
+    for name, value in values.items():
+        widths = value if isinstance(value, tuple) else (value,)
+        most = limits.get(name, MAX_WIDTH)
+        if type(value) in (int, tuple) and any(width > most for width in widths):
+            raise PolicyFileError(f"{where}: the header's {name} is {value!r}, above {most}")
+    if values["n_neurons"] < 2 or values["episode_length"] < 2:
+        raise PolicyFileError(f"{where}: the header's n_neurons and episode_length must be >= 2")
+    rest, threshold = values["v_rest_mV"], values["v_threshold_mV"]
+    if not (abs(rest) <= MAX_POTENTIAL_MV and abs(threshold) <= MAX_POTENTIAL_MV):
+        raise PolicyFileError(
+            f"{where}: the header's v_rest_mV {rest!r} or v_threshold_mV {threshold!r} is "
+            f"beyond +-{MAX_POTENTIAL_MV:g} mV"
+        )
+    if not threshold > rest:
+        raise PolicyFileError(
+            f"{where}: the header's v_threshold_mV {threshold!r} must be above v_rest_mV {rest!r}"
+        )
+    if not values["layer_norm_eps"] < 1:
+        raise PolicyFileError(
+            f"{where}: the header's layer_norm_eps {values['layer_norm_eps']!r} must be < 1"
+        )
+
+
+def check_policy_checksum(where: str, header_raw: np.ndarray, spec: PolicySpec,
+                          weights: Mapping[str, np.ndarray]) -> None:  # fmt: skip
+    """Refuse a file whose header or weights changed since export (checksum mismatch)."""
+    header = json.loads(str(header_raw))
+    if header.get("checksum") != policy_checksum(spec, weights):
+        raise PolicyFileError(
+            f"{where} is damaged or altered: its checksum does not match its header and weights"
+        )

@@ -83,7 +83,11 @@ def main(argv: list[str] | None = None) -> None:
         devnull = os.open(os.devnull, os.O_WRONLY)
         os.dup2(devnull, sys.stdout.fileno())
         raise SystemExit(141) from None
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, SystemError) as error:
+        # Ctrl-C inside a Numba kernel comes back as a SystemError whose cause is the
+        # KeyboardInterrupt; any other SystemError is a bug and keeps its traceback.
+        if not _interrupted(error):
+            raise
         print(
             "spikectl: interrupted (a training run or sweep continues from its last "
             "checkpoint: spikectl train --resume RUN_DIR, or the same sweep command)",
@@ -96,3 +100,14 @@ def main(argv: list[str] | None = None) -> None:
         where = f"{error.filename}: " if error.filename else ""
         print(f"spikectl: error: {where}{describe_os_error(error)}", file=sys.stderr)
         raise SystemExit(2) from error
+
+
+def _interrupted(error: BaseException) -> bool:
+    """Whether ``error`` is, or was caused by, a KeyboardInterrupt."""
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, KeyboardInterrupt):
+            return True
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return False

@@ -39,6 +39,8 @@ class BenchmarkCommand:
     comparison of two controllers reads."""
 
 
+MAX_RANDOM_SEEDS = 1000
+"""The most seeds of the random controller (each plays the whole suite once more)."""
 CSV_FIELDS = (
     "suite_version", "task", "split", "controller", "model", "seeds", "mean_return",
     "sd_over_seeds", "normalised", "do_nothing", "oracle", "cpu_seconds", "contexts",
@@ -49,15 +51,25 @@ PER_NETWORK_FIELDS = ("suite_version", "task", "split", "controller", "model", "
 
 def benchmark(command: BenchmarkCommand) -> None:
     """Print the controller's mean return and normalised score on each task."""
+    from spikectl.cli.output import Printer, check_outputs
     from spikectl.experiments import suite
+    from spikectl.training.config import MAX_TORCH_THREADS
 
-    if command.random_seeds < 1:
-        raise ValueError(f"--random-seeds must be an integer >= 1, got {command.random_seeds}")
-    if command.torch_threads < 1:
-        raise ValueError(f"--torch-threads must be an integer >= 1, got {command.torch_threads}")
-    for flag, path in (("--out", command.out), ("--per-network", command.per_network)):
-        if path is not None and path.is_dir():  # refused before the episodes, not after
-            raise ValueError(f"{flag} {path}: it is a folder, not a file")
+    if not 1 <= command.random_seeds <= MAX_RANDOM_SEEDS:
+        raise ValueError(f"--random-seeds must be an integer in 1..{MAX_RANDOM_SEEDS}, "
+                         f"got {command.random_seeds}")  # fmt: skip
+    if not 1 <= command.torch_threads <= MAX_TORCH_THREADS:
+        raise ValueError(f"--torch-threads must be an integer in 1..{MAX_TORCH_THREADS}, "
+                         f"got {command.torch_threads}")  # fmt: skip
+    # Refused before the episodes, not after: nothing is overwritten that should not be.
+    check_outputs((("--out", command.out), ("--per-network", command.per_network)))
+    if not Path(command.controller).is_dir():
+        for flag, given in (("--model", command.model != "final"),
+                            ("--compiled", command.compiled)):  # fmt: skip
+            if given:
+                raise ValueError(f"{flag} chooses among a run directory's networks; "
+                                 f"{command.controller} is not a run directory")  # fmt: skip
+    print = Printer()  # results are written even if the reader of stdout goes away
     names = list(suite.TASKS) if "all" in command.task else list(dict.fromkeys(command.task))
     if not names:
         raise ValueError("--task: give at least one task, or all")
@@ -100,10 +112,14 @@ def benchmark(command: BenchmarkCommand) -> None:
     if len(names) > 1:
         print(f"mean normalised score over {len(names)} tasks: "
               f"{suite.mean_normalised(normalised):.3f}")  # fmt: skip
+    written = []
     if command.out is not None:
-        print(f"wrote {write_rows(rows, command.out)}")
+        written.append(write_rows(rows, command.out))
     if command.per_network is not None:
-        print(f"wrote {write_rows(per_network, command.per_network, PER_NETWORK_FIELDS)}")
+        written.append(write_rows(per_network, command.per_network, PER_NETWORK_FIELDS))
+    for path in written:
+        print(f"wrote {path}")
+    print.finish()
 
 
 def training_task(command: BenchmarkCommand) -> str | None:

@@ -269,7 +269,8 @@ def flag_message(message: str, command_types: Iterable[type] = ()) -> str:
         for path, flag in field_flags(kind).items():
             if "." not in flag:
                 names[path[-1]] = flag
-    match = re.match(r"[A-Za-z_]\w*", message)
+    # A field name, not the start of a file name ("test_contexts.npz: ..." is a file).
+    match = re.match(r"[A-Za-z_]\w*(?![\w./\\-])", message)
     if match and match.group() in names:
         message = names[match.group()] + message[match.end() :]
     return message

@@ -14,6 +14,9 @@ import tyro
 
 from spikectl.cli.baseline_policies import environment_setup, generated_split
 
+MAX_RATE_HZ = 1e6
+"""The fastest pace the rig accepts (1 µs frames: far beyond any decision's time)."""
+
 
 @dataclass(frozen=True)
 class RealtimeCommand:
@@ -54,18 +57,27 @@ class RealtimeCommand:
 
 def realtime(command: RealtimeCommand) -> None:
     """Print the median, p99 and max decision time, the misses and the mean return."""
+    from spikectl.cli.output import Printer, check_outputs
     from spikectl.contexts import ContextSet
     from spikectl.envs.env import NeuronControlEnv
     from spikectl.envs.realtime import run_realtime
+    from spikectl.training.config import MAX_TORCH_THREADS
     from spikectl.training.controllers import load_controller
 
-    for flag, value, least in (("--episodes", command.episodes, 1),
-                               ("--n-neurons", command.n_neurons, 2),
-                               ("--torch-threads", command.torch_threads, 1)):  # fmt: skip
+    for flag, value, least, most in (("--episodes", command.episodes, 1, None),
+                                     ("--n-neurons", command.n_neurons, 2, None),
+                                     ("--torch-threads", command.torch_threads, 1,
+                                      MAX_TORCH_THREADS)):  # fmt: skip
         if value is not None and value < least:
             raise ValueError(f"{flag} must be an integer >= {least}, got {value}")
-    if not command.rate_hz > 0:
-        raise ValueError(f"--rate-hz must be a positive number, got {command.rate_hz}")
+        if value is not None and most is not None and value > most:
+            raise ValueError(f"{flag} must be an integer in {least}..{most}, got {value}")
+    if not 0 < command.rate_hz <= MAX_RATE_HZ:
+        raise ValueError(
+            f"--rate-hz must be a number in (0, {MAX_RATE_HZ:g}], got {command.rate_hz}"
+        )
+    check_outputs([("--out", command.out)])
+    print = Printer()  # the decisions are written even if the reader of stdout goes away
     if command.cpu is not None:
         allowed = sorted(os.sched_getaffinity(0))
         if command.cpu not in allowed:
@@ -119,6 +131,7 @@ def realtime(command: RealtimeCommand) -> None:
           f"(misses {late})")  # fmt: skip
     if command.out is not None:
         print(f"wrote {write_decisions(report, command.out)}")
+    print.finish()
 
 
 def write_decisions(report, path: Path) -> Path:

@@ -300,7 +300,12 @@ def _expand_task_flag(argv: list[str]) -> list[str]:
         return argv
     if len(tasks) > 1:
         raise ValueError(f"--task: one task per run, got {', '.join(tasks)}")
-    for flag in ("--train-contexts", "--test-contexts"):
+    for flag in ("--train-contexts", "--test-contexts", "--resume"):
+        if flag == "--resume" and any(arg == flag or arg.startswith(flag + "=") for arg in rest):
+            raise ValueError(
+                f"--task {tasks[0]} starts a run on the task's sets; --resume continues a run "
+                "with its own recorded settings: give one of them"
+            )
         if any(arg == flag or arg.startswith(flag + "=") for arg in rest):
             raise ValueError(
                 f"--task {tasks[0]} trains on the task's pinned sets, {flag} on a file of "

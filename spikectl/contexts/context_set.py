@@ -303,6 +303,15 @@ class ContextSet(Sequence[Context]):
             metadata.get("episode_length"),
         ):
             raise ContextFileError(f"{path} is inconsistent: its header does not match its arrays")
+        # A checksum is recomputed as easily as a witness is changed: replay every witness
+        # (generation checks them the same way), so a reference row never reports a
+        # "witness" score for answers that do not produce the pattern.
+        for index, context in enumerate(loaded):
+            if context.witness is not None and not context.verify_witness(loaded.params):
+                raise ContextFileError(
+                    f"{path} is damaged: the witness of context {index} does not reproduce "
+                    "its pattern in the target neuron"
+                )
         return loaded
 
 

@@ -18,7 +18,7 @@ from typing import Any
 
 import numpy as np
 
-from spikectl.files import atomic_write, check_regular_file, physical_memory_bytes
+from spikectl.files import atomic_write, check_regular_file, npz_size_problem
 
 FORMAT_NAME = "spikectl.ContextSet"
 FORMAT_VERSION = 1
@@ -102,29 +102,11 @@ def read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
 
 def _check_array_sizes(path: Path) -> None:
     """Refuse arrays whose header claims more data than the file holds, or more memory
-    than the machine has, before NumPy allocates them."""
-    memory = physical_memory_bytes()
-    with zipfile.ZipFile(path) as archive:
-        for info in archive.infolist():
-            if not info.filename.endswith(".npy"):
-                continue
-            with archive.open(info) as member:
-                version = np.lib.format.read_magic(member)
-                if version == (1, 0):
-                    shape, _, dtype = np.lib.format.read_array_header_1_0(member)
-                else:
-                    shape, _, dtype = np.lib.format.read_array_header_2_0(member)
-                header_bytes = member.tell()
-            name = info.filename[: -len(".npy")]
-            claimed = int(np.prod(shape, dtype=object)) * dtype.itemsize
-            if dtype.hasobject:
-                raise ContextFileError(f"{path}: array {name!r} holds Python objects (refused)")
-            if claimed != info.file_size - header_bytes or (memory and claimed > memory):
-                raise ContextFileError(
-                    f"{path} is damaged: the header of array {name!r} claims shape "
-                    f"{tuple(shape)} ({claimed:,} bytes), the file holds "
-                    f"{info.file_size - header_bytes:,} bytes"
-                )
+    than the machine has, before NumPy allocates them (``files.npz_size_problem``)."""
+    problem = npz_size_problem(path)
+    if problem is not None:
+        separator = " " if problem.startswith("is ") else ": "
+        raise ContextFileError(f"{path}{separator}{problem}")
 
 
 def _parse_metadata(path: Path, raw: np.ndarray) -> dict[str, Any]:

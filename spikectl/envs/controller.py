@@ -26,6 +26,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from spikectl.contexts import ContextSet
+from spikectl.contexts.generation import check_seed
 from spikectl.envs.env_support import random_legal_actions
 from spikectl.neuron.simulator import DO_NOTHING
 
@@ -47,6 +48,60 @@ class BatchController(Controller, Protocol):
     def act_batch(
         self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Any]
     ) -> np.ndarray: ...
+
+
+class ControllerInputError(ValueError):
+    """An observation or info given to a controller that no environment produces: not a
+    dict, a key missing, NaN or infinite voltages, pattern values other than 0 and 1, an
+    action mask that allows no action (the message names the controller and the entry).
+    Every controller of this package raises it for the same inputs."""
+
+
+def check_controller_input(
+    observation: Any, info: Any, who: str, keys: tuple[str, ...] = ("voltage", "pattern")
+) -> None:
+    """Refuse what no environment produces, before a controller acts on it: a NaN
+    voltage would otherwise be read as "no neuron near threshold" and a mask that allows
+    nothing as "do nothing". Works on one environment's entries and on batched ones."""
+    if not isinstance(observation, Mapping) or not isinstance(info, Mapping):
+        raise ControllerInputError(
+            f"{who}.act: observation and info must be dicts (as env.reset and env.step "
+            f"return them), got {type(observation).__name__} and {type(info).__name__}"
+        )
+    missing = [key for key in keys if key not in observation]
+    if "action_mask" not in info:
+        missing.append("info['action_mask']")
+    if missing:
+        raise ControllerInputError(f"{who}.act: the observation lacks {missing}")
+    try:
+        voltage = np.asarray(observation.get("voltage", 0.0))
+        pattern = np.asarray(observation.get("pattern", 0))
+        mask = np.asarray(info["action_mask"])
+        finite = bool(np.isfinite(voltage).all()) if "voltage" in keys else True
+    except TypeError as error:
+        raise ControllerInputError(f"{who}.act: an entry is not numeric: {error}") from None
+    if not finite:
+        raise ControllerInputError(f"{who}.act: the voltages hold NaN or infinite values")
+    if "pattern" in keys and not _zeros_and_ones(pattern):
+        raise ControllerInputError(f"{who}.act: the pattern holds values other than 0 and 1")
+    if not _zeros_and_ones(mask):
+        raise ControllerInputError(f"{who}.act: the action mask holds values other than 0 and 1")
+    if mask.size == 0 or not mask.any(axis=-1).all():
+        raise ControllerInputError(f"{who}.act: the action mask allows no action")
+
+
+def _zeros_and_ones(values: np.ndarray) -> bool:
+    """Whether every value is 0 or 1 (cheap for the bool and int8 arrays the
+    environments give: a real-time rig calls this every decision)."""
+    if values.dtype == np.bool_:
+        return True
+    if values.size == 0:
+        return True
+    if values.dtype.kind in "iu":
+        return bool(values.min() >= 0 and values.max() <= 1)
+    if values.dtype.kind != "f":
+        return False
+    return bool(((values == 0) | (values == 1)).all())
 
 
 def _context_index(info: Mapping[str, Any], who: str) -> int:
@@ -75,16 +130,20 @@ class RandomLegal:
     """Uniformly random legal actions from a generator seeded once, with ``seed``."""
 
     def __init__(self, seed: int | None = None) -> None:
+        if seed is not None:
+            seed = check_seed(seed)
         self.rng = np.random.default_rng(seed)
 
     def reset(self) -> None:
         pass
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
+        check_controller_input(observation, info, "RandomLegal", ())
         mask = np.asarray(info["action_mask"], dtype=bool)[None]  # [1, n + 1]
         return int(random_legal_actions(mask, self.rng)[0])
 
     def act_batch(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Any]):
+        check_controller_input(observations, infos, "RandomLegal", ())
         return random_legal_actions(infos["action_mask"], self.rng)
 
 
@@ -99,16 +158,43 @@ class Witness:
         self.witnesses = np.stack([context.agent_witness for context in contexts]).astype(
             np.int64
         )  # [C, N]
+        self.patterns = np.stack([context.pattern for context in contexts])  # [C, N]
+        self.targets = np.array([context.observed_target for context in contexts])  # [C]
+
+    def _check_context(self, contexts: np.ndarray, observations: Mapping[str, Any]) -> None:
+        """Refuse a context index outside the set, or an observation of another context
+        (a Witness built on another set would replay the wrong answer silently)."""
+        if contexts.size and (contexts.min() < 0 or contexts.max() >= len(self.targets)):
+            raise ControllerInputError(
+                f"Witness.act: context index {contexts.tolist()} is outside its set of "
+                f"{len(self.targets)} contexts: build the Witness on the environment's set"
+            )
+        pattern = np.asarray(observations["pattern"])
+        target = np.asarray(observations["target"])
+        if pattern.shape != self.patterns[contexts].shape or not (
+            np.array_equal(pattern, self.patterns[contexts])
+            and np.array_equal(target, self.targets[contexts])
+        ):
+            raise ControllerInputError(
+                "Witness.act: the observation's target and pattern are not those of its "
+                "context in the Witness's set: build the Witness on the environment's set"
+            )
 
     def reset(self) -> None:
         pass
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
+        check_controller_input(observation, info, "Witness", ("pattern", "target", "step"))
         context = _context_index(info, "Witness")
+        self._check_context(np.asarray(context), observation)
         return int(self.witnesses[context, int(observation["step"])])
 
     def act_batch(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Any]):
+        check_controller_input(observations, infos, "Witness", ("pattern", "target", "step"))
+        if "context_index" not in infos:
+            _context_index(infos, "Witness")  # the error naming what is missing
         contexts = np.asarray(infos["context_index"], dtype=np.int64)  # [S]
+        self._check_context(contexts, observations)
         return self.witnesses[contexts, np.asarray(observations["step"], dtype=np.int64)]
 
 
@@ -176,6 +262,6 @@ def play_episode(env: Any, controller: Controller, context: int, seed: int | Non
 
 
 __all__ = [
-    "BatchController", "Controller", "Copies", "DoNothing", "RandomLegal", "Witness",
-    "batched", "play_episode",
+    "BatchController", "Controller", "ControllerInputError", "Copies", "DoNothing",
+    "RandomLegal", "Witness", "batched", "check_controller_input", "play_episode",
 ]  # fmt: skip

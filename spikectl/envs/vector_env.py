@@ -33,6 +33,7 @@ from spikectl.envs.env_support import (
     observation_space,
     resolve_setup,
 )
+from spikectl.files import check_fits_in_memory
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance, uniform_neuron_parameters
@@ -98,6 +99,11 @@ class NeuronControlVectorEnv(VectorEnv):
         self.episode_length = length = self.contexts.episode_length
         self.allow_target_action = self.extensions.allow_target_action
         self.render_mode = render_mode
+        # Weights, per-step input buffers and state of every sub-environment, checked
+        # before any is allocated (num_envs=10**9 is one line, not a frozen machine).
+        check_fits_in_memory(batch * (16 * n * n + 16 * length * n + 64 * n),
+                             f"num_envs={batch:,} environments of {n} neurons",
+                             "use fewer environments")  # fmt: skip
         self._release_uniforms, self._input_mV = self._effects.input_buffers(batch, n)
 
         self.single_observation_space = observation_space(k, length)

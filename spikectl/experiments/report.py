@@ -106,6 +106,8 @@ def mean_curve(runs: Sequence[Run], column: str) -> Curve:
     """
     series = []
     for run in runs:
+        if any(column not in row for row in run.metrics):
+            raise ValueError(f"the runs' metrics have no column {column!r}")
         steps = np.array([row["env_steps"] for row in run.metrics], dtype=float)
         values = np.array([row[column] for row in run.metrics], dtype=float)
         keep = np.isfinite(values)

@@ -190,7 +190,8 @@ def train_arguments(name: str) -> list[str]:
     validation sets are the task's (tested) whatever the preset's own sizes (the guided
     preset trains on 1 000 networks)."""
     spec = task(name)
-    arguments = ["--env", spec.env_id, "--n-neurons", str(spec.n_neurons)]
+    arguments = ["--env", spec.env_id, "--n-neurons", str(spec.n_neurons),
+                 "--episode-length", str(EPISODE_LENGTH)]  # fmt: skip
     for flag in ("--n-train", "--n-test", "--n-val"):
         arguments += [flag, str(SET_SIZE)]
     arguments += ["--context-seed", str(spec.seed)]

@@ -25,7 +25,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spikectl.files import check_fits_in_memory
+from spikectl.files import TooLargeError, check_fits_in_memory
 from spikectl.neuron.kernel import (
     PARALLEL_MIN_BATCH,
     PARALLEL_MIN_WORK,
@@ -188,6 +188,11 @@ def as_weight_batch(weights: np.ndarray | list) -> np.ndarray:
     return np.ascontiguousarray(array, dtype=np.int8)
 
 
+MAX_SIMULATE_STEPS = 10**8
+"""The most steps one :func:`simulate` call runs (1000 times the longest episode a context
+may have); longer runs go through :func:`advance` in pieces."""
+
+
 def simulate(
     weights: np.ndarray,
     actions: np.ndarray,
@@ -243,6 +248,12 @@ def simulate(
         f"simulating {batch:,} x {action_array.shape[1]:,} steps of {n} neurons",
         "simulate fewer steps or networks per call",
     )
+    if action_array.shape[1] > MAX_SIMULATE_STEPS:
+        raise TooLargeError(
+            f"simulate: {action_array.shape[1]:,} steps per call is above the limit of "
+            f"{MAX_SIMULATE_STEPS:,}: simulate in pieces, carrying a SimulatorState "
+            "through advance()"
+        )
     if weight_batch.shape[0] not in (1, batch):
         raise ValueError(
             f"weights batch ({weight_batch.shape[0]}) does not match actions batch ({batch})"

@@ -17,6 +17,7 @@ import numpy as np
 
 from spikectl.contexts import Context
 from spikectl.contexts.generation import legal_actions
+from spikectl.envs.controller import check_controller_input
 from spikectl.envs.env_support import step_rewards
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, neuron_parameters, simulate
@@ -127,6 +128,7 @@ class OraclePlanner:
         return self.plans[context]
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
+        check_controller_input(observation, info, "OraclePlanner")
         step = int(observation["step"])
         if step == 0 or self._plan is None:
             if "context_index" not in info:

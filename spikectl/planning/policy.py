@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 
+from spikectl.envs.controller import check_controller_input
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, advance
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
@@ -217,6 +218,7 @@ class IdentifyAndPlan:
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
         """The action for this observation (an agent index, -1 for do nothing)."""
+        check_controller_input(observation, info, "IdentifyAndPlan")
         step = int(observation["step"])
         voltage = np.asarray(observation["voltage"], dtype=np.float64)
         mask = np.asarray(info["action_mask"], dtype=bool)

@@ -117,9 +117,16 @@ def load_controller(
     if model not in MODEL_CHOICES:
         raise ValueError(f"model must be one of {MODEL_CHOICES}, got {model!r}")
     name = os.fspath(source)
+    path = Path(name)
+    if (model != "final" or compiled) and not (name not in NAMED_CONTROLLERS and path.is_dir()):
+        # Silently playing the one network a policy file holds would report it as "best".
+        given = f"model={model!r}" if model != "final" else "compiled=True"
+        raise ValueError(
+            f"{given} chooses among a run directory's networks; {name} is not a run "
+            "directory (a compiled policy file holds one network)"
+        )
     if name in NAMED_CONTROLLERS:
         return _named(name, env, contexts, params, seed)
-    path = Path(name)
     if not path.exists():
         raise FileNotFoundError(
             f"no controller {name!r}: not a run directory, not a compiled policy file, and "

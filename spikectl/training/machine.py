@@ -12,6 +12,7 @@ machine says so in one warning.
 from __future__ import annotations
 
 import datetime
+import os
 import platform
 import warnings
 from pathlib import Path
@@ -64,15 +65,37 @@ def this_machine() -> dict[str, Any]:
 def record_machine(run_dir: Path, episode: int) -> None:
     """Append this machine to ``run_dir/machine.json`` as a start at ``episode`` (0 for
     the first start); warn (RuntimeWarning) when the run ran on another kind before. A
-    damaged file is started again: it is a note for people, not something a run needs."""
+    damaged file is reported in a warning and kept beside as ``machine.json.damaged``
+    (its record of earlier machines is lost to the check, which the warning says), then
+    started again: it is a note for people, not something a run needs."""
     path = run_dir / MACHINE_FILE
     starts: list[dict[str, Any]] = []
+    problem = None
     try:
         found = read_json_file(path)
         if isinstance(found, dict) and isinstance(found.get("starts"), list):
             starts = [start for start in found["starts"] if isinstance(start, dict)]
-    except (OSError, ValueError):
+            if len(starts) != len(found["starts"]):
+                problem = "some of its starts are not records"
+        else:
+            problem = "it holds no list of starts"
+    except FileNotFoundError:
         pass
+    except (OSError, ValueError) as error:
+        problem = str(error).splitlines()[0] if str(error) else type(error).__name__
+    if problem is not None and episode > 0:
+        aside = path.with_name(MACHINE_FILE + ".damaged")
+        try:
+            os.replace(path, aside)
+            kept = f"kept as {aside}"
+        except OSError:
+            kept = "it could not be moved aside"
+        warnings.warn(
+            f"{path} is damaged ({problem}; {kept}): whether {run_dir} ran before on another "
+            "kind of machine cannot be checked; a new record starts with this machine",
+            RuntimeWarning,
+            stacklevel=2,
+        )
     machine = this_machine()
     if episode == 0:
         starts = []  # a run started again from step 0

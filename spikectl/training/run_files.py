@@ -41,6 +41,12 @@ BEST_MODEL_FILE = "best_model.pt"
 METRICS_FILE = "metrics.csv"
 BASELINES_FILE = "baselines.json"
 MACHINE_FILE = "machine.json"
+RUN_FILE_NAMES = (
+    CONFIG_FILE, CHECKPOINT_FILE, MODEL_FILE, BEST_MODEL_FILE, METRICS_FILE, BASELINES_FILE,
+    MACHINE_FILE, "train_contexts.npz", "test_contexts.npz", "val_contexts.npz",
+    "learning_curve.png", "best_model.set-aside.pt", LOCK_FILE,
+)  # fmt: skip
+"""The files of a run directory: never an output of another command."""
 CLOCK_FIELDS = ("wall_time_s", "cpu_time_s", "eval_cpu_time_s")
 """The clocks of metrics.csv and of a checkpoint's runs: the only values a bit-identical
 rerun may change."""
@@ -195,11 +201,24 @@ def write_metrics(run_dir: Path, rows: list[dict], fields: tuple[str, ...]) -> N
     atomic_write_text(run_dir / METRICS_FILE, buffer.getvalue())
 
 
+REQUIRED_METRICS = ("episode", "env_steps", "train_return", "test_return", "wall_time_s")
+"""The columns every metrics.csv spikectl wrote has, and that its readers use."""
+
+
 def read_metrics(run_dir: Path) -> list[dict[str, float]]:
+    """The rows of a run's metrics.csv as numbers; one lacking a column of
+    :data:`REQUIRED_METRICS` (renamed by hand) or holding text is a RunDirError."""
     path = Path(run_dir) / METRICS_FILE
     try:
         handle = io.StringIO(read_text_file(path), newline="")
-        return [{key: float(value) for key, value in row.items()} for row in csv.DictReader(handle)]
+        reader = csv.DictReader(handle)
+        missing = [name for name in REQUIRED_METRICS if name not in (reader.fieldnames or ())]
+        if missing:
+            raise RunDirError(f"{path} is damaged: it has no column {', '.join(missing)} "
+                              f"(its columns: {', '.join(reader.fieldnames or ())})")  # fmt: skip
+        return [{key: float(value) for key, value in row.items()} for row in reader]
+    except RunDirError:
+        raise
     except FileNotFoundError:
         raise
     except OSError as error:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import hashlib
 import io
+import os
 import pickle
 import pickletools
 import zipfile
@@ -20,7 +21,12 @@ from typing import Any
 
 import torch
 
-from spikectl.files import atomic_write_bytes, check_regular_file
+from spikectl.files import (
+    MAX_TEXT_FILE_BYTES,
+    NotARegularFileError,
+    atomic_write_bytes,
+    open_regular_file,
+)
 from spikectl.training.run_files import MODEL_FILE, RunDirError
 
 MODEL_FORMAT = "spikectl.model"
@@ -98,9 +104,11 @@ def peek_header(path: Path) -> dict[str, Any]:
     wanted = {"format", "format_version", "spikectl_version"}
     found: dict[str, Any] = {}
     try:
-        with zipfile.ZipFile(path) as archive:
-            name = next(n for n in archive.namelist() if n.endswith("data.pkl"))
-            data = archive.read(name)
+        with open_regular_file(path) as handle, zipfile.ZipFile(handle) as archive:
+            info = next(i for i in archive.infolist() if i.filename.endswith("data.pkl"))
+            if info.file_size > MAX_TEXT_FILE_BYTES:
+                return found  # no header to peek at; the full load refuses the file
+            data = archive.read(info)
         previous = None
         for opcode, argument, _ in pickletools.genops(data):
             if opcode.name in ("BINPUT", "LONG_BINPUT", "PUT", "MEMOIZE"):
@@ -119,14 +127,19 @@ def load_torch_file(path: Path, what: str, map_location: str = "cpu") -> Any:
     if path.is_dir():
         raise RunDirError(f"{path} is a folder, not a {what}")
     try:
-        check_regular_file(path)
-        if path.stat().st_size == 0:
-            raise RunDirError(f"{path} is not a readable {what}: the file is empty")
-        if not zipfile.is_zipfile(path):
-            raise RunDirError(f"{path} is not a readable {what}: not a PyTorch (zip) file")
-        return torch.load(path, map_location=map_location, weights_only=True)
+        # One guarded open (a FIFO, a device or /dev/zero is refused on the descriptor);
+        # torch reads the very handle that was checked.
+        with open_regular_file(path) as handle:
+            if os.fstat(handle.fileno()).st_size == 0:
+                raise RunDirError(f"{path} is not a readable {what}: the file is empty")
+            if not zipfile.is_zipfile(handle):
+                raise RunDirError(f"{path} is not a readable {what}: not a PyTorch (zip) file")
+            handle.seek(0)
+            return torch.load(handle, map_location=map_location, weights_only=True)
     except RunDirError:
         raise
+    except NotARegularFileError as error:
+        raise RunDirError(f"{path} is not a readable {what}: {error.strerror}") from None
     except pickle.UnpicklingError as error:
         if "GLOBAL" in str(error) or "global" in str(error):
             raise RunDirError(

@@ -1,0 +1,55 @@
+"""Output of the commands that write result files: the files are written whatever
+happens to standard output.
+
+A reader that goes away early (``spikectl benchmark ... --out o.csv | head -1``) closes
+the pipe; printing then raises BrokenPipeError. :class:`Printer` swallows it, sends the
+rest of the printing to ``/dev/null``, lets the command finish and write its files, and
+:meth:`Printer.finish` then raises BrokenPipeError so that ``spikectl`` exits quietly
+(status 141) as a shell tool does. Output paths are checked before any work by
+:func:`check_outputs`.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+from collections.abc import Iterable
+from pathlib import Path
+
+from spikectl.files import check_distinct_outputs, check_output_path
+
+
+class Printer:
+    """``print`` that survives a closed standard output until :meth:`finish`."""
+
+    def __init__(self) -> None:
+        self.closed = False
+
+    def __call__(self, text: str = "") -> None:
+        if self.closed:
+            return
+        try:
+            print(text, flush=True)
+        except BrokenPipeError:
+            self.closed = True
+            devnull = os.open(os.devnull, os.O_WRONLY)
+            os.dup2(devnull, sys.stdout.fileno())
+            os.close(devnull)
+
+    def finish(self) -> None:
+        """Raise BrokenPipeError (after the files are written) if the reader went away."""
+        if self.closed:
+            raise BrokenPipeError
+
+
+def check_outputs(outputs: Iterable[tuple[str, Path | None]]) -> None:
+    """Refuse, before any work, output flags that would damage something: a folder, an
+    existing FIFO, device or link, a run directory's own file, or two flags naming one
+    file (``files.check_output_path``, ``files.check_distinct_outputs``)."""
+    from spikectl.training.run_files import RUN_FILE_NAMES
+
+    outputs = list(outputs)
+    for flag, path in outputs:
+        if path is not None:
+            check_output_path(path, flag, RUN_FILE_NAMES)
+    check_distinct_outputs(outputs)

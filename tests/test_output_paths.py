@@ -1,0 +1,240 @@
+"""Reliability round 4 (issue 40), what commands write and the options they take.
+
+Class 7: an output path that names a run's own file, an existing device, FIFO or link,
+or the other output, is refused before any work (nothing overwritten). Class 8: results
+are written even when the reader of standard output has gone (``| head -1``). Class 9:
+options are honoured or refused (``--model best`` without a run, ``--rate-hz inf``,
+``--torch-threads 1000``, ``--random-seeds 10^8``, ``--task`` beside ``--resume``, the
+task's episode length). Class 5: Ctrl-C inside a Numba kernel. Class 13: a file name is
+never reported as a flag.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from spikectl.cli import main
+from spikectl.files import FileWriteError, atomic_write_text
+
+SMOKE_RUN = Path(__file__).parent / "data" / "format2-smoke-run"
+
+
+def cli(args: list, capsys) -> tuple[int, str, str]:
+    try:
+        main([str(arg) for arg in args])
+        code = 0
+    except SystemExit as exit:
+        code = exit.code
+    out = capsys.readouterr()
+    return code, out.out, out.err
+
+
+def one_line(err: str) -> str:
+    (line,) = err.strip().splitlines()
+    assert line.startswith("spikectl: error:")
+    return line
+
+
+@pytest.fixture
+def run_copy(tmp_path) -> Path:
+    run = tmp_path / "run"
+    shutil.copytree(SMOKE_RUN, run)
+    return run
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in folder.iterdir() if p.is_file()}
+
+
+@pytest.mark.parametrize("name", ["checkpoint.pt", "config.json", "metrics.csv",
+                                  "test_contexts.npz", "best_model.pt"])  # fmt: skip
+@pytest.mark.parametrize(
+    "command",
+    [
+        ["benchmark", "do-nothing", "--task", "paper", "--out"],
+        ["benchmark", "do-nothing", "--task", "paper", "--per-network"],
+        ["realtime", "do-nothing", "--episodes", "1", "--out"],
+    ],
+)
+def test_an_output_naming_a_runs_own_file_is_refused(run_copy, name, command, capsys):
+    """Class 7: ``--per-network RUN/checkpoint.pt`` destroyed the run's checkpoint."""
+    before = snapshot(run_copy)
+    code, _, err = cli([*command, run_copy / name], capsys)
+    assert code == 2 and "that is a file of the run" in one_line(err)
+    assert snapshot(run_copy) == before
+
+
+@pytest.mark.parametrize("kind", ["fifo", "device", "link"])
+@pytest.mark.parametrize("command", [["benchmark", "do-nothing", "--task", "paper", "--out"],
+                                     ["realtime", "do-nothing", "--episodes", "1", "--out"]])
+def test_an_output_that_is_not_a_regular_file_is_refused(tmp_path, kind, command, capsys):
+    """Class 7: the writer replaced a device node, FIFO or symlink with a file."""
+    if kind == "fifo":
+        path = tmp_path / "pipe"
+        os.mkfifo(path)
+    elif kind == "device":
+        path = Path("/dev/null")
+    else:
+        (tmp_path / "target.csv").write_text("kept\n")
+        path = tmp_path / "link.csv"
+        path.symlink_to(tmp_path / "target.csv")
+    code, _, err = cli([*command, path], capsys)
+    line = one_line(err)
+    assert code == 2 and ("not a regular file" in line or "symbolic link" in line)
+    assert path.is_symlink() or not path.is_file()
+    if kind == "link":
+        assert (tmp_path / "target.csv").read_text() == "kept\n"
+
+
+def test_the_atomic_writer_never_replaces_a_link_or_a_fifo(tmp_path):
+    """Class 7, the API: atomic_write refuses what renaming over would destroy."""
+    os.mkfifo(tmp_path / "pipe")
+    (tmp_path / "link").symlink_to(tmp_path / "elsewhere")
+    for name in ("pipe", "link"):
+        with pytest.raises(FileWriteError, match="not a regular file; refusing to replace it"):
+            atomic_write_text(tmp_path / name, "x")
+    assert (tmp_path / "link").is_symlink() and not (tmp_path / "elsewhere").exists()
+
+
+def test_two_outputs_naming_one_file_are_refused(tmp_path, capsys):
+    """Class 7: --out and --per-network given one path clobbered each other."""
+    out = tmp_path / "o.csv"
+    code, _, err = cli(["benchmark", "do-nothing", "--task", "paper", "--out", out,
+                        "--per-network", tmp_path / "." / "o.csv"], capsys)  # fmt: skip
+    assert code == 2 and "name the same file" in one_line(err)
+    assert not out.exists()
+
+
+def test_results_are_written_when_the_reader_of_stdout_goes_away(tmp_path):
+    """Class 8: ``spikectl benchmark ... --out o.csv | head -1`` exited 141 without
+    writing o.csv. The files are written, then the command stops quietly."""
+    out, per = tmp_path / "o.csv", tmp_path / "p.csv"
+    read, write = os.pipe()
+    process = subprocess.Popen(
+        [sys.executable, "-m", "spikectl.cli", "benchmark", "do-nothing", "--task", "paper",
+         "n16", "--out", str(out), "--per-network", str(per)],
+        stdout=write, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    os.close(write)
+    with os.fdopen(read) as reader:
+        assert reader.readline().startswith("benchmark suite")
+    _, err = process.communicate(timeout=300)
+    assert process.returncode == 141 and err == ""
+    assert len(out.read_text().splitlines()) == 3  # the header and two tasks
+    assert len(per.read_text().splitlines()) == 201
+
+
+@pytest.mark.parametrize(
+    ("args", "message"),
+    [
+        (["benchmark", "do-nothing", "--task", "paper", "--random-seeds", "100000000"],
+         "--random-seeds must be an integer in 1..1000, got 100000000"),
+        (["benchmark", "random", "--task", "paper", "--torch-threads", "1000"],
+         "--torch-threads must be an integer in 1..256"),
+        (["benchmark", "do-nothing", "--task", "paper", "--model", "best"],
+         "--model chooses among a run directory's networks"),
+        (["benchmark", "do-nothing", "--task", "paper", "--compiled"],
+         "--compiled chooses among a run directory's networks"),
+        (["realtime", "do-nothing", "--rate-hz", "inf"],
+         "--rate-hz must be a number in (0, 1e+06]"),
+        (["realtime", "do-nothing", "--rate-hz", "nan"], "--rate-hz must be a number in"),
+        (["realtime", "do-nothing", "--torch-threads", "1000"], "--torch-threads must be an"),
+        (["train", "--resume", "RUN", "--task", "paper"], "--task paper starts a run on"),
+    ],
+)
+def test_options_out_of_range_or_without_effect_are_refused(args, message, capsys):
+    """Class 9: options that were accepted and then ignored or lied about."""
+    code, _, err = cli(args, capsys)
+    assert code == 2 and message in one_line(err)
+
+
+def test_model_best_with_a_policy_file_is_refused_in_the_api(tmp_path):
+    """Class 9: ``--model best`` with a .npz played the file's one network as "best"."""
+    from spikectl.agents import export_policy, make_agent
+    from spikectl.training.controllers import load_controller
+
+    path = export_policy(make_agent("tdrqn", 5, 20), tmp_path / "policy.npz")
+    with pytest.raises(ValueError, match="model='best' chooses among a run directory's"):
+        load_controller(path, model="best")
+    with pytest.raises(ValueError, match="compiled=True chooses"):
+        load_controller("do-nothing", compiled=True)
+    assert load_controller(path).spec.n_neurons == 5
+
+
+def test_a_task_trains_on_its_own_episode_length():
+    """Class 9: ``train smoke --task paper`` trained on 20-step sets (the preset's), not
+    the task's pinned 60-step ones, and benchmark refused the run only afterwards."""
+    from spikectl.cli.training import parse_train
+    from spikectl.experiments import suite
+
+    command = parse_train(["smoke", "--task", "paper"])
+    assert command.config.env.episode_length == suite.EPISODE_LENGTH == 60
+    assert command.config.env.n_train == suite.SET_SIZE
+
+
+def test_ctrl_c_inside_a_numba_kernel_is_one_line_and_130(tmp_path):
+    """Class 5: Ctrl-C while the oracle's beam search runs (Numba) was a SystemError
+    traceback and exit 1."""
+    process = subprocess.Popen(
+        [sys.executable, "-c",
+         "import sys, time\n"
+         "from spikectl.cli import main\n"
+         "import spikectl.planning.beam as beam\n"
+         "print('ready', flush=True)\n"
+         "main(['benchmark', 'do-nothing', '--task', 'all'])\n"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    assert process.stdout.readline().strip() == "ready"
+    assert process.stdout.readline().startswith("benchmark suite")
+    time.sleep(2.0)  # into the references' planning (Numba) of the first task
+    process.send_signal(signal.SIGINT)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 130, err
+    assert err.strip().splitlines() == [err.strip()] and "interrupted" in err
+
+
+def test_a_system_error_caused_by_ctrl_c_is_the_interrupt(monkeypatch, capsys):
+    """Class 5, deterministically: Numba returns a KeyboardInterrupt raised inside a
+    kernel as a SystemError caused by it; any other SystemError keeps its traceback."""
+    import spikectl.cli as spikectl_cli
+    from spikectl.cli.benchmark import BenchmarkCommand
+
+    def numba_interrupted(command):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as interrupt:
+            raise SystemError("CPUDispatcher returned a result with an exception set") from (
+                interrupt
+            )
+
+    commands = spikectl_cli.COMMANDS
+    monkeypatch.setitem(commands, "benchmark", (numba_interrupted, BenchmarkCommand))
+    code, _, err = cli(["benchmark", "do-nothing"], capsys)
+    assert code == 130 and err.startswith("spikectl: interrupted") and len(err.splitlines()) == 1
+
+    def a_bug(command):
+        raise SystemError("a real bug")
+
+    monkeypatch.setitem(commands, "benchmark", (a_bug, BenchmarkCommand))
+    with pytest.raises(SystemError, match="a real bug"):
+        main(["benchmark", "do-nothing"])
+
+
+def test_a_file_name_is_never_reported_as_a_flag():
+    """Class 13: ``evaluate RUN --contexts test_contexts.npz`` reported
+    ``--test-contexts.npz: ...``, a flag that does not exist."""
+    from spikectl.cli import COMMANDS
+    from spikectl.cli.errors import flag_message
+
+    kinds = [kind for _, kind in COMMANDS.values()]
+    assert flag_message("test_contexts.npz is damaged", kinds) == "test_contexts.npz is damaged"
+    assert flag_message("train_contexts/x.npz: gone", kinds) == "train_contexts/x.npz: gone"
+    assert flag_message("n_test must be >= 1", kinds) == "--n-test must be >= 1"
