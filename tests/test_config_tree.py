@@ -16,7 +16,7 @@ from spikectl.training.checkpoint import read_checkpoint
 from spikectl.training.config import Experiment
 from spikectl.training.controllers import load_agent
 from spikectl.training.evaluate import evaluate_run
-from spikectl.training.learners.dqn import build_networks
+from spikectl.training.learners.q_learning import build_networks
 from spikectl.training.presets import SMOKE
 from spikectl.training.run import train
 from spikectl.training.run_files import read_config, read_metrics
