@@ -314,7 +314,7 @@ class Experiment:
             except ConfigError as error:
                 raise error.within("env", name) from None
         for name in ("train_contexts", "test_contexts"):
-            if env.get(name) is not None:
+            if isinstance(env.get(name), str):
                 env[name] = Path(env[name])
         sizes = dict(agent.get("sizes", {}))
         legacy_normalisation(sizes, env["params"])

@@ -140,12 +140,10 @@ def check_model(contexts: ContextSet, config: Experiment, name: str) -> None:
 
 
 def make_env(config: Experiment, contexts: ContextSet, num_envs: int) -> NeuronControlVectorEnv:
-    """A vector environment on ``contexts`` with the config's params and extensions."""
+    """A vector environment on ``contexts`` (which carry the neuron parameters they were
+    made with: the environment plays those) with the config's environment extensions."""
     return NeuronControlVectorEnv(
-        num_envs,
-        contexts=contexts,
-        params=config.env.params,
-        extensions=config.env.extensions.environment_part(),
+        num_envs, contexts=contexts, extensions=config.env.extensions.environment_part()
     )
 
 
@@ -155,9 +153,9 @@ def stream_seed(config: Experiment, stream: int, *more: int) -> int:
 
 
 def baseline_episodes(config: Experiment, contexts: ContextSet, policy) -> EpisodeBatch:
-    """A reference policy's episodes on a set, in the run's environment (its params,
-    extensions and evaluation seed)."""
+    """A reference policy's episodes on a set, in the run's environment (the set's
+    params, the run's extensions and evaluation seed)."""
     return evaluate_policy(
-        contexts, policy, config.env.params, config.env.extensions.environment_part(),
+        contexts, policy, extensions=config.env.extensions.environment_part(),
         seed=stream_seed(config, EVAL_STREAM),
     )  # fmt: skip

@@ -23,18 +23,16 @@ from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.training.learners.dqn_losses import soft_update, training_losses
 from spikectl.training.learners.q_learning import (
-    EpsilonGreedyPolicy,
+    QLearner,
     build_networks,
     build_predictor,
-    epsilon_greedy_collection,
     gradient_step,
-    loss_metrics,
     set_learning_rate,
 )
 from spikectl.training.replay import EpisodeReplay
 
 
-class DQNLearner:
+class DQNLearner(QLearner):
     """One seed's recurrent double-Q learner (``Experiment.learner`` a DQNConfig)."""
 
     metric_fields = ("epsilon", "aux_loss")
@@ -73,12 +71,6 @@ class DQNLearner:
         ``connectivity_weight``); None here."""
         return None
 
-    def epsilon(self, episode: int) -> float:
-        return self.settings.epsilon(episode, self.total_episodes)
-
-    def collection_policy(self, episode: int) -> EpsilonGreedyPolicy:
-        return epsilon_greedy_collection(self, episode)
-
     def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
         self.replay.add(
             episodes.voltage, episodes.actions, episodes.rewards, self.targets[contexts],
@@ -108,12 +100,6 @@ class DQNLearner:
         self.loss_sum += td.item()
         self.aux_loss_sum += 0.0 if aux is None else aux.item()
         return td if aux is None else td + self.settings.aux_voltage_weight * aux
-
-    def row_metrics(self, episode: int) -> dict[str, float]:
-        return loss_metrics(self, episode)
-
-    def progress(self, episode: int) -> dict[str, str]:
-        return {"eps": f"{self.epsilon(episode):.2f}"}
 
     def state_dict(self) -> dict[str, Any]:
         return {

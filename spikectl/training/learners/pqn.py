@@ -41,12 +41,10 @@ from spikectl.training.learners.dqn_losses import (
 )
 from spikectl.training.learners.pqn_config import PQNConfig
 from spikectl.training.learners.q_learning import (
-    EpsilonGreedyPolicy,
+    QLearner,
     build_network,
     build_predictor,
-    epsilon_greedy_collection,
     gradient_step,
-    loss_metrics,
     set_learning_rate,
 )
 from spikectl.training.replay import EpisodeBatchArrays
@@ -128,7 +126,7 @@ def minibatch(arrays: EpisodeBatchArrays, index: np.ndarray) -> EpisodeBatchArra
     )
 
 
-class PQNLearner:
+class PQNLearner(QLearner):
     """One seed's parallel Q-learner without replay (``Experiment.learner`` a PQNConfig)."""
 
     metric_fields = ("epsilon", "aux_loss")
@@ -152,12 +150,6 @@ class PQNLearner:
         self.updates, self.loss_count = 0, 0
         self.loss_sum, self.aux_loss_sum = 0.0, 0.0
 
-    def epsilon(self, episode: int) -> float:
-        return self.settings.epsilon(episode, self.total_episodes)
-
-    def collection_policy(self, episode: int) -> EpsilonGreedyPolicy:
-        return epsilon_greedy_collection(self, episode)
-
     def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
         self.round = episode_arrays(episodes, self.targets[contexts], self.patterns[contexts])
 
@@ -178,12 +170,6 @@ class PQNLearner:
                 self.loss_sum += td.item()
                 self.aux_loss_sum += 0.0 if aux is None else aux.item()
         self.round = None  # no replay: the episodes are used up
-
-    def row_metrics(self, episode: int) -> dict[str, float]:
-        return loss_metrics(self, episode)
-
-    def progress(self, episode: int) -> dict[str, str]:
-        return {"eps": f"{self.epsilon(episode):.2f}"}
 
     def state_dict(self) -> dict[str, Any]:
         return {

@@ -111,28 +111,47 @@ def set_learning_rate(optimizer: torch.optim.Optimizer, learning_rate: float) ->
             group["lr"] = learning_rate
 
 
-def epsilon_greedy_collection(learner: Any, episode: int) -> EpsilonGreedyPolicy:
-    """A round's collection policy for a learner with an epsilon schedule: epsilon-greedy
-    on its online network, drawing from its generator (the double-Q learner's and PQN's)."""
-    return EpsilonGreedyPolicy(
-        learner.network, learner.epsilon(episode), learner.rng, learner.device,
-        learner.settings.explore_do_nothing,
-    )  # fmt: skip
+class QLearner:
+    """What every Q-learner of the loop does alike, given ``settings`` (a
+    :class:`~spikectl.training.learners.q_settings.QSettings`), ``total_episodes``,
+    ``network``, ``rng``, ``device``, ``predictor`` and running loss sums: collect
+    epsilon-greedily on the online network, drawing from the run's generator, and report
+    the metrics row (``updates``, ``epsilon`` and the mean losses since the last row)."""
 
+    settings: Any
+    total_episodes: int
+    network: torch.nn.Module
+    predictor: torch.nn.Module | None
+    rng: np.random.Generator
+    device: str
+    updates: int
+    loss_sum: float
+    aux_loss_sum: float
+    loss_count: int
 
-def loss_metrics(learner: Any, episode: int) -> dict[str, float]:
-    """The metrics row of a learner that keeps running sums of its TD and auxiliary
-    losses (``updates``, ``epsilon``, and the means since the last row, NaN without
-    updates), then starts the sums again: the double-Q learner's and PQN's."""
-    n = learner.loss_count
-    row = {
-        "updates": learner.updates,
-        "epsilon": learner.epsilon(episode),
-        "loss": learner.loss_sum / n if n else math.nan,
-        "aux_loss": learner.aux_loss_sum / n if n and learner.predictor is not None else math.nan,
-    }
-    learner.loss_sum, learner.aux_loss_sum, learner.loss_count = 0.0, 0.0, 0
-    return row
+    def epsilon(self, episode: int) -> float:
+        return self.settings.epsilon(episode, self.total_episodes)
+
+    def collection_policy(self, episode: int) -> EpsilonGreedyPolicy:
+        return EpsilonGreedyPolicy(
+            self.network, self.epsilon(episode), self.rng, self.device,
+            self.settings.explore_do_nothing,
+        )  # fmt: skip
+
+    def row_metrics(self, episode: int) -> dict[str, float]:
+        """The means since the last row (NaN without updates); the sums start again."""
+        n = self.loss_count
+        row = {
+            "updates": self.updates,
+            "epsilon": self.epsilon(episode),
+            "loss": self.loss_sum / n if n else math.nan,
+            "aux_loss": self.aux_loss_sum / n if n and self.predictor is not None else math.nan,
+        }
+        self.loss_sum, self.aux_loss_sum, self.loss_count = 0.0, 0.0, 0
+        return row
+
+    def progress(self, episode: int) -> dict[str, str]:
+        return {"eps": f"{self.epsilon(episode):.2f}"}
 
 
 def gradient_step(learner: Any, loss: torch.Tensor) -> None:
