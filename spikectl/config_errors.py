@@ -42,7 +42,7 @@ class ConfigError(ValueError):
 
     def within(self, *prefix: str) -> ConfigError:
         """The same error, its path lengthened by the enclosing fields ``prefix``."""
-        error = ConfigError((*prefix, *self.path), self.problem, label=self.label, sep=self.sep)
+        error = type(self)((*prefix, *self.path), self.problem, label=self.label, sep=self.sep)
         return error.with_traceback(None)
 
     def naming(self, name: str) -> str:
@@ -52,7 +52,7 @@ class ConfigError(ValueError):
 
     def __reduce__(self) -> tuple[Any, ...]:
         # Pickled whole (e.g. from a sweep's worker process), not from the message alone.
-        return _config_error, (self.path, self.problem, self.label, self.sep)
+        return _config_error, (self.path, self.problem, self.label, self.sep, type(self))
 
     @property
     def dotted(self) -> str:
@@ -65,8 +65,16 @@ class MissingExtraError(ImportError):
     pip extra that installs it (``pip install "spikectl[ray]"``)."""
 
 
-def _config_error(path: tuple[str, ...], problem: str, label: str, sep: str) -> ConfigError:
-    return ConfigError(path, problem, label=label, sep=sep)
+class ConfigTypeError(ConfigError, TypeError):
+    """A config field whose value has the wrong type (a string for a number, say): a
+    :class:`ConfigError` (the command line reports it in one line naming the flag) and a
+    ``TypeError``."""
+
+
+def _config_error(
+    path: tuple[str, ...], problem: str, label: str, sep: str, kind: type = ConfigError
+) -> ConfigError:
+    return kind(path, problem, label=label, sep=sep)
 
 
 def check_int(name: str, value: Any, low: int, high: int | None = None, what: str = "") -> None:
@@ -82,16 +90,16 @@ def check_int(name: str, value: Any, low: int, high: int | None = None, what: st
 
 def check_field_types(config: Any) -> None:
     """Refuse the first field of the dataclass instance ``config`` whose value is not of its
-    declared type, in one line naming the field (a :class:`ConfigError`): the one type
+    declared type, in one line naming the field (a :class:`ConfigTypeError`): the one type
     check of every part of the config tree, whatever built it (the command line, a sweep
     file, ``with_changes``, Python). ``int`` is an integer (not a bool), ``float`` any real
-    number (not a bool); ``X | None``, ``Literal``, ``tuple[X, ...]`` and dataclass types
-    are followed; ranges are the part's own ``__post_init__``'s to check."""
+    number (not a bool); ``X | None``, ``Literal``, ``tuple[X, ...]``, paths and dataclass
+    types are followed; ranges are the part's own ``__post_init__``'s to check."""
     hints = _field_types(type(config))
     for field in dataclasses.fields(config):
         value, expected = getattr(config, field.name), hints[field.name]
         if not _matches(value, expected):
-            raise ConfigError(field.name, f"must be {_describe(expected)}, got {value!r}")
+            raise ConfigTypeError(field.name, f"must be {_describe(expected)}, got {value!r}")
 
 
 @functools.cache
