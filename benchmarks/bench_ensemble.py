@@ -68,8 +68,8 @@ def micro(seeds: list[int], repeats: int, preset: str, device: str) -> None:
     import numpy as np
     import torch
 
-    from spikectl.training.learners.dqn import build_networks, build_predictor
     from spikectl.training.learners.dqn_losses import training_losses
+    from spikectl.training.learners.q_learning import build_networks, build_predictor
     from spikectl.training.replay import EpisodeReplay
 
     torch.set_num_threads(1)

@@ -15,6 +15,7 @@ from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import simulate
 from spikectl.planning import IdentifyAndPlan, plan_episode
+from spikectl.version import __version__
 from spikectl.wrappers import sb3_compatible, sb3_vec_env
 
 register_envs()
@@ -34,8 +35,8 @@ __all__ = [
     "sb3_compatible",
     "sb3_vec_env",
     "simulate",
+    "__version__",
 ]
-__version__ = "0.1.0"
 
 
 def __getattr__(name: str) -> Any:

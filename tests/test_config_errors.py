@@ -4,6 +4,7 @@ path (a lookup in tyro's naming), never from the message."""
 
 from __future__ import annotations
 
+import dataclasses
 import pickle
 
 import pytest
@@ -13,7 +14,7 @@ from spikectl.cli import DemoConfig, TrainCommand, flag_for, main
 from spikectl.config_errors import ConfigError
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.training.config import AgentConfig, EnvConfig, TrainConfig
+from spikectl.training.config import AgentConfig, EnvConfig, Experiment, TrainConfig
 from spikectl.training.learners import DQNConfig
 from spikectl.training.presets import SMOKE
 
@@ -195,3 +196,41 @@ def test_another_command_names_its_own_flag(capsys):
     assert capsys.readouterr().err.splitlines() == [
         "spikectl: error: --hidden-fraction must lie in [0, 1), got 2.0"
     ]
+
+
+@pytest.mark.parametrize(
+    ("changes", "path", "message"),
+    [({"explore_do_nothing": "0.5"}, ("learner", "explore_do_nothing"),
+      "explore_do_nothing must be a number or None, got '0.5'"),
+     ({"learner.learning_rate": "1e-3"}, ("learner", "learning_rate"),
+      "learning_rate must be a number, got '1e-3'"),
+     ({"learner.n_step": 1.5}, ("learner", "n_step"), "n_step must be an integer, got 1.5"),
+     ({"learner.loss": "l1"}, ("learner", "loss"),
+      "loss must be one of ('mse', 'huber'), got 'l1'"),
+     ({"train.progress": "yes"}, ("train", "progress"),
+      "progress must be true or false, got 'yes'"),
+     ({"train.num_envs": 2.0}, ("train", "num_envs"), "num_envs must be an integer, got 2.0"),
+     ({"env.train_contexts": 3}, ("env", "train_contexts"),
+      "train_contexts must be a path or None, got 3")],
+)  # fmt: skip
+def test_a_wrong_type_is_refused_in_one_line_from_every_entry_point(changes, path, message):
+    """Every part of the tree, the learner's included, checks its fields' types with the
+    one checker (``check_field_types``): the same line from ``with_changes`` (and so a
+    sweep file's overrides and grid), config.json (``from_dict``) and Python."""
+    from spikectl.experiments.sweep import Sweep
+
+    for build in (
+        lambda: SMOKE.with_changes(changes),
+        lambda: Sweep.from_dict({"base": "smoke", "overrides": changes, "grid": {}}),
+    ):
+        error = refusal(build)
+        assert (error.path, str(error)) == (path, message)
+    (value,) = changes.values()
+    section, name = path
+    values = SMOKE.to_dict()
+    values[section][name] = value
+    error = refusal(lambda: Experiment.from_dict(values))
+    assert (error.path, str(error)) == (path, message)
+    part = getattr(SMOKE, section)
+    error = refusal(lambda: dataclasses.replace(part, **{name: value}))
+    assert (error.path, str(error)) == ((name,), message)

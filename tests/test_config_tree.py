@@ -16,7 +16,7 @@ from spikectl.training.checkpoint import read_checkpoint
 from spikectl.training.config import Experiment
 from spikectl.training.controllers import load_agent
 from spikectl.training.evaluate import evaluate_run
-from spikectl.training.learners.dqn import build_networks
+from spikectl.training.learners.q_learning import build_networks
 from spikectl.training.presets import SMOKE
 from spikectl.training.run import train
 from spikectl.training.run_files import read_config, read_metrics
@@ -173,25 +173,32 @@ def test_train_help_shows_the_defaults_it_describes(capsys):
     assert "paper preset" in capsys.readouterr().out
 
 
-def test_a_noisy_run_resumes_exactly(tmp_path, monkeypatch):
-    """The environment's draws are seeded per round, so a run stopped after a checkpoint
-    and resumed sees the very noise the uninterrupted run saw."""
-    import spikectl.training.run as dqn
+def stop_after_first_checkpoint(monkeypatch, config: Experiment, run_dir) -> None:
+    """Train ``config`` in ``run_dir`` until its first checkpoint is written, then stop
+    as a Ctrl-C would."""
+    import spikectl.training.run as run_module
 
-    config = SMOKE.with_changes({"env.id": NOISY, "total_env_steps": 4 * 8 * 20,
-                                 "eval_every_episodes": 8,
-                                 "checkpoint_every_episodes": 16})  # fmt: skip
-    whole = train(config, tmp_path / "whole")
-    save = dqn.save_checkpoint
+    save = run_module.save_checkpoint
 
     def save_then_stop(*args, **kwargs):
         save(*args, **kwargs)
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(dqn, "save_checkpoint", save_then_stop)
+    monkeypatch.setattr(run_module, "save_checkpoint", save_then_stop)
     with pytest.raises(KeyboardInterrupt):
-        train(config, tmp_path / "stopped")
-    monkeypatch.setattr(dqn, "save_checkpoint", save)
+        train(config, run_dir)
+    monkeypatch.setattr(run_module, "save_checkpoint", save)
+
+
+def test_a_noisy_run_resumes_exactly(tmp_path, monkeypatch):
+    """The environment's draws are seeded per round, so a run stopped after a checkpoint
+    and resumed sees the very noise the uninterrupted run saw."""
+
+    config = SMOKE.with_changes({"env.id": NOISY, "total_env_steps": 4 * 8 * 20,
+                                 "eval_every_episodes": 8,
+                                 "checkpoint_every_episodes": 16})  # fmt: skip
+    whole = train(config, tmp_path / "whole")
+    stop_after_first_checkpoint(monkeypatch, config, tmp_path / "stopped")
     resumed = train(config, tmp_path / "stopped", resume=True)
 
     def comparable(rows):  # NaN (no loss yet) compared as None; clocks left out
@@ -225,23 +232,13 @@ def flat_config(config: Experiment) -> dict:
 
 
 def test_a_run_written_before_the_tree_resumes_exactly(tmp_path, monkeypatch):
-    import spikectl.training.run as dqn
     from spikectl.training.torch_files import payload_checksum
 
     config = SMOKE.with_changes(total_env_steps=4 * 8 * 20, eval_every_episodes=8,
                                 checkpoint_every_episodes=16)  # fmt: skip
     whole = train(config, tmp_path / "whole")
-    save = dqn.save_checkpoint
-
-    def save_then_stop(*args, **kwargs):
-        save(*args, **kwargs)
-        raise KeyboardInterrupt
-
-    monkeypatch.setattr(dqn, "save_checkpoint", save_then_stop)
     run = tmp_path / "old"
-    with pytest.raises(KeyboardInterrupt):
-        train(config, run)
-    monkeypatch.setattr(dqn, "save_checkpoint", save)
+    stop_after_first_checkpoint(monkeypatch, config, run)
     # Rewrite its config.json and its checkpoint's config as spikectl wrote them before.
     (run / "config.json").write_text(json.dumps(flat_config(config), indent=2))
     payload = torch.load(run / "checkpoint.pt", weights_only=True)

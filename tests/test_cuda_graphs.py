@@ -16,7 +16,7 @@ from spikectl.training.cuda_graphs import (
     make_capturable,
     update_snapshot,
 )
-from spikectl.training.learners.dqn import set_learning_rate
+from spikectl.training.learners.q_learning import set_learning_rate
 from spikectl.training.presets import SMOKE
 
 needs_cuda = pytest.mark.skipif(not torch.cuda.is_available(), reason="needs CUDA")

@@ -18,7 +18,7 @@ from torch import nn
 from spikectl import ContextSet
 from spikectl.agents import ARCHITECTURES, make_agent
 from spikectl.agents.stacked import StackableLSTM, StackedNetworks
-from spikectl.training.learners.dqn import build_networks
+from spikectl.training.learners.q_learning import build_networks
 from spikectl.training.presets import SMOKE
 from spikectl.training.run import train, train_group, train_seeds
 from spikectl.training.run_files import CLOCK_FIELDS, RunDirError, read_metrics

@@ -18,7 +18,7 @@ import pytest
 PACKAGE_DIR = Path(__file__).resolve().parent.parent / "spikectl"
 
 LAYERS = (
-    ("spikectl.files", "spikectl.config_errors"),
+    ("spikectl.files", "spikectl.config_errors", "spikectl.seeds", "spikectl.version"),
     ("spikectl.neuron",),
     ("spikectl.contexts",),
     ("spikectl.envs",),
@@ -65,7 +65,7 @@ def imported_modules(module: str) -> set[str]:
                 submodule = f"{node.module}.{alias.name}"
                 if submodule in MODULES:
                     found.add(submodule)  # `from spikectl.envs import render`
-                elif not (node.module == "spikectl" and alias.name == "__version__"):
+                else:
                     found.add(node.module)
     return {name for name in found if name in MODULES and name != module}
 

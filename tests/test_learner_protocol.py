@@ -3,27 +3,48 @@
 ``CountingLearner`` is the smallest learner the protocol allows: its network prefers
 "do nothing" by a learned margin that it moves each update; the loop must collect,
 evaluate, write metrics with its own column, save its network, checkpoint its state
-and resume it exactly, alone and as a group's seeds, without knowing what it is.
+and resume it exactly, alone and as a group's seeds, without knowing what it is. It is
+registered the public way (``spikectl.training.learners.register``), as a learner of
+spikectl is: its config class, its implementation and one line.
 """
 
 from __future__ import annotations
 
+import ast
+import dataclasses
 import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import ClassVar
 
 import numpy as np
 import pytest
 import torch
 
+import spikectl
+from spikectl.config_errors import ConfigError, check_field_types
 from spikectl.training import run as run_module
-from spikectl.training.learners.looped import LoopedLearners
+from spikectl.training.config import Experiment
+from spikectl.training.learners import learner_entries, register
 from spikectl.training.learners.protocol import LossDiverged
-from spikectl.training.presets import SMOKE
+from spikectl.training.presets import PRESETS, SMOKE
 from spikectl.training.run import train, train_seeds
 from spikectl.training.run_files import CLOCK_FIELDS, RunDirError, read_metrics
 from spikectl.training.torch_files import load_model_weights
 
-CONFIG = SMOKE.with_changes(total_env_steps=6 * 20 * 8, eval_every_episodes=16,
-                            checkpoint_every_episodes=16)  # fmt: skip
+
+@dataclass(frozen=True)
+class CountingConfig:
+    """The test learner's settings: the update at which its loss diverges (0: never)."""
+
+    name: ClassVar[str] = "counting"
+    diverge_at: int = 0
+
+    def __post_init__(self) -> None:
+        check_field_types(self)
+
+    def check_episode_length(self, episode_length: int) -> None:
+        """Any episode length fits."""
 
 
 class MarginNetwork(torch.nn.Module):
@@ -43,9 +64,10 @@ class MarginNetwork(torch.nn.Module):
 class CountingLearner:
     metric_fields = ("margin",)
 
-    def __init__(self, config, train_set, rng, diverge_at: int | None = None) -> None:
+    def __init__(self, config, train_set, rng) -> None:
         self.network = MarginNetwork(config.env.n_observed + 1)
-        self.rng, self.updates, self.seen, self.diverge_at = rng, 0, 0, diverge_at
+        self.rng, self.updates, self.seen = rng, 0, 0
+        self.diverge_at = config.learner.diverge_at
 
     def collection_policy(self, episode):
         rng = self.rng
@@ -81,17 +103,16 @@ class CountingLearner:
         self.updates, self.seen = state["updates"], state["seen"]
 
 
-@pytest.fixture
-def counting(monkeypatch):
-    def make_learners(configs, train_sets, rngs, stacked=False, **kwargs):
-        seeds = zip(configs, train_sets, rngs, strict=True)
-        return LoopedLearners([CountingLearner(c, s, r, **kwargs) for c, s, r in seeds])
+register(CountingConfig, CountingLearner)  # the one line that adds a learner
 
-    monkeypatch.setattr(run_module, "make_learners", make_learners)
-    return make_learners
+CONFIG = dataclasses.replace(
+    SMOKE.with_changes(total_env_steps=6 * 20 * 8, eval_every_episodes=16,
+                       checkpoint_every_episodes=16),
+    learner=CountingConfig(),
+)  # fmt: skip
 
 
-def test_the_loop_trains_evaluates_and_saves_any_learner(tmp_path, counting):
+def test_the_loop_trains_evaluates_and_saves_any_learner(tmp_path):
     rows = train(CONFIG, tmp_path / "run")
     assert [row["episode"] for row in rows] == [0, 16, 32, 48]
     assert [row["updates"] for row in rows] == [0, 2, 4, 6]
@@ -105,7 +126,7 @@ def test_the_loop_trains_evaluates_and_saves_any_learner(tmp_path, counting):
     assert load_model_weights(tmp_path / "run" / "model.pt")["margin"].item() == 0.5
 
 
-def test_the_loop_resumes_any_learner_exactly(tmp_path, counting, monkeypatch):
+def test_the_loop_resumes_any_learner_exactly(tmp_path, monkeypatch):
     reference = train(CONFIG, tmp_path / "reference")
     calls = {"n": 0}
     real_round = run_module.Loop.round
@@ -126,13 +147,58 @@ def test_the_loop_resumes_any_learner_exactly(tmp_path, counting, monkeypatch):
     ]
 
 
-def test_a_group_of_any_learner_and_its_divergence(tmp_path, counting, monkeypatch):
+def test_a_group_of_any_learner_and_its_divergence(tmp_path):
     metrics = train_seeds(CONFIG, [0, 1], tmp_path / "group")
     assert [rows[-1]["updates"] for rows in metrics] == [6, 6]
-
-    def diverging(configs, train_sets, rngs, stacked=False):
-        return counting(configs, train_sets, rngs, diverge_at=2)
-
-    monkeypatch.setattr(run_module, "make_learners", diverging)
+    diverging = dataclasses.replace(CONFIG, learner=CountingConfig(diverge_at=2))
     with pytest.raises(RunDirError, match=r"training loss became inf at update 2 .*diverged"):
-        train(CONFIG, tmp_path / "diverged")
+        train(diverging, tmp_path / "diverged")
+
+
+def test_a_registered_learner_is_in_the_tree_config_json_and_with_changes():
+    saved = CONFIG.to_dict()
+    assert saved["learner"] == {"name": "counting", "diverge_at": 0}
+    assert Experiment.from_dict(saved) == CONFIG
+    assert CONFIG.with_changes({"learner.diverge_at": 3}).learner == CountingConfig(3)
+    with pytest.raises(ConfigError, match=r"^diverge_at must be an integer, got '3'$") as error:
+        CONFIG.with_changes({"learner.diverge_at": "3"})
+    assert error.value.dotted == "learner.diverge_at"
+    with pytest.raises(ValueError, match="stacked: the counting learner has no stacked form"):
+        train_seeds(CONFIG, [0, 1], Path("unused"), stacked=True)
+
+
+def test_a_learner_is_three_files_of_spikectl():
+    """Outside the learners package no module names a learner in its code (identifiers and
+    string literals; docstrings may): the registry is the only list of them."""
+    package = Path(spikectl.__file__).parent
+    learners = package / "training" / "learners"
+    names = {entry.name for entry in learner_entries()} - {"dqn", "counting"}
+    assert names == {"guided", "pqn"}
+    assert set(PRESETS) >= names  # each learner's presets come from its entry
+    named = []
+    for path in package.rglob("*.py"):
+        if learners in path.parents:
+            continue
+        tree = ast.parse(path.read_text())
+        docstrings = {
+            id(node.value)
+            for node in ast.walk(tree)
+            if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant)
+        }
+        for node in ast.walk(tree):
+            words = []
+            if isinstance(node, ast.Name):
+                words = [node.id]
+            elif isinstance(node, ast.Attribute):
+                words = [node.attr]
+            elif isinstance(node, (ast.FunctionDef, ast.ClassDef)):
+                words = [node.name]
+            elif isinstance(node, ast.alias):
+                words = [node.name, node.asname or ""]
+            elif isinstance(node, ast.Constant) and isinstance(node.value, str):
+                if id(node) not in docstrings:
+                    words = [node.value]
+            named += [
+                (path.name, word) for word in words if any(name in word.lower() for name in names)
+            ]
+    assert named == []

@@ -203,7 +203,7 @@ def test_target_voltage_feature_keeps_the_networks_equivariant(arch):
 
 @pytest.mark.parametrize("do_nothing", [0.0, 0.75, 1.0])
 def test_do_nothing_biased_exploration(do_nothing):
-    from spikectl.training.learners.dqn import EpsilonGreedyPolicy
+    from spikectl.training.learners.q_learning import EpsilonGreedyPolicy
 
     class Zero(torch.nn.Module):
         def step(self, obs, state):

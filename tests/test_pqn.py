@@ -119,7 +119,7 @@ def test_config_checks_and_round_trip():
     for field, value, message in (
         ("q_lambda", 1.5, "q_lambda must lie in"),
         ("epochs", 0, "epochs must be a positive integer"),
-        ("minibatch_size", 2.5, "minibatch_size must be a positive integer"),
+        ("minibatch_size", 2.5, "minibatch_size must be an integer, got 2.5"),
         ("gamma", -0.1, "gamma must lie in"),
         ("learning_rate", 0.0, "learning_rate must be > 0"),
         ("loss", "l1", "loss must be"),

@@ -9,6 +9,10 @@ from typing import Annotated, Literal
 import tyro
 
 from spikectl.experiments.slurm import SlurmSettings
+from spikectl.training.presets import PRESETS
+
+PresetName = Literal[tuple(PRESETS)]  # type: ignore[valid-type]
+"""The name of a preset: the tree's and every registered learner's."""
 
 
 @dataclass(frozen=True)
@@ -47,7 +51,7 @@ class SweepCommand:
     """The paper's experiments: fig4 (4 architectures x 10 seeds), fig5 (TDRQN x sizes)."""
     config: Path | None = None
     """A JSON sweep file instead: {"base": PRESET, "overrides": {...}, "grid": {...}}."""
-    base: Literal["paper", "quick", "guided", "smoke"] | None = None
+    base: PresetName | None = None
     """Replace the sweep's base preset (e.g. quick for a laptop-sized reproduction)."""
     seeds: tuple[int, ...] | None = None
     """Replace the grid's seeds."""

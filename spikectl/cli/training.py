@@ -234,7 +234,7 @@ def _print_group(configs: list[Experiment], run_dirs: list[Path], metrics: list[
 TRAIN_HELP = """Train an agent: spikectl train [PRESET] [FLAGS]. The defaults shown are
 the {name} preset's: {help}
 
-The preset (paper, quick, guided, pqn or smoke; quick when none is given) sets every default, and
+The preset ({presets}; quick when none is given) sets every default, and
 the flags override them: `spikectl train paper --help` shows the paper's. --env picks
 a registered environment (spikectl/NeuronControlNoisy-v0, ...) whose settings become
 the defaults of --n-neurons, --params.* and --extensions.*. --task T trains on task T of
@@ -250,7 +250,9 @@ def _train_presets(env_id: str | None = None) -> Any:
         if env_id is not None:
             experiment = dataclasses.replace(experiment, env=experiment.env.with_variant(env_id))
         default = TrainCommand(config=experiment, preset=name)
-        description = TRAIN_HELP.format(name=name, help=PRESET_HELP[name])
+        description = TRAIN_HELP.format(
+            name=name, help=PRESET_HELP[name], presets=", ".join(PRESETS)
+        )
         choices.append(
             Annotated[TrainCommand, tyro.conf.subcommand(name, default=default,
                                                          description=description)]
@@ -266,7 +268,7 @@ def parse_train(argv: list[str], command_types: tuple[type, ...] = ()) -> TrainC
     ``command_types`` name the flags in tyro's parse errors."""
     if "--preset" in argv or any(arg.startswith("--preset=") for arg in argv):
         raise ValueError(
-            "--preset: the preset is a subcommand now: spikectl train paper|quick|smoke [FLAGS]"
+            f"--preset: the preset is a subcommand now: spikectl train {'|'.join(PRESETS)} [FLAGS]"
         )
     if not argv or argv[0] not in PRESETS:
         argv = ["quick", *argv]

@@ -32,6 +32,7 @@ from spikectl.contexts.generation import (
 from spikectl.files import check_fits_in_memory
 from spikectl.neuron.extensions import Extensions, Heterogeneity
 from spikectl.neuron.params import NeuronParams
+from spikectl.seeds import VALIDATION_STREAM
 
 CONTEXT_OVERHEAD_BYTES = 1024
 """About what one Context costs besides its arrays' data (objects and array headers)."""
@@ -353,10 +354,6 @@ def make_splits(
         int(n_val), (train, test), n_neurons, episode_length, seed, params, extensions
     )
     return train, test, validation
-
-
-VALIDATION_STREAM = 1
-"""The validation set is drawn from ``numpy.random.default_rng([seed, VALIDATION_STREAM])``."""
 
 
 def make_validation_set(

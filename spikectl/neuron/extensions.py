@@ -28,7 +28,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from spikectl.config_errors import ConfigError
+from spikectl.config_errors import ConfigError, ConfigTypeError
 from spikectl.neuron.params import NeuronParams
 
 CONTEXT_FIELDS = (
@@ -84,11 +84,13 @@ class Extensions:
     def __post_init__(self) -> None:
         for name in ("stochastic_release", "allow_target_action"):
             if not isinstance(getattr(self, name), (bool, np.bool_)):
-                raise TypeError(f"Extensions.{name} must be a bool, got {getattr(self, name)!r}")
+                raise ConfigTypeError(name, f"must be a bool, got {getattr(self, name)!r}",
+                                      label=f"Extensions.{name}")  # fmt: skip
             object.__setattr__(self, name, bool(getattr(self, name)))
         hidden = self.hidden_neurons
         if isinstance(hidden, (bool, np.bool_)) or not isinstance(hidden, (int, np.integer)):
-            raise TypeError(f"Extensions.hidden_neurons must be an integer, got {hidden!r}")
+            raise ConfigTypeError("hidden_neurons", f"must be an integer, got {hidden!r}",
+                                  label="Extensions.hidden_neurons")  # fmt: skip
         if hidden < 0:
             raise ConfigError("hidden_neurons", f"must be >= 0, got {hidden}",
                               label="Extensions.hidden_neurons")  # fmt: skip
@@ -100,7 +102,8 @@ class Extensions:
             if value is None and field.name == "bleaching_time_constant_steps":
                 continue
             if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float)):
-                raise TypeError(f"Extensions.{field.name} must be a number, got {value!r}")
+                raise ConfigTypeError(field.name, f"must be a number, got {value!r}",
+                                      label=f"Extensions.{field.name}")  # fmt: skip
             if not math.isfinite(value):
                 raise ConfigError(field.name, f"must be finite, got {value!r}",
                                   label=f"Extensions.{field.name}")  # fmt: skip

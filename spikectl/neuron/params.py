@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from spikectl.config_errors import ConfigError
+from spikectl.config_errors import ConfigError, ConfigTypeError
 
 NEVER_RELEASES = 2**31 - 1
 """``min_release_interval_steps`` when the release rule can never be met (p_r < 0.5)."""
@@ -61,7 +61,8 @@ class NeuronParams:
             if isinstance(value, (bool, np.bool_)) or not isinstance(
                 value, (int, float, np.integer, np.floating)
             ):
-                raise TypeError(f"NeuronParams.{field.name} must be a number, got {value!r}")
+                raise ConfigTypeError(field.name, f"must be a number, got {value!r}",
+                                      label=f"NeuronParams.{field.name}")  # fmt: skip
             if not math.isfinite(value):
                 raise ConfigError(field.name, f"must be finite, got {value!r}",
                                   label=f"NeuronParams.{field.name}")  # fmt: skip

@@ -48,6 +48,7 @@ from spikectl.training.torch_files import (
     torch_bytes,
     verify_checksum,
 )
+from spikectl.version import __version__
 
 CHECKPOINT_FORMAT = "spikectl.checkpoint"
 CHECKPOINT_VERSION = 3
@@ -131,8 +132,6 @@ def save_checkpoint(
     """Write ``where/checkpoint.pt`` atomically (then each seed's baselines.json);
     refuses (RunDirError) a learner state holding NaN or infinite values: the previous
     checkpoint stays."""
-    from spikectl import __version__
-
     check_finite(learners_state, f"the learners' state in {where}")
     payload = {
         "format": CHECKPOINT_FORMAT,

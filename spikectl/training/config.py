@@ -42,7 +42,7 @@ from typing import Annotated, Any
 import tyro
 
 from spikectl.agents import ARCHITECTURES, AgentSizes, Architecture
-from spikectl.config_errors import ConfigError, check_int
+from spikectl.config_errors import ConfigError, check_field_types, check_int
 from spikectl.contexts import MAX_EPISODE_LENGTH, MAX_N_NEURONS
 from spikectl.envs.registration import ENV_ID
 from spikectl.neuron.extensions import Extensions
@@ -55,14 +55,12 @@ from spikectl.training.config_migration import (
     nest,
 )
 from spikectl.training.learners import (
-    LEARNER_CONFIGS,
     DQNConfig,
     LearnerConfig,
     learner_config_type,
+    learner_configs,
 )
 from spikectl.training.variants import flat_settings, split_settings, variant_settings
-
-LEARNER_CONFIGS_TUPLE = tuple(LEARNER_CONFIGS.values())
 
 MAX_TORCH_THREADS = 256
 """More Torch threads than any one machine spikectl runs on has cores (a typo such as
@@ -107,6 +105,7 @@ class EnvConfig:
             raise ConfigError(
                 "id", f"must be a registered environment id, got {self.id!r}", label="env"
             )
+        check_field_types(self)
         check_int("n_neurons", self.n_neurons, 2, MAX_N_NEURONS,
                    f"an integer in 2..{MAX_N_NEURONS} (MAX_N_NEURONS)")  # fmt: skip
         check_int("episode_length", self.episode_length, 2, MAX_EPISODE_LENGTH,
@@ -179,6 +178,7 @@ class AgentConfig:
     """Network sizes and input settings (the preset's, then these flags)."""
 
     def __post_init__(self) -> None:
+        check_field_types(self)
         if self.arch not in ARCHITECTURES:
             raise ConfigError("arch", f"must be one of {ARCHITECTURES}, got {self.arch!r}")
         if not isinstance(self.sizes, AgentSizes):
@@ -211,6 +211,7 @@ class TrainConfig:
     """Replay a stacked group's update and acting step as CUDA graphs (--stacked on CUDA)."""
 
     def __post_init__(self) -> None:
+        check_field_types(self)
         for name in ("total_env_steps", "num_envs", "eval_every_episodes",
                      "checkpoint_every_episodes"):  # fmt: skip
             check_int(name, getattr(self, name), 1, what="a positive integer")
@@ -243,7 +244,7 @@ class Experiment:
 
     def __post_init__(self) -> None:
         for name, kind in (("env", EnvConfig), ("agent", AgentConfig), ("train", TrainConfig),
-                           ("learner", LEARNER_CONFIGS_TUPLE)):  # fmt: skip
+                           ("learner", learner_configs())):  # fmt: skip
             if not isinstance(getattr(self, name), kind):
                 value = getattr(self, name)
                 raise ConfigError(name, f"must be a {_kind_name(kind)}, got {value!r}")
@@ -313,7 +314,7 @@ class Experiment:
             except ConfigError as error:
                 raise error.within("env", name) from None
         for name in ("train_contexts", "test_contexts"):
-            if env.get(name) is not None:
+            if isinstance(env.get(name), str):
                 env[name] = Path(env[name])
         sizes = dict(agent.get("sizes", {}))
         legacy_normalisation(sizes, env["params"])

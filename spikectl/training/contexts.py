@@ -6,21 +6,16 @@ from __future__ import annotations
 import dataclasses
 from pathlib import Path
 
-import numpy as np
-
 from spikectl.contexts import ContextSet, make_splits
 from spikectl.contexts.context_set import make_validation_set
 from spikectl.envs.rollout import EpisodeBatch, evaluate_policy
 from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.seeds import EVAL_STREAM, environment_seed
 from spikectl.training.config import Experiment
 
 TRAIN_FILE = "train_contexts.npz"
 TEST_FILE = "test_contexts.npz"
 VAL_FILE = "val_contexts.npz"
-COLLECT_STREAM = 2
-"""Seed stream of the collecting environment's own draws (noise, stochastic release, ...)."""
-EVAL_STREAM = 3
-"""Seed stream of the evaluation environments' own draws, the same at every evaluation."""
 
 
 def generated_contexts(config: Experiment) -> tuple[ContextSet, ContextSet]:
@@ -145,25 +140,22 @@ def check_model(contexts: ContextSet, config: Experiment, name: str) -> None:
 
 
 def make_env(config: Experiment, contexts: ContextSet, num_envs: int) -> NeuronControlVectorEnv:
-    """A vector environment on ``contexts`` with the config's params and extensions."""
+    """A vector environment on ``contexts`` (which carry the neuron parameters they were
+    made with: the environment plays those) with the config's environment extensions."""
     return NeuronControlVectorEnv(
-        num_envs,
-        contexts=contexts,
-        params=config.env.params,
-        extensions=config.env.extensions.environment_part(),
+        num_envs, contexts=contexts, extensions=config.env.extensions.environment_part()
     )
 
 
 def stream_seed(config: Experiment, stream: int, *more: int) -> int:
     """A seed for an environment's own draws, derived from the training seed."""
-    entropy = [config.train.seed, stream, *more]
-    return int(np.random.SeedSequence(entropy).generate_state(1, np.uint64)[0] >> 1)
+    return environment_seed(config.train.seed, stream, *more)
 
 
 def baseline_episodes(config: Experiment, contexts: ContextSet, policy) -> EpisodeBatch:
-    """A reference policy's episodes on a set, in the run's environment (its params,
-    extensions and evaluation seed)."""
+    """A reference policy's episodes on a set, in the run's environment (the set's
+    params, the run's extensions and evaluation seed)."""
     return evaluate_policy(
-        contexts, policy, config.env.params, config.env.extensions.environment_part(),
+        contexts, policy, extensions=config.env.extensions.environment_part(),
         seed=stream_seed(config, EVAL_STREAM),
     )  # fmt: skip

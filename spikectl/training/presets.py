@@ -4,18 +4,16 @@
   default of the tree;
 - ``quick``: the paper's learner fast, under 15 minutes on one CPU core (the default
   preset, and the base of the Figure 4 and 5 reproductions and the suite's TDRQN rows);
-- ``guided``: the README's main job, quick with a teacher; ``pqn``: quick's run with
-  parallel Q-learning without replay;
-- ``smoke``: seconds, for tests.
+- ``smoke``: seconds, for tests;
+- and every learner's own, registered beside its config class
+  (``spikectl.training.learners``): ``guided`` (the README's main job), ``pqn``, ...
 """
 
 from __future__ import annotations
 
-import dataclasses
-
 from spikectl.agents import AgentSizes
 from spikectl.training.config import AgentConfig, EnvConfig, Experiment, TrainConfig
-from spikectl.training.learners import DQNConfig, GuidedConfig, PQNConfig
+from spikectl.training.learners import DQNConfig, learner_entries
 
 PAPER = Experiment()
 
@@ -61,54 +59,6 @@ do-nothing-biased exploration, gamma 0.9, lr 2e-3 decaying linearly to 2e-4,
 half-width networks, one Torch thread. Until 2026-11-23 the preset had the dueling
 do-nothing head and a constant lr (docs/results sweep files made with it pin both)."""
 
-GUIDED = dataclasses.replace(
-    QUICK,
-    env=dataclasses.replace(QUICK.env, n_train=1000),
-    learner=GuidedConfig(
-        **{**dataclasses.asdict(QUICK.learner), "updates_per_round": 24},
-        teacher="identify",
-        imitation_weight_end=0.2,
-        connectivity_weight=0.1,
-    ),
-)
-"""The README's main job: the quick preset's run and sizes with the teacher-guided learner
-(docs/training.md, "Teacher-guided learning"): identify-and-plan labels the states the
-agent visits; the imitation weight falls from 1 to a floor of 0.2 over the first half of
-the episodes and stays there (chosen on the validation networks, 2026-11-24: 0.816 ±
-0.006 against 0.773 ± 0.002 weaned to 0), and a privileged auxiliary loss of weight 0.1
-asks the features for each neuron's synapse onto the target (validation 0.824 ± 0.005
-against 0.816 ± 0.006 without). 24 updates a round, not the quick preset's 32 (6 600
-updates in all; 2026-11-24, fourth stop): the same unseen return (0.811 ± 0.003) for
-0.75 of the core-minutes, measured side by side (docs/training.md). 1 000 training
-networks, not 100 (2026-11-25, second session; chosen on validation: 0.834 ± 0.001
-against 0.817 ± 0.009 on 100, 3 seeds each on one host): the same 4 400 episodes see
-each network about 4 times instead of 44, and the learner no longer scores higher on
-its training networks than on unseen ones. The test and validation sets are the same
-100 networks either way (``make_splits``)."""
-
-PQN = dataclasses.replace(
-    QUICK,
-    agent=dataclasses.replace(
-        QUICK.agent, sizes=dataclasses.replace(QUICK.agent.sizes, layer_norm=True)
-    ),
-    train=dataclasses.replace(QUICK.train, num_envs=32),
-    learner=PQNConfig(
-        epochs=16,
-        minibatch_size=8,
-        q_lambda=0.65,
-        learning_rate=1e-3,
-        learning_rate_end_fraction=0.1,
-        gamma=0.9,
-        aux_voltage_weight=1.0,
-        explore_do_nothing=0.75,
-    ),
-)
-"""The quick preset's environment, network (plus LayerNorm) and environment steps with
-parallel Q-learning without replay (docs/training.md, "Parallel Q-learning without
-replay"): 32 episodes a round (137 rounds, 4 384 episodes), 16 epochs of minibatches of
-8 episodes over each round (8 768 updates of 8 episodes, as quick's 8 800), Q(0.65)
-returns, the auxiliary loss and exploration of quick, lr 1e-3 decaying to 1e-4."""
-
 SMOKE = Experiment(
     env=EnvConfig(episode_length=20, n_neurons=5, n_train=6, n_test=6, n_val=6),
     agent=AgentConfig(
@@ -142,18 +92,34 @@ SMOKE = Experiment(
 )
 """Seconds on one core: 5-neuron networks, 20-step episodes, tiny networks (tests)."""
 
-PRESETS: dict[str, Experiment] = {
-    "paper": PAPER,
-    "quick": QUICK,
-    "guided": GUIDED,
-    "pqn": PQN,
-    "smoke": SMOKE,
+BASE_PRESETS: dict[str, tuple[Experiment, str]] = {
+    "paper": (
+        PAPER,
+        "Table 2 exactly: 1 M environment steps, the paper's network sizes (days on a CPU).",
+    ),
+    "quick": (
+        QUICK,
+        "The paper's learner fast: n-step targets, auxiliary loss, half-width nets (~15 min).",
+    ),
+    "smoke": (SMOKE, "Seconds: 5-neuron networks, 20-step episodes, tiny networks (for tests)."),
 }
-PRESET_HELP: dict[str, str] = {
-    "paper": "Table 2 exactly: 1 M environment steps, the paper's network sizes (days on a CPU).",
-    "quick": "The paper's learner fast: n-step targets, auxiliary loss, half-width nets (~15 min).",
-    "guided": "The main job: quick on 1 000 networks, taught by identify-and-plan (floor 0.2).",
-    "pqn": "The quick run with PQN: Q(lambda) on parallel episodes, no replay, LayerNorm.",
-    "smoke": "Seconds: 5-neuron networks, 20-step episodes, tiny networks (for tests).",
-}
-"""One line per preset, for ``spikectl train --help``."""
+"""The presets of the tree itself, each with its line of help; every learner adds its own
+(``spikectl.training.learners``, each beside its config class)."""
+
+
+def _presets() -> dict[str, tuple[Experiment, str]]:
+    presets = dict(BASE_PRESETS)
+    bases = {name: experiment for name, (experiment, _) in BASE_PRESETS.items()}
+    for entry in learner_entries():
+        for preset in entry.presets:
+            if preset.name in presets:
+                raise ValueError(f"the {entry.name} learner's preset {preset.name!r} is taken")
+            presets[preset.name] = (preset.build(bases), preset.help)
+    return presets
+
+
+_ALL = _presets()
+PRESETS: dict[str, Experiment] = {name: experiment for name, (experiment, _) in _ALL.items()}
+"""Every preset by name: the tree's and the learners'."""
+PRESET_HELP: dict[str, str] = {name: line for name, (_, line) in _ALL.items()}
+"""One line per preset, for ``spikectl train --help`` (read from the same table)."""

@@ -32,12 +32,11 @@ import torch
 from spikectl.contexts import ContextSet
 from spikectl.envs.controller import DoNothing, RandomLegal
 from spikectl.envs.rollout import EpisodeBatch, run_episodes
+from spikectl.seeds import COLLECT_STREAM, EVAL_STREAM
 from spikectl.training.best_model import kept_network, restore_best_model
 from spikectl.training.checkpoint import RunState, load_checkpoint, save_checkpoint
 from spikectl.training.config import Experiment
 from spikectl.training.contexts import (
-    COLLECT_STREAM,
-    EVAL_STREAM,
     TEST_FILE,
     TRAIN_FILE,
     VAL_FILE,

@@ -2,8 +2,7 @@
 
 A learner is the algorithm inside the run (``spikectl.training.run``): it acts on batches
 of observations while episodes are collected, takes the finished episodes, updates its
-networks and gives and takes its whole state for checkpoints (:class:`Learner`). Each
-learner is one module and one config class; adding one means adding both here.
+networks and gives and takes its whole state for checkpoints (:class:`Learner`).
 
 =========  =========================  ==============================================
 name       config                     learner
@@ -12,57 +11,73 @@ name       config                     learner
 ``guided`` :class:`GuidedConfig`      the same, guided by a teacher (DAgger + DQfD)
 ``pqn``    :class:`PQNConfig`         parallel Q(lambda) without replay or target network
 =========  =========================  ==============================================
+
+How to add a learner (three files of spikectl, nothing outside this package):
+
+1. ``NAME_config.py``: a frozen dataclass with ``name: ClassVar[str] = "NAME"``, a
+   docstring per field, ``__post_init__`` checking values (``check_field_types`` first) and
+   ``check_episode_length(episode_length)``; beside it, its presets
+   (``PRESETS = (Preset("NAME", "one line of help", build),)``, ``build`` making the
+   Experiment from the base presets). A Q-learner takes its epsilon and learning-rate
+   settings from :class:`~spikectl.training.learners.q_settings.QSettings`.
+2. ``NAME.py``: the learner (:class:`~spikectl.training.learners.protocol.Learner`), made
+   as ``Learner(config, train_set, rng)``; a Q-learner builds on
+   :mod:`~spikectl.training.learners.q_learning`.
+3. One ``register(...)`` line below. The config tree (``Experiment.learner``,
+   config.json), the loop, the presets, ``spikectl train NAME``, sweeps and checkpoints
+   then know it; add its row to the table above.
+
+Tests register a learner the same public way (tests/test_learner_protocol.py).
 """
 
 from __future__ import annotations
 
 from typing import TYPE_CHECKING, Union
 
+from spikectl.training.learners import guided_config, pqn_config
 from spikectl.training.learners.dqn_config import DQNConfig
 from spikectl.training.learners.guided_config import GuidedConfig
 from spikectl.training.learners.pqn_config import PQNConfig
+from spikectl.training.learners.registry import (
+    LearnerEntry,
+    Preset,
+    learner_config_type,
+    learner_configs,
+    learner_entries,
+    learner_entry,
+    register,
+)
 
 if TYPE_CHECKING:
     from spikectl.training.learners.protocol import Learner, LearnerGroup
 
-LearnerConfig = Union[DQNConfig, GuidedConfig, PQNConfig]  # noqa: UP007 (tyro reads the Union)
-"""The type of ``Experiment.learner``: the union of every learner's config. On the
-command line the preset chooses the learner and its flags are that learner's
-(``spikectl train guided --teacher identify``)."""
+_HERE = "spikectl.training.learners"
+register(DQNConfig, f"{_HERE}.dqn:DQNLearner", stacked=f"{_HERE}.dqn_stacked:StackedDQN")
+register(GuidedConfig, f"{_HERE}.guided:GuidedDQNLearner", presets=guided_config.PRESETS)
+register(PQNConfig, f"{_HERE}.pqn:PQNLearner", presets=pqn_config.PRESETS)
 
-LEARNER_CONFIGS: dict[str, type] = {
-    config.name: config for config in (DQNConfig, GuidedConfig, PQNConfig)
-}
-"""Every learner's config class by its name in config.json."""
+LearnerConfig = Union[learner_configs()]  # noqa: UP007 (tyro reads the Union)
+"""The type of ``Experiment.learner`` on the command line: the union of the learners'
+configs registered with spikectl. The preset chooses the learner and its flags are that
+learner's (``spikectl train guided --teacher identify``)."""
 
 
-def learner_config_type(name: object) -> type:
-    """The config class of the learner called ``name``; a clear error for another name."""
-    if name not in LEARNER_CONFIGS:
-        raise ValueError(
-            f"learner.name: unknown learner {name!r}; this spikectl has "
-            f"{', '.join(sorted(LEARNER_CONFIGS))}"
-        )
-    return LEARNER_CONFIGS[name]
+def entry_of(config) -> LearnerEntry:
+    """The registry entry of ``config.learner`` (an Experiment's)."""
+    entry = learner_entry(type(config.learner).name)
+    if entry.config is not type(config.learner):
+        raise TypeError(f"{type(config.learner).__name__} is not the registered {entry.name}")
+    return entry
 
 
 def make_learner(config, train_set, rng) -> Learner:
     """The learner of ``config.learner`` for one seed: it draws from the run's ``rng``."""
-    from spikectl.training.learners.dqn import DQNLearner
-    from spikectl.training.learners.guided import GuidedDQNLearner
-    from spikectl.training.learners.pqn import PQNLearner
-
-    implementations = {DQNConfig: DQNLearner, GuidedConfig: GuidedDQNLearner, PQNConfig: PQNLearner}
-    return implementations[type(config.learner)](config, train_set, rng)
-
-
-STACKED_GROUPS = (DQNConfig,)
-"""The learners whose seeds can also train as one stacked computation (``--stacked``)."""
+    return entry_of(config).learner_class()(config, train_set, rng)
 
 
 def check_stacked(configs) -> None:
     """Refuse ``--stacked`` for a learner that has no stacked form (before a run starts)."""
-    if type(configs[0].learner) not in STACKED_GROUPS:
+    if entry_of(configs[0]).stacked is None:
         raise ValueError(
             f"--stacked: the {configs[0].learner.name} learner has no stacked form "
             "(drop --stacked: a group of seeds loops, each seed exactly as alone)"
@@ -75,9 +90,7 @@ def make_learners(configs, train_sets, rngs, stacked: bool = False) -> LearnerGr
     one stacked computation where the learner has one."""
     if stacked:
         check_stacked(configs)
-        from spikectl.training.learners.dqn_stacked import StackedDQN
-
-        return StackedDQN(configs, train_sets, rngs)
+        return entry_of(configs[0]).stacked_class()(configs, train_sets, rngs)
     from spikectl.training.learners.looped import LoopedLearners
 
     return LoopedLearners(
@@ -85,5 +98,7 @@ def make_learners(configs, train_sets, rngs, stacked: bool = False) -> LearnerGr
     )
 
 
-__all__ = ["DQNConfig", "GuidedConfig", "LEARNER_CONFIGS", "LearnerConfig", "PQNConfig",
-           "check_stacked", "learner_config_type", "make_learner", "make_learners"]  # fmt: skip
+__all__ = ["DQNConfig", "GuidedConfig", "LearnerConfig", "LearnerEntry", "PQNConfig", "Preset",
+           "check_stacked", "entry_of", "learner_config_type", "learner_configs",
+           "learner_entries", "learner_entry", "make_learner", "make_learners",
+           "register"]  # fmt: skip

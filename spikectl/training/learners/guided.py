@@ -32,6 +32,7 @@ from spikectl.agents import make_connectivity_predictor, masked_q
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.planning import IdentifyAndPlan
+from spikectl.seeds import CONNECTIVITY_HEAD_STREAM, torch_seed
 from spikectl.training.learners.dqn import DQNLearner
 from spikectl.training.learners.dqn_losses import connectivity_loss, training_losses
 from spikectl.training.learners.teachers import TeacherMixedPolicy, teacher_labels
@@ -104,7 +105,7 @@ class GuidedDQNLearner(DQNLearner):
         if config.learner.connectivity_weight <= 0:
             return None
         with torch.random.fork_rng(devices=[]):
-            torch.manual_seed(np.random.SeedSequence([config.train.seed, 2]).generate_state(1)[0])
+            torch.manual_seed(torch_seed(config.train.seed, CONNECTIVITY_HEAD_STREAM))
             head = make_connectivity_predictor(self.network)
         return head.to(config.train.device)
 

@@ -33,14 +33,6 @@ import torch
 from spikectl.agents import masked_q
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
-from spikectl.training.learners.dqn import (
-    EpsilonGreedyPolicy,
-    build_network,
-    build_predictor,
-    epsilon_greedy_collection,
-    loss_metrics,
-    set_learning_rate,
-)
 from spikectl.training.learners.dqn_losses import (
     batch_tensors,
     next_voltage_loss,
@@ -48,7 +40,13 @@ from spikectl.training.learners.dqn_losses import (
     td_regression_loss,
 )
 from spikectl.training.learners.pqn_config import PQNConfig
-from spikectl.training.learners.protocol import LossDiverged
+from spikectl.training.learners.q_learning import (
+    QLearner,
+    build_network,
+    build_predictor,
+    gradient_step,
+    set_learning_rate,
+)
 from spikectl.training.replay import EpisodeBatchArrays
 
 
@@ -128,7 +126,7 @@ def minibatch(arrays: EpisodeBatchArrays, index: np.ndarray) -> EpisodeBatchArra
     )
 
 
-class PQNLearner:
+class PQNLearner(QLearner):
     """One seed's parallel Q-learner without replay (``Experiment.learner`` a PQNConfig)."""
 
     metric_fields = ("epsilon", "aux_loss")
@@ -152,12 +150,6 @@ class PQNLearner:
         self.updates, self.loss_count = 0, 0
         self.loss_sum, self.aux_loss_sum = 0.0, 0.0
 
-    def epsilon(self, episode: int) -> float:
-        return self.settings.epsilon(episode, self.total_episodes)
-
-    def collection_policy(self, episode: int) -> EpsilonGreedyPolicy:
-        return epsilon_greedy_collection(self, episode)
-
     def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
         self.round = episode_arrays(episodes, self.targets[contexts], self.patterns[contexts])
 
@@ -174,24 +166,10 @@ class PQNLearner:
                 tensors = batch_tensors(minibatch(arrays, index), self.device)
                 td, aux = pqn_losses(self.network, tensors, settings, self.predictor)
                 loss = td if aux is None else td + settings.aux_voltage_weight * aux
-                if not torch.isfinite(loss):
-                    raise LossDiverged(loss.item(), self.updates + 1)
-                self.optimizer.zero_grad(set_to_none=True)
-                loss.backward()
-                if settings.max_grad_norm > 0:
-                    torch.nn.utils.clip_grad_norm_(self.trained, settings.max_grad_norm)
-                self.optimizer.step()
-                self.updates += 1
-                self.loss_count += 1
+                gradient_step(self, loss)
                 self.loss_sum += td.item()
                 self.aux_loss_sum += 0.0 if aux is None else aux.item()
         self.round = None  # no replay: the episodes are used up
-
-    def row_metrics(self, episode: int) -> dict[str, float]:
-        return loss_metrics(self, episode)
-
-    def progress(self, episode: int) -> dict[str, str]:
-        return {"eps": f"{self.epsilon(episode):.2f}"}
 
     def state_dict(self) -> dict[str, Any]:
         return {
