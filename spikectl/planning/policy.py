@@ -27,10 +27,12 @@ from typing import Any
 
 import numpy as np
 
+from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, advance
+from spikectl.planning.bayes import BayesConnectivityEstimate, ObservationModel, release_chances
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
-from spikectl.planning.discrete import DiscreteConnectivityEstimate
+from spikectl.planning.discrete import DiscreteConnectivityEstimate, column_hypotheses_fit
 from spikectl.planning.identify import (
     NOISE_FREE_SD,
     ConnectivityEstimate,
@@ -39,9 +41,10 @@ from spikectl.planning.identify import (
 )
 from spikectl.planning.qmdp import qmdp_action
 
-IDENTIFICATIONS = ("gaussian", "discrete")
-"""How the policy identifies G: a Gaussian posterior (ridge regression, any n) or the
-exact posterior over {-1, 0, +1} (n <= 11)."""
+IDENTIFICATIONS = ("gaussian", "discrete", "bayes")
+"""How the policy identifies G: a Gaussian posterior (ridge regression, any n), the
+exact posterior over {-1, 0, +1} (n <= 11), or that posterior under the task's own
+observation model (:mod:`spikectl.planning.bayes`; the Gaussian one above n = 11)."""
 
 # The constructor's arguments besides ``params``, each kept as an attribute of that name
 # (what :meth:`IdentifyAndPlan.spawn` copies).
@@ -49,7 +52,7 @@ _SETTINGS = (
     "width", "horizon", "known_sd", "noise_mV", "hypotheses", "seed", "probe",
     "identification", "plan_on", "spike_margin_sd", "gamble_networks",
     "gamble_information", "gamble_horizon", "gamble_width", "gamble_candidates",
-    "known_weights",
+    "known_weights", "extensions",
 )  # fmt: skip
 
 
@@ -103,6 +106,10 @@ class IdentifyAndPlan:
             same loop *told* the connectivity, with nothing left to identify (a
             privileged controller, 0.993 on the validation networks against the
             oracle planner's 0.998; a teacher for ``spikectl.training.learners.guided``).
+        extensions: the environment's extensions, what ``identification="bayes"`` reads
+            its observation model from (measurement noise, stochastic release,
+            background input, synaptic spread; :class:`ObservationModel`); None: the
+            paper's model with ``noise_mV``.
 
     ```python
     policy = IdentifyAndPlan()
@@ -134,6 +141,7 @@ class IdentifyAndPlan:
         gamble_width: int = 8,
         gamble_candidates: int = 8,
         known_weights: np.ndarray | None = None,
+        extensions: Extensions | None = None,
     ) -> None:
         params = NeuronParams() if params is None else params
         if not isinstance(params, NeuronParams):
@@ -186,6 +194,15 @@ class IdentifyAndPlan:
             if not np.isin(known_weights, (-1, 0, 1)).all():
                 raise ValueError("known_weights must hold only -1, 0 and +1")
         self.known_weights = known_weights
+        if extensions is not None and not isinstance(extensions, Extensions):
+            raise TypeError(f"extensions must be an Extensions, got {type(extensions).__name__}")
+        self.extensions = extensions
+        self._observation = ObservationModel.of(extensions, params)
+        if extensions is None and noise_mV:
+            self._observation = ObservationModel(noise_mV=float(noise_mV))
+        # Stochastic release under the Bayes model: the evidence carries each spike's
+        # release chance instead of the deterministic rule's release.
+        self._release_chances = identification == "bayes" and self._observation.stochastic_release
         self.params, self.width, self.horizon = params, int(width), horizon
         self.known_sd, self.noise_mV = float(known_sd), float(noise_mV)
         # A plan is renewed when less than half its horizon is left, so that a wanted
@@ -229,6 +246,7 @@ class IdentifyAndPlan:
             self.reset()
             self._tracker = ObservedState(n, self.params, self.spike_margin_sd * self.noise_mV)
             self.estimate = self._new_estimate(n)
+            self._chances = np.zeros(n)
             draws = max(self.hypotheses if self.hypotheses > 1 else 0, self.gamble_networks)
             if draws:
                 # One draw per episode, reused by every re-plan: hypotheses change only
@@ -236,7 +254,13 @@ class IdentifyAndPlan:
                 rng = np.random.default_rng([self.seed, self._episodes])
                 self._uniforms = (rng.random((draws, n, n)), rng.random((draws, n)))
         else:
+            since = self._tracker.state.steps_since_release[0].copy()
             evidence = self._tracker.observe(voltage, int(observation["last_action"]))
+            if self._release_chances:
+                evidence = (self._chances, *evidence[1:])
+                self._chances = release_chances(
+                    self._tracker.spiked, np.minimum(since + 1, 2**30), self.params
+                )
             self.estimate.add(*evidence)
         pattern = np.asarray(observation["pattern"], dtype=bool)
         if step >= pattern.shape[0]:
@@ -295,6 +319,8 @@ class IdentifyAndPlan:
             return KnownConnectivity(self.known_weights)
         if self.identification == "discrete":
             return DiscreteConnectivityEstimate(n, self._residual_sd)
+        if self.identification == "bayes" and column_hypotheses_fit(n):
+            return BayesConnectivityEstimate(n, self._observation, self.params)
         return ConnectivityEstimate(n, self._residual_sd)
 
     def _replan(self, weights, target, mask, pattern, step) -> None:
