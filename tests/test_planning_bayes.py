@@ -225,3 +225,33 @@ def test_bayes_falls_back_to_gaussian_beyond_exact_size():
 def test_extensions_type_is_checked():
     with pytest.raises(TypeError, match="extensions must be an Extensions"):
         IdentifyAndPlan(PARAMS, extensions={"stochastic_release": True})
+
+
+def test_filtered_state_values():
+    """The per-neuron Kalman filter on hand-computed steps (noise 2 mV, prior variance
+    0 at rest plus the model's 0.25 mV^2 per step)."""
+    from spikectl.planning.filtering import MODEL_VARIANCE_MV2, FilteredState
+
+    tracker = FilteredState(2, PARAMS, noise_mV=2.0, spike_margin_sd=2.0)
+    # Step 1: neuron 0 stimulated (+40 mV -> -30 mV, a spike); neuron 1 at rest, seen at -69.
+    released, residual, observed = tracker.observe(np.array([-31.0, -69.0]), 0)
+    gain = MODEL_VARIANCE_MV2 / (MODEL_VARIANCE_MV2 + 4.0)
+    assert tracker.filtered[1] == pytest.approx(-70.0 + gain * 1.0)
+    assert tracker.filtered[0] == pytest.approx(-30.0 + gain * -1.0)
+    assert tracker.spiked.tolist() == [True, False]
+    assert tracker.state.voltage_mV[0, 0] == PARAMS.v_rest_mV
+    assert tracker.variance[0] == 0.0
+    assert tracker.variance[1] == pytest.approx((1 - gain) * MODEL_VARIANCE_MV2)
+    # The residuals are the raw observations against the no-synapse step.
+    np.testing.assert_allclose(residual, [(-31.0 - -30.0) / 20.0, (-69.0 - -70.0) / 20.0])
+    assert released.tolist() == [0.0, 0.0] and observed.tolist() == [True, True]
+    # Step 2: neuron 0 released onto neuron 1 (weight +1 known exactly): predicted
+    # -70 + 20 mV from its filtered potential; seen 3 mV low, it is still read as a spike.
+    v1, p1 = tracker.filtered[1], tracker.variance[1]
+    mean, sd = np.array([[0.0, 1.0], [0.0, 0.0]]), np.zeros((2, 2))
+    tracker.observe(np.array([-70.0, -53.0]), -1, (mean, sd))
+    predicted = v1 - (v1 - PARAMS.v_rest_mV) * PARAMS.leak_per_step + 20.0
+    prior = (1 - PARAMS.leak_per_step) ** 2 * p1 + MODEL_VARIANCE_MV2
+    k = prior / (prior + 4.0)
+    assert tracker.filtered[1] == pytest.approx(predicted + k * (-53.0 - predicted))
+    assert tracker.spiked[1]  # raw -53 mV would not be a spike without a 3 mV margin

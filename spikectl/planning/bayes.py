@@ -103,31 +103,61 @@ class BayesConnectivityEstimate(DiscreteConnectivityEstimate):
     def __init__(self, n_neurons: int, model: ObservationModel, params: NeuronParams) -> None:
         super().__init__(n_neurons, model.residual_sd(params))
         self.model = model
+        # The hypotheses as floats, and their indicators, made once (every step uses them).
+        self._values = self.hypotheses.astype(np.float64)  # [post, M, pre]
+        self._magnitudes = np.abs(self._values)
+        self._plus = (self.hypotheses == 1).astype(np.float64)
+        self._minus = (self.hypotheses == -1).astype(np.float64)
+        self._marginal_cache: tuple[np.ndarray, np.ndarray] | None = None
+
+    def _marginals(self) -> tuple[np.ndarray, np.ndarray]:
+        """(P(G = +1), P(G = -1)), both [n (pre), n (post)] (as the discrete estimate's,
+        by batched matrix products; kept until the weights change)."""
+        if self._marginal_cache is not None:
+            return self._marginal_cache
+        weights = np.exp(self.log_weights - self.log_weights.max(axis=1, keepdims=True))
+        weights /= weights.sum(axis=1, keepdims=True)  # [post, M]
+        plus = np.matmul(weights[:, None, :], self._plus)[:, 0, :].T
+        minus = np.matmul(weights[:, None, :], self._minus)[:, 0, :].T
+        self._marginal_cache = (plus, minus)
+        return plus, minus
+
+    def _apply_dale(self) -> None:
+        signs = self._row_sign.copy()
+        super()._apply_dale()
+        if not np.array_equal(signs, self._row_sign):  # the weights changed
+            self._marginal_cache = None
 
     def log_likelihood(self, released: np.ndarray, residual: np.ndarray,
                        observed: np.ndarray) -> np.ndarray:  # fmt: skip
         """[k, M] log P(residual_j | column hypothesis m) for the k observed columns."""
         released = np.asarray(released, dtype=np.float64)
-        hypotheses = self.hypotheses[observed].astype(np.float64)  # [k, M, n]
+        observed = np.flatnonzero(observed)
         uncertain = np.flatnonzero((released > 0) & (released < 1))[:MAX_UNCERTAIN_RELEASES]
         sure = released.copy()
         sure[uncertain] = 0.0
+        hypotheses = self._values[observed]  # [k, M, n]
         base = hypotheses @ sure  # [k, M]
+        parts = hypotheses[:, :, uncertain]  # [k, M, u]
         spread = self.model.synaptic_spread
+        if spread > 0:
+            magnitudes = self._magnitudes[observed]
+            base_synapses, part_synapses = magnitudes @ sure, magnitudes[:, :, uncertain]
         r = np.asarray(residual, dtype=np.float64)[observed, None]  # [k, 1]
         rho = self.model.background_probability
+        q = released[uncertain]
         density = np.zeros(base.shape)
         for subset in itertools.product((0.0, 1.0), repeat=uncertain.shape[0]):
             chosen = np.array(subset)
-            q = released[uncertain]
             probability = float(np.prod(np.where(chosen > 0, q, 1.0 - q)))
-            mean = base + hypotheses[:, :, uncertain] @ chosen if uncertain.size else base
-            # Variance: the noise, plus that of each released nonzero synapse's strength,
-            # a factor uniform in [1 - s, 1 + s] (variance s^2 / 3).
-            active = sure.copy()
-            active[uncertain] = chosen
-            synapses = np.abs(hypotheses) @ active  # [k, M]
-            sd = np.sqrt(self.residual_sd**2 + synapses * spread**2 / 3.0)
+            mean = base + parts @ chosen if uncertain.size else base
+            sd = self.residual_sd
+            if spread > 0:
+                # Each released nonzero synapse adds the variance of its strength, a
+                # factor uniform in [1 - s, 1 + s] (variance s^2 / 3).
+                synapses = base_synapses + part_synapses @ chosen if uncertain.size else (
+                    base_synapses)  # fmt: skip
+                sd = np.sqrt(self.residual_sd**2 + synapses * spread**2 / 3.0)
             part = _normal(r, mean, sd)
             if rho > 0:
                 part = (1.0 - rho) * part + rho * _normal(r, mean + self.model.background_step, sd)
@@ -140,11 +170,12 @@ class BayesConnectivityEstimate(DiscreteConnectivityEstimate):
         step, ``residual`` [n] in units of w_in, ``observed`` [n] bool columns."""
         if not observed.any() or not np.any(released):
             return
+        observed = np.asarray(observed, dtype=bool)
         self.log_weights[observed] += self.log_likelihood(released, residual, observed)
         self.log_weights[observed] -= self.log_weights[observed].max(axis=1, keepdims=True)
         self.observations += int(observed.sum())
         self.version += 1
-        self._cache = None
+        self._cache = self._marginal_cache = None
         self._apply_dale()
 
 

@@ -33,6 +33,7 @@ from spikectl.neuron.simulator import DO_NOTHING, advance
 from spikectl.planning.bayes import BayesConnectivityEstimate, ObservationModel, release_chances
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.discrete import DiscreteConnectivityEstimate, column_hypotheses_fit
+from spikectl.planning.filtering import FilteredState
 from spikectl.planning.identify import (
     NOISE_FREE_SD,
     ConnectivityEstimate,
@@ -52,7 +53,7 @@ _SETTINGS = (
     "width", "horizon", "known_sd", "noise_mV", "hypotheses", "seed", "probe",
     "identification", "plan_on", "spike_margin_sd", "gamble_networks",
     "gamble_information", "gamble_horizon", "gamble_width", "gamble_candidates",
-    "known_weights", "extensions",
+    "known_weights", "extensions", "filter_voltage",
 )  # fmt: skip
 
 
@@ -110,6 +111,9 @@ class IdentifyAndPlan:
             its observation model from (measurement noise, stochastic release,
             background input, synaptic spread; :class:`ObservationModel`); None: the
             paper's model with ``noise_mV``.
+        filter_voltage: under measurement noise (``noise_mV`` > 0), plan from potentials
+            filtered against the model's prediction (:class:`~spikectl.planning.
+            filtering.FilteredState`) instead of the raw observations.
 
     ```python
     policy = IdentifyAndPlan()
@@ -142,6 +146,7 @@ class IdentifyAndPlan:
         gamble_candidates: int = 8,
         known_weights: np.ndarray | None = None,
         extensions: Extensions | None = None,
+        filter_voltage: bool = False,
     ) -> None:
         params = NeuronParams() if params is None else params
         if not isinstance(params, NeuronParams):
@@ -194,6 +199,7 @@ class IdentifyAndPlan:
             if not np.isin(known_weights, (-1, 0, 1)).all():
                 raise ValueError("known_weights must hold only -1, 0 and +1")
         self.known_weights = known_weights
+        self.filter_voltage = bool(filter_voltage)
         if extensions is not None and not isinstance(extensions, Extensions):
             raise TypeError(f"extensions must be an Extensions, got {type(extensions).__name__}")
         self.extensions = extensions
@@ -244,7 +250,10 @@ class IdentifyAndPlan:
             if step != 0:
                 raise ValueError("IdentifyAndPlan must see the episode from its first step")
             self.reset()
-            self._tracker = ObservedState(n, self.params, self.spike_margin_sd * self.noise_mV)
+            if self.filter_voltage and self.noise_mV > 0:
+                self._tracker = FilteredState(n, self.params, self.noise_mV, self.spike_margin_sd)
+            else:
+                self._tracker = ObservedState(n, self.params, self.spike_margin_sd * self.noise_mV)
             self.estimate = self._new_estimate(n)
             self._chances = np.zeros(n)
             draws = max(self.hypotheses if self.hypotheses > 1 else 0, self.gamble_networks)
@@ -255,7 +264,12 @@ class IdentifyAndPlan:
                 self._uniforms = (rng.random((draws, n, n)), rng.random((draws, n)))
         else:
             since = self._tracker.state.steps_since_release[0].copy()
-            evidence = self._tracker.observe(voltage, int(observation["last_action"]))
+            if isinstance(self._tracker, FilteredState):
+                evidence = self._tracker.observe(
+                    voltage, int(observation["last_action"]), self.estimate.posterior()
+                )
+            else:
+                evidence = self._tracker.observe(voltage, int(observation["last_action"]))
             if self._release_chances:
                 evidence = (self._chances, *evidence[1:])
                 self._chances = release_chances(

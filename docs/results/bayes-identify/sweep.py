@@ -1,5 +1,5 @@
 """Identify-and-plan settings on a suite task's split: mean return, normalised score,
-CPU s per episode and decision-time percentiles, one line per (task, setting).
+CPU s per episode and per-decision CPU-time percentiles, one line per (task, setting).
 
     python docs/results/bayes-identify/sweep.py --tasks paper noise2 --split validation \
         --settings '{}' '{"model": "bayes"}' [--size 30] [--per-network out.csv]
@@ -22,7 +22,8 @@ from spikectl.planning import IdentifyAndPlan
 
 
 class Timed:
-    """Wraps a controller, recording the wall time of every decision."""
+    """Wraps a controller, recording the CPU time of every decision (the thread's
+    clock: on a shared machine wall time measures the neighbours, not the decision)."""
 
     def __init__(self, policy, times=None):
         self.policy, self.times = policy, ([] if times is None else times)
@@ -34,9 +35,9 @@ class Timed:
         self.policy.reset()
 
     def act(self, observation, info):
-        started = time.perf_counter()
+        started = time.thread_time()
         action = self.policy.act(observation, info)
-        self.times.append(time.perf_counter() - started)
+        self.times.append(time.thread_time() - started)
         return action
 
 
@@ -72,8 +73,8 @@ def main() -> None:
             row = {"task": name, "split": args.split, "settings": text, "contexts": len(contexts),
                    "mean_return": round(mean, 6), "normalised": round(norm, 6),
                    "cpu_s_per_episode": round(cpu / len(contexts), 4),
-                   "decision_ms_p50": round(float(np.percentile(times, 50)), 4),
-                   "decision_ms_p99": round(float(np.percentile(times, 99)), 4)}
+                   "decision_cpu_ms_p50": round(float(np.percentile(times, 50)), 4),
+                   "decision_cpu_ms_p99": round(float(np.percentile(times, 99)), 4)}
             rows.append(row)
             print(" ".join(f"{k}={v}" for k, v in row.items()), flush=True)
             per_network += [{"task": name, "split": args.split, "settings": text,
