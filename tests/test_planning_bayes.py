@@ -255,3 +255,26 @@ def test_filtered_state_values():
     k = prior / (prior + 4.0)
     assert tracker.filtered[1] == pytest.approx(predicted + k * (-53.0 - predicted))
     assert tracker.spiked[1]  # raw -53 mV would not be a spike without a 3 mV margin
+
+
+def test_named_controller_takes_the_environments_observation_model():
+    """`identify-and-plan` by name plays the Bayes model where the environment changes
+    what an observation means, and the constructor's defaults (the guided learner's
+    teacher) on the paper's environment."""
+    from spikectl.contexts import make_splits
+    from spikectl.envs.env import NeuronControlEnv
+    from spikectl.planning.policy import environment_settings
+    from spikectl.training.controllers import load_controller
+
+    contexts, _ = make_splits(2, 1, 8, 60, seed=5)
+    noisy = Extensions(observation_noise_mV=2.0)
+    controller = load_controller(
+        "identify-and-plan", env=NeuronControlEnv(contexts=contexts, extensions=noisy)
+    )
+    assert controller.identification == "bayes" and controller.filter_voltage
+    assert controller.extensions == noisy and controller.noise_mV == 2.0
+    plain = load_controller("identify-and-plan", env=NeuronControlEnv(contexts=contexts))
+    assert plain.identification == "gaussian" and not plain.filter_voltage
+    assert environment_settings(Extensions(hidden_fraction=0.25)) == {}
+    stochastic = environment_settings(Extensions(stochastic_release=True))
+    assert stochastic["identification"] == "bayes" and not stochastic["filter_voltage"]

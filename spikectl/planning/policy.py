@@ -57,6 +57,26 @@ _SETTINGS = (
 )  # fmt: skip
 
 
+def environment_settings(extensions: Extensions | None) -> dict[str, Any]:
+    """The settings the named controller ``identify-and-plan`` plays on an environment
+    with ``extensions`` (``spikectl benchmark``, ``spikectl realtime``,
+    ``spikectl.load_controller``): the Bayes observation model
+    (``identification="bayes"``, and ``filter_voltage`` under measurement noise) where
+    the environment changes what an observation means (measurement noise, stochastic
+    release, background input, synaptic spread), chosen on the suite's validation sets
+    (docs/baselines.md); the constructor's defaults (the teacher of the guided learner)
+    elsewhere."""
+    if extensions is None or not (
+        extensions.observation_noise_mV > 0
+        or extensions.stochastic_release
+        or extensions.background_rate > 0
+        or extensions.synaptic_spread > 0
+    ):
+        return {}
+    return {"identification": "bayes", "extensions": extensions,
+            "filter_voltage": extensions.observation_noise_mV > 0}  # fmt: skip
+
+
 class IdentifyAndPlan:
     """A training-free controller: identify the connectivity, then plan (MPC).
 
