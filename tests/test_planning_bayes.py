@@ -276,5 +276,36 @@ def test_named_controller_takes_the_environments_observation_model():
     plain = load_controller("identify-and-plan", env=NeuronControlEnv(contexts=contexts))
     assert plain.identification == "gaussian" and not plain.filter_voltage
     assert environment_settings(Extensions(hidden_fraction=0.25)) == {}
-    stochastic = environment_settings(Extensions(stochastic_release=True))
-    assert stochastic["identification"] == "bayes" and not stochastic["filter_voltage"]
+    assert environment_settings(Extensions(background_rate=0.005)) == {}
+    stochastic = Extensions(stochastic_release=True)
+    assert environment_settings(stochastic) == {"extensions": stochastic}
+
+
+def test_gaussian_estimate_learns_from_release_chances():
+    """Told stochastic release, the Gaussian estimate's evidence is each spike's release
+    chance (the rule's probability), not the deterministic rule's 0/1."""
+    from spikectl.contexts import make_splits
+    from spikectl.envs.env import NeuronControlEnv
+
+    extensions = Extensions(stochastic_release=True)
+    contexts, _ = make_splits(1, 1, 8, 60, seed=2)
+    env = NeuronControlEnv(contexts=contexts, params=PARAMS, extensions=extensions)
+    policy = IdentifyAndPlan(PARAMS, extensions=extensions)
+    seen = []
+    add = None
+
+    def record(released, residual, observed):
+        seen.append(np.asarray(released, dtype=float).copy())
+        add(released, residual, observed)
+
+    observation, info = env.reset(seed=0, options={"context": 0})
+    policy.reset()
+    for _ in range(20):
+        action = policy.act(observation, info)
+        if add is None:
+            add = policy.estimate.add
+            policy.estimate.add = record
+        observation, _, _, _, info = env.step(action)
+    chances = np.concatenate(seen)
+    assert np.any((chances > 0) & (chances < 1))  # fractional chances reached the estimate
+    assert chances.max() <= PARAMS.release_scale + 1e-12
