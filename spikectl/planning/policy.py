@@ -16,6 +16,14 @@ The policy knows the neuron model (``NeuronParams``) but not the weights. Each s
    K networks drawn from the estimate (QMDP, :mod:`spikectl.planning.qmdp`), plus a
    bonus for what the action teaches about the target's inputs.
 
+Under the extensions (``extensions=``, ``identification="bayes"``,
+``filter_voltage=True``) it learns with the task's own observation model: measurement
+noise, release chances under stochastic release, background input, synaptic spread
+(:mod:`spikectl.planning.bayes`), and plans from potentials filtered against the
+model (:mod:`spikectl.planning.filtering`). :func:`environment_settings` is what the
+named controller ``identify-and-plan`` plays on an environment; the constructor's
+defaults are the paper's model.
+
 It acts through the public interface only (observation and ``info["action_mask"]``)
 and never takes an illegal action.
 """
@@ -98,9 +106,11 @@ class IdentifyAndPlan:
             :meth:`spawn` (one per sub-environment of a vector environment) get
             ``seed + index``.
         probe: whether to probe when the plan misses wanted spikes.
-        identification: ``"gaussian"`` (ridge regression, any n) or ``"discrete"``
+        identification: ``"gaussian"`` (ridge regression, any n), ``"discrete"``
             (the exact posterior over {-1, 0, +1}, n <= 11; it knows more entries but
-            scored no better on the training networks, docs/baselines.md).
+            scored no better on the training networks, docs/baselines.md) or
+            ``"bayes"`` (that posterior under the observation model of ``extensions``,
+            :mod:`spikectl.planning.bayes`; the Gaussian estimate above n = 11).
         plan_on: what the planner takes for weights that are not known: ``"mean"``
             their posterior mean (noise-free: 0.879 / 0.866 on the training /
             validation networks), ``"known"`` 0 (0.869 / 0.850; better under
