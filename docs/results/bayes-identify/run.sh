@@ -20,6 +20,11 @@ python $here/sweep.py --tasks stochastic noise4 noise2 --split validation \
     --out $here/validation-sweep3.csv --per-network $here/validation-sweep3-per-network.csv
 python $here/sweep.py --tasks noise1 --split validation --settings '{"filter_voltage": true}' \
     --out $here/validation-sweep4.csv --per-network $here/validation-sweep4-per-network.csv
+# Validation, after the test run (changed no choice): QMDP over drawn networks.
+python $here/sweep.py --tasks stochastic noise4 --split validation \
+    --settings '{"extensions": true, "gamble_networks": 16}' \
+    "{$B, \"filter_voltage\": true, \"gamble_networks\": 16}" \
+    --out $here/validation-sweep5.csv --per-network $here/validation-sweep5-per-network.csv
 # Test, once: the old default against what `spikectl benchmark identify-and-plan` now
 # plays, on the tasks where it changed; paired differences.
 python $here/sweep.py --tasks noise1 noise2 noise4 stochastic --split test \

@@ -25,6 +25,10 @@ NAMES = {
         "Bayes model + filtered potentials",
     '{"extensions": true}': "Gaussian, told the extensions (release chances)",
     '{"filter_voltage": true}': "Gaussian + filtered potentials",
+    '{"extensions": true, "gamble_networks": 16}':
+        "Gaussian, told the extensions, + QMDP over 16 drawn networks",
+    '{"identification": "bayes", "extensions": true, "filter_voltage": true, '
+    '"gamble_networks": 16}': "Bayes model + filtered potentials + QMDP over 16 drawn networks",
 }  # fmt: skip
 
 
