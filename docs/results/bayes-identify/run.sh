@@ -6,7 +6,9 @@ set -euo pipefail
 here=docs/results/bayes-identify
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 B='"identification": "bayes", "extensions": true'
-# Validation: the old default against the Bayes observation model on eight tasks.
+# Validation: the old default against the Bayes observation model on eight tasks
+# (validation-sweep1.csv was written before sweep.py timed decisions in thread CPU time:
+# its decision_ms columns are wall time on the loaded machine).
 python $here/sweep.py --tasks stochastic noise2 noise4 noise1 heterogeneous background \
     hidden25 paper --split validation --settings '{}' "{$B}" \
     --out $here/validation-sweep1.csv --per-network $here/validation-sweep1-per-network.csv
