@@ -16,6 +16,14 @@ The policy knows the neuron model (``NeuronParams``) but not the weights. Each s
    K networks drawn from the estimate (QMDP, :mod:`spikectl.planning.qmdp`), plus a
    bonus for what the action teaches about the target's inputs.
 
+Under the extensions (``extensions=``, ``identification="bayes"``,
+``filter_voltage=True``) it learns with the task's own observation model: measurement
+noise, release chances under stochastic release, background input, synaptic spread
+(:mod:`spikectl.planning.bayes`), and plans from potentials filtered against the
+model (:mod:`spikectl.planning.filtering`). :func:`environment_settings` is what the
+named controller ``identify-and-plan`` plays on an environment; the constructor's
+defaults are the paper's model.
+
 It acts through the public interface only (observation and ``info["action_mask"]``)
 and never takes an illegal action.
 """
@@ -28,10 +36,13 @@ from typing import Any
 import numpy as np
 
 from spikectl.envs.controller import check_controller_input
+from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, advance
+from spikectl.planning.bayes import BayesConnectivityEstimate, ObservationModel, release_chances
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
-from spikectl.planning.discrete import DiscreteConnectivityEstimate
+from spikectl.planning.discrete import DiscreteConnectivityEstimate, column_hypotheses_fit
+from spikectl.planning.filtering import FilteredState
 from spikectl.planning.identify import (
     NOISE_FREE_SD,
     ConnectivityEstimate,
@@ -40,9 +51,10 @@ from spikectl.planning.identify import (
 )
 from spikectl.planning.qmdp import qmdp_action
 
-IDENTIFICATIONS = ("gaussian", "discrete")
-"""How the policy identifies G: a Gaussian posterior (ridge regression, any n) or the
-exact posterior over {-1, 0, +1} (n <= 11)."""
+IDENTIFICATIONS = ("gaussian", "discrete", "bayes")
+"""How the policy identifies G: a Gaussian posterior (ridge regression, any n), the
+exact posterior over {-1, 0, +1} (n <= 11), or that posterior under the task's own
+observation model (:mod:`spikectl.planning.bayes`; the Gaussian one above n = 11)."""
 
 # The constructor's arguments besides ``params``, each kept as an attribute of that name
 # (what :meth:`IdentifyAndPlan.spawn` copies).
@@ -50,8 +62,27 @@ _SETTINGS = (
     "width", "horizon", "known_sd", "noise_mV", "hypotheses", "seed", "probe",
     "identification", "plan_on", "spike_margin_sd", "gamble_networks",
     "gamble_information", "gamble_horizon", "gamble_width", "gamble_candidates",
-    "known_weights",
+    "known_weights", "extensions", "filter_voltage",
 )  # fmt: skip
+
+
+def environment_settings(extensions: Extensions | None) -> dict[str, Any]:
+    """The settings the named controller ``identify-and-plan`` plays on an environment
+    with ``extensions`` (``spikectl benchmark``, ``spikectl realtime``,
+    ``spikectl.load_controller``), chosen on the suite's validation sets
+    (docs/baselines.md): under measurement noise the Bayes observation model with
+    filtered potentials (``identification="bayes"``, ``filter_voltage=True``); under
+    stochastic release the extensions alone (the Gaussian estimate learns from each
+    spike's release chance); elsewhere the constructor's defaults, which are the guided
+    learner's teacher (background input, heterogeneous and hidden neurons, where the Bayes
+    model scored lower, and the paper's task)."""
+    if extensions is None:
+        return {}
+    if extensions.observation_noise_mV > 0:
+        return {"identification": "bayes", "extensions": extensions, "filter_voltage": True}
+    if extensions.stochastic_release:
+        return {"extensions": extensions}
+    return {}
 
 
 class IdentifyAndPlan:
@@ -76,9 +107,11 @@ class IdentifyAndPlan:
             :meth:`spawn` (one per sub-environment of a vector environment) get
             ``seed + index``.
         probe: whether to probe when the plan misses wanted spikes.
-        identification: ``"gaussian"`` (ridge regression, any n) or ``"discrete"``
+        identification: ``"gaussian"`` (ridge regression, any n), ``"discrete"``
             (the exact posterior over {-1, 0, +1}, n <= 11; it knows more entries but
-            scored no better on the training networks, docs/baselines.md).
+            scored no better on the training networks, docs/baselines.md) or
+            ``"bayes"`` (that posterior under the observation model of ``extensions``,
+            :mod:`spikectl.planning.bayes`; the Gaussian estimate above n = 11).
         plan_on: what the planner takes for weights that are not known: ``"mean"``
             their posterior mean (noise-free: 0.879 / 0.866 on the training /
             validation networks), ``"known"`` 0 (0.869 / 0.850; better under
@@ -104,6 +137,14 @@ class IdentifyAndPlan:
             same loop *told* the connectivity, with nothing left to identify (a
             privileged controller, 0.993 on the validation networks against the
             oracle planner's 0.998; a teacher for ``spikectl.training.learners.guided``).
+        extensions: the environment's extensions, what ``identification="bayes"`` reads
+            its observation model from (measurement noise, stochastic release,
+            background input, synaptic spread; :class:`ObservationModel`); None: the
+            paper's model with ``noise_mV``. With stochastic release, every
+            identification learns from each spike's release chance.
+        filter_voltage: under measurement noise (``noise_mV`` > 0), plan from potentials
+            filtered against the model's prediction (:class:`~spikectl.planning.
+            filtering.FilteredState`) instead of the raw observations.
 
     ```python
     policy = IdentifyAndPlan()
@@ -135,6 +176,8 @@ class IdentifyAndPlan:
         gamble_width: int = 8,
         gamble_candidates: int = 8,
         known_weights: np.ndarray | None = None,
+        extensions: Extensions | None = None,
+        filter_voltage: bool = False,
     ) -> None:
         params = NeuronParams() if params is None else params
         if not isinstance(params, NeuronParams):
@@ -187,6 +230,17 @@ class IdentifyAndPlan:
             if not np.isin(known_weights, (-1, 0, 1)).all():
                 raise ValueError("known_weights must hold only -1, 0 and +1")
         self.known_weights = known_weights
+        self.filter_voltage = bool(filter_voltage)
+        if extensions is not None and not isinstance(extensions, Extensions):
+            raise TypeError(f"extensions must be an Extensions, got {type(extensions).__name__}")
+        self.extensions = extensions
+        self._observation = ObservationModel.of(extensions, params)
+        if extensions is None and noise_mV:
+            self._observation = ObservationModel(noise_mV=float(noise_mV))
+        # Stochastic release, told by ``extensions``: the evidence carries each spike's
+        # release chance instead of the deterministic rule's release (the Gaussian
+        # estimate regresses on the chances, the Bayes one mixes over the releases).
+        self._release_chances = self._observation.stochastic_release
         self.params, self.width, self.horizon = params, int(width), horizon
         self.known_sd, self.noise_mV = float(known_sd), float(noise_mV)
         # A plan is renewed when less than half its horizon is left, so that a wanted
@@ -229,8 +283,12 @@ class IdentifyAndPlan:
             if step != 0:
                 raise ValueError("IdentifyAndPlan must see the episode from its first step")
             self.reset()
-            self._tracker = ObservedState(n, self.params, self.spike_margin_sd * self.noise_mV)
+            if self.filter_voltage and self.noise_mV > 0:
+                self._tracker = FilteredState(n, self.params, self.noise_mV, self.spike_margin_sd)
+            else:
+                self._tracker = ObservedState(n, self.params, self.spike_margin_sd * self.noise_mV)
             self.estimate = self._new_estimate(n)
+            self._chances = np.zeros(n)
             draws = max(self.hypotheses if self.hypotheses > 1 else 0, self.gamble_networks)
             if draws:
                 # One draw per episode, reused by every re-plan: hypotheses change only
@@ -238,7 +296,18 @@ class IdentifyAndPlan:
                 rng = np.random.default_rng([self.seed, self._episodes])
                 self._uniforms = (rng.random((draws, n, n)), rng.random((draws, n)))
         else:
-            evidence = self._tracker.observe(voltage, int(observation["last_action"]))
+            since = self._tracker.state.steps_since_release[0].copy()
+            if isinstance(self._tracker, FilteredState):
+                evidence = self._tracker.observe(
+                    voltage, int(observation["last_action"]), self.estimate.posterior()
+                )
+            else:
+                evidence = self._tracker.observe(voltage, int(observation["last_action"]))
+            if self._release_chances:
+                evidence = (self._chances, *evidence[1:])
+                self._chances = release_chances(
+                    self._tracker.spiked, np.minimum(since + 1, 2**30), self.params
+                )
             self.estimate.add(*evidence)
         pattern = np.asarray(observation["pattern"], dtype=bool)
         if step >= pattern.shape[0]:
@@ -297,6 +366,8 @@ class IdentifyAndPlan:
             return KnownConnectivity(self.known_weights)
         if self.identification == "discrete":
             return DiscreteConnectivityEstimate(n, self._residual_sd)
+        if self.identification == "bayes" and column_hypotheses_fit(n):
+            return BayesConnectivityEstimate(n, self._observation, self.params)
         return ConnectivityEstimate(n, self._residual_sd)
 
     def _replan(self, weights, target, mask, pattern, step) -> None:

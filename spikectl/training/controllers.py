@@ -24,7 +24,7 @@ from spikectl.contexts import ContextSet
 from spikectl.envs.controller import Controller, DoNothing, RandomLegal, Witness
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
-from spikectl.planning.policy import IdentifyAndPlan
+from spikectl.planning.policy import IdentifyAndPlan, environment_settings
 
 NAMED_CONTROLLERS = ("do-nothing", "random", "identify-and-plan", "oracle", "witness")
 """The controllers that need no training, by name; the oracle and the witness are
@@ -110,9 +110,11 @@ def load_controller(
     :data:`NAMED_CONTROLLERS`.
 
     The named ones take the neuron model, the measurement noise, whether stimulating
-    the target is legal, and (oracle, witness) the contexts from ``env`` (a
-    ``NeuronControlEnv`` or ``NeuronControlVectorEnv``) where it is given, else from
-    ``contexts`` and ``params``. ``seed`` seeds the random controller.
+    the target is legal (identify-and-plan: the environment's extensions, which choose
+    its observation model, :func:`~spikectl.planning.policy.environment_settings`), and
+    (oracle, witness) the contexts from ``env`` (a ``NeuronControlEnv`` or
+    ``NeuronControlVectorEnv``) where it is given, else from ``contexts`` and ``params``.
+    ``seed`` seeds the random controller.
     """
     if model not in MODEL_CHOICES:
         raise ValueError(f"model must be one of {MODEL_CHOICES}, got {model!r}")
@@ -153,7 +155,7 @@ def load_controller(
 def _named(
     name: str, env: Any, contexts: ContextSet | None, params: NeuronParams | None, seed: int
 ) -> Controller:
-    noise_mV, allow_target = 0.0, False
+    noise_mV, allow_target, extensions = 0.0, False, None
     if env is not None:
         unwrapped = getattr(env, "unwrapped", env)
         missing = [
@@ -165,8 +167,9 @@ def _named(
                 f"{type(env).__name__} (it has no {', '.join(missing)})"
             )
         contexts, params = unwrapped.contexts, unwrapped.params
-        noise_mV = unwrapped.extensions.observation_noise_mV
-        allow_target = unwrapped.extensions.allow_target_action
+        extensions = unwrapped.extensions
+        noise_mV = extensions.observation_noise_mV
+        allow_target = extensions.allow_target_action
     elif contexts is not None:
         params = contexts.params if params is None else params
         noise_mV = contexts.extensions.observation_noise_mV
@@ -180,7 +183,7 @@ def _named(
     if name == "random":
         return RandomLegal(seed)
     if name == "identify-and-plan":
-        return IdentifyAndPlan(params, noise_mV=noise_mV)
+        return IdentifyAndPlan(params, noise_mV=noise_mV, **environment_settings(extensions))
     if name == "oracle":
         return OraclePlanner(contexts, params, DEFAULT_ORACLE_WIDTH, allow_target)
     return Witness(contexts)

@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# The commands behind docs/baselines.md, "Identify-and-plan under the task's observation
+# model" (issue 43), run from the repository root, one BLAS thread, nice -n 5 on the
+# shared 2-core machine. Choices on the validation sets; the test sets played once.
+set -euo pipefail
+here=docs/results/bayes-identify
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+B='"identification": "bayes", "extensions": true'
+# Validation: the old default against the Bayes observation model on eight tasks
+# (validation-sweep1.csv was written before sweep.py timed decisions in thread CPU time:
+# its decision_ms columns are wall time on the loaded machine).
+python $here/sweep.py --tasks stochastic noise2 noise4 noise1 heterogeneous background \
+    hidden25 paper --split validation --settings '{}' "{$B}" \
+    --out $here/validation-sweep1.csv --per-network $here/validation-sweep1-per-network.csv
+# Validation: the Bayes model with filtered potentials under noise.
+python $here/sweep.py --tasks noise2 noise4 noise1 --split validation \
+    --settings "{$B, \"filter_voltage\": true}" \
+    --out $here/validation-sweep2.csv --per-network $here/validation-sweep2-per-network.csv
+# Validation: the Gaussian estimate told the extensions (release chances) / filtering.
+python $here/sweep.py --tasks stochastic noise4 noise2 --split validation \
+    --settings '{"extensions": true}' '{"filter_voltage": true}' \
+    --out $here/validation-sweep3.csv --per-network $here/validation-sweep3-per-network.csv
+python $here/sweep.py --tasks noise1 --split validation --settings '{"filter_voltage": true}' \
+    --out $here/validation-sweep4.csv --per-network $here/validation-sweep4-per-network.csv
+# Validation, after the test run (changed no choice): QMDP over drawn networks.
+python $here/sweep.py --tasks stochastic noise4 --split validation \
+    --settings '{"extensions": true, "gamble_networks": 16}' \
+    "{$B, \"filter_voltage\": true, \"gamble_networks\": 16}" \
+    --out $here/validation-sweep5.csv --per-network $here/validation-sweep5-per-network.csv
+# Test, once: the old default against what `spikectl benchmark identify-and-plan` now
+# plays, on the tasks where it changed; paired differences.
+python $here/sweep.py --tasks noise1 noise2 noise4 stochastic --split test \
+    --settings '{}' '{"named": true}' --out $here/test.csv --per-network $here/test-per-network.csv
+python $here/paired.py $here/test.csv $here/test-per-network.csv --out $here/test-paired.csv
+# The suite table's row (docs/benchmark.md), every task.
+spikectl benchmark identify-and-plan --task all --out docs/results/suite/identify-and-plan.csv \
+    --per-network $here/test-benchmark-per-network.csv

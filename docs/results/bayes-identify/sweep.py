@@ -1,0 +1,119 @@
+"""Identify-and-plan settings on a suite task's split: mean return, normalised score,
+CPU s per episode and per-decision CPU-time percentiles, one line per (task, setting).
+
+    python docs/results/bayes-identify/sweep.py --tasks paper noise2 --split validation \
+        --settings '{}' '{"identification": "bayes", "extensions": true}' [--size 30] \
+        [--out rows.csv] [--per-network out.csv]
+
+A setting is IdentifyAndPlan's keyword arguments as JSON; "extensions": true passes the
+task's extensions; {"named": true} is what `spikectl benchmark identify-and-plan` plays
+(spikectl.planning.policy.environment_settings of the task's extensions).
+
+Choose on validation; the test split is played once, at the end.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import time
+
+import numpy as np
+
+from spikectl.envs.rollout import evaluate_policy
+from spikectl.experiments import suite
+from spikectl.planning import IdentifyAndPlan
+from spikectl.planning.policy import environment_settings
+
+
+class Timed:
+    """Wraps a controller, recording the CPU time of every decision (the thread's
+    clock: on a shared machine wall time measures the neighbours, not the decision)."""
+
+    def __init__(self, policy, times=None):
+        self.policy, self.times = policy, ([] if times is None else times)
+
+    def spawn(self, index):
+        return Timed(self.policy.spawn(index), self.times)
+
+    def reset(self):
+        self.policy.reset()
+
+    def act(self, observation, info):
+        started = time.thread_time()
+        action = self.policy.act(observation, info)
+        self.times.append(time.thread_time() - started)
+        return action
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser()
+    parser.add_argument("--tasks", nargs="+", default=["paper"])
+    parser.add_argument("--split", default="validation", choices=("validation", "test"))
+    parser.add_argument("--settings", nargs="+", default=["{}"])
+    parser.add_argument("--size", type=int, default=100)
+    parser.add_argument("--per-network", default=None)
+    parser.add_argument("--out", default=None)
+    args = parser.parse_args()
+    rows, per_network = [], []
+    for name in args.tasks:
+        spec = suite.task(name)
+        contexts = suite.load_split(name, args.split)
+        if args.size < len(contexts):
+            contexts = contexts[: args.size]
+        nothing, oracle = suite.references(name, args.split) if args.size >= 100 else (None, None)
+        for text in args.settings:
+            settings = json.loads(text)
+            if settings.pop("named", False):
+                # What `spikectl benchmark identify-and-plan` plays (load_controller).
+                settings = {
+                    "noise_mV": spec.extensions.observation_noise_mV,
+                    **environment_settings(spec.extensions),
+                    **settings,
+                }
+            settings.setdefault("noise_mV", spec.extensions.observation_noise_mV)
+            if settings.pop("extensions", False):
+                settings["extensions"] = spec.extensions
+            policy = Timed(IdentifyAndPlan(contexts.params, **settings))
+            started = time.process_time()
+            episodes = evaluate_policy(
+                contexts, policy, contexts.params, spec.extensions, seed=suite.ENV_SEED
+            )
+            cpu = time.process_time() - started
+            mean = float(episodes.returns.mean())
+            norm = suite.normalise(mean, nothing, oracle) if nothing is not None else float("nan")
+            times = np.array(policy.times) * 1e3
+            row = {
+                "task": name,
+                "split": args.split,
+                "settings": text,
+                "contexts": len(contexts),
+                "mean_return": round(mean, 6),
+                "normalised": round(norm, 6),
+                "cpu_s_per_episode": round(cpu / len(contexts), 4),
+                "decision_cpu_ms_p50": round(float(np.percentile(times, 50)), 4),
+                "decision_cpu_ms_p99": round(float(np.percentile(times, 99)), 4),
+            }
+            rows.append(row)
+            print(" ".join(f"{k}={v}" for k, v in row.items()), flush=True)
+            per_network += [
+                {
+                    "task": name,
+                    "split": args.split,
+                    "settings": text,
+                    "context": i,
+                    "return": round(float(r), 6),
+                }
+                for i, r in enumerate(episodes.returns)
+            ]
+    for path, table in ((args.out, rows), (args.per_network, per_network)):
+        if path:
+            with open(path, "w", newline="") as handle:
+                writer = csv.DictWriter(handle, fieldnames=list(table[0]))
+                writer.writeheader()
+                writer.writerows(table)
+
+
+if __name__ == "__main__":
+    main()
