@@ -17,7 +17,6 @@ from pathlib import Path
 
 from spikectl.files import FileWriteError, describe_os_error
 
-
 # tqdm's own bar without its estimate of the time left: that estimate averages over the
 # first round, which carries the one-time costs (Numba's and PyTorch's compilation, the
 # first evaluation) and once predicted four hours for a ten-minute run. The postfix
