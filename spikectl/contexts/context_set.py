@@ -172,10 +172,12 @@ class ContextSet(Sequence[Context]):
 
     @property
     def n_neurons(self) -> int:
+        """n, the number of neurons of every context."""
         return self._contexts[0].n_neurons
 
     @property
     def episode_length(self) -> int:
+        """N, the episode length of every context."""
         return self._contexts[0].episode_length
 
     @property

@@ -96,11 +96,13 @@ class SB3CompatibleEnv(gym.Env):
 
     @property
     def np_random_seed(self) -> int:
+        """The seed of the wrapped environment's generator."""
         return self.env.unwrapped.np_random_seed
 
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[np.ndarray | dict[str, Any], dict[str, Any]]:
+        """Reset the wrapped environment; the observation in SB3's conventions."""
         observation, info = self.env.reset(seed=seed, options=options)
         self._mask = info["action_mask"].copy()
         return self.observation_codec(observation), info
@@ -108,6 +110,7 @@ class SB3CompatibleEnv(gym.Env):
     def step(
         self, action: Any
     ) -> tuple[np.ndarray | dict[str, Any], float, bool, bool, dict[str, Any]]:
+        """Step with a zero-based action (0 does nothing, j + 1 stimulates neuron j)."""
         if not self.action_space.contains(action):
             raise ValueError(
                 f"action {action!r} is not in {self.action_space}: 0 does nothing, "
@@ -127,9 +130,11 @@ class SB3CompatibleEnv(gym.Env):
         return self._mask.copy()
 
     def render(self) -> str | np.ndarray | None:
+        """The wrapped environment's render."""
         return self.env.render()
 
     def close(self) -> None:
+        """Close the wrapped environment."""
         self.env.close()
 
 
