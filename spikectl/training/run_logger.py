@@ -88,13 +88,15 @@ class RunLogger:
         return self.bar.format_interval(left)
 
     def progress(self, episodes: int, collect_return: float, learner: dict[str, str]) -> None:
-        self.bar.update(episodes)
         self.done += episodes  # the bar counts nothing when it is disabled
-        eta = self.eta(self.done)
-        # refresh=False: the bar redraws at most every mininterval, not on every round.
+        # The postfix first, then the count: the redraw that update() may make shows this
+        # round's estimate, not the previous round's. refresh=False: the bar redraws at
+        # most every mininterval, not on every round.
         self.bar.set_postfix(
-            eta=eta, **learner, collect=f"{collect_return:.3f}", **self.last, refresh=False
-        )
+            eta=self.eta(self.done), **learner, collect=f"{collect_return:.3f}", **self.last,
+            refresh=False,
+        )  # fmt: skip
+        self.bar.update(episodes)
 
     def log(self, row: dict) -> None:
         with self._writing():
