@@ -20,7 +20,7 @@ def test_readme_example_runs():
 
 
 def test_every_relative_link_in_the_docs_exists():
-    for page in [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]:
+    for page in doc_pages():
         for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", page.read_text()):
             if "://" in target or target.startswith("mailto:"):
                 continue
@@ -147,7 +147,32 @@ def test_suite_train_script_reruns_its_trials_exactly():
 
 
 def doc_pages() -> list[Path]:
-    return [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+    """The README, CONTRIBUTING, CHANGELOG and every page of the site (docs/ and its
+    folders, not the results folders' own notes)."""
+    site = [page for page in sorted((ROOT / "docs").rglob("*.md"))
+            if "results" not in page.relative_to(ROOT / "docs").parts]  # fmt: skip
+    return [ROOT / "README.md", ROOT / "CONTRIBUTING.md", ROOT / "CHANGELOG.md", *site]
+
+
+def test_the_research_index_lists_every_results_folder():
+    index = (ROOT / "docs" / "research" / "index.md").read_text()
+    listed = set(re.findall(r"^\| \[([\w.-]+)\]\(\.\./results/\1/\)", index, flags=re.MULTILINE))
+    folders = {path.name for path in (ROOT / "docs" / "results").iterdir() if path.is_dir()}
+    assert folders - listed == set(), "docs/research/index.md lacks these results folders"
+    assert listed - folders == set(), "docs/research/index.md lists folders that do not exist"
+
+
+def test_readme_fits_the_first_screen():
+    text = (ROOT / "README.md").read_text()
+    assert len(text.split()) <= 1000
+    first_block = next(i for i, line in enumerate(text.splitlines()) if line.startswith("```"))
+    assert first_block < 60
+    paragraphs = [p for p in text.split("\n\n") if not p.lstrip().startswith(("```", "|", "- "))]
+    assert max(len(p.split()) for p in paragraphs) <= 120
+    # CI's .ci/run copies the two commands: they must stay byte-identical.
+    ci = (ROOT / ".ci" / "run").read_text()
+    for command in re.findall(r"```bash\n(python3 -m venv[^\n]*)\n```", text):
+        assert command in ci or command.endswith("spikectl train guided"), command
 
 
 def test_module_paths_and_names_in_the_docs_exist():

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -63,6 +64,34 @@ def runs(tmp_path):
 def assert_png(path):
     assert path.exists() and path.stat().st_size > 1000
     assert path.read_bytes()[:8] == PNG_MAGIC
+
+
+@pytest.fixture
+def saved(monkeypatch):
+    """The figures the plot functions save, by file name, as they were saved: what a
+    test checks is what the PNG shows (lines, labels), not only that a PNG exists."""
+    import spikectl.experiments.figures as figures_module
+    import spikectl.experiments.report as report_module
+
+    figures = {}
+    real_save = figures_module.save_figure
+
+    def record(figure, path):
+        figures[Path(path).name] = figure
+        return real_save(figure, path)
+
+    monkeypatch.setattr(figures_module, "save_figure", record)
+    monkeypatch.setattr(report_module, "save_figure", record)
+    return figures
+
+
+def plotted_lines(axis):
+    """{label: (x, y)} of an axis's labelled lines."""
+    return {
+        line.get_label(): (np.asarray(line.get_xdata()), np.asarray(line.get_ydata()))
+        for line in axis.lines
+        if not line.get_label().startswith("_")
+    }
 
 
 def test_load_and_group_runs(runs):
@@ -158,14 +187,23 @@ def test_training_curves_figure(runs, tmp_path):
     np.testing.assert_allclose(result.curves["test"]["drqn"].mean, [0.5, 0.5, 0.55])
 
 
-def test_training_curves_accept_run_directories(tmp_path):
+def test_training_curves_accept_run_directories(tmp_path, saved):
     dirs = [make_run(tmp_path, "tdrqn", seed, *RETURNS[("tdrqn", seed)]) for seed in range(2)]
-    result = plot_training_curves({"TDRQN": dirs}, tmp_path / "figure4.png")
+    result = plot_training_curves({"TDRQN": dirs}, tmp_path / "figure4.png", title="Fig. 4")
     assert_png(result.path)
     np.testing.assert_allclose(result.curves["train"]["TDRQN"].mean, [0.6, 0.75, 0.85])
+    figure = saved["figure4.png"]
+    assert figure.get_suptitle() == "Fig. 4"
+    left, right = figure.axes
+    steps, train = plotted_lines(left)["TDRQN"]
+    np.testing.assert_allclose(steps, STEPS)
+    np.testing.assert_allclose(train, [0.6, 0.75, 0.85])  # the mean of seeds 0 and 1
+    np.testing.assert_allclose(plotted_lines(right)["TDRQN"][1], [0.55, 0.65, 0.75])
+    assert plotted_lines(right)["do nothing"][1][0] == DO_NOTHING_RETURN
+    assert (left.get_xlabel(), left.get_ylabel()) == ("environment steps", "return")
 
 
-def test_test_curves_by_size(tmp_path):
+def test_test_curves_by_size(tmp_path, saved):
     dirs = [
         make_run(tmp_path, "tdrqn", seed, [0.6] * 3, [0.5 + 0.1 * seed + 0.001 * n] * 3, n_train=n)
         for n in (10, 100)
@@ -175,6 +213,12 @@ def test_test_curves_by_size(tmp_path):
     assert list(groups) == [10, 100]
     result = plot_test_curves_by_size(groups, tmp_path / "figure5.png")
     assert_png(result.path)
+    (axis,) = saved["figure5.png"].axes
+    lines = plotted_lines(axis)
+    assert set(lines) == {"10 training contexts", "100 training contexts", "do nothing"}
+    np.testing.assert_allclose(lines["100 training contexts"][1], [0.65] * 3)
+    np.testing.assert_allclose(lines["10 training contexts"][1], [0.56] * 3)
+    assert axis.get_title() == "unseen test contexts"
     np.testing.assert_allclose(result.curves["test"][100].mean, [0.65] * 3)
     np.testing.assert_allclose(result.curves["test"][10].mean, [0.56] * 3)
     np.testing.assert_allclose(result.curves["test"][10].std, [0.05] * 3)
@@ -187,10 +231,72 @@ def test_empty_groups_are_errors(tmp_path):
         plot_training_curves({"tdrqn": []}, tmp_path / "x.png")
 
 
-def test_networks_figure(tmp_path):
+def test_networks_figure(tmp_path, saved):
     contexts = ContextSet.generate(3, seed=0)
     path = plot_networks(contexts, tmp_path / "figure3.png")
     assert_png(path)
+    figure = saved["figure3.png"]
+    assert [axis.get_title(loc="left") for axis in figure.axes] == ["(a)", "(b)", "(c)"]
+    legend_labels = [text.get_text() for text in figure.legends[0].get_texts()]
+    assert legend_labels == ["excitatory", "inhibitory", "target neuron"]
+    for context, axis in zip(contexts, figure.axes, strict=True):
+        nodes = axis.collections[0]  # networkx draws the nodes first
+        colours = nodes.get_facecolors()
+        green = [i for i, colour in enumerate(colours) if colour[1] > 0.4 and colour[0] < 0.3]
+        assert len(colours) == 8 and green == [context.target]
+
+
+def test_learning_curve_figure(tmp_path, saved):
+    from spikectl.experiments.figures import plot_learning_curve
+
+    metrics = [
+        {"env_steps": 100, "train_return": 0.55, "test_return": 0.52, "val_return": 0.53},
+        {"env_steps": 200, "train_return": 0.65, "test_return": 0.60, "val_return": 0.61},
+    ]
+    baselines = {"do_nothing": {"train": 0.5, "test": 0.5}, "random": {"train": 0.50, "test": 0.52}}
+    plot_learning_curve(metrics, baselines, tmp_path / "curve.png", title="seed 0")
+    (axis,) = saved["curve.png"].axes
+    lines = plotted_lines(axis)
+    np.testing.assert_allclose(lines["train contexts"][0], [100, 200])
+    np.testing.assert_allclose(lines["train contexts"][1], [0.55, 0.65])
+    np.testing.assert_allclose(lines["unseen test contexts"][1], [0.52, 0.60])
+    np.testing.assert_allclose(lines["validation contexts"][1], [0.53, 0.61])
+    assert lines["do nothing"][1][0] == 0.5 and lines["random"][1][0] == pytest.approx(0.51)
+    assert (axis.get_xlabel(), axis.get_ylabel(), axis.get_title()) == (
+        "environment steps", "greedy return", "seed 0"
+    )
+    # Without validation returns there is no validation line.
+    plot_learning_curve([{k: v for k, v in row.items() if k != "val_return"} for row in metrics],
+                        {}, tmp_path / "bare.png")  # fmt: skip
+    assert set(plotted_lines(saved["bare.png"].axes[0])) == {"train contexts",
+                                                             "unseen test contexts"}  # fmt: skip
+
+
+def test_episode_raster_figure(tmp_path, saved):
+    from spikectl.experiments.figures import plot_episode_raster
+
+    pattern = np.array([1, 0, 1, 0, 0, 1], dtype=bool)
+    spikes = np.zeros((6, 3), dtype=bool)
+    spikes[[0, 3], 1] = True  # target 1: a hit at step 0, an unwanted spike at step 3
+    spikes[4, 2] = True
+    actions = np.array([-1, 2, -1, 2, -1, -1])
+    plot_episode_raster(pattern, actions, spikes, target=1, path=tmp_path / "raster.png")
+    (axis,) = saved["raster.png"].axes
+    marked = {}
+    for collection in axis.collections:
+        marked.setdefault(collection.get_label(), []).append(collection.get_offsets())
+    steps = {label: sorted(int(x) for offsets in marked[label] for x, _ in offsets)
+             for label in ("wanted spike", "hit", "unwanted spike", "missed spike", "stimulated")}
+    assert steps == {"wanted spike": [0, 2, 5], "hit": [0], "unwanted spike": [3],
+                     "missed spike": [2, 5], "stimulated": []}  # fmt: skip
+    labels = [tick.get_text() for tick in axis.get_yticklabels()]
+    assert labels == ["pattern", "target n1", "n0", "n2"]
+    # Stimulations are open blue squares on the stimulated neuron's row (n2: y = 0).
+    squares = [(int(x), int(y)) for c in axis.collections if c.get_label().startswith("_")
+               and len(c.get_offsets()) and c.get_facecolors().size == 0
+               for x, y in c.get_offsets()]  # fmt: skip
+    assert sorted(squares) == [(1, 0), (3, 0)]
+    assert axis.get_title() == "2 stimulations"
 
 
 def test_network_edges_by_sign():

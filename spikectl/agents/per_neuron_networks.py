@@ -87,9 +87,11 @@ class DDRQN(PerNeuronQNetwork):
     mix_name = "ff"
 
     def build_mix(self) -> nn.Module:
+        """DDRQN's mixing block: one feed-forward layer per neuron, no mixing across neurons."""
         return MLP(self.sizes.lstm_hidden, [self.sizes.ff_hidden], None, self.sizes.layer_norm)
 
     def head_hidden(self) -> tuple[int, ...]:
+        """DDRQN's per-neuron Q head widths (``sizes.head_hidden``)."""
         return self.sizes.head_hidden
 
 
@@ -106,8 +108,10 @@ class TDRQN(PerNeuronQNetwork):
     mix_name = "mixer"
 
     def build_mix(self) -> nn.Module:
+        """TDRQN's mixing block: self-attention across the neurons."""
         s = self.sizes
         return NeuronMixer(s.lstm_hidden, s.attn_width, s.attn_layers, s.attn_heads, s.attn_ff)
 
     def head_hidden(self) -> tuple[int, ...]:
+        """TDRQN's per-neuron Q head widths (``sizes.tdrqn_head_hidden``)."""
         return self.sizes.tdrqn_head_hidden

@@ -35,7 +35,9 @@ class RecurrentQNetwork(Protocol):
 
     def initial_state(
         self, batch_size: int, n_neurons: int, device: torch.device | str | None = None
-    ) -> State: ...
+    ) -> State:
+        """The zero recurrent state for ``batch_size`` episodes of ``n_neurons`` neurons."""
+        ...
 
     def forward(
         self, obs_seq: Observation, state: State | None = None
@@ -105,6 +107,9 @@ class RecurrentQNetworkBase(nn.Module):
     def initial_state(
         self, batch_size: int, n_neurons: int, device: torch.device | str | None = None
     ) -> State:
+        """The zero recurrent state for ``batch_size`` episodes of ``n_neurons`` neurons
+        (refused for a network built for another fixed n).
+        """
         if self.fixed_n is not None and n_neurons != self.fixed_n:
             raise ValueError(
                 f"{type(self).__name__}.initial_state: this network is built for a fixed "

@@ -57,11 +57,13 @@ class DRQN(SystemQNetwork):
     """
 
     def build(self) -> None:
+        """One LSTM over the whole network's input vector, then the context and the head."""
         n, H = self.n_neurons, self.sizes.lstm_hidden
         self.lstm = nn.LSTM(2 * n + 1, H, batch_first=True)
         self.build_context_and_head(H)
 
     def state_shape(self, batch_size: int, n_neurons: int) -> tuple[int, ...]:
+        """The LSTM state of one of the pair: ``(batch_size, lstm_hidden)``."""
         return batch_size, self.sizes.lstm_hidden
 
     def encode(
@@ -91,6 +93,7 @@ class DMDRQN(SystemQNetwork, PerNeuronMemory):
     """
 
     def build(self) -> None:
+        """The shared per-neuron LSTM, a feed-forward layer over all neurons, the head."""
         self.lstm = self.build_lstm()
         s = self.sizes
         self.mix = MLP(self.n_neurons * s.lstm_hidden, [s.ff_hidden], None, s.layer_norm)

@@ -100,10 +100,12 @@ class Context:
 
     @property
     def n_neurons(self) -> int:
+        """n, the number of neurons (observable and hidden)."""
         return self.weights.shape[0]
 
     @property
     def episode_length(self) -> int:
+        """N, the number of steps of an episode (the pattern's length)."""
         return self.pattern.shape[0]
 
     @property

@@ -15,7 +15,7 @@ import os
 from collections.abc import Iterator, Mapping, Sequence
 from itertools import accumulate
 from pathlib import Path
-from typing import Any, Self, overload
+from typing import Any, Literal, Self, overload
 
 import numpy as np
 
@@ -173,10 +173,12 @@ class ContextSet(Sequence[Context]):
 
     @property
     def n_neurons(self) -> int:
+        """n, the number of neurons of every context."""
         return self._contexts[0].n_neurons
 
     @property
     def episode_length(self) -> int:
+        """N, the episode length of every context."""
         return self._contexts[0].episode_length
 
     @property
@@ -316,6 +318,33 @@ class ContextSet(Sequence[Context]):
         return loaded
 
 
+@overload
+def make_splits(
+    n_train: int = ...,
+    n_test: int = ...,
+    n_neurons: int = ...,
+    episode_length: int = ...,
+    seed: int = ...,
+    params: NeuronParams | None = ...,
+    extensions: Extensions | Mapping[str, Any] | None = ...,
+    n_val: Literal[0] = ...,
+) -> tuple[ContextSet, ContextSet]: ...
+
+
+@overload
+def make_splits(
+    n_train: int = ...,
+    n_test: int = ...,
+    n_neurons: int = ...,
+    episode_length: int = ...,
+    seed: int = ...,
+    params: NeuronParams | None = ...,
+    extensions: Extensions | Mapping[str, Any] | None = ...,
+    n_val: int = ...,
+) -> tuple[ContextSet, ...]: ...
+
+
+# The overloads let a type checker unpack ``train, test = make_splits(...)``.
 def make_splits(
     n_train: int = 100,
     n_test: int = 100,
@@ -325,7 +354,7 @@ def make_splits(
     params: NeuronParams | None = None,
     extensions: Extensions | Mapping[str, Any] | None = None,
     n_val: int = 0,
-) -> tuple[ContextSet, ContextSet] | tuple[ContextSet, ContextSet, ContextSet]:
+) -> tuple[ContextSet, ...]:
     """A training and a test set (and, with ``n_val > 0``, a validation set) with no
     topology shared within or across them.
 

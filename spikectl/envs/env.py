@@ -189,6 +189,11 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     def reset(
         self, *, seed: int | None = None, options: dict[str, Any] | None = None
     ) -> tuple[dict[str, Any], dict[str, Any]]:
+        """Start an episode: a context drawn from the set by the seeded generator, or the one
+        ``options`` names (``{"context": index}`` or a :class:`~spikectl.contexts.Context`).
+
+        Returns ``(observation, info)``; the neurons start at rest.
+        """
         super().reset(seed=seed)
         context = None if options is None else _context_option(options)
         if isinstance(context, Context):
@@ -230,6 +235,11 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         return observation, info
 
     def step(self, action: int) -> tuple[dict[str, Any], float, bool, bool, dict[str, Any]]:
+        """Apply ``action`` (-1 does nothing, j stimulates neuron j) for one 1 ms step.
+
+        Returns ``(observation, reward, terminated, truncated, info)`` as Gymnasium's
+        ``Env.step``; an illegal action raises ``ValueError``.
+        """
         t = self._next_step
         if t >= self.episode_length:
             raise ResetNeeded(
@@ -287,6 +297,9 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         )
 
     def render(self) -> str | np.ndarray | None:
+        """The episode so far: text for ``render_mode="ansi"``, an RGB array for
+        ``"rgb_array"``; ``None`` with a warning without a render mode.
+        """
         if self.render_mode is None:
             gym.logger.warn(
                 "render() called without a render_mode; pass render_mode='ansi' or "

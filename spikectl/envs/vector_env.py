@@ -154,6 +154,9 @@ class NeuronControlVectorEnv(VectorEnv):
         seed: int | Sequence[int | None] | None = None,
         options: dict[str, Any] | None = None,
     ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+        """Reset every sub-environment (``seed``: one seed, or one per sub-environment) and
+        return the batched ``(observations, infos)``.
+        """
         seeds = self._seed_list(seed)
         if is_int(seed):
             super().reset(seed=int(seed))
@@ -190,6 +193,11 @@ class NeuronControlVectorEnv(VectorEnv):
     def step(
         self, actions: np.ndarray
     ) -> tuple[dict[str, np.ndarray], np.ndarray, np.ndarray, np.ndarray, dict[str, np.ndarray]]:
+        """Step every sub-environment with its action ([S] ints, -1 does nothing); finished
+        sub-environments reset themselves on the next step (Gymnasium's next-step autoreset).
+
+        Returns batched ``(observations, rewards, terminated, truncated, infos)``.
+        """
         if not self._all_reset:
             never = np.flatnonzero(~self._ever_reset).tolist()
             raise ResetNeeded(f"sub-environment(s) {never} were never reset: call reset() first")

@@ -243,6 +243,7 @@ class Heterogeneity:
 
     @property
     def n_neurons(self) -> int:
+        """n, the number of neurons these values are drawn for."""
         return self.thresholds_mV.shape[0]
 
     def simulate_kwargs(self) -> dict[str, np.ndarray]:

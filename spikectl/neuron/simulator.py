@@ -85,6 +85,7 @@ class SimulatorState:
         self.released[which] = False
 
     def copy(self) -> SimulatorState:
+        """An independent copy (every array copied)."""
         return SimulatorState(
             self.voltage_mV.copy(),
             self.refractory_left.copy(),

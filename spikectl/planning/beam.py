@@ -74,6 +74,7 @@ class PlanningModel:
 
     @property
     def n_neurons(self) -> int:
+        """n, the number of neurons of the modelled networks."""
         return self.weights.shape[-1]
 
     @property
@@ -93,6 +94,7 @@ class Plan:
 
     @property
     def predicted_return(self) -> float:
+        """The sum of the plan's predicted step rewards."""
         return float(self.rewards.sum())
 
 

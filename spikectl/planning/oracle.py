@@ -114,6 +114,7 @@ class OraclePlanner:
         self._plan: np.ndarray | None = None
 
     def reset(self) -> None:
+        """Forget the current episode's plan (the plans per context are kept)."""
         self._plan = None
 
     def plan(self, context: int) -> np.ndarray:
@@ -128,6 +129,7 @@ class OraclePlanner:
         return self.plans[context]
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
+        """The planned action for this step of the context ``info["context_index"]``."""
         check_controller_input(observation, info, "OraclePlanner")
         step = int(observation["step"])
         if step == 0 or self._plan is None:
@@ -140,6 +142,7 @@ class OraclePlanner:
         return int(self._plan[step])
 
     def act_batch(self, observations: Mapping[str, np.ndarray], infos: Mapping[str, Any]):
+        """The planned actions [S] of a vector environment's batch, one per sub-environment."""
         contexts = np.asarray(infos["context_index"], dtype=np.int64)  # [S]
         steps = np.asarray(observations["step"], dtype=np.int64)  # [S]
         return np.array(

@@ -11,15 +11,27 @@ from __future__ import annotations
 
 import contextlib
 import math
-from collections.abc import Iterator
+import time
+from collections.abc import Callable, Iterator
 from pathlib import Path
 
 from spikectl.files import FileWriteError, describe_os_error
 
+# tqdm's own bar without its estimate of the time left: that estimate averages over the
+# first round, which carries the one-time costs (Numba's and PyTorch's compilation, the
+# first evaluation) and once predicted four hours for a ten-minute run. The postfix
+# carries an honest one instead (RunLogger.eta).
+BAR_FORMAT = "{l_bar}{bar}| {n_fmt}/{total_fmt} [{elapsed}, {rate_fmt}{postfix}]"
+
 
 class RunLogger:
     """tqdm progress bar (optional) and a TensorBoard writer in ``run_dir/tensorboard``;
-    ``resume_dir`` is where the run resumes from (a seed group's directory)."""
+    ``resume_dir`` is where the run resumes from (a seed group's directory).
+
+    The bar's ``eta`` is the time left at the pace of the rounds after this process's
+    first (``?`` until a second round has ended): evaluation rounds count, compilation
+    does not. ``clock`` is the wall clock in seconds (a test passes its own).
+    """
 
     def __init__(
         self,
@@ -29,6 +41,7 @@ class RunLogger:
         show_progress: bool,
         desc: str,
         resume_dir: Path | None = None,
+        clock: Callable[[], float] = time.perf_counter,
     ) -> None:
         from torch.utils.tensorboard import SummaryWriter
         from tqdm.auto import tqdm
@@ -39,9 +52,12 @@ class RunLogger:
             self.writer = SummaryWriter(str(self.log_dir), purge_step=episodes)
         self.bar = tqdm(
             total=total_episodes, initial=episodes, unit="ep", disable=not show_progress,
-            dynamic_ncols=True, desc=desc, mininterval=1.0,
+            dynamic_ncols=True, desc=desc, mininterval=1.0, bar_format=BAR_FORMAT,
         )  # fmt: skip
         self.last: dict[str, str] = {}
+        self.total_episodes, self.clock, self.done = total_episodes, clock, episodes
+        # (clock, episodes) at the end of this process's first round; None before it.
+        self.paced_from: tuple[float, int] | None = None
 
     @contextlib.contextmanager
     def _writing(self) -> Iterator[None]:
@@ -57,10 +73,30 @@ class RunLogger:
                 f"space, then spikectl train --resume {self.resume_dir}",
             ) from error
 
+    def eta(self, done: int) -> str:
+        """The time left, ``H:MM:SS`` or ``MM:SS``, at the pace since the first round
+        ended; ``?`` while no round after the first has ended."""
+        now = self.clock()
+        if self.paced_from is None:
+            self.paced_from = (now, done)
+            return "?"
+        since, done_then = self.paced_from
+        if done <= done_then or now <= since:
+            return "?"
+        seconds_per_episode = (now - since) / (done - done_then)
+        left = max(self.total_episodes - done, 0) * seconds_per_episode
+        return self.bar.format_interval(left)
+
     def progress(self, episodes: int, collect_return: float, learner: dict[str, str]) -> None:
+        self.done += episodes  # the bar counts nothing when it is disabled
+        # The postfix first, then the count: the redraw that update() may make shows this
+        # round's estimate, not the previous round's. refresh=False: the bar redraws at
+        # most every mininterval, not on every round.
+        self.bar.set_postfix(
+            eta=self.eta(self.done), **learner, collect=f"{collect_return:.3f}", **self.last,
+            refresh=False,
+        )  # fmt: skip
         self.bar.update(episodes)
-        # refresh=False: the bar redraws at most every mininterval, not on every round.
-        self.bar.set_postfix(**learner, collect=f"{collect_return:.3f}", **self.last, refresh=False)
 
     def log(self, row: dict) -> None:
         with self._writing():

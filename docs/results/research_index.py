@@ -1,0 +1,107 @@
+"""Write docs/research/index.md's table of every results folder from what the folder
+holds and the git log: its claim (the subject of the commit that added it), the command
+that reruns it, the day it was added and the CPU its runs recorded.
+
+    python docs/results/research_index.py > /tmp/table.md   # then paste into the index
+
+Run from the repository root of a full clone (the dates and claims come from git).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+from pathlib import Path
+
+RESULTS = Path(__file__).resolve().parent
+ROOT = RESULTS.parent.parent
+CLAIM_CHARS = 220
+# Folders whose first commits' subjects name something else (a folder committed beside
+# another change): their claim as the commit that reported the result stated it.
+CLAIMS = {
+    "ddrqn-paper-update-ratio": "DDRQN at the paper's update ratio finished (1 M steps, 1 seed): "
+    "0.654 train / 0.621 unseen, below TDRQN's 0.833 / 0.800",
+    "tdrqn-paper-update-ratio": "TDRQN with the paper's 2 updates per episode reaches 0.833 train "
+    "/ 0.800 unseen (2 seeds)",
+    "learn-fast-without-aux-loss": "Ablation of the quick preset without the auxiliary "
+    "next-voltage loss (3 seeds; docs/research/training-experiments.md, Ablation)",
+    "learn-fast-without-target-voltage": "Ablation of the quick preset without the target-voltage "
+    "input (3 seeds; docs/research/training-experiments.md, Ablation)",
+    "guided-ntrain4000-4x": "4x the steps on 4 000 networks, 3 seeds: validation 0.839 ± 0.003, "
+    "unseen 0.818 ± 0.002 in 42-44 core-minutes, the same plateau",
+    "quick-this-machine": "The quick preset rerun on the project's machine, 3 seeds: unseen "
+    "0.743 ± 0.016 final, 0.741 ± 0.003 selected on validation",
+    "paper-protocol": "The paper's protocol at Table 2 on one H100, partial: every seed still "
+    "near 0.5 when the session ended; the pace, not results",
+}
+
+
+def git(*args: str) -> str:
+    return subprocess.run(["git", *args], cwd=ROOT, capture_output=True, text=True,
+                          check=True).stdout.strip()  # fmt: skip
+
+
+def first_commit(folder: Path) -> tuple[str, str]:
+    """(date, subject): the day the folder was added, and the subject of the earliest
+    commit touching it that names it (else that says "result", else the earliest)."""
+    log = git("log", "--format=%ad%x09%s", "--date=short", "--", str(folder.relative_to(ROOT)))
+    commits = [line.split("\t", 1) for line in reversed(log.splitlines())]
+    for test in (lambda s: folder.name in s, lambda s: "result" in s.lower(), lambda s: True):
+        chosen = [subject for _, subject in commits if test(subject)]
+        if chosen:
+            return commits[0][0], chosen[0]
+    raise AssertionError(f"no commit touches {folder}")
+
+
+def command(folder: Path) -> str:
+    name = folder.name
+    if (folder / "sweep-file.json").exists():
+        return (f"`spikectl sweep --config docs/results/{name}/sweep-file.json "
+                f"--sweep-dir runs/{name}`")  # fmt: skip
+    if (folder / "sweep.json").exists():
+        return f"`spikectl sweep --config docs/results/{name}/sweep.json --sweep-dir runs/{name}`"
+    runs_script = (RESULTS / "guided_runs.sh").read_text()
+    if f"    {name})" in runs_script:
+        return f"`bash docs/results/guided_runs.sh {name} SEED`"
+    if (folder / "README.md").exists():
+        return f"in [its README](../results/{name}/README.md)"
+    if (folder / "train.sh").exists():
+        return f"`bash docs/results/{name}/train.sh TASK SEED`"
+    return "in the page that cites it"
+
+
+def cpus(folder: Path) -> str:
+    """The CPU kinds the folder's runs recorded (machine.json), or where they are not."""
+    kinds = set()
+    for machine in folder.rglob("machine.json"):
+        for start in json.loads(machine.read_text()).get("starts", []):
+            avx = "AVX-512" if start.get("avx512f") else "AVX2" if start.get("avx2") else "?"
+            kinds.add(f"{start.get('cpu', '?')} ({avx})")
+    lscpu = folder / "lscpu.txt"
+    if not kinds and lscpu.exists():
+        for line in lscpu.read_text().splitlines():
+            if line.startswith("Model name:"):
+                kinds.add(line.split(":", 1)[1].strip())
+    return ", ".join(sorted(kinds)) or "not recorded"
+
+
+def seeds(folder: Path) -> int:
+    return len(list(folder.glob("trials/*seed=*"))) + len(list(folder.glob("trials/seed=*")))
+
+
+def main() -> None:
+    print("| folder | claim (from the commit that added it) | command | added | CPU |")
+    print("|---|---|---|---|---|")
+    for folder in sorted(path for path in RESULTS.iterdir() if path.is_dir()):
+        if folder.name.startswith(("_", ".")):
+            continue
+        date, subject = first_commit(folder)
+        subject = CLAIMS.get(folder.name, subject)
+        claim = subject if len(subject) <= CLAIM_CHARS else subject[:CLAIM_CHARS] + " …"
+        claim = claim.replace("|", "/")
+        print(f"| [{folder.name}](../results/{folder.name}/) | {claim} | {command(folder)} "
+              f"| {date} | {cpus(folder)} |")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
