@@ -35,7 +35,8 @@ class GreedyController:
     """The legal action of highest score under ``network.step`` (scores [S, n + 1]),
     carrying one recurrent state per episode; every episode of a batch starts at step 0
     together, and a step-0 batch starts from the zero state. ``per_environment``: play
-    each sub-environment of a batch alone (see the module docstring)."""
+    each sub-environment of a batch alone, each from the zero state at its step 0 (see
+    the module docstring)."""
 
     def __init__(
         self, network: torch.nn.Module, device: str = "cpu", per_environment: bool = False
@@ -66,20 +67,20 @@ class GreedyController:
         if not self.per_environment:
             return self(dict(observations), mask)
         size = mask.shape[0]
-        if len(self.row_states) != size or not np.any(observations["step"]):
-            self.row_states = [None] * size  # a new batch of episodes
+        if len(self.row_states) != size:
+            self.row_states = [None] * size
         actions = np.empty(size, dtype=np.int64)
         for row in range(size):
             alone = {key: np.array(value[row]) for key, value in observations.items()}
-            actions[row], self.row_states[row] = self._alone(alone, mask[row], self.row_states[row])
+            state = None if alone["step"] == 0 else self.row_states[row]  # as act() does
+            actions[row], self.row_states[row] = self._alone(alone, mask[row], state)
         return actions
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
         """The action on one environment's observation (a batch of one)."""
         mask = np.asarray(info["action_mask"], dtype=bool)
-        if self.state is not None and not np.any(observation["step"]):
-            self.state = None  # a new episode
-        action, self.state = self._alone(observation, mask, self.state)
+        state = None if np.asarray(observation["step"]) == 0 else self.state  # a new episode
+        action, self.state = self._alone(observation, mask, state)
         return action
 
     @torch.no_grad()
