@@ -27,6 +27,9 @@ class BenchmarkCommand:
     """A run's weights: the final model.pt, or best_model.pt (best validation return)."""
     compiled: bool = False
     """Run a run directory's network as its compiled policy instead of PyTorch."""
+    per_environment: bool = False
+    """Play a run's PyTorch network on each context alone, as `spikectl realtime RUN`
+    does: its actions on every CPU (by default one batched forward per task)."""
     random_seeds: int = 10
     """Seeds 0 .. N-1 of the random controller (its score is the mean over them); the
     other controllers are deterministic and play once."""
@@ -142,7 +145,9 @@ def model_label(command: BenchmarkCommand) -> str:
     """Which weights of a run played ("" for the other controllers)."""
     if not Path(command.controller).is_dir():
         return ""
-    return command.model + (" compiled" if command.compiled else "")
+    if command.compiled:
+        return command.model + " compiled"
+    return command.model + (" per-environment" if command.per_environment else "")
 
 
 def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
@@ -187,7 +192,7 @@ def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
 
                 policy = CompiledPolicy.from_network(network)
                 return lambda seed: policy
-            return lambda seed: GreedyController(network)
+            return lambda seed: GreedyController(network, per_environment=command.per_environment)
 
         return trained
     controller = load_controller(command.controller)  # a compiled policy file, or refused

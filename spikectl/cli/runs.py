@@ -28,13 +28,19 @@ class EvaluateCommand:
     compiled: bool = False
     """Play the network's compiled policy (NumPy/Numba, what a real-time rig runs)
     instead of the PyTorch network; the returns agree but for near-ties."""
+    per_environment: bool = False
+    """Play the PyTorch network on each context alone, as `spikectl realtime RUN` does:
+    its actions on every CPU (by default one batched forward, as metrics.csv scored it)."""
 
 
 def evaluate(command: EvaluateCommand) -> None:
     """Print the agent's mean greedy return per split, with its standard error."""
     from spikectl.training.evaluate import evaluate_run
 
-    for result in evaluate_run(command.run_dir, command.contexts, command.model, command.compiled):
+    for result in evaluate_run(
+        command.run_dir, command.contexts, command.model, command.compiled,
+        command.per_environment,
+    ):  # fmt: skip
         print(
             f"{result.name:<24}{result.mean:.3f} +- {result.standard_error:.3f} "
             f"over {result.returns.size} contexts (do nothing {result.do_nothing:.3f})"

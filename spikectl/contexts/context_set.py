@@ -15,7 +15,7 @@ import os
 from collections.abc import Iterator, Mapping, Sequence
 from itertools import accumulate
 from pathlib import Path
-from typing import Any, Literal, Self, overload
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 import numpy as np
 
@@ -33,6 +33,9 @@ from spikectl.files import check_fits_in_memory
 from spikectl.neuron.extensions import Extensions, Heterogeneity
 from spikectl.neuron.params import NeuronParams
 from spikectl.seeds import VALIDATION_STREAM
+
+if TYPE_CHECKING:  # typing.Self is Python 3.11+; annotations are never evaluated here
+    from typing_extensions import Self
 
 CONTEXT_OVERHEAD_BYTES = 1024
 """About what one Context costs besides its arrays' data (objects and array headers)."""

@@ -99,13 +99,16 @@ def load_controller(
     *,
     model: str = "final",
     compiled: bool = False,
+    per_environment: bool = False,
     env: Any = None,
     contexts: ContextSet | None = None,
     params: NeuronParams | None = None,
     seed: int = 0,
 ) -> Controller:
     """The controller ``source`` names: a run directory (its trained network,
-    ``model="final"`` or ``"best"``; ``compiled=True`` for its compiled policy), a
+    ``model="final"`` or ``"best"``; ``compiled=True`` for its compiled policy;
+    ``per_environment=True`` to play each environment of a batch alone, with the actions
+    the real-time rig takes on every CPU: ``GreedyController``), a
     compiled policy file (.npz from ``spikectl.agents.export_policy``), or one of
     :data:`NAMED_CONTROLLERS`.
 
@@ -139,7 +142,7 @@ def load_controller(
         if not compiled:
             from spikectl.agents.greedy import GreedyController
 
-            return GreedyController(network)
+            return GreedyController(network, per_environment=per_environment)
         from spikectl.agents.compiled import CompiledPolicy
         from spikectl.agents.policy_file import PolicyFileError
 

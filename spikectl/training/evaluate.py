@@ -61,11 +61,15 @@ def evaluate_run(
     contexts: str | os.PathLike | None = None,
     model: str = "final",
     compiled: bool = False,
+    per_environment: bool = False,
 ) -> list[SplitResult]:
     """Greedy returns of a run's agent (``model``: "final" or "best", see
     :func:`load_agent`) on its training, test (and validation) sets, or on ``contexts``;
     ``compiled=True`` plays its compiled policy (:mod:`spikectl.agents.compiled`)
-    instead of the PyTorch network, the controller a real-time rig would run."""
+    instead of the PyTorch network, the controller a real-time rig would run;
+    ``per_environment=True`` plays the network on each context alone, as the real-time
+    rig does (the same actions on every CPU; metrics.csv scored one batched forward,
+    which this repeats exactly on the same machine by default)."""
     run_dir = Path(run_dir)
     config = read_config(run_dir)
     if contexts is not None:
@@ -82,7 +86,9 @@ def evaluate_run(
         }
         if (run_dir / VAL_FILE).exists():
             sets["validation"] = ContextSet.load(run_dir / VAL_FILE)
-    controller: Controller = load_controller(run_dir, model=model, compiled=compiled)
+    controller: Controller = load_controller(
+        run_dir, model=model, compiled=compiled, per_environment=per_environment
+    )
     results = []
     for name, context_set in sets.items():
         if context_set.episode_length != config.env.episode_length:
