@@ -14,6 +14,7 @@ Runs in the Cleo virtualenv:
 from __future__ import annotations
 
 import argparse
+import csv
 import os
 import platform
 import time
@@ -88,6 +89,33 @@ def table(rows: list[dict], settings: list[str]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def read_rows(path: Path) -> list[dict]:
+    with open(path, newline="") as file:
+        rows = list(csv.DictReader(file))
+    for row in rows:
+        row["seed"], row["context"] = int(row["seed"]), int(row["context"])
+        row["return"], row["seconds"] = float(row["return"]), float(row["seconds"])
+        row["same_actions"] = "" if row["same_actions"] == "" else int(row["same_actions"])
+    return rows
+
+
+def write_table(paths: list[Path], out: Path) -> None:
+    """The table of several runs of this script (e.g. one per controller and settings),
+    their spikectl rows counted once per controller and seed."""
+    rows, seen = [], set()
+    for path in paths:
+        for row in read_rows(path):
+            key = (row["controller"], row["seed"], row["setting"], row["context"])
+            if key not in seen:
+                seen.add(key)
+                rows.append(row)
+    settings = list(dict.fromkeys(r["setting"] for r in rows if r["setting"] != "spikectl"))
+    settings.sort(key=lambda name: list(SETTINGS).index(name))
+    text = table(rows, settings)
+    atomic_write_text(out / "table.md", text)
+    print(text)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--runs", type=Path, nargs="*", default=[])
@@ -95,7 +123,12 @@ def main() -> None:
     parser.add_argument("--planners", nargs="*", default=["identify-and-plan", "oracle"])
     parser.add_argument("--networks", type=int, default=100)
     parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--table-from", type=Path, nargs="*", default=None,
+                        help="only write OUT/table.md from these returns.csv files (merged)")
     args = parser.parse_args()
+    if args.table_from:
+        write_table(args.table_from, args.out)
+        return
     contexts = load_split("paper", "test")
     indices = range(args.networks)
     env = NeuronControlEnv(contexts=contexts)

@@ -192,8 +192,8 @@ class CleoLoop:
             self._set_opsin_clock()
             actuate = self._inject_chr2()
         self.processor = ControllerProcessor(
-            sample_period=step, latency=setting.latency_ms * b2.ms, actuate=actuate,
-            recorder="potentials", v_rest_mV=params.v_rest_mV,
+            sample_period=step, latency_ms=setting.latency_ms, actuate=actuate,
+            recorder="potentials",
         )  # fmt: skip
         self.simulator.set_io_processor(self.processor, communication_period=step)
 

@@ -91,13 +91,12 @@ class ControllerProcessor(LatencyIOProcessor):
     that apply it (``actuate``), delivered ``latency`` later by LatencyIOProcessor.
     """
 
-    def __init__(self, sample_period, latency, actuate: Callable[[int], dict], recorder: str,
-                 v_rest_mV: float) -> None:  # fmt: skip
+    def __init__(self, sample_period, latency_ms: int, actuate: Callable[[int], dict],
+                 recorder: str) -> None:  # fmt: skip
         super().__init__(sample_period)
-        self.latency = latency
+        self.latency_ms = latency_ms
         self.actuate = actuate
         self.recorder = recorder
-        self.v_rest_mV = v_rest_mV
         self.controller: Controller | None = None
         self.actions: list[int] = []
 
@@ -133,4 +132,7 @@ class ControllerProcessor(LatencyIOProcessor):
                 f"(-1 or a neuron in 0..{len(self.legal) - 2} other than the target {self.target})"
             )
         self.actions.append(action)
-        return self.actuate(action), t_samp + self.latency
+        # Cleo compares the output time with round(t / ms, 6) * ms: rounded alike, an
+        # output lands exactly latency steps later (t_samp + latency may be 1 ulp late,
+        # which would hold it, and every output after it, for one more step).
+        return self.actuate(action), round(float(t_samp / b2.ms + self.latency_ms), 6) * b2.ms
