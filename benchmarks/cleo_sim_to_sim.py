@@ -99,12 +99,14 @@ def read_rows(path: Path) -> list[dict]:
     return rows
 
 
-def write_table(paths: list[Path], out: Path) -> None:
-    """The table of several runs of this script (e.g. one per controller and settings),
-    their spikectl rows counted once per controller and seed."""
+def write_table(paths: list[Path], out: Path, networks: int) -> None:
+    """The table of several runs of this script (e.g. one per controller and settings) on
+    their first ``networks`` networks, their spikectl rows counted once per controller."""
     rows, seen = [], set()
     for path in paths:
         for row in read_rows(path):
+            if row["context"] >= networks:
+                continue
             key = (row["controller"], row["seed"], row["setting"], row["context"])
             if key not in seen:
                 seen.add(key)
@@ -127,7 +129,7 @@ def main() -> None:
                         help="only write OUT/table.md from these returns.csv files (merged)")
     args = parser.parse_args()
     if args.table_from:
-        write_table(args.table_from, args.out)
+        write_table(args.table_from, args.out, args.networks)
         return
     contexts = load_split("paper", "test")
     indices = range(args.networks)

@@ -27,9 +27,9 @@ kernel counts it), and a release adds ``w_ij * w_in`` to the postsynaptic curren
 controller sees is the one after integration and before reset (``v_seen``).
 
 Brian 2 keeps its settings in globals: building a loop sets ``prefs.codegen.target`` to
-``"numpy"`` (no compiler needed) and, with ChR2, ``defaultclock.dt`` to the opsin's step
-(Cleo's opsin and light objects run on the default clock; the network keeps its 1 ms
-clock).
+``"numpy"`` (no compiler needed) and ``defaultclock.dt`` to the step of Cleo's opsin
+and light objects, which run on the default clock (0.1 ms with ChR2, else 1 ms; the
+network keeps its own 1 ms clock), before it builds and before each episode.
 
 Needs the ``cleo`` extra (cleosim, Brian 2): ``pip install -c constraints-cleo.txt
 "spikectl[cleo]"``; without it, importing this module raises
@@ -176,6 +176,7 @@ class CleoLoop:
 
     def _build(self) -> None:
         b2.prefs.codegen.target = "numpy"
+        self._set_default_clock()
         setting, params, n = self.setting, self.params, self.n_neurons
         step = params.dt_ms * b2.ms
         self._step = step
@@ -189,7 +190,6 @@ class CleoLoop:
             self.simulator.inject(stimulator, self.neurons)
             actuate = stimulator.signal
         else:
-            self._set_opsin_clock()
             actuate = self._inject_chr2()
         self.processor = ControllerProcessor(
             sample_period=step, latency_ms=setting.latency_ms, actuate=actuate,
@@ -197,9 +197,12 @@ class CleoLoop:
         )  # fmt: skip
         self.simulator.set_io_processor(self.processor, communication_period=step)
 
-    def _set_opsin_clock(self) -> None:
-        if self.setting.actuation == "chr2":
-            b2.defaultclock.dt = self.setting.opsin_dt_ms * b2.ms
+    def _set_default_clock(self) -> None:
+        # Cleo's opsin and light run on Brian's default clock, a global: each loop sets
+        # it before it builds and before each episode, so that loops of different
+        # settings can share a process.
+        chr2 = self.setting.actuation == "chr2"
+        b2.defaultclock.dt = (self.setting.opsin_dt_ms if chr2 else self.params.dt_ms) * b2.ms
 
     def _inject_chr2(self):
         n = self.n_neurons
@@ -234,7 +237,7 @@ class CleoLoop:
         if not 0 <= row < len(self.contexts):
             raise IndexError(f"context {context} is out of range 0..{len(self.contexts) - 1}")
         started = time.perf_counter()
-        self._set_opsin_clock()
+        self._set_default_clock()
         self.simulator.reset()
         tables = self._tables
         weights = tables.weights[row]
