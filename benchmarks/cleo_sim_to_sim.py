@@ -57,17 +57,22 @@ def table(rows: list[dict], settings: list[str]) -> str:
         seeds = sorted({row["seed"] for row in rows if row["controller"] == name})
 
         def returns(setting, seed, name=name):
-            mine = [r for r in rows if r["controller"] == name and r["seed"] == seed
-                    and r["setting"] == setting]  # fmt: skip
-            return np.array([r["return"] for r in sorted(mine, key=lambda r: r["context"])])
+            """{context: return} of one controller seed in one setting."""
+            return {r["context"]: r["return"] for r in rows if r["controller"] == name
+                    and r["seed"] == seed and r["setting"] == setting}  # fmt: skip
 
         for setting in ["spikectl", *settings]:
-            means = np.array([returns(setting, seed).mean() for seed in seeds])
+            means = np.array([np.mean(list(returns(setting, seed).values())) for seed in seeds])
             cell = f"{means.mean():.3f}" + (f" ± {means.std(ddof=1):.3f}" if len(seeds) > 1 else "")
             if setting != "spikectl":
-                gap = np.mean([returns(setting, s) - returns("spikectl", s) for s in seeds], 0)
+                gaps = []
+                for seed in seeds:  # paired on the networks this setting played
+                    played, reference = returns(setting, seed), returns("spikectl", seed)
+                    gaps.append([played[c] - reference[c] for c in sorted(played)])
+                gap = np.mean(gaps, axis=0)
                 interval = bootstrap_ci(gap, np.mean, rng=0)
-                cell += f" ({interval.estimate:+.3f} [{interval.low:+.3f}, {interval.high:+.3f}])"
+                cell += (f" ({interval.estimate:+.3f} [{interval.low:+.3f}, "
+                         f"{interval.high:+.3f}]; {gap.size})")
             cells.append(cell)
         lines.append(f"| {name} ({len(seeds)} seed{'s' * (len(seeds) > 1)}) | "
                      + " | ".join(cells) + " |")  # fmt: skip
@@ -124,6 +129,7 @@ def main() -> None:
     parser.add_argument("--settings", nargs="+", default=list(SETTINGS))
     parser.add_argument("--planners", nargs="*", default=["identify-and-plan", "oracle"])
     parser.add_argument("--networks", type=int, default=100)
+    parser.add_argument("--first", type=int, default=0, help="play networks FIRST..NETWORKS-1")
     parser.add_argument("--out", type=Path, required=True)
     parser.add_argument("--table-from", type=Path, nargs="*", default=None,
                         help="only write OUT/table.md from these returns.csv files (merged)")
@@ -132,7 +138,7 @@ def main() -> None:
         write_table(args.table_from, args.out, args.networks)
         return
     contexts = load_split("paper", "test")
-    indices = range(args.networks)
+    indices = range(args.first, args.networks)
     env = NeuronControlEnv(contexts=contexts)
     loops = {name: CleoLoop(contexts, SETTINGS[name]) for name in args.settings}
     rows: list[dict] = []
