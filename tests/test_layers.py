@@ -1,7 +1,7 @@
 """The package's layers: imports run downward only, with no cycles.
 
 neuron model -> contexts -> environments -> agents (learned or planned) -> training ->
-experiments -> CLI. Read statically from the source, lazy (function-level) imports
+bridges -> experiments -> CLI. Read statically from the source, lazy (function-level) imports
 included, so a layer cannot reach upward even where the import would run late.
 """
 
@@ -25,11 +25,14 @@ LAYERS = (
     ("spikectl.wrappers",),
     ("spikectl.agents", "spikectl.planning"),
     ("spikectl.training",),
+    ("spikectl.bridges",),
     ("spikectl.experiments",),
     ("spikectl.cli", "spikectl"),
 )
 """Lowest first. A module may import its own layer's package and the layers below it;
-the packages that share a layer (agents and planning) do not import each other."""
+the packages that share a layer (agents and planning) do not import each other. The
+bridges to other simulators (spikectl.bridges, each imported only with its extra) sit
+above the controllers they play and below everything that might import them."""
 
 
 def module_name(path: Path) -> str:
