@@ -178,6 +178,8 @@ def test_readme_fits_the_first_screen():
 def test_module_paths_and_names_in_the_docs_exist():
     import importlib
 
+    from spikectl.config_errors import MissingExtraError
+
     for page in doc_pages():
         text = page.read_text()
         for path in set(re.findall(r"(?<![\w/.])(spikectl/[\w/]+\.py)", text)):
@@ -185,11 +187,18 @@ def test_module_paths_and_names_in_the_docs_exist():
         for dotted in set(re.findall(r"`(spikectl(?:\.\w+)+)", text)):
             parts = dotted.split(".")
             for split in range(len(parts), 0, -1):
+                module = ".".join(parts[:split])
                 try:
-                    target = importlib.import_module(".".join(parts[:split]))
+                    target = importlib.import_module(module)
                 except ModuleNotFoundError:
                     continue
+                except MissingExtraError:  # a module of an extra not installed here
+                    if not (ROOT / (module.replace(".", "/") + ".py")).exists():
+                        continue  # a name inside that module: try the module itself
+                    target = None
                 break
+            if target is None:
+                continue  # its names are checked where the extra is (its own CI venv)
             for name in parts[split:]:
                 assert hasattr(target, name), f"{page.name} names missing {dotted}"
                 target = getattr(target, name)

@@ -16,14 +16,13 @@ import io
 import json
 import os
 import shutil
-import signal
 import warnings
 import zipfile
-from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import no_hang
 
 from spikectl.agents import make_agent
 from spikectl.agents.compiled import CompiledPolicy, PolicyFileError
@@ -35,22 +34,6 @@ from spikectl.files import TooLargeError, npz_size_problem
 from spikectl.training.run_files import RunDirError, read_metrics
 
 SMOKE_RUN = Path(__file__).parent / "data" / "format2-smoke-run"
-
-
-@contextmanager
-def no_hang(seconds: int = 60):
-    """Fail (instead of hanging the test run) if the block blocks."""
-
-    def expired(signum, frame):
-        raise TimeoutError("blocked")
-
-    previous = signal.signal(signal.SIGALRM, expired)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 def cli(args: list[str], capsys) -> tuple[int, str]:

@@ -8,11 +8,10 @@ the environment check what they are given (context sets, params).
 from __future__ import annotations
 
 import os
-import signal
-from contextlib import contextmanager
 from pathlib import Path
 
 import pytest
+from conftest import no_hang
 
 from spikectl.cli import main
 from spikectl.contexts import make_splits
@@ -23,22 +22,6 @@ from spikectl.training.presets import SMOKE
 from spikectl.training.run import train
 from spikectl.training.run_files import RunDirError, read_config, read_metrics
 from spikectl.training.torch_files import load_model_weights
-
-
-@contextmanager
-def no_hang(seconds: int = 20):
-    """Fail (instead of hanging the test run) if the block blocks."""
-
-    def expired(signum, frame):
-        raise TimeoutError("the reader blocked")
-
-    previous = signal.signal(signal.SIGALRM, expired)
-    signal.alarm(seconds)
-    try:
-        yield
-    finally:
-        signal.alarm(0)
-        signal.signal(signal.SIGALRM, previous)
 
 
 def fifo(path: Path) -> Path:

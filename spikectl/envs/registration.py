@@ -65,22 +65,23 @@ def register_envs() -> None:
     ``make_vec`` builds :class:`spikectl.wrappers.flat_vector_env.FlatNeuronControlVectorEnv`
     on the batched simulator; see docs/ecosystem.md.
     """
-    for env_id, kwargs in {ENV_ID: {}, **VARIANTS}.items():
+    paper = (
+        "spikectl.envs.env:NeuronControlEnv",
+        "spikectl.envs.vector_env:NeuronControlVectorEnv",
+    )
+    flat = (
+        "spikectl.wrappers.flat_env:FlatNeuronControlEnv",
+        "spikectl.wrappers.flat_vector_env:FlatNeuronControlVectorEnv",
+    )
+    ids = [(i, kwargs, paper) for i, kwargs in {ENV_ID: {}, **VARIANTS}.items()]
+    ids += [(i, kwargs, flat) for i, kwargs in {FLAT_ENV_ID: {}, **FLAT_VARIANTS}.items()]
+    for env_id, kwargs, (entry_point, vector_entry_point) in ids:
         # Registering an id twice makes Gymnasium warn, and the package may be re-imported.
         if env_id in gymnasium.registry:
             continue
         gymnasium.register(
             id=env_id,
-            entry_point="spikectl.envs.env:NeuronControlEnv",
-            vector_entry_point="spikectl.envs.vector_env:NeuronControlVectorEnv",
-            kwargs=kwargs,
-        )
-    for env_id, kwargs in {FLAT_ENV_ID: {}, **FLAT_VARIANTS}.items():
-        if env_id in gymnasium.registry:
-            continue
-        gymnasium.register(
-            id=env_id,
-            entry_point="spikectl.wrappers.flat_env:FlatNeuronControlEnv",
-            vector_entry_point="spikectl.wrappers.flat_vector_env:FlatNeuronControlVectorEnv",
+            entry_point=entry_point,
+            vector_entry_point=vector_entry_point,
             kwargs=kwargs,
         )
