@@ -51,13 +51,12 @@ QUICK = Experiment(
         explore_do_nothing=0.75,
     ),
 )
-"""The paper's learner fast (the README's main job until 2026-11-24): ~14 minutes on one
-core of the project's 2-core machine (docs/training.md, "Learning fast"): 4 400
-episodes, 8 800 updates of 8 episodes, n-step targets, the auxiliary next-voltage
-loss, the target's voltage in each neuron's input, a pooled do-nothing head,
-do-nothing-biased exploration, gamma 0.9, lr 2e-3 decaying linearly to 2e-4,
-half-width networks, one Torch thread. Until 2026-11-23 the preset had the dueling
-do-nothing head and a constant lr (docs/results sweep files made with it pin both)."""
+"""The paper's learner fast (docs/training.md, "Learning fast"): 4 400 episodes, 8 800
+updates of 8 episodes, n-step targets, the auxiliary next-voltage loss, the target's
+voltage in each neuron's input, a pooled do-nothing head, do-nothing-biased exploration,
+gamma 0.9, lr 2e-3 decaying linearly to 2e-4, half-width networks, one Torch thread.
+Older sweep files in docs/results pin the dueling do-nothing head and constant lr the
+preset once had (the research record, docs/research/index.md, has the history)."""
 
 SMOKE = Experiment(
     env=EnvConfig(episode_length=20, n_neurons=5, n_train=6, n_test=6, n_val=6),

@@ -18,10 +18,9 @@ from spikectl.training.learners.dqn_config import DQNConfig
 from spikectl.training.learners.registry import Preset
 
 TEACHERS = ("identify", "told-weights")
-"""``identify``: identify-and-plan, which sees only what the agent sees (realisable:
-0.837 on the test networks); ``told-weights``: the same loop told the network's true
-weights (privileged: 0.993 on the validation networks; a student cannot copy what it
-cannot infer, the imitation gap)."""
+"""``identify``: identify-and-plan, which sees only what the agent sees (realisable);
+``told-weights``: the same loop told the network's true weights (privileged: a student
+cannot copy what it cannot infer, the imitation gap; docs/training.md)."""
 
 
 @dataclass(frozen=True)
@@ -97,17 +96,12 @@ def guided_preset(presets: Mapping[str, Any]) -> Any:
     """The README's main job: the quick preset's run and sizes with the teacher-guided
     learner (docs/training.md, "Teacher-guided learning"): identify-and-plan labels the
     states the agent visits; the imitation weight falls from 1 to a floor of 0.2 over the
-    first half of the episodes and stays there (chosen on the validation networks,
-    2026-11-24: 0.816 ± 0.006 against 0.773 ± 0.002 weaned to 0), and a privileged
-    auxiliary loss of weight 0.1 asks the features for each neuron's synapse onto the
-    target (validation 0.824 ± 0.005 against 0.816 ± 0.006 without). 24 updates a round,
-    not the quick preset's 32 (6 600 updates in all; 2026-11-24, fourth stop): the same
-    unseen return (0.811 ± 0.003) for 0.75 of the core-minutes, measured side by side
-    (docs/training.md). 1 000 training networks, not 100 (2026-11-25, second session;
-    chosen on validation: 0.834 ± 0.001 against 0.817 ± 0.009 on 100, 3 seeds each on one
-    host): the same 4 400 episodes see each network about 4 times instead of 44, and the
-    learner no longer scores higher on its training networks than on unseen ones. The test
-    and validation sets are the same 100 networks either way (``make_splits``)."""
+    first half of the episodes and stays there; a privileged auxiliary loss of weight 0.1
+    asks the features for each neuron's synapse onto the target; 24 updates a round (6 600
+    in all); 1 000 training networks, so the 4 400 episodes see each network about 4
+    times. Each choice was made on the validation networks; the measurements are in the
+    research record (docs/research/index.md). The test and validation sets are the same
+    100 networks whatever ``n_train`` is (``make_splits``)."""
     quick = presets["quick"]
     return dataclasses.replace(
         quick,
