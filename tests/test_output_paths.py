@@ -191,6 +191,9 @@ def test_ctrl_c_inside_a_numba_kernel_is_one_line_and_130(tmp_path):
          "print('ready', flush=True)\n"
          "main(['benchmark', 'do-nothing', '--task', 'all'])\n"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        # As in a terminal: a test run started in the background (`pytest &`, some CI
+        # runners) ignores SIGINT, and a child would inherit that and never see Ctrl-C.
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )  # fmt: skip
     assert process.stdout.readline().strip() == "ready"
     assert process.stdout.readline().startswith("benchmark suite")
