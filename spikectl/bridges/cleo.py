@@ -44,22 +44,15 @@ from typing import Any
 
 import numpy as np
 
-from spikectl.config_errors import ConfigError, MissingExtraError
-
-try:
-    import brian2 as b2
-    import cleo
-except ImportError as _error:
-    raise MissingExtraError(
-        f"spikectl.bridges.cleo needs Cleo and Brian 2 ({_error}): "
-        'pip install -c constraints-cleo.txt "spikectl[cleo]" (docs/cleo.md)'
-    ) from None
-
+# cleo_devices imports Cleo and Brian 2 behind the extra's one-line MissingExtraError.
 from spikectl.bridges.cleo_devices import (
     ControllerProcessor,
     PotentialRecorder,
     PulseStimulator,
+    b2,
+    cleo,
 )
+from spikectl.config_errors import ConfigError
 from spikectl.contexts import ContextSet
 from spikectl.envs.controller import Controller
 from spikectl.envs.env_support import ContextTables

@@ -10,8 +10,9 @@ import numpy as np
 
 from spikectl.config_errors import MissingExtraError
 
-try:
+try:  # the one guard of the Cleo extra: spikectl.bridges.cleo imports through here
     import brian2 as b2
+    import cleo  # noqa: F401  (spikectl.bridges.cleo uses it from here)
     from attrs import define, field
     from cleo.base import Recorder, Stimulator
     from cleo.ioproc import LatencyIOProcessor
