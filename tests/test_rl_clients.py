@@ -10,6 +10,7 @@ with the ``rllib`` extra (.ci/run makes one).
 
 from __future__ import annotations
 
+import importlib.metadata
 import importlib.util
 import os
 import subprocess
@@ -20,6 +21,7 @@ from pathlib import Path
 import gymnasium as gym
 import numpy as np
 import pytest
+from packaging.requirements import Requirement
 
 import spikectl  # noqa: F401  (registers the ids)
 from spikectl.envs.registration import FLAT_ENV_ID
@@ -31,9 +33,43 @@ needs_clients = pytest.mark.skipif(
     bool(MISSING),
     reason=f'the RL client tier needs pip install -e ".[clients]" (missing: {", ".join(MISSING)})',
 )
+
+
+def rllib_unmet() -> list[str]:
+    """ray[rllib]'s requirements this environment does not satisfy (all of them without Ray).
+
+    Ray alone (the ``ray`` extra) ships the ``ray.rllib`` package without RLlib's
+    dependencies (dm-tree, the Gymnasium it pins, ...), so finding the module is not enough.
+    """
+    try:
+        requirements = importlib.metadata.requires("ray") or []
+    except importlib.metadata.PackageNotFoundError:
+        return ["ray"]
+    unmet = []
+    for line in requirements:
+        requirement = Requirement(line)
+        marker = requirement.marker
+        if (
+            marker is None
+            or not marker.evaluate({"extra": "rllib"})
+            or marker.evaluate({"extra": ""})
+        ):
+            continue  # not one of the rllib extra's
+        try:
+            installed = importlib.metadata.version(requirement.name)
+        except importlib.metadata.PackageNotFoundError:
+            unmet.append(requirement.name)
+            continue
+        if not requirement.specifier.contains(installed, prereleases=True):
+            unmet.append(f"{requirement.name}{requirement.specifier} (installed {installed})")
+    return unmet
+
+
+RLLIB_UNMET = rllib_unmet()
 needs_rllib = pytest.mark.skipif(
-    importlib.util.find_spec("ray") is None or importlib.util.find_spec("ray.rllib") is None,
-    reason='RLlib needs its own virtual environment with pip install -e ".[rllib]"',
+    bool(RLLIB_UNMET),
+    reason='RLlib needs its own virtual environment with pip install -e ".[rllib]" '
+    f"(unmet: {', '.join(RLLIB_UNMET)})",
 )
 CLEANRL_ID = f"spikectl:{FLAT_ENV_ID}"  # the module prefix makes gym.make import spikectl
 
