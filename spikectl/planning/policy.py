@@ -108,35 +108,33 @@ class IdentifyAndPlan:
             ``seed + index``.
         probe: whether to probe when the plan misses wanted spikes.
         identification: ``"gaussian"`` (ridge regression, any n), ``"discrete"``
-            (the exact posterior over {-1, 0, +1}, n <= 11; it knows more entries but
-            scored no better on the training networks, docs/baselines.md) or
+            (the exact posterior over {-1, 0, +1}, n <= 11; it knows more entries,
+            docs/baselines.md compares the two) or
             ``"bayes"`` (that posterior under the observation model of ``extensions``,
             :mod:`spikectl.planning.bayes`; the Gaussian estimate above n = 11).
         plan_on: what the planner takes for weights that are not known: ``"mean"``
-            their posterior mean (noise-free: 0.879 / 0.866 on the training /
-            validation networks), ``"known"`` 0 (0.869 / 0.850; better under
-            measurement noise, where the mean is noisy), ``"auto"``: ``"mean"``
-            without measurement noise, ``"known"`` with it.
+            their posterior mean, ``"known"`` 0 (under measurement noise the mean is
+            noisy), ``"auto"``: ``"mean"`` without measurement noise, ``"known"`` with
+            it (docs/baselines.md measures the three).
         spike_margin_sd: spikes are read at the threshold less this many ``noise_mV``
-            (2: chosen on the first 50 training networks at 1, 2 and 4 mV; 1 lost
-            0.03-0.05, 3 lost 0.05 at 4 mV).
+            (the default was chosen on training networks at 1, 2 and 4 mV,
+            docs/baselines.md).
         gamble_networks: K; 0 probes as described above. K > 0 chooses the action
             where the policy would probe by its expected return over K networks drawn
-            from the estimate (QMDP): 0.869 against 0.866 on the validation networks
-            at 5x the CPU time (K = 16, docs/baselines.md), so off by default.
+            from the estimate (QMDP). Off by default: on the paper's task it costs
+            about 5x the CPU time for a gain within noise (docs/baselines.md).
         gamble_information: the bonus, in units of return per nat, for stimulating a
             ready neuron whose synapse onto the target is unknown (the entropy of that
             synapse over the K networks): QMDP alone values no information and waits
-            (0.814 on 50 validation networks against 0.857); 0.03 was best of 0.01,
-            0.03, 0.05, 0.1.
+            (the default was chosen on validation networks, docs/baselines.md).
         gamble_horizon: steps each action is valued over, its own included.
         gamble_width: beam width of the best continuation on each drawn network.
         gamble_candidates: at most this many actions are valued (do nothing, the
             probe and the likeliest excitatory inputs of the target), for large n.
         known_weights: [n, n] the network's true signed weights (agent indexing): the
             same loop *told* the connectivity, with nothing left to identify (a
-            privileged controller, 0.993 on the validation networks against the
-            oracle planner's 0.998; a teacher for ``spikectl.training.learners.guided``).
+            privileged controller, near the oracle planner; a teacher for
+            ``spikectl.training.learners.guided``).
         extensions: the environment's extensions, what ``identification="bayes"`` reads
             its observation model from (measurement noise, stochastic release,
             background input, synaptic spread; :class:`ObservationModel`); None: the
