@@ -176,6 +176,11 @@ class AgentConfig:
     """Q-network architecture."""
     sizes: AgentSizes = field(default_factory=AgentSizes)
     """Network sizes and input settings (the preset's, then these flags)."""
+    init_from: Path | None = None
+    """Start the Q-network from these weights instead of a fresh initialisation: a
+    model file (model.pt, best_model.pt) or a run directory (its best_model.pt). The
+    architecture and sizes must match; the per-neuron architectures (ddrqn, tdrqn) take
+    weights trained at another number of neurons (a curriculum over network sizes)."""
 
     def __post_init__(self) -> None:
         check_field_types(self)
@@ -281,6 +286,8 @@ class Experiment:
         for name in ("train_contexts", "test_contexts"):
             if values["env"][name] is not None:
                 values["env"][name] = str(values["env"][name])
+        if values["agent"]["init_from"] is not None:
+            values["agent"]["init_from"] = str(values["agent"]["init_from"])
         values["agent"]["sizes"] = {
             key: list(value) if isinstance(value, tuple) else value
             for key, value in values["agent"]["sizes"].items()
@@ -316,6 +323,8 @@ class Experiment:
         for name in ("train_contexts", "test_contexts"):
             if isinstance(env.get(name), str):
                 env[name] = Path(env[name])
+        if isinstance(agent.get("init_from"), str):
+            agent["init_from"] = Path(agent["init_from"])
         sizes = dict(agent.get("sizes", {}))
         legacy_normalisation(sizes, env["params"])
         check_fields(AgentSizes, "agent.sizes", sizes)

@@ -20,6 +20,7 @@ K in one batched computation, equal up to floating-point rounding (for GPUs).
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import math
 import time
 import warnings
@@ -50,6 +51,7 @@ from spikectl.training.greedy import greedy_returns
 from spikectl.training.group import check_group, prepare_group, seed_dirs
 from spikectl.training.learners import check_stacked, make_learners
 from spikectl.training.learners.protocol import LossDiverged
+from spikectl.training.learners.q_learning import check_initial_weights
 from spikectl.training.machine import record_machine
 from spikectl.training.run_files import (
     BEST_MODEL_FILE,
@@ -121,6 +123,9 @@ def train_runs(
     check_group(configs, run_dirs)
     if stacked:
         check_stacked(configs)  # before any directory is made
+    if not resume:
+        for config in configs:  # weights that do not fit are refused before any directory
+            check_initial_weights(config)
     configs = [recorded_config(c, d, resume) for c, d in zip(configs, run_dirs, strict=True)]
     check_device(configs[0].train.device)
     if group_dir is None and len(configs) > 1:
@@ -157,7 +162,14 @@ class Loop:
         sets = [load_or_make_contexts(config, run_dir) for config, run_dir in pairs]
         self.train_sets = [seed_sets[0] for seed_sets in sets]
         rngs = [np.random.default_rng(np.random.SeedSequence(c.train.seed)) for c in self.configs]
-        self.learners = make_learners(self.configs, self.train_sets, rngs, self.stacked)
+        # A resumed run's networks come from its checkpoint: the weights it started from
+        # (agent.init_from) are not read again, and may be gone.
+        starts = [
+            dataclasses.replace(c, agent=dataclasses.replace(c.agent, init_from=None))
+            if resume else c
+            for c in self.configs
+        ]  # fmt: skip
+        self.learners = make_learners(starts, self.train_sets, rngs, self.stacked)
         extra = tuple(f for f in self.learners.metric_fields if f not in METRIC_FIELDS)
         self.metric_fields = METRIC_FIELDS + extra
         if resume:

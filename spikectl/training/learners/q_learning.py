@@ -7,7 +7,9 @@ setter a CUDA graph can read, one gradient step, and the metrics row of running 
 from __future__ import annotations
 
 import copy
+import dataclasses
 import math
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -15,9 +17,12 @@ import torch
 
 from spikectl.agents import make_agent, make_voltage_predictor
 from spikectl.agents.greedy import GreedyController
+from spikectl.config_errors import ConfigError
 from spikectl.envs.env_support import random_legal_actions
 from spikectl.seeds import AUX_HEAD_STREAM, torch_seed
 from spikectl.training.learners.protocol import LossDiverged
+from spikectl.training.run_files import BEST_MODEL_FILE
+from spikectl.training.torch_files import load_model_weights
 
 
 class EpsilonGreedyPolicy(GreedyController):
@@ -71,14 +76,45 @@ def explore(
 
 def build_network(config) -> torch.nn.Module:
     """The online network of an Experiment, initialised from ``config.train.seed``
-    without touching Torch's global generator."""
+    without touching Torch's global generator, or from the weights
+    ``config.agent.init_from`` names."""
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(config.train.seed)
         online = make_agent(
             config.agent.arch, config.env.n_observed, config.env.episode_length,
             config.agent.sizes, params=config.env.params,
         )  # fmt: skip
+    if config.agent.init_from is not None:
+        load_initial_weights(online, Path(config.agent.init_from))
     return online.to(config.train.device)
+
+
+def check_initial_weights(config) -> None:
+    """Refuse (ConfigError) ``config.agent.init_from`` when it names no weights, or
+    weights that do not fit the network ``config`` describes (built on the CPU)."""
+    if config.agent.init_from is not None:
+        build_network(
+            dataclasses.replace(config, train=dataclasses.replace(config.train, device="cpu"))
+        )
+
+
+def load_initial_weights(network: torch.nn.Module, path: Path) -> None:
+    """Load the weights of a model file, or of a run directory's best_model.pt, into
+    ``network``; weights of another architecture or size are a ConfigError."""
+    if path.is_dir():
+        path = path / BEST_MODEL_FILE
+    if not path.exists():
+        raise ConfigError(("agent", "init_from"), f"{path} does not exist")
+    weights = load_model_weights(path)
+    try:
+        network.load_state_dict(weights)
+    except RuntimeError as error:
+        raise ConfigError(
+            ("agent", "init_from"),
+            f"the weights in {path} do not fit this network "
+            f"({str(error).splitlines()[0].rstrip(':.')}: another architecture or sizes, "
+            "or a fixed-size architecture trained at another number of neurons)",
+        ) from None
 
 
 def build_networks(config) -> tuple[torch.nn.Module, torch.nn.Module]:
