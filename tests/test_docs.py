@@ -40,17 +40,18 @@ def test_committed_results_table_is_what_its_trials_say():
         assert (sweep_dir / "results.md").read_text() == markdown, sweep_dir.name
 
 
-def test_benchmark_page_learned_tables_are_what_the_committed_csvs_say(capsys):
-    """docs/benchmark.md's learned rows are learned_table.py's output, not edited by hand."""
+def test_benchmark_learned_tables_are_what_the_committed_csvs_say(capsys):
+    """The research record's learned rows (docs/research/benchmark-suite.md) are
+    learned_table.py's output, not edited by hand."""
     import runpy
 
     runpy.run_path(str(ROOT / "docs" / "results" / "suite" / "learned_table.py"),
                    run_name="__main__")  # fmt: skip
-    page = (ROOT / "docs" / "benchmark.md").read_text().splitlines()
+    page = (ROOT / "docs" / "research" / "benchmark-suite.md").read_text().splitlines()
     printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]
     assert len(printed) > 20
     missing = [line for line in printed if line not in page]
-    assert not missing, f"docs/benchmark.md lacks {len(missing)} printed rows: {missing[:3]}"
+    assert not missing, f"benchmark-suite.md lacks {len(missing)} printed rows: {missing[:3]}"
 
 
 MADE_WITH_AN_EARLIER_QUICK_PRESET = {
@@ -160,6 +161,19 @@ def test_the_research_index_lists_every_results_folder():
     folders = {path.name for path in (ROOT / "docs" / "results").iterdir() if path.is_dir()}
     assert folders - listed == set(), "docs/research/index.md lacks these results folders"
     assert listed - folders == set(), "docs/research/index.md lists folders that do not exist"
+
+
+def test_every_research_page_is_linked_from_the_index_and_the_site():
+    """A page of dated measurements moved out of a user page is reachable: the research
+    record's index links it and the site's navigation lists it."""
+    research = ROOT / "docs" / "research"
+    index = (research / "index.md").read_text()
+    nav = (ROOT / "mkdocs.yml").read_text()
+    for page in sorted(research.glob("*.md")):
+        if page.name == "index.md":
+            continue
+        assert f"]({page.name}" in index, f"docs/research/index.md does not link {page.name}"
+        assert f"research/{page.name}" in nav, f"mkdocs.yml's nav lacks research/{page.name}"
 
 
 def test_readme_fits_the_first_screen():

@@ -16,6 +16,8 @@ from spikectl.training.config import AgentConfig, EnvConfig, Experiment, TrainCo
 from spikectl.training.learners import DQNConfig, learner_entries
 
 PAPER = Experiment()
+"""Table 2 of the paper exactly: every default of the configuration tree (1 M environment
+steps, the paper's network sizes, batches of 5 episodes)."""
 
 QUICK = Experiment(
     agent=AgentConfig(

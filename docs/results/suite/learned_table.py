@@ -1,4 +1,5 @@
-"""The learned rows of docs/benchmark.md, from the committed results of train.sh:
+"""The learned rows of docs/research/benchmark-suite.md (docs/benchmark.md quotes them),
+from the committed results of train.sh:
 
     python docs/results/suite/learned_table.py
 
