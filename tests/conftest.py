@@ -139,6 +139,19 @@ def spike_pattern(length: int, spikes: list[int]):
     return pattern
 
 
+def play_legally(env, policy, seeds) -> None:
+    """Play an episode of ``policy`` on ``env`` reset with each of ``seeds``, asserting
+    that every action is legal (the paper's environment also raises on one that is not)."""
+    for seed in seeds:
+        observation, info = env.reset(seed=seed)
+        policy.reset()
+        terminated = False
+        while not terminated:
+            action = policy.act(observation, info)
+            assert info["action_mask"][action + 1]
+            observation, _, terminated, _, info = env.step(action)
+
+
 @pytest.fixture
 def interrupt_after_rounds(monkeypatch) -> Callable[[int], Callable[[], None]]:
     """``stop = interrupt_after_rounds(n)``: the training loop raises KeyboardInterrupt

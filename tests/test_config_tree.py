@@ -55,7 +55,7 @@ def test_training_on_the_noisy_variant_applies_its_noise(tmp_path):
     assert results["test"] == noisy[-1]["test_return"]
 
 
-def test_contexts_with_other_params_train_normalised_by_those_params(tmp_path):
+def test_contexts_with_other_params_train_normalised_by_those_params(tmp_path, capsys):
     """A context set made with other NeuronParams: the run's environment simulates them
     and the agent's input is normalised by them (rest -> 0, threshold -> 1)."""
     train_set, test_set = (ContextSet.generate(6, n_neurons=5, episode_length=20, seed=s,
@@ -64,10 +64,21 @@ def test_contexts_with_other_params_train_normalised_by_those_params(tmp_path):
     test_set.save(tmp_path / "test.npz")
     files = {"train_contexts": tmp_path / "train.npz", "test_contexts": tmp_path / "test.npz",
              "n_val": 0}  # fmt: skip
-    with pytest.raises(ValueError, match="params: the training contexts were made with other"):
+    with pytest.raises(ValueError, match=r"params: the config's \(--params.\*\) differ from "
+                       "those the training contexts were made with: v_rest_mV -70.0 "
+                       r"\(theirs: -65.0\)"):  # fmt: skip
         train(SHORT.with_changes(files), tmp_path / "refused")
     config = SHORT.with_changes({**files, "env.params": OTHER_PARAMS})
     train(config, tmp_path / "run")
+    # Its agent plays only contexts of those params (one check, the contexts' own).
+    ContextSet.generate(2, n_neurons=5, episode_length=20, seed=3).save(tmp_path / "paper.npz")
+    with pytest.raises(ValueError, match="was trained on .* differ from those .*paper.npz were"):
+        evaluate_run(tmp_path / "run", contexts=tmp_path / "paper.npz")
+    # The real-time rig generates its set with the run's params, and refuses others.
+    main(["realtime", str(tmp_path / "run"), "--episodes", "1", "--rate-hz", "1e6"])
+    with pytest.raises(SystemExit, match="2"):
+        main(["realtime", str(tmp_path / "run"), "--contexts", str(tmp_path / "paper.npz")])
+    assert "capacitance_pF 25.0 (theirs: 30.0)" in capsys.readouterr().err
     online, _ = build_networks(config)
     assert (online.v_rest_mV, online.v_threshold_mV) == (-65.0, -45.0)
     # Every stored episode starts at the other resting potential, which the agent sees as 0.

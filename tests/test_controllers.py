@@ -155,6 +155,19 @@ def test_load_controller_refuses_what_it_cannot_build(tmp_path, contexts):
     assert isinstance(load_controller("do-nothing"), DoNothing)
 
 
+def test_named_controllers_play_their_contexts_params(contexts):
+    """The planners' neuron model is the contexts' (or the env's); params= beside them
+    must be theirs, and serves alone where no contexts are given."""
+    other = spikectl.NeuronParams(release_scale=0.8)
+    assert load_controller("oracle", contexts=contexts).params == contexts.params
+    assert load_controller("identify-and-plan", contexts=contexts, params=contexts.params)
+    assert load_controller("identify-and-plan", params=other).params == other
+    env = NeuronControlEnv(contexts=contexts)
+    for given in ({"contexts": contexts}, {"env": env}):
+        with pytest.raises(ValueError, match="release_scale 0.8 .*leave params out"):
+            load_controller("oracle", params=other, **given)
+
+
 def test_a_compiled_policy_file_loads_without_pytorch(tmp_path):
     from spikectl.agents import export_policy
     from spikectl.training.controllers import load_agent

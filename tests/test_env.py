@@ -21,6 +21,7 @@ from spikectl.contexts import ContextSet, make_context, make_splits
 from spikectl.envs import registration
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.env_support import MAX_REWARD, step_rewards
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.params import NeuronParams
 
 ENV_ID = registration.ENV_ID
@@ -305,11 +306,18 @@ def test_sizes_come_from_a_given_context_set():
         NeuronControlEnv(contexts=contexts, episode_length=60)
 
 
-def test_params_default_to_the_context_sets():
+def test_the_environment_plays_its_contexts_params():
+    """One route: params= generates contexts; beside contexts only theirs are taken."""
     params = NeuronParams(release_scale=0.8)
     train, _ = make_splits(3, 1, seed=0, params=params)
     assert NeuronControlEnv(contexts=train).params == params
     assert NeuronControlEnv(n_train=3, n_test=1, params=params).contexts == train
+    assert NeuronControlEnv(contexts=train, params=params).params == params
+    for make in (NeuronControlEnv, NeuronControlVectorEnv):
+        with pytest.raises(ValueError, match=r"params: params= differ from those the contexts "
+                           r"were made with: release_scale 0.65 \(theirs: 0.8\); the "
+                           "environment plays the contexts' own"):  # fmt: skip
+            make(contexts=train, params=NeuronParams())
 
 
 def test_reset_options():

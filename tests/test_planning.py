@@ -7,7 +7,7 @@ import csv
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import spike_pattern
+from conftest import play_legally, spike_pattern
 
 import spikectl
 from spikectl import IdentifyAndPlan, NeuronParams, make_context, plan_episode
@@ -258,15 +258,7 @@ def test_identify_and_plan_never_takes_an_illegal_action(env_id, extensions, hyp
     kwargs = {} if extensions is None else {"extensions": extensions}
     env = gym.make(env_id, n_train=4, n_test=4, **kwargs)
     noise = env.unwrapped.extensions.observation_noise_mV
-    policy = IdentifyAndPlan(noise_mV=noise, width=8, hypotheses=hypotheses)
-    for episode in range(3):
-        observation, info = env.reset(seed=episode)
-        policy.reset()
-        terminated = False
-        while not terminated:
-            action = policy.act(observation, info)
-            assert info["action_mask"][action + 1]
-            observation, _, terminated, _, info = env.step(action)
+    play_legally(env, IdentifyAndPlan(noise_mV=noise, width=8, hypotheses=hypotheses), range(3))
 
 
 @pytest.mark.parametrize("hypotheses", [1, 4])

@@ -6,7 +6,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import spike_pattern
+from conftest import play_legally, spike_pattern
 
 from spikectl import IdentifyAndPlan, NeuronParams, make_splits
 from spikectl.contexts.generation import legal_actions
@@ -150,12 +150,6 @@ def test_gamble_never_takes_an_illegal_action_under_extensions(env_id, extension
                              gamble_horizon=4)  # fmt: skip
     gambles = 0
     for episode in range(2):
-        observation, info = env.reset(seed=episode)
-        policy.reset()
-        terminated = False
-        while not terminated:
-            action = policy.act(observation, info)
-            assert info["action_mask"][action + 1]
-            observation, _, terminated, _, info = env.step(action)
+        play_legally(env, policy, [episode])
         gambles += policy.gambles
     assert gambles > 0

@@ -75,13 +75,15 @@ def environment_setup(env_id: str) -> tuple[dict, Any]:
 
 
 def generated_split(
-    split: str, n_neurons: int, extensions: Any, episode_length: int = 60
+    split: str, n_neurons: int, extensions: Any, episode_length: int = 60, params: Any = None
 ) -> ContextSet:
-    """The ``split`` of make_splits(100, 100, n_neurons, episode_length, seed=0,
-    n_val=100): the sets every table of docs/baselines.md and docs/realtime.md plays."""
+    """The ``split`` of make_splits(100, 100, n_neurons, episode_length, seed=0, params,
+    n_val=100): the sets every table of docs/baselines.md and docs/realtime.md plays
+    (``params`` None: the paper's)."""
     train_set, test_set, validation_set = make_splits(
-        100, 100, n_neurons, episode_length, seed=0, extensions=extensions, n_val=100
-    )
+        100, 100, n_neurons, episode_length, seed=0, params=params, extensions=extensions,
+        n_val=100,
+    )  # fmt: skip
     return {"train": train_set, "test": test_set, "validation": validation_set}[split]
 
 
@@ -116,7 +118,7 @@ def baselines(command: BaselinesCommand) -> None:
         n_neurons = kwargs.get("n_neurons") or 8
         context_set = generated_split(command.split, n_neurons, extensions)
         where = f"the generated {command.split} set ({n_neurons} neurons, seed 0)"
-    policy = IdentifyAndPlan(width=command.identify_width,
+    policy = IdentifyAndPlan(context_set.params, width=command.identify_width,
                              noise_mV=extensions.observation_noise_mV)  # fmt: skip
     results = run_baselines(context_set, extensions=extensions,
                             random_seeds=command.random_seeds,

@@ -164,8 +164,7 @@ def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
             from spikectl.envs.env import NeuronControlEnv
 
             contexts = suite.load_split(name, command.split)
-            env = NeuronControlEnv(contexts=contexts, params=contexts.params,
-                                   extensions=suite.task(name).extensions)  # fmt: skip
+            env = NeuronControlEnv(contexts=contexts, extensions=suite.task(name).extensions)
             return lambda seed: load_controller(command.controller, env=env, seed=seed)
 
         return named

@@ -5,7 +5,16 @@
   followed by the error's own path; :func:`flag_for` looks that path up in a table of the
   command's flags built with tyro's naming (:func:`field_flags`). The message is never read.
 - tyro's own parse errors (a bad literal, a missing subcommand) come as framed text;
-  :func:`parse_error_line` reads one line out of the frame.
+  :func:`parse_error_line` reads one line out of the frame. This is what remains of
+  reading tyro's printed output, and why: tyro (1.0.17 checked) has no public API that
+  hands parse errors over as data. Its one way, ``tyro._errors.on_parse_error`` (events
+  such as ``MissingSubcommand``, ``InvalidChoice``, ``UnrecognizedArgs``,
+  ``InstantiationFailure``), is private by its own docstring ("may change or be removed
+  in any release ... pin an exact tyro version"), serves the default backend only and
+  is not promised by the older tyro releases that ``tyro>=0.8`` admits. Once tyro makes it
+  public, :func:`run_tyro` can take the events and the frame reader can go. A
+  config's own refusal needs no reading: it is the ConfigError itself
+  (:func:`config_error_in`), named by field path, never by its message.
 - Any other user error (a plain ``ValueError`` from outside the configs, such as
   ``make_splits``' argument checks) keeps the older reading: a leading field name in its
   message becomes its flag (:func:`flag_message`).

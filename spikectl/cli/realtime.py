@@ -84,7 +84,7 @@ def realtime(command: RealtimeCommand) -> None:
             raise ValueError(f"--cpu {command.cpu}: this process may run on cores {allowed}")
         os.sched_setaffinity(0, {command.cpu})
     source = Path(command.controller)
-    params, episode_length = None, 60
+    config, params, episode_length = None, None, 60
     if source.is_dir():
         from spikectl.training.run_files import read_config
 
@@ -100,18 +100,21 @@ def realtime(command: RealtimeCommand) -> None:
         where = str(command.contexts)
     else:
         context_set = generated_split(
-            command.split, n_neurons, extensions.context_part(), episode_length
+            command.split, n_neurons, extensions.context_part(), episode_length, params
         )
         where = f"the generated {command.split} set ({n_neurons} neurons, seed 0)"
-    if source.is_dir() and context_set.episode_length != episode_length:
-        raise ValueError(
-            f"--contexts {command.contexts} have episodes of {context_set.episode_length} "
-            f"steps; {source} was trained on {episode_length}"
-        )
+    if config is not None:
+        from spikectl.training.contexts import check_trained_params
+
+        check_trained_params(context_set, config, str(source), where)
+        if context_set.episode_length != episode_length:
+            raise ValueError(
+                f"--contexts {command.contexts} have episodes of {context_set.episode_length} "
+                f"steps; {source} was trained on {episode_length}"
+            )
     if command.episodes > len(context_set):
         raise ValueError(f"--episodes {command.episodes}: {where} has {len(context_set)} contexts")
-    env = NeuronControlEnv(contexts=context_set, params=params,
-                           extensions=extensions.environment_part())  # fmt: skip
+    env = NeuronControlEnv(contexts=context_set, extensions=extensions.environment_part())
     controller = load_controller(command.controller, model=command.model,
                                  compiled=command.compiled, env=env)  # fmt: skip
     if "torch" in sys.modules:  # a PyTorch controller (the others never import it)

@@ -212,6 +212,27 @@ class ContextSet(Sequence[Context]):
                 arrays[name] = np.stack([getattr(c.heterogeneity, name) for c in self])
         return arrays
 
+    def check_params(
+        self, params: NeuronParams, whose: str, remedy: str, name: str = "the contexts"
+    ) -> None:
+        """Refuse ``params`` (``whose`` they are) unless they are those the set (``name``)
+        was made with.
+
+        The one check of every place handed neuron parameters beside contexts (the
+        environments' ``params=``, a run's config): the contexts' patterns and
+        witnesses hold only under their own params, so those are the params played. The
+        error names each field that differs, then ``remedy``.
+        """
+        if params == self.params:
+            return
+        given, own = params.to_dict(), self.params.to_dict()
+        differ = ", ".join(
+            f"{key} {given[key]} (theirs: {own[key]})" for key in given if given[key] != own[key]
+        )  # fmt: skip
+        raise ValueError(
+            f"params: {whose} differ from those {name} were made with: {differ}; {remedy}"
+        )
+
     def topology_keys(self) -> list[bytes]:
         """One hashable key per context identifying its signed connectivity."""
         return [c.weights.astype(np.int8).tobytes() for c in self]

@@ -170,8 +170,10 @@ def resolve_setup(
 ) -> Setup:
     """Check and resolve the constructor arguments that both environments take.
 
-    Generated context sets are drawn with the context-level part of ``extensions``;
-    the model parameters are the set's unless ``params`` is given.
+    Generated context sets are drawn with ``params`` and the context-level part of
+    ``extensions``. The neuron parameters played are always the set's: ``params``
+    only generates sets, and beside ``contexts`` it must be theirs
+    (:meth:`ContextSet.check_params`).
     """
     if render_mode is not None and render_mode not in RENDER_MODES:
         raise ValueError(f"render_mode must be one of {RENDER_MODES} or None, got {render_mode!r}")
@@ -212,16 +214,13 @@ def resolve_setup(
     ):
         if given is not None and given != actual:
             raise ValueError(f"{name}={given!r} conflicts with the context set's {name} {actual}")
-    if params is not None and params != context_set.params:
-        mine, theirs = params.to_dict(), context_set.params.to_dict()
-        differ = ", ".join(f"{key} {mine[key]} (the contexts': {theirs[key]})"
-                           for key in mine if mine[key] != theirs[key])  # fmt: skip
-        raise ValueError(
-            f"params differ from those the contexts were made with: {differ}; the "
-            "contexts' patterns and witnesses hold only under their own params (leave "
-            "params out to play them, or generate contexts with these params)"
-        )
-    params = context_set.params if params is None else params
+    if params is not None and contexts is not None:
+        context_set.check_params(
+            params, "params=",
+            "the environment plays the contexts' own params (params= generates contexts: "
+            "leave it out, or generate contexts with these params)",
+        )  # fmt: skip
+    params = context_set.params
     effective = resolve_extensions(requested, allow_target_action, context_set)
     tables = ContextTables.build(context_set, effective.allow_target_action, params)
     effects = EnvironmentEffects(effective, params, context_set.episode_length)

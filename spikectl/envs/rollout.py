@@ -18,7 +18,6 @@ from spikectl.contexts import ContextSet
 from spikectl.envs.controller import Controller, batched
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.extensions import Extensions
-from spikectl.neuron.params import NeuronParams
 
 Policy = Callable[[dict[str, np.ndarray], np.ndarray], np.ndarray]
 """A bare batched policy: (observations, action_mask [S, n + 1]) -> int64 [S]."""
@@ -100,16 +99,14 @@ def run_episodes(
 def evaluate_policy(
     contexts: ContextSet,
     policy: Controller | Policy,
-    params: NeuronParams | None = None,
+    *,
     extensions: Extensions | None = None,
     seed: int | None = None,
 ) -> EpisodeBatch:
     """One episode of ``policy`` (a controller or a bare policy function) on every
-    context of a set, all in one batch (with the
+    context of a set, all in one batch, under the set's own neuron parameters (with the
     environment-level ``extensions``, whose draws start from ``seed``)."""
-    env = NeuronControlVectorEnv(
-        num_envs=len(contexts), contexts=contexts, params=params, extensions=extensions
-    )
+    env = NeuronControlVectorEnv(num_envs=len(contexts), contexts=contexts, extensions=extensions)
     if seed is not None:
         env.reset(seed=seed)
     episodes = run_episodes(env, np.arange(len(contexts)), policy)

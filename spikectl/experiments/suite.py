@@ -266,7 +266,7 @@ def play(name: str, split: str, controller: Controller) -> tuple[np.ndarray, flo
     contexts = load_split(name, split)
     started = time.process_time()
     episodes = evaluate_policy(
-        contexts, controller, contexts.params, task(name).extensions, seed=ENV_SEED
+        contexts, controller, extensions=task(name).extensions, seed=ENV_SEED
     )
     return episodes.returns, time.process_time() - started
 

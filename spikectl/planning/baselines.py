@@ -24,7 +24,6 @@ from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.files import atomic_write_text
 from spikectl.neuron.extensions import CONTEXT_FIELDS, Extensions
-from spikectl.neuron.params import NeuronParams
 from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
 from spikectl.planning.policy import IdentifyAndPlan
 
@@ -77,7 +76,7 @@ class BaselineResults:
 
 def run_baselines(
     contexts: ContextSet,
-    params: NeuronParams | None = None,
+    *,
     extensions: Extensions | None = None,
     random_seeds: int = 10,
     oracle_width: int = DEFAULT_ORACLE_WIDTH,
@@ -87,14 +86,14 @@ def run_baselines(
     """Score the controllers of :data:`CONTROLLERS` on every context of ``contexts``.
 
     Args:
-        contexts: the set to play (one episode per context and controller).
-        params: the neuron model; the set's when None.
+        contexts: the set to play (one episode per context and controller), under the
+            neuron parameters it was made with (``contexts.params``).
         extensions: environment-level extensions to play with (the context-level ones
             come from the set); None: the set's own.
         random_seeds: seeds 0 .. random_seeds - 1 of the random policy.
         oracle_width: beam width of the oracle planner.
-        policy: the identify-and-plan settings; ``IdentifyAndPlan(noise_mV=sigma)`` with
-            the extensions' measurement noise when None.
+        policy: the identify-and-plan settings; ``IdentifyAndPlan(contexts.params,
+            noise_mV=sigma)`` with the extensions' measurement noise when None.
         env_seed: seed of the environments' generators (noise, stochastic release).
     """
     if random_seeds < 1:
@@ -105,10 +104,8 @@ def run_baselines(
             Extensions.coerce(extensions),
             **{name: getattr(contexts.extensions, name) for name in CONTEXT_FIELDS},
         )
-    env = NeuronControlVectorEnv(
-        num_envs=len(contexts), contexts=contexts, params=params, extensions=extensions
-    )
-    params = env.params
+    env = NeuronControlVectorEnv(num_envs=len(contexts), contexts=contexts, extensions=extensions)
+    params = contexts.params
     if policy is None:
         policy = IdentifyAndPlan(params, noise_mV=env.extensions.observation_noise_mV)
     indices = np.arange(len(contexts))

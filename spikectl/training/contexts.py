@@ -119,24 +119,28 @@ def load_or_make_contexts(
 
 def check_model(contexts: ContextSet, config: Experiment, name: str) -> None:
     """Refuse a context set made with other NeuronParams or context-level extensions than
-    the config's: the environment and the agent's input normalisation use the config's."""
+    the config's: the agent normalises its input with the config's params, and the
+    environment plays the contexts' own."""
     env = config.env
-    if contexts.params != env.params:
-        mine, theirs = env.params.to_dict(), contexts.params.to_dict()
-        differ = ", ".join(
-            f"{key}={theirs[key]}" for key in theirs if theirs[key] != mine[key]
-        )  # fmt: skip
-        raise ValueError(
-            f"params: the {name} contexts were made with other NeuronParams ({differ}); "
-            "give the same values with --params.* (e.g. --params."
-            f"{next(k for k in theirs if theirs[k] != mine[k]).replace('_', '-')})"
-        )
+    contexts.check_params(
+        env.params, "the config's (--params.*)", "give theirs with the --params.* flags named",
+        f"the {name} contexts",
+    )  # fmt: skip
     if contexts.extensions != env.extensions.context_part():
         raise ValueError(
             f"extensions: the {name} contexts were made with context-level extensions "
             f"{contexts.extensions.to_dict(only_changed=True)}, the config says "
             f"{env.extensions.context_part().to_dict(only_changed=True)} (--extensions.*)"
         )
+
+
+def check_trained_params(contexts: ContextSet, config: Experiment, run: str, name: str) -> None:
+    """Refuse contexts (``name``) made with other NeuronParams than those a trained
+    ``run`` (its config) was trained on: its agent normalises its input with those."""
+    contexts.check_params(
+        config.env.params, f"the params {run} was trained on (its config.json)",
+        "its agent would play another model: play it on contexts made with its params", name,
+    )  # fmt: skip
 
 
 def make_env(config: Experiment, contexts: ContextSet, num_envs: int) -> NeuronControlVectorEnv:

@@ -116,8 +116,10 @@ def load_controller(
     the target is legal (identify-and-plan: the environment's extensions, which choose
     its observation model, :func:`~spikectl.planning.policy.environment_settings`), and
     (oracle, witness) the contexts from ``env`` (a ``NeuronControlEnv`` or
-    ``NeuronControlVectorEnv``) where it is given, else from ``contexts`` and ``params``.
-    ``seed`` seeds the random controller.
+    ``NeuronControlVectorEnv``) where it is given, else from ``contexts``; the neuron
+    model is then the contexts' own (``contexts.params``), and ``params`` serves where
+    neither is given (identify-and-plan alone; None: the paper's). ``seed`` seeds the
+    random controller.
     """
     if model not in MODEL_CHOICES:
         raise ValueError(f"model must be one of {MODEL_CHOICES}, got {model!r}")
@@ -161,22 +163,23 @@ def _named(
     noise_mV, allow_target, extensions = 0.0, False, None
     if env is not None:
         unwrapped = getattr(env, "unwrapped", env)
-        missing = [
-            key for key in ("contexts", "params", "extensions") if not hasattr(unwrapped, key)
-        ]
+        missing = [key for key in ("contexts", "extensions") if not hasattr(unwrapped, key)]
         if missing:
             raise TypeError(
                 f"env must be a spikectl NeuronControlEnv or NeuronControlVectorEnv, got "
                 f"{type(env).__name__} (it has no {', '.join(missing)})"
             )
-        contexts, params = unwrapped.contexts, unwrapped.params
-        extensions = unwrapped.extensions
+        contexts, extensions = unwrapped.contexts, unwrapped.extensions
         noise_mV = extensions.observation_noise_mV
         allow_target = extensions.allow_target_action
     elif contexts is not None:
-        params = contexts.params if params is None else params
         noise_mV = contexts.extensions.observation_noise_mV
         allow_target = contexts.extensions.allow_target_action
+    if contexts is not None:  # the contexts' own params, as the environment plays them
+        if params is not None:
+            contexts.check_params(params, "params=", "the controller plays the contexts' own: "
+                                  "leave params out")  # fmt: skip
+        params = contexts.params
     if name in PRIVILEGED and contexts is None:
         raise ValueError(
             f"the {name} controller replays a known answer per context: give env= or contexts="

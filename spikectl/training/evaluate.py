@@ -17,7 +17,13 @@ from spikectl.contexts import ContextSet
 from spikectl.envs.controller import Controller, DoNothing
 from spikectl.envs.rollout import EpisodeBatch, evaluate_policy
 from spikectl.training.config import Experiment
-from spikectl.training.contexts import TEST_FILE, TRAIN_FILE, VAL_FILE, baseline_episodes
+from spikectl.training.contexts import (
+    TEST_FILE,
+    TRAIN_FILE,
+    VAL_FILE,
+    baseline_episodes,
+    check_trained_params,
+)
 from spikectl.training.controllers import load_controller
 from spikectl.training.run_files import read_config
 
@@ -74,11 +80,7 @@ def evaluate_run(
     config = read_config(run_dir)
     if contexts is not None:
         sets = {Path(contexts).name: ContextSet.load(contexts)}
-        if sets[Path(contexts).name].params != config.env.params:
-            raise ValueError(
-                f"{contexts} was made with other NeuronParams than the run's environment "
-                f"({run_dir / 'config.json'}): the agent would play another model"
-            )
+        check_trained_params(sets[Path(contexts).name], config, str(run_dir), str(contexts))
     else:
         sets = {
             "train": ContextSet.load(run_dir / TRAIN_FILE),

@@ -78,7 +78,7 @@ def main() -> None:
             policy = Timed(IdentifyAndPlan(contexts.params, **settings))
             started = time.process_time()
             episodes = evaluate_policy(
-                contexts, policy, contexts.params, spec.extensions, seed=suite.ENV_SEED
+                contexts, policy, extensions=spec.extensions, seed=suite.ENV_SEED
             )
             cpu = time.process_time() - started
             mean = float(episodes.returns.mean())

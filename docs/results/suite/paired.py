@@ -76,8 +76,7 @@ def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:
         spec = suite.task(name)
         contexts = suite.load_split(name, "test")
         # The planner exactly as `spikectl benchmark identify-and-plan` builds it.
-        env = NeuronControlEnv(contexts=contexts, params=contexts.params,
-                               extensions=spec.extensions)  # fmt: skip
+        env = NeuronControlEnv(contexts=contexts, extensions=spec.extensions)
         planner, _ = suite.play(name, "test", load_controller("identify-and-plan", env=env))
         trained_on = name if trained_on_task else "paper"
         learned = np.mean([seed_returns(preset, trained_on, seed, name) for seed in SEEDS],
