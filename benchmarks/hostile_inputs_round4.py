@@ -301,8 +301,8 @@ def classify(probe: Probe, folder: Path, python: str) -> tuple[str, str]:
     before = {name: digest(folder / name) for name in probe.keep}
     if isinstance(probe.command, str):
         argv = [python, "-c", API_WRAPPER.replace("CODE", repr(probe.command))]
-    else:
-        argv = [python, "-m", "spikectl.cli", *probe.command]
+    else:  # as the ``spikectl`` command runs (its entry point, outside the package)
+        argv = [python, "-m", "_spikectl_launcher", *probe.command]
     environment = {**os.environ, **probe.env}
     process = subprocess.Popen(argv, cwd=folder, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, env=environment)  # fmt: skip
