@@ -166,6 +166,11 @@ PROBES = [
         "+ ']' * 100000))\"", ["realtime", "deep.npz"]),  # fmt: skip
     # 5. interrupts and the machine (the Ctrl-C probe is in tests/test_output_paths.py)
     Probe("NUMBA_NUM_THREADS=0", 5, "", ["demo"], env={"NUMBA_NUM_THREADS": "0"}),
+    Probe("NUMBA_NUM_THREADS=four", 5, "", ["demo"], env={"NUMBA_NUM_THREADS": "four"}),
+    Probe("NUMBA_NUM_THREADS=100000", 5, "", ["demo"], env={"NUMBA_NUM_THREADS": "100000"}),
+    Probe("NUMBA_OPT=fast", 5, "", ["demo"], env={"NUMBA_OPT": "fast"}),
+    Probe("NUMBA_THREADING_LAYER=bogus, import spikectl", 5, "", "import spikectl\n",
+          env={"NUMBA_THREADING_LAYER": "bogus"}),  # fmt: skip
     # 6. the controller API
     controller_probe("act(None, info), random", "random", "obs = None"),
     controller_probe("act(obs, None), compiled-free witness", "witness", "info = None"),
@@ -296,13 +301,15 @@ def prepare(base: Path, python: str) -> None:
 
 
 def classify(probe: Probe, folder: Path, python: str) -> tuple[str, str]:
-    if probe.setup:
-        subprocess.run(probe.setup, shell=True, cwd=folder, check=True, executable="/bin/bash")
+    if probe.setup:  # its ``python`` is the interpreter probed (bin/python in the root)
+        path = f"{folder.parent / 'bin'}{os.pathsep}{os.environ.get('PATH', '')}"
+        subprocess.run(probe.setup, shell=True, cwd=folder, check=True, executable="/bin/bash",
+                       env={**os.environ, "PATH": path})  # fmt: skip
     before = {name: digest(folder / name) for name in probe.keep}
     if isinstance(probe.command, str):
         argv = [python, "-c", API_WRAPPER.replace("CODE", repr(probe.command))]
-    else:
-        argv = [python, "-m", "spikectl.cli", *probe.command]
+    else:  # as the ``spikectl`` command runs (its entry point, outside the package)
+        argv = [python, "-m", "_spikectl_launcher", *probe.command]
     environment = {**os.environ, **probe.env}
     process = subprocess.Popen(argv, cwd=folder, stdout=subprocess.PIPE,
                                stderr=subprocess.PIPE, text=True, env=environment)  # fmt: skip
@@ -351,6 +358,10 @@ def main() -> None:
     with tempfile.TemporaryDirectory(prefix="hostile4-") as root:
         base = Path(root) / "base"
         base.mkdir()
+        (Path(root) / "bin").mkdir()  # a script, not a link: a venv's python finds its
+        shim = Path(root) / "bin" / "python"  # pyvenv.cfg by the path it was started as
+        shim.write_text(f'#!/bin/sh\nexec "{args.python}" "$@"\n')
+        shim.chmod(0o755)
         prepare(base, args.python)
         for index, probe in enumerate(PROBES):
             if args.only and not any(word in probe.name for word in args.only.split(",")):

@@ -1,11 +1,20 @@
 """spikectl: closed-loop control of simulated neuronal networks with reinforcement learning.
 
 The public API is re-exported here; importing the package registers the Gymnasium
-environment ids (a cheap dictionary entry) and does no other work. ``load_controller``
-(which needs PyTorch) loads its module on first use.
+environment ids (a cheap dictionary entry) and does no other work. It first checks the
+environment variables Numba reads (``spikectl.environment``): one it cannot use raises
+:class:`~spikectl.environment.EnvironmentVariableError` (a ValueError) naming it.
+``load_controller`` (which needs PyTorch) loads its module on first use.
 """
 
 from typing import Any
+
+from spikectl.environment import EnvironmentVariableError, check_environment, import_numba
+
+# Before Numba reads the environment: a value it cannot use is one EnvironmentVariableError
+# (a ValueError) naming the variable, not a traceback from inside Numba.
+check_environment()
+import_numba()
 
 from spikectl.contexts import Context, ContextSet, make_context, make_splits
 from spikectl.envs.env import NeuronControlEnv
@@ -23,6 +32,7 @@ register_envs()
 __all__ = [
     "Context",
     "ContextSet",
+    "EnvironmentVariableError",
     "Extensions",
     "NeuronControlEnv",
     "NeuronControlVectorEnv",

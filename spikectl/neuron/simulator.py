@@ -23,8 +23,10 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
+from spikectl.environment import threading_layer_error
 from spikectl.files import TooLargeError, check_fits_in_memory
 from spikectl.neuron.kernel import (
     PARALLEL_MIN_BATCH,
@@ -148,6 +150,8 @@ def advance(
     batch, steps = actions.shape
     work = batch * steps * weights.shape[-1]
     threaded = batch >= PARALLEL_MIN_BATCH and work >= PARALLEL_MIN_WORK
+    if threaded and not _threads_started:
+        _start_threads()
     kernel = advance_parallel if threaded else advance_serial
     kernel(
         weights,
@@ -163,6 +167,21 @@ def advance(
         release_uniforms,
         input_mV,
     )
+
+
+_threads_started = False
+
+
+def _start_threads() -> None:
+    """Start Numba's threads before the first threaded call: a threading layer that
+    cannot load (``NUMBA_THREADING_LAYER=tbb`` without TBB) is one named error, not a
+    ValueError from inside the kernel's dispatch."""
+    global _threads_started
+    try:
+        numba.get_num_threads()  # starts the threading layer
+    except ValueError as error:
+        raise threading_layer_error(error) from None
+    _threads_started = True
 
 
 def as_weight_batch(weights: np.ndarray | list) -> np.ndarray:

@@ -59,3 +59,11 @@ def controllers(env: NeuronControlEnv) -> float:
     summary: dict[str, float] = report.summary()
     plans: list[Plan] = []
     return action + summary["mean_return"] + len(plans)
+
+
+def a_bad_environment_variable() -> str:
+    try:
+        spikectl.environment.check_environment({"NUMBA_NUM_THREADS": "0"})
+    except spikectl.EnvironmentVariableError as error:
+        return f"{error.name}={error.value}"
+    return ""

@@ -1,0 +1,79 @@
+"""The ``spikectl`` command's entry point (``[project.scripts]`` in pyproject.toml).
+
+It stands outside the ``spikectl`` package on purpose: importing any module inside the
+package first runs ``spikectl/__init__``, which checks the environment and loads Numba,
+and the command then loads PyTorch and its options (a second or more). A Ctrl-C in that
+time, or an environment variable Numba cannot use (``NUMBA_NUM_THREADS=0``), would
+otherwise be a Python traceback from inside an import. Here both are caught around the
+import of the command: a Ctrl-C is one line and exit 130, a bad environment variable one
+line and exit 2 (``spikectl.environment``). This module imports only the standard
+library, and nothing imports it: it is a process's entry, not a library.
+
+What it cannot cover is Python's own start, before this module runs (a few tens of
+milliseconds: the interpreter and its ``site`` imports); a Ctrl-C then is Python's.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+INTERRUPTED_STARTING = "spikectl: interrupted while starting (nothing was run)"
+INTERRUPTED = "spikectl: interrupted"
+
+
+def main() -> None:
+    """Run the ``spikectl`` command on ``sys.argv``; see the module's docstring."""
+    try:
+        from spikectl.cli import main as command  # the package, Numba, tyro, the commands
+    except BaseException as error:  # noqa: B036 - a Ctrl-C is the point
+        _ignore_interrupts()
+        if _interrupted(error):
+            _exit_now(INTERRUPTED_STARTING, 130)
+        environment_error = sys.modules.get("spikectl.environment")
+        if environment_error is not None and isinstance(
+            error, environment_error.EnvironmentVariableError
+        ):
+            _exit_now(f"spikectl: error: {error}", 2)
+        raise
+    try:
+        command()  # its own Ctrl-C handling: one line and 130 (spikectl.cli.main)
+    except KeyboardInterrupt:  # one that came outside the command's handling
+        _ignore_interrupts()
+        print(INTERRUPTED, file=sys.stderr)
+        raise SystemExit(130) from None
+    finally:
+        # The command has finished or is exiting: a Ctrl-C from here on, while Python
+        # shuts down, would only be a traceback from its exit handlers.
+        _ignore_interrupts()
+
+
+def _ignore_interrupts() -> None:
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _exit_now(line: str, code: int) -> None:
+    """Print ``line`` on stderr and end the process with ``code``, skipping the exit
+    handlers of the half-imported libraries (nothing has run that could need them)."""
+    print(line, file=sys.stderr)
+    sys.stderr.flush()
+    sys.stdout.flush()
+    os._exit(code)
+
+
+def _interrupted(error: BaseException | None) -> bool:
+    """Whether ``error`` is, or was caused by, a KeyboardInterrupt (an extension module
+    interrupted while it initialises may report it as the cause of another error).
+    The same test as ``spikectl.cli``'s, which this module cannot import to share."""
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, KeyboardInterrupt):
+            return True
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return False
+
+
+if __name__ == "__main__":
+    main()
