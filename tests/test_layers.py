@@ -18,7 +18,13 @@ import pytest
 PACKAGE_DIR = Path(__file__).resolve().parent.parent / "spikectl"
 
 LAYERS = (
-    ("spikectl.files", "spikectl.config_errors", "spikectl.seeds", "spikectl.version"),
+    (
+        "spikectl.files",
+        "spikectl.config_errors",
+        "spikectl.seeds",
+        "spikectl.version",
+        "spikectl.environment",
+    ),
     ("spikectl.neuron",),
     ("spikectl.contexts",),
     ("spikectl.envs",),
