@@ -62,6 +62,9 @@ def table(rows: list[dict], settings: list[str]) -> str:
                     and r["seed"] == seed and r["setting"] == setting}  # fmt: skip
 
         for setting in ["spikectl", *settings]:
+            if not any(returns(setting, seed) for seed in seeds):
+                cells.append("")  # this controller did not play this setting
+                continue
             means = np.array([np.mean(list(returns(setting, seed).values())) for seed in seeds])
             cell = f"{means.mean():.3f}" + (f" ± {means.std(ddof=1):.3f}" if len(seeds) > 1 else "")
             if setting != "spikectl":
