@@ -4,10 +4,11 @@
         docs/images/baselines.png
 
 Reads ``curve_noise{sigma}_hidden{fraction}.csv`` (measurement noise x hidden
-fraction, n = 8), ``test_n32.csv`` and, for the one setting a trained agent exists
-for (noise 0, nothing hidden), TDRQN's test return from
-``../learn-fast-quick/results.csv``. Writes the figure and ``summary.md`` (the
-tables) beside the CSVs. Nothing is recomputed: only saved results are read.
+fraction, n = 8), ``test_n32.csv`` and the main job's TDRQN (three seeds trained on
+the suite's ``paper`` task) played on the suite's tasks of the same noise and hidden
+fraction (``../suite/trained/guided-upr24/paper/seed=*/transfer.csv``). Writes the
+figure and ``summary.md`` (the tables) beside the CSVs. Nothing is recomputed: only
+saved results are read.
 """
 
 import csv
@@ -66,13 +67,29 @@ def summary_table(results: Path) -> str:
     return "\n".join(lines)
 
 
-def tdrqn_test_return(results: Path) -> tuple[float, float] | None:
-    path = results.resolve().parent / "learn-fast-quick" / "results.csv"
-    if not path.exists():
-        return None
-    with path.open() as handle:
-        row = next(row for row in csv.DictReader(handle) if row["group"] == "tdrqn")
-    return float(row["test_mean"]), float(row["test_std"])
+TDRQN_TASKS = {("0", 0): "paper", ("0", 1): "noise1", ("0", 2): "noise2", ("0", 4): "noise4",
+               ("0.25", 0): "hidden25"}
+"""(hidden fraction, noise sigma) -> the benchmark suite's task with that setting."""
+
+
+def tdrqn_returns(results: Path, fraction: str) -> tuple[list[int], list[float], list[float]]:
+    """The main job's TDRQN (the guided preset trained on the suite's ``paper`` task,
+    seeds 0-2, best on validation) played on the suite's task of each noise level at
+    this hidden fraction: sigmas, mean and sd over the seeds of the test return (from
+    the seeds' committed transfer.csv; the suite's test sets, not the curve's)."""
+    folder = results.resolve().parent / "suite" / "trained" / "guided-upr24" / "paper"
+    by_task: dict[str, list[float]] = {}
+    for path in sorted(folder.glob("seed=*/transfer.csv")):
+        with path.open() as handle:
+            for row in csv.DictReader(handle):
+                by_task.setdefault(row["task"], []).append(float(row["mean_return"]))
+    sigmas, means, sds = [], [], []
+    for (hidden, sigma), task in TDRQN_TASKS.items():
+        if hidden == fraction and len(by_task.get(task, [])) > 1:
+            sigmas.append(sigma)
+            means.append(float(np.mean(by_task[task])))
+            sds.append(float(np.std(by_task[task], ddof=1)))
+    return sigmas, means, sds
 
 
 def plot(results: Path, out: Path) -> None:
@@ -91,11 +108,11 @@ def plot(results: Path, out: Path) -> None:
             means = [curve[name].mean() for curve in curves]
             errors = [curve[name].std(ddof=1) / np.sqrt(curve[name].size) for curve in curves]
             axis.errorbar(sigmas, means, yerr=errors, marker="o", capsize=2, label=LABELS[name])
-        tdrqn = tdrqn_test_return(results)
-        if fraction == "0" and tdrqn is not None:
-            axis.errorbar([0], [tdrqn[0]], yerr=[tdrqn[1]], marker="s", color="black",
+        sigmas, means, sds = tdrqn_returns(results, fraction)
+        if sigmas:
+            axis.errorbar(sigmas, means, yerr=sds, marker="s", color="black",
                           linestyle="none", capsize=3,
-                          label="TDRQN (quick preset, 3 seeds)")  # fmt: skip
+                          label="TDRQN, the main job (3 seeds)")  # fmt: skip
         axis.set_title(f"n = 8, hidden fraction {fraction}")
         axis.set_xlabel("measurement noise sigma (mV)")
         axis.set_xticks(list(NOISE_MV))
