@@ -279,6 +279,16 @@ def test_named_controller_takes_the_environments_observation_model():
     assert environment_settings(Extensions(background_rate=0.005)) == {}
     stochastic = Extensions(stochastic_release=True)
     assert environment_settings(stochastic) == {"extensions": stochastic}
+    assert plain.gamble_networks == 0  # n = 8: no QMDP
+    # From 16 observed neurons on, QMDP where it would probe, beside the observation model.
+    large, _ = make_splits(2, 1, 16, 60, seed=5)
+    controller = load_controller("identify-and-plan", contexts=large)
+    assert controller.gamble_networks == 16 and controller.identification == "gaussian"
+    assert environment_settings(noisy, 32) == {
+        "identification": "bayes", "extensions": noisy, "filter_voltage": True,
+        "gamble_networks": 16,
+    }  # fmt: skip
+    assert environment_settings(None, 15) == {} and environment_settings(None, 16) != {}
 
 
 def test_gaussian_estimate_learns_from_release_chances():

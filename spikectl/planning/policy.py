@@ -66,23 +66,41 @@ _SETTINGS = (
 )  # fmt: skip
 
 
-def environment_settings(extensions: Extensions | None) -> dict[str, Any]:
+GAMBLE_FROM_NEURONS = 16
+"""From this many neurons on, the named ``identify-and-plan`` chooses where it would
+probe by expected return over networks drawn from its estimate (QMDP,
+``gamble_networks=GAMBLE_NETWORKS``): chosen on the suite's ``n16`` and ``n32``
+validation sets (docs/baselines.md); at n = 8 it costs about 5x the CPU time for a gain
+within noise, and it is off."""
+GAMBLE_NETWORKS = 16
+"""K, the networks QMDP draws from the estimate where :data:`GAMBLE_FROM_NEURONS` turns
+it on."""
+
+
+def environment_settings(
+    extensions: Extensions | None, n_neurons: int | None = None
+) -> dict[str, Any]:
     """The settings the named controller ``identify-and-plan`` plays on an environment
-    with ``extensions`` (``spikectl benchmark``, ``spikectl realtime``,
-    ``spikectl.load_controller``), chosen on the suite's validation sets
-    (docs/baselines.md): under measurement noise the Bayes observation model with
-    filtered potentials (``identification="bayes"``, ``filter_voltage=True``); under
-    stochastic release the extensions alone (the Gaussian estimate learns from each
-    spike's release chance); elsewhere the constructor's defaults, which are the guided
-    learner's teacher (background input, heterogeneous and hidden neurons, where the Bayes
-    model scored lower, and the paper's task)."""
+    with ``extensions`` and ``n_neurons`` observed neurons (``spikectl benchmark``,
+    ``spikectl realtime``, ``spikectl.load_controller``), chosen on the suite's
+    validation sets (docs/baselines.md): under measurement noise the Bayes observation
+    model with filtered potentials (``identification="bayes"``, ``filter_voltage=True``);
+    under stochastic release the extensions alone (the Gaussian estimate learns from each
+    spike's release chance); from :data:`GAMBLE_FROM_NEURONS` neurons on, QMDP where it
+    would probe; elsewhere the constructor's defaults, which are the guided learner's
+    teacher (background input, heterogeneous and hidden neurons, where the Bayes model
+    scored lower, and the paper's task)."""
+    settings: dict[str, Any] = {}
+    if n_neurons is not None and n_neurons >= GAMBLE_FROM_NEURONS:
+        settings["gamble_networks"] = GAMBLE_NETWORKS
     if extensions is None:
-        return {}
+        return settings
     if extensions.observation_noise_mV > 0:
-        return {"identification": "bayes", "extensions": extensions, "filter_voltage": True}
+        return {"identification": "bayes", "extensions": extensions, "filter_voltage": True,
+                **settings}  # fmt: skip
     if extensions.stochastic_release:
-        return {"extensions": extensions}
-    return {}
+        return {"extensions": extensions, **settings}
+    return settings
 
 
 class IdentifyAndPlan:

@@ -189,7 +189,10 @@ def _named(
     if name == "random":
         return RandomLegal(seed)
     if name == "identify-and-plan":
-        return IdentifyAndPlan(params, noise_mV=noise_mV, **environment_settings(extensions))
+        n_neurons = None if contexts is None else contexts.n_observed
+        return IdentifyAndPlan(
+            params, noise_mV=noise_mV, **environment_settings(extensions, n_neurons)
+        )
     if name == "oracle":
         return OraclePlanner(contexts, params, DEFAULT_ORACLE_WIDTH, allow_target)
     return Witness(contexts)

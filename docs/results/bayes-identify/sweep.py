@@ -69,7 +69,7 @@ def main() -> None:
                 # What `spikectl benchmark identify-and-plan` plays (load_controller).
                 settings = {
                     "noise_mV": spec.extensions.observation_noise_mV,
-                    **environment_settings(spec.extensions),
+                    **environment_settings(spec.extensions, contexts.n_observed),
                     **settings,
                 }
             settings.setdefault("noise_mV", spec.extensions.observation_noise_mV)
