@@ -34,11 +34,12 @@ LEARNER_FIELDS = tuple(field.name for field in dataclasses.fields(DQNConfig))
 LEGACY_FIELDS: dict[str, str] = {
     **{name: "env" for name in ("n_neurons", "episode_length", "n_train", "n_test", "n_val",
                                 "context_seed", "train_contexts", "test_contexts")},
-    **{name: "agent" for name in ("arch", "sizes")},
+    **{name: "agent" for name in ("arch", "sizes", "init_from")},
     **{name: "train" for name in RUN_FIELDS},
     **{name: "learner" for name in LEARNER_FIELDS},
 }  # fmt: skip
-"""Where each field of the flat config (before the tree) lives in the tree."""
+"""Where each field of the flat config (before the tree) lives in the tree, and the agent's
+fields added since, which ``with_changes`` also takes by their own name."""
 
 
 def field_path(key: str) -> list[str]:
