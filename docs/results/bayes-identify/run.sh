@@ -35,3 +35,20 @@ python $here/paired.py $here/test.csv $here/test-per-network.csv --out $here/tes
 # The suite table's row (docs/benchmark.md), every task.
 spikectl benchmark identify-and-plan --task all --out docs/results/suite/identify-and-plan.csv \
     --per-network $here/test-benchmark-per-network.csv
+# A later session (choices on validation only; the test sets above were not replayed):
+# QMDP beside the Bayes model under noise 1 and 2 mV (with sweep 5's noise4 row: not
+# taken), and QMDP at n = 16 and 32 against the default (taken from 16 neurons on:
+# spikectl.planning.policy.GAMBLE_FROM_NEURONS).
+python $here/sweep.py --tasks noise1 noise2 --split validation \
+    --settings "{$B, \"filter_voltage\": true, \"gamble_networks\": 16}" \
+    --out $here/validation-sweep6.csv --per-network $here/validation-sweep6-per-network.csv
+python $here/sweep.py --tasks n16 n32 --split validation --settings '{}' '{"gamble_networks": 16}' \
+    --out $here/validation-sweep7.csv --per-network $here/validation-sweep7-per-network.csv
+python $here/paired.py $here/validation-sweep7.csv $here/validation-sweep7-per-network.csv \
+    --old '{}' --new '{"gamble_networks": 16}'
+# Test, once, as `spikectl benchmark` plays it now (the suite's n16 and n32 rows); paired
+# against the rows of test-benchmark-per-network.csv (the default before).
+for task in n16 n32; do
+    spikectl benchmark identify-and-plan --task $task --out $here/test-benchmark-$task.csv \
+        --per-network $here/test-benchmark-$task-per-network.csv
+done
