@@ -66,10 +66,10 @@ def test_per_neuron_weights_play_at_another_number_of_neurons(trained):
 
 
 def test_weights_that_do_not_fit_are_one_config_error(trained, tmp_path):
-    with pytest.raises(ConfigError, match=r"init_from .*does not exist"):
+    with pytest.raises(ConfigError, match=r"init_from names no weights: .*missing.pt does not"):
         build_network(starting_from(tmp_path / "missing.pt"))
     fixed_size = SHORT.with_changes(arch="drqn")
-    with pytest.raises(ConfigError, match=r"init_from the weights in .* do not fit"):
+    with pytest.raises(ConfigError, match=r"init_from names weights that do not fit .*model.pt"):
         build_network(fixed_size.with_changes({"agent.init_from": trained / "model.pt"}))
     with pytest.raises(ConfigError, match="do not fit"):
         narrower = SHORT.with_changes({"agent.sizes.lstm_hidden": 8})
@@ -84,6 +84,7 @@ def test_the_cli_refuses_weights_that_do_not_fit_in_one_line(trained, tmp_path, 
     assert result.returncode == 2, result.stderr
     assert "Traceback" not in result.stderr
     assert "do not fit" in result.stderr
+    assert result.stderr.startswith("spikectl: error: --init-from names weights")  # the flag
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not (tmp_path / "run").exists()  # refused before the run directory is made
 

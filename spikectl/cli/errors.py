@@ -111,14 +111,17 @@ def flag_for(path: Iterable[str], command: type) -> str | None:
 
 def command_path(error: ConfigError, command: type) -> FieldPath:
     """``error``'s field within ``command``: the place of the config that raised it (the
-    innermost config of ``command``'s tree on its traceback: tyro builds the tree from
-    the inside out, so an ``EnvConfig`` refuses ``("n_train",)`` before any
-    ``Experiment`` holds it), then the error's own path."""
+    innermost config of ``command``'s tree on its traceback, as ``self`` of its own
+    checks or as the ``config`` a function was handed: tyro builds the tree from the
+    inside out, so an ``EnvConfig`` refuses ``("n_train",)`` before any ``Experiment``
+    holds it, and a run refuses ``("agent", "init_from")`` of its Experiment), then the
+    error's own path."""
     places, place = config_places(command), ()
     for frame, _ in traceback.walk_tb(error.__traceback__):
-        owner = frame.f_locals.get("self")
-        if type(owner) in places:
-            place = places[type(owner)]
+        for owner in (frame.f_locals.get("self"), frame.f_locals.get("config")):
+            if type(owner) in places:
+                place = places[type(owner)]
+                break
     return (*place, *error.path)
 
 

@@ -104,14 +104,14 @@ def load_initial_weights(network: torch.nn.Module, path: Path) -> None:
     if path.is_dir():
         path = path / BEST_MODEL_FILE
     if not path.exists():
-        raise ConfigError(("agent", "init_from"), f"{path} does not exist")
+        raise ConfigError(("agent", "init_from"), f"names no weights: {path} does not exist")
     weights = load_model_weights(path)
     try:
         network.load_state_dict(weights)
     except RuntimeError as error:
         raise ConfigError(
             ("agent", "init_from"),
-            f"the weights in {path} do not fit this network "
+            f"names weights that do not fit this network: {path} "
             f"({str(error).splitlines()[0].rstrip(':.')}: another architecture or sizes, "
             "or a fixed-size architecture trained at another number of neurons)",
         ) from None
