@@ -9,6 +9,12 @@ import of the command: a Ctrl-C is one line and exit 130, a bad environment vari
 line and exit 2 (``spikectl.environment``). This module imports only the standard
 library, and nothing imports it: it is a process's entry, not a library.
 
+A Ctrl-C is recognised by the signal, not only by the error it leaves: an extension
+module interrupted while it initialises may replace the KeyboardInterrupt with an error
+of its own and no chain back to it (numpy on Python 3.10: ``PyCapsule_Import could not
+import module "datetime"``). So the launcher's SIGINT handler records the signal, then
+raises KeyboardInterrupt as Python's own handler does.
+
 What it cannot cover is Python's own start, before this module runs (a few tens of
 milliseconds: the interpreter and its ``site`` imports); a Ctrl-C then is Python's.
 """
@@ -22,9 +28,15 @@ import sys
 INTERRUPTED_STARTING = "spikectl: interrupted while starting (nothing was run)"
 INTERRUPTED = "spikectl: interrupted"
 
+_signals_received: list[int] = []  # the SIGINTs this process has had (see _record_interrupt)
+
 
 def main() -> None:
     """Run the ``spikectl`` command on ``sys.argv``; see the module's docstring."""
+    if signal.getsignal(signal.SIGINT) is signal.default_int_handler:
+        # Only where Ctrl-C would interrupt anyway: a job started in the background
+        # ignores SIGINT, and keeps ignoring it.
+        signal.signal(signal.SIGINT, _record_interrupt)
     try:
         from spikectl.cli import main as command  # the package, Numba, tyro, the commands
     except BaseException as error:  # noqa: B036 - a Ctrl-C is the point
@@ -39,14 +51,24 @@ def main() -> None:
         raise
     try:
         command()  # its own Ctrl-C handling: one line and 130 (spikectl.cli.main)
-    except KeyboardInterrupt:  # one that came outside the command's handling
+    except SystemExit:
+        raise
+    except BaseException as error:  # noqa: B036 - a Ctrl-C outside the command's handling
         _ignore_interrupts()
+        if not _interrupted(error):
+            raise
         print(INTERRUPTED, file=sys.stderr)
         raise SystemExit(130) from None
     finally:
         # The command has finished or is exiting: a Ctrl-C from here on, while Python
         # shuts down, would only be a traceback from its exit handlers.
         _ignore_interrupts()
+
+
+def _record_interrupt(signum: int, frame: object) -> None:
+    """Python's default SIGINT handler, which also remembers that the signal came."""
+    _signals_received.append(signum)
+    raise KeyboardInterrupt
 
 
 def _ignore_interrupts() -> None:
@@ -63,9 +85,12 @@ def _exit_now(line: str, code: int) -> None:
 
 
 def _interrupted(error: BaseException | None) -> bool:
-    """Whether ``error`` is, or was caused by, a KeyboardInterrupt (an extension module
-    interrupted while it initialises may report it as the cause of another error).
-    The same test as ``spikectl.cli``'s, which this module cannot import to share."""
+    """Whether a Ctrl-C came, or ``error`` is or was caused by a KeyboardInterrupt (an
+    extension module interrupted while it initialises may report it as the cause of
+    another error, or replace it: see the module's docstring). The chain test is
+    ``spikectl.cli``'s, which this module cannot import to share."""
+    if _signals_received:
+        return True
     seen = set()
     while error is not None and id(error) not in seen:
         if isinstance(error, KeyboardInterrupt):

@@ -192,3 +192,41 @@ def test_ctrl_c_at_any_moment_after_python_started_is_one_line(delay_s):
     else:
         assert process.returncode == 130, err
         assert len(err.splitlines()) == 1 and err.startswith("spikectl: interrupted"), err
+
+
+# A stand-in for an extension module that, interrupted while it initialises, replaces the
+# KeyboardInterrupt with an error of its own and no chain back to it (numpy does so on
+# Python 3.10: "PyCapsule_Import could not import module 'datetime'").
+SWALLOWING_IMPORT = (
+    "import os, signal\n"
+    "try:\n"
+    "    os.kill(os.getpid(), signal.SIGINT)\n"
+    "    import time; time.sleep(5)\n"
+    "except BaseException:\n"
+    "    pass\n"
+    "raise ImportError('could not import module \"datetime\"')\n"
+)
+
+
+@pytest.mark.parametrize("where", ["spikectl.cli", "the command"])
+def test_ctrl_c_an_import_turned_into_another_error_is_still_one_line(tmp_path, where):
+    """The launcher knows a Ctrl-C by its signal, whatever error the import left."""
+    package = tmp_path / "spikectl"
+    (package / "cli").mkdir(parents=True)
+    (package / "__init__.py").write_text("")
+    if where == "spikectl.cli":
+        (package / "cli" / "__init__.py").write_text(SWALLOWING_IMPORT)
+        expected = "spikectl: interrupted while starting (nothing was run)\n"
+    else:  # a library the command imports only when it runs
+        (package / "cli" / "__init__.py").write_text("def main():\n    import swallowing\n")
+        (tmp_path / "swallowing.py").write_text(SWALLOWING_IMPORT)
+        expected = "spikectl: interrupted\n"
+    launcher = Path(__file__).resolve().parents[1]
+    process = spikectl_command(
+        "--help",
+        env={"PYTHONPATH": os.pathsep.join([str(tmp_path), str(launcher)])},
+        cwd=tmp_path,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    out, err = process.communicate(timeout=60)
+    assert (process.returncode, err, out) == (130, expected, "")
