@@ -30,6 +30,10 @@ CLAIMS = {
     "curriculum-n32-pilot": "The main job's n = 8 network fine-tuned at n = 32 with its "
     "teacher (1 seed, 25 core-minutes): never above its zero-shot start (0.622 test); teacher "
     "agreement stays 0.35-0.37",
+    "student-n32-diagnosis": "Why the student does not follow its teacher at 32 neurons "
+    "(validation): it does not identify the target's inputs (16-26% of its stimulations where "
+    "the planner plans are true inputs, against 57-59%); the distance prior is worth -0.015 "
+    "[-0.050, +0.022] to the planner itself",
     "ddrqn-paper-update-ratio": "DDRQN at the paper's update ratio finished (1 M steps, 1 seed): "
     "0.654 train / 0.621 unseen, below TDRQN's 0.833 / 0.800",
     "tdrqn-paper-update-ratio": "TDRQN with the paper's 2 updates per episode reaches 0.833 train "
