@@ -263,7 +263,7 @@ def test_named_controller_takes_the_environments_observation_model():
     teacher) on the paper's environment."""
     from spikectl.contexts import make_splits
     from spikectl.envs.env import NeuronControlEnv
-    from spikectl.planning.policy import environment_settings
+    from spikectl.planning.policy import KNOWN_SD_LARGE, environment_settings
     from spikectl.training.controllers import load_controller
 
     contexts, _ = make_splits(2, 1, 8, 60, seed=5)
@@ -275,19 +275,24 @@ def test_named_controller_takes_the_environments_observation_model():
     assert controller.extensions == noisy and controller.noise_mV == 2.0
     plain = load_controller("identify-and-plan", env=NeuronControlEnv(contexts=contexts))
     assert plain.identification == "gaussian" and not plain.filter_voltage
+    assert plain.known_sd == 0.25 and controller.known_sd == 0.25
     assert environment_settings(Extensions(hidden_fraction=0.25)) == {}
-    assert environment_settings(Extensions(background_rate=0.005)) == {}
+    assert environment_settings(Extensions(threshold_spread=0.1)) == {}
+    assert environment_settings(Extensions(background_rate=0.005)) == {"known_sd": 0.35}
     stochastic = Extensions(stochastic_release=True)
-    assert environment_settings(stochastic) == {"extensions": stochastic}
+    assert environment_settings(stochastic) == {"extensions": stochastic, "known_sd": 0.4}
     assert plain.gamble_networks == 0  # n = 8: no QMDP
-    # From 16 observed neurons on, QMDP where it would probe, beside the observation model.
+    # From 16 observed neurons on, QMDP where it would probe and an earlier commitment,
+    # beside the observation model.
     large, _ = make_splits(2, 1, 16, 60, seed=5)
     controller = load_controller("identify-and-plan", contexts=large)
     assert controller.gamble_networks == 16 and controller.identification == "gaussian"
+    assert controller.known_sd == KNOWN_SD_LARGE
     assert environment_settings(noisy, 32) == {
         "identification": "bayes", "extensions": noisy, "filter_voltage": True,
-        "gamble_networks": 16,
+        "gamble_networks": 16, "known_sd": KNOWN_SD_LARGE,
     }  # fmt: skip
+    assert environment_settings(stochastic, 16)["known_sd"] == KNOWN_SD_LARGE
     assert environment_settings(None, 15) == {} and environment_settings(None, 16) != {}
 
 
