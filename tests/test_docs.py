@@ -158,7 +158,11 @@ def doc_pages() -> list[Path]:
 def test_the_research_index_lists_every_results_folder():
     index = (ROOT / "docs" / "research" / "index.md").read_text()
     listed = set(re.findall(r"^\| \[([\w.-]+)\]\(\.\./results/\1/\)", index, flags=re.MULTILINE))
-    folders = {path.name for path in (ROOT / "docs" / "results").iterdir() if path.is_dir()}
+    folders = {
+        path.name
+        for path in (ROOT / "docs" / "results").iterdir()
+        if path.is_dir() and not path.name.startswith(("_", "."))
+    }  # not __pycache__
     assert folders - listed == set(), "docs/research/index.md lacks these results folders"
     assert listed - folders == set(), "docs/research/index.md lists folders that do not exist"
 

@@ -52,7 +52,18 @@ for task in n16 n32; do
     spikectl benchmark identify-and-plan --task $task --out $here/test-benchmark-$task.csv \
         --per-network $here/test-benchmark-$task-per-network.csv
 done
-# A later session (choices on validation only): when a weight counts as known
+# A later session (choices on validation only): when a weight counts as known. First the
+# constructor's planner alone (no QMDP) at n32 (width, horizon, known_sd), then known_sd
+# at n32, n16 and paper (sweeps 13 and 12; what pointed to known_sd).
+python $here/sweep.py --tasks n32 --split validation --settings '{}' '{"width": 64}' \
+    '{"horizon": 30}' '{"horizon": null}' '{"known_sd": 0.15}' '{"known_sd": 0.35}' \
+    '{"width": 16}' '{"horizon": 10}' \
+    --out $here/validation-sweep13.csv --per-network $here/validation-sweep13-per-network.csv
+python $here/sweep.py --tasks n32 n16 paper --split validation --settings '{}' \
+    '{"known_sd": 0.3}' '{"known_sd": 0.35}' '{"known_sd": 0.4}' '{"known_sd": 0.45}' \
+    '{"known_sd": 0.55}' \
+    --out $here/validation-sweep12.csv --per-network $here/validation-sweep12-per-network.csv
+# Then on top of what the named controller plays (when a weight counts as known
 # (known_sd; the constructor's 0.25) on top of what the named controller plays, on every
 # task. Taken: 0.35 from 16 neurons on (the best mean over n16 and n32, with QMDP),
 # 0.4 under stochastic release, 0.35 under background input (paired intervals above 0);
