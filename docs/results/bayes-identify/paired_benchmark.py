@@ -25,6 +25,15 @@ def returns(path: str) -> dict[tuple[str, str], dict[int, float]]:
     return table
 
 
+def paired_cells(difference: np.ndarray) -> str:
+    """``mean [low, high] | better / worse`` of per-network differences new - old."""
+    interval = bootstrap_ci(difference, statistic=np.mean, n_resamples=10_000, rng=0)
+    return (
+        f"{interval.estimate:+.3f} [{interval.low:+.3f}, {interval.high:+.3f}] | "
+        f"{(difference > 1e-12).sum()} / {(difference < -1e-12).sum()}"
+    )
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("old")
@@ -41,12 +50,9 @@ def main() -> None:
         if sorted(a) != sorted(b):
             raise SystemExit(f"{key[0]} {key[1]}: the two files hold different networks")
         difference = np.array([b[c] - a[c] for c in sorted(a)])
-        interval = bootstrap_ci(difference, statistic=np.mean, n_resamples=10_000, rng=0)
         print(
             f"| `{key[0]}` | {key[1]} | {np.mean(list(a.values())):.3f} | "
-            f"{np.mean(list(b.values())):.3f} | {interval.estimate:+.3f} "
-            f"[{interval.low:+.3f}, {interval.high:+.3f}] | "
-            f"{(difference > 1e-12).sum()} / {(difference < -1e-12).sum()} |"
+            f"{np.mean(list(b.values())):.3f} | {paired_cells(difference)} |"
         )
 
 

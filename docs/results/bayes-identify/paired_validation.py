@@ -11,8 +11,7 @@ import csv
 from pathlib import Path
 
 import numpy as np
-
-from spikectl.experiments.stats import bootstrap_ci
+from paired_benchmark import paired_cells  # beside this script
 
 HERE = Path(__file__).resolve().parent
 BEFORE = '{"gamble_networks": 16}'
@@ -33,11 +32,9 @@ def main() -> None:
             if name != task or settings == BEFORE:
                 continue
             difference = np.array([after[c] - before[c] for c in sorted(before)])
-            interval = bootstrap_ci(difference, statistic=np.mean, n_resamples=10_000, rng=0)
             print(
                 f"| `{task}` | `{settings}` | {np.mean(list(after.values())):.3f} | "
-                f"{interval.estimate:+.3f} [{interval.low:+.3f}, {interval.high:+.3f}] | "
-                f"{(difference > 1e-12).sum()} / {(difference < -1e-12).sum()} |"
+                f"{paired_cells(difference)} |"
             )
 
 
