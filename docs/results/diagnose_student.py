@@ -16,7 +16,7 @@ import numpy as np
 import torch
 
 from spikectl import IdentifyAndPlan, make_splits
-from spikectl.envs.controller import batched
+from spikectl.envs.controller import Copies
 from spikectl.envs.env_support import step_rewards
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.training.controllers import load_controller
@@ -26,12 +26,14 @@ DO_NOTHING = -1
 
 
 class BesidePlanner:
-    """The student acts; identify-and-plan reads the same observations (which include
-    the action taken) and says what it would have done at every step."""
+    """The student acts; identify-and-plan (a copy per network) reads the same
+    observations (which include the action taken) and says what it would have done at
+    every step, and whether that is a probe (the copy's ``probes`` counter moves).
+    ``steps`` holds (step, chosen [S], planned [S], probed [S]) per step."""
 
     def __init__(self, student) -> None:
-        self.student, self.planner = student, batched(IdentifyAndPlan())
-        self.steps: list[tuple[int, np.ndarray, np.ndarray]] = []
+        self.student, self.planner = student, Copies(IdentifyAndPlan())
+        self.steps: list[tuple[int, np.ndarray, np.ndarray, np.ndarray]] = []
 
     def reset(self) -> None:
         self.student.reset()
@@ -39,8 +41,10 @@ class BesidePlanner:
 
     def act_batch(self, observations, infos) -> np.ndarray:
         chosen = self.student.act_batch(observations, infos)  # [S]
+        before = np.array([copy.probes for copy in self.planner.copies] or [0] * len(chosen))
         planned = self.planner.act_batch(observations, infos)  # [S]
-        self.steps.append((int(observations["step"][0]), chosen, planned))
+        probed = np.array([copy.probes for copy in self.planner.copies]) > before
+        self.steps.append((int(observations["step"][0]), chosen, planned, probed))
         return chosen
 
     def act(self, observation, info) -> int:
@@ -88,8 +92,8 @@ def main() -> None:
             f"{(difference > 0.01).sum()}, worse on {(difference < -0.01).sum()} networks"
         )
         for low, high in zip(STEP_BINS[:-1], STEP_BINS[1:], strict=True):
-            chosen = np.concatenate([c for step, c, _ in beside.steps if low <= step < high])
-            planned = np.concatenate([p for step, _, p in beside.steps if low <= step < high])
+            chosen = np.concatenate([c for step, c, _, _ in beside.steps if low <= step < high])
+            planned = np.concatenate([p for step, _, p, _ in beside.steps if low <= step < high])
             passive = (chosen == DO_NOTHING) & (planned != DO_NOTHING)
             print(
                 f"  steps {low:>2}-{high - 1:<2}: "

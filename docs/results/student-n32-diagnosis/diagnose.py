@@ -19,43 +19,21 @@ another size on the task's size (per-neuron networks).
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import numpy as np
 import torch
 
 from spikectl import IdentifyAndPlan
 from spikectl.agents.greedy import GreedyController
-from spikectl.envs.controller import Copies
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments.suite import load_split
 from spikectl.training.controllers import load_agent
 
-DO_NOTHING = -1
-
-
-class BesidePlanner:
-    """The student acts; a copy of identify-and-plan per network says what it would do,
-    and whether that is a probe (its ``probes`` counter moves)."""
-
-    def __init__(self, student) -> None:
-        self.student, self.planner = student, Copies(IdentifyAndPlan())
-        self.records: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = []
-
-    def reset(self) -> None:
-        self.student.reset()
-        self.planner.reset()
-
-    def act_batch(self, observations, infos) -> np.ndarray:
-        chosen = self.student.act_batch(observations, infos)  # [S]
-        before = np.array([copy.probes for copy in self.planner.copies] or [0] * len(chosen))
-        planned = self.planner.act_batch(observations, infos)  # [S]
-        after = np.array([copy.probes for copy in self.planner.copies])
-        step = np.asarray(observations["step"])  # [S]
-        self.records.append((step, chosen, planned, after > before))
-        return chosen
-
-    def act(self, observation, info) -> int:
-        raise NotImplementedError("played on the vector environment only")
+# The student beside its teacher, as the diagnosis at 8 neurons plays them.
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from diagnose_student import DO_NOTHING, BesidePlanner  # noqa: E402
 
 
 def excitatory_inputs(contexts) -> np.ndarray:
@@ -79,10 +57,11 @@ def share(mask: np.ndarray, of: np.ndarray) -> str:
 def report(
     name: str, beside: BesidePlanner, returns: np.ndarray, inputs: np.ndarray, second: np.ndarray
 ) -> None:
-    steps, chosen, planned, probe = (
-        np.concatenate([record[i] for record in beside.records]) for i in range(4)
+    chosen, planned, probe = (
+        np.concatenate([record[i] for record in beside.steps]) for i in (1, 2, 3)
     )  # each [steps x networks], step-major
-    network = np.concatenate([np.arange(len(record[1])) for record in beside.records])
+    steps = np.concatenate([np.full(len(record[1]), record[0]) for record in beside.steps])
+    network = np.concatenate([np.arange(len(record[1])) for record in beside.steps])
 
     def hits(actions: np.ndarray, of: np.ndarray) -> np.ndarray:
         return (actions != DO_NOTHING) & of[network, np.maximum(actions, 0)]
