@@ -15,6 +15,7 @@ import numpy as np
 
 from spikectl import IdentifyAndPlan
 from spikectl.envs.rollout import evaluate_policy
+from spikectl.experiments.stats import bootstrap_ci
 from spikectl.experiments.suite import load_split
 from spikectl.planning import identify
 
@@ -38,10 +39,8 @@ def main() -> None:
         identify.connection_probability = by_distance
         identify.ConnectivityEstimate._PRIORS.clear()
     difference = without - with_prior
-    rng = np.random.default_rng(0)
-    means = [difference[rng.integers(0, len(difference), len(difference))].mean()
-             for _ in range(10_000)]  # fmt: skip
-    low, high = np.percentile(means, [2.5, 97.5])
+    interval = bootstrap_ci(difference, statistic=np.mean, n_resamples=10_000, rng=0)
+    low, high = interval.low, interval.high
     print(
         f"{args.task} validation ({len(contexts)} networks, n = {n}): with the distance "
         f"prior {with_prior.mean():.3f}, every pair alike (p = {mean_probability:.3f}) "
