@@ -13,6 +13,10 @@ import torch.nn.functional as F
 
 from spikectl.agents.spikes import VISIBLE_SPIKE_LEVEL
 
+BELIEF_WIDTH = 3
+"""Features per neuron in the ``belief`` observation key (``spikectl.planning.belief``'s
+``BELIEF_FEATURES``: excites, inhibits, uncertainty)."""
+
 
 def normalised_voltage(
     voltage: torch.Tensor, v_rest_mV: float, v_threshold_mV: float
@@ -53,11 +57,14 @@ def per_neuron_features(
     dtype: torch.dtype,
     with_target_voltage: bool = False,
     with_others_spiking: bool = False,
+    with_belief: bool = False,
 ) -> torch.Tensor:
     """Per-neuron LSTM input [..., n, F]: normalised V, stimulated at t-1, (is target),
-    (the target's normalised V), (how many other neurons show a spike).
+    (the target's normalised V), (how many other neurons show a spike), (the belief about
+    its synapse onto the target: ``obs["belief"]`` [..., n, BELIEF_WIDTH]).
 
-    F = 2 + with_target + with_target_voltage + with_others_spiking (docs/agents.md). The
+    F = 2 + with_target + with_target_voltage + with_others_spiking
+    + BELIEF_WIDTH·with_belief (docs/agents.md). The
     target's voltage, the same for every neuron, keeps the input permutation equivariant
     and lets each neuron's memory relate its own spikes to the target's response; the
     count of the others' visible spikes tells that memory whether a response that
@@ -74,7 +81,18 @@ def per_neuron_features(
     if with_others_spiking:
         spiking = (voltage >= VISIBLE_SPIKE_LEVEL).to(dtype)  # [..., n]
         columns.append(spiking.sum(-1, keepdim=True) - spiking)  # [..., n]
-    return torch.stack(columns, dim=-1)  # [..., n, F]
+    features = torch.stack(columns, dim=-1)  # [..., n, F - BELIEF_WIDTH·with_belief]
+    if with_belief:
+        belief = obs["belief"].to(dtype)  # [..., n, BELIEF_WIDTH]
+        features = torch.cat([features, belief], dim=-1)  # [..., n, F]
+    return features
+
+
+def per_neuron_feature_count(sizes) -> int:
+    """F of :func:`per_neuron_features` for an :class:`~spikectl.agents.AgentSizes`."""
+    s = sizes
+    flags = s.target_in_input + s.target_voltage_in_input + s.others_spiking_in_input
+    return 2 + flags + BELIEF_WIDTH * s.belief_in_input
 
 
 def system_features(

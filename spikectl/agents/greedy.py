@@ -37,13 +37,20 @@ class GreedyController:
     carrying one recurrent state per episode; every episode of a batch starts at step 0
     together, and a step-0 batch starts from the zero state. ``per_environment``: play
     each sub-environment of a batch alone, each from the zero state at its step 0 (see
-    the module docstring)."""
+    the module docstring). ``belief``: what computes the ``belief`` input of a network
+    built with ``belief_in_input`` (``spikectl.planning.belief.TargetInputBelief``: called
+    on every observation batch, each row its own, ``reset()`` with the controller)."""
 
     def __init__(
-        self, network: torch.nn.Module, device: str = "cpu", per_environment: bool = False
+        self,
+        network: torch.nn.Module,
+        device: str = "cpu",
+        per_environment: bool = False,
+        belief: Any = None,
     ) -> None:
         self.network, self.device, self.state = network, device, None
         self.per_environment = per_environment
+        self.belief = belief
         self.row_states: list[Any] = []
         """The recurrent state of each sub-environment, played alone."""
 
@@ -51,13 +58,15 @@ class GreedyController:
         """Forget the episodes: the next decision starts from the zero state."""
         self.state = None
         self.row_states = []
+        if self.belief is not None:
+            self.belief.reset()
 
     @torch.no_grad()
     def __call__(self, observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
         """int64 [S]: the actions of one batched forward over every row."""
         if self.state is not None and not np.any(observations["step"]):
             self.state = None  # a new batch of episodes
-        obs = observation_batch(observations, self.device)
+        obs = observation_batch(self._with_belief(observations), self.device)
         scores, self.state = self.network.step(obs, self.state)  # [S, n + 1]
         legal = torch.as_tensor(action_mask, device=scores.device)
         return greedy_action(scores, legal).cpu().numpy()  # [S]
@@ -68,6 +77,7 @@ class GreedyController:
         mask = np.asarray(infos["action_mask"], dtype=bool)  # [S, n + 1]
         if not self.per_environment:
             return self(dict(observations), mask)
+        observations = self._with_belief(observations)  # each row its own estimate
         size = mask.shape[0]
         if len(self.row_states) != size:
             self.row_states = [None] * size
@@ -83,8 +93,17 @@ class GreedyController:
         check_controller_input(observation, info, "GreedyController")
         mask = np.asarray(info["action_mask"], dtype=bool)
         state = None if np.asarray(observation["step"]) == 0 else self.state  # a new episode
+        if self.belief is not None:
+            batch = {key: np.asarray(value)[None] for key, value in observation.items()}
+            observation = {**observation, "belief": self.belief(batch)[0]}
         action, self.state = self._alone(observation, mask, state)
         return action
+
+    def _with_belief(self, observations: Mapping[str, Any]) -> dict[str, Any]:
+        """The observation batch with its ``belief`` key where the controller has one."""
+        if self.belief is None:
+            return dict(observations)
+        return {**observations, "belief": self.belief(observations)}
 
     @torch.no_grad()
     def _alone(self, observation: Mapping[str, Any], mask: np.ndarray, state: Any):

@@ -22,6 +22,10 @@ import torch
 OBS_KEYS = ("voltage", "target", "pattern", "step", "last_action")
 """Keys every observation batch must hold (extra keys are ignored)."""
 
+OPTIONAL_KEYS = ("belief",)
+"""Keys a network reads only when its sizes say so (``belief``: float [n, 3], the belief
+about each neuron's synapse onto the target, ``AgentSizes.belief_in_input``)."""
+
 _INDEX_KEYS = ("target", "step", "last_action")
 """The integer-valued keys (int64 once converted)."""
 
@@ -137,18 +141,21 @@ def observation_batch(
     Takes either a sequence of single-environment observations (stacked along a
     new batch dimension) or one already batched dict, as a vector environment
     returns it. The result is what ``network.step`` takes: voltage float32 [B, n],
-    pattern float32 [B, N], and target / step / last_action int64 [B].
+    pattern float32 [B, N], and target / step / last_action int64 [B]; ``belief``
+    float32 [B, n, 3] where the observations hold it.
     """
     if isinstance(observations, Mapping):
         missing = [key for key in OBS_KEYS if key not in observations]
         if missing:
             raise ValueError(f"observation_batch: the batch lacks keys {missing}")
-        arrays = {key: np.asarray(observations[key]) for key in OBS_KEYS}
+        keys = OBS_KEYS + tuple(key for key in OPTIONAL_KEYS if key in observations)
+        arrays = {key: np.asarray(observations[key]) for key in keys}
     else:
         if len(observations) == 0:
             raise ValueError("observation_batch: need at least one observation")
         try:
-            arrays = {key: np.stack([np.asarray(o[key]) for o in observations]) for key in OBS_KEYS}
+            keys = OBS_KEYS + tuple(key for key in OPTIONAL_KEYS if key in observations[0])
+            arrays = {key: np.stack([np.asarray(o[key]) for o in observations]) for key in keys}
         except KeyError as error:
             raise ValueError(f"observation_batch: an observation lacks key {error}") from None
     out: dict[str, torch.Tensor] = {}
@@ -160,7 +167,7 @@ def observation_batch(
 
 def long_indices(obs: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     """The observation with target / step / last_action as int64 (no copy if they are)."""
-    out = {key: obs[key] for key in OBS_KEYS}
+    out = {key: obs[key] for key in OBS_KEYS + OPTIONAL_KEYS if key in obs}
     for key in _INDEX_KEYS:
         out[key] = out[key].long()
     return out

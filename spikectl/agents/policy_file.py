@@ -156,6 +156,11 @@ def _spec_of(network: Any) -> PolicySpec:
             "export_policy: the compiled policy has no LayerNorm in its MLPs "
             "(AgentSizes.layer_norm); play this network with PyTorch"
         )
+    if s.belief_in_input:
+        raise ValueError(
+            "export_policy: the compiled policy does not compute the belief input "
+            "(AgentSizes.belief_in_input); play this network with PyTorch"
+        )
     eps = 1e-5
     if architecture == "tdrqn":
         encoder = network.mixer.encoder

@@ -17,8 +17,14 @@ import torch
 from torch import nn
 
 from spikectl.agents.encoders import PerNeuronLSTM
-from spikectl.agents.features import per_neuron_features
-from spikectl.agents.observation import OBS_KEYS, check_observation, check_state, long_indices
+from spikectl.agents.features import BELIEF_WIDTH, per_neuron_feature_count, per_neuron_features
+from spikectl.agents.observation import (
+    OBS_KEYS,
+    OPTIONAL_KEYS,
+    check_observation,
+    check_state,
+    long_indices,
+)
 from spikectl.agents.sizes import AgentSizes
 from spikectl.neuron.params import NeuronParams
 
@@ -130,7 +136,8 @@ class RecurrentQNetworkBase(nn.Module):
             obs, leading_dims=1, episode_length=self.episode_length, n_neurons=self.fixed_n,
             where=f"{type(self).__name__}.step",
         )  # fmt: skip
-        seq = {key: obs[key].unsqueeze(1) for key in OBS_KEYS}  # [B, 1, ...]
+        keys = OBS_KEYS + tuple(key for key in OPTIONAL_KEYS if key in obs)
+        seq = {key: obs[key].unsqueeze(1) for key in keys}  # [B, 1, ...]
         q, state = self(seq, state)  # q: [B, 1, n+1]
         return q.squeeze(1), state  # [B, n+1]
 
@@ -151,6 +158,22 @@ class RecurrentQNetworkBase(nn.Module):
         return obs_seq, state
 
 
+def check_belief(obs: Observation, network: str) -> None:
+    """A network built with ``belief_in_input`` needs ``obs["belief"]`` [..., n, 3]."""
+    belief, voltage = obs.get("belief"), obs["voltage"]
+    if belief is None:
+        raise ValueError(
+            f"{network}: this network reads obs['belief'] (AgentSizes.belief_in_input), "
+            "which the observations lack; play it with spikectl.load_controller or give "
+            "GreedyController a spikectl.planning.belief.TargetInputBelief"
+        )
+    expected = (*voltage.shape, BELIEF_WIDTH)
+    if tuple(belief.shape) != expected:
+        raise ValueError(
+            f"{network}: obs['belief'] must have shape {list(expected)}, got {list(belief.shape)}"
+        )
+
+
 class PerNeuronMemory(RecurrentQNetworkBase):
     """A network whose memory is the shared per-neuron LSTM (DDRQN, DMDRQN, TDRQN):
     each neuron's features → one LSTM with a state per neuron, (h, c) each [B, n, H]."""
@@ -158,8 +181,7 @@ class PerNeuronMemory(RecurrentQNetworkBase):
     def build_lstm(self) -> PerNeuronLSTM:
         """The LSTM, for ``build`` to register as ``lstm``, first."""
         s = self.sizes
-        features = 2 + s.target_in_input + s.target_voltage_in_input + s.others_spiking_in_input
-        return PerNeuronLSTM(features, s.lstm_hidden)
+        return PerNeuronLSTM(per_neuron_feature_count(s), s.lstm_hidden)
 
     def state_shape(self, batch_size: int, n_neurons: int) -> tuple[int, ...]:
         return batch_size, n_neurons, self.sizes.lstm_hidden
@@ -169,6 +191,8 @@ class PerNeuronMemory(RecurrentQNetworkBase):
         the final state."""
         obs_seq, state = self.checked_inputs(obs_seq, state)
         s = self.sizes
+        if s.belief_in_input:
+            check_belief(obs_seq, type(self).__name__)
         x = per_neuron_features(
             obs_seq,
             v_rest_mV=self.v_rest_mV,
@@ -176,6 +200,7 @@ class PerNeuronMemory(RecurrentQNetworkBase):
             with_target=s.target_in_input,
             with_target_voltage=s.target_voltage_in_input,
             with_others_spiking=s.others_spiking_in_input,
+            with_belief=s.belief_in_input,
             dtype=self.param_dtype(),
         )  # [B, T, n, F]
         return self.lstm(x, state)  # [B, T, n, H], (h, c)

@@ -51,6 +51,10 @@ class AgentSizes:
     """The target's normalised voltage also in each neuron's LSTM input (not in the paper)."""
     others_spiking_in_input: bool = False
     """How many other neurons show a spike, also in each neuron's LSTM input (not in the paper)."""
+    belief_in_input: bool = False
+    """What the observations so far say about each neuron's synapse onto the target (the
+    ``belief`` observation key: ``spikectl.planning.belief``), also in each neuron's LSTM
+    input; per-neuron networks only (not in the paper)."""
     layer_norm: bool = False
     """LayerNorm in every hidden layer of the Q heads and FF blocks (PQN; not in the paper)."""
 
@@ -84,6 +88,7 @@ class AgentSizes:
             "target_in_input",
             "target_voltage_in_input",
             "others_spiking_in_input",
+            "belief_in_input",
             "layer_norm",
         ):
             if not isinstance(getattr(self, name), bool):

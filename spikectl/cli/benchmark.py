@@ -182,16 +182,19 @@ def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
         torch.set_num_threads(command.torch_threads)
 
         def trained(name: str):
-            from spikectl.agents.greedy import GreedyController
+            from spikectl.training.greedy import greedy_controller
 
-            network = load_agent(source, n_neurons=suite.task(name).n_observed,
-                                 model=command.model)  # fmt: skip
+            task = suite.task(name)
+            network = load_agent(source, n_neurons=task.n_observed, model=command.model)
             if command.compiled:
                 from spikectl.agents.compiled import CompiledPolicy
 
                 policy = CompiledPolicy.from_network(network)
                 return lambda seed: policy
-            return lambda seed: GreedyController(network, per_environment=command.per_environment)
+            noise_mV = task.extensions.observation_noise_mV  # the belief's, where it reads one
+            return lambda seed: greedy_controller(
+                network, None, noise_mV, per_environment=command.per_environment
+            )
 
         return trained
     controller = load_controller(command.controller)  # a compiled policy file, or refused

@@ -40,6 +40,14 @@ erfc = np.vectorize(_erfc, otypes=[np.float64])
 NOISE_FREE_SD = 0.01
 
 
+def residual_sd(params: NeuronParams, noise_mV: float) -> float:
+    """The residual noise (in units of w_in) of one observation under Gaussian measurement
+    noise of ``noise_mV``: a residual differences two noisy observations, the older one
+    shrunk by the leak; at least :data:`NOISE_FREE_SD`."""
+    noise_sd = noise_mV * np.hypot(1.0, 1.0 - params.leak_per_step) / params.synaptic_step_mV
+    return max(float(noise_sd), NOISE_FREE_SD)
+
+
 class ConnectivityEstimate:
     """Gaussian posterior over the signed weights G [n, n] in units of w_in.
 
@@ -99,6 +107,15 @@ class ConnectivityEstimate:
             sd = np.sqrt(np.diagonal(covariance, axis1=1, axis2=2))  # [post, pre]
             self._cache = (mean.T.copy(), sd.T.copy())
         return self._cache
+
+    def column(self, post: int) -> tuple[np.ndarray, np.ndarray]:
+        """(mean, standard deviation) of column ``post`` of G, both [n (pre)]: the
+        posterior's (to rounding), for the price of one [n, n] inverse."""
+        if self._cache is not None:
+            mean, sd = self._cache
+            return mean[:, post].copy(), sd[:, post].copy()
+        covariance = np.linalg.inv(self.precision[post])  # [pre, pre]
+        return covariance @ self.moment[post], np.sqrt(np.diagonal(covariance)).copy()
 
     def weights(self, known_sd: float) -> tuple[np.ndarray, np.ndarray]:
         """(signed weights [n, n] in {-1, 0, +1} to plan with, known [n, n] bool).

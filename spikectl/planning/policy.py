@@ -44,10 +44,10 @@ from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.discrete import DiscreteConnectivityEstimate, column_hypotheses_fit
 from spikectl.planning.filtering import FilteredState
 from spikectl.planning.identify import (
-    NOISE_FREE_SD,
     ConnectivityEstimate,
     KnownConnectivity,
     ObservedState,
+    residual_sd,
 )
 from spikectl.planning.qmdp import qmdp_action
 
@@ -280,9 +280,7 @@ class IdentifyAndPlan:
         # A plan is renewed when less than half its horizon is left, so that a wanted
         # spike just past its end is seen in time (a receding horizon).
         self._replan_margin = 1 if horizon is None else max(1, horizon // 2)
-        # The residual differences two noisy observations, the older one shrunk by the leak.
-        noise_sd = noise_mV * np.hypot(1.0, 1.0 - params.leak_per_step) / params.synaptic_step_mV
-        self._residual_sd = max(noise_sd, NOISE_FREE_SD)
+        self._residual_sd = residual_sd(params, noise_mV)
         self.reset()
 
     def reset(self) -> None:

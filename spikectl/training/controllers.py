@@ -142,9 +142,15 @@ def load_controller(
     if path.is_dir():
         network = load_agent(path, model=model)
         if not compiled:
-            from spikectl.agents.greedy import GreedyController
+            from spikectl.training.greedy import greedy_controller
+            from spikectl.training.run_files import read_config
 
-            return GreedyController(network, per_environment=per_environment)
+            if env is None and contexts is None and params is None:
+                env_config = read_config(path).env  # the run's own environment
+                params, noise_mV = env_config.params, env_config.extensions.observation_noise_mV
+            else:
+                _, params, noise_mV, _, _ = _played_on(env, contexts, params)
+            return greedy_controller(network, params, noise_mV, per_environment=per_environment)
         from spikectl.agents.compiled import CompiledPolicy
         from spikectl.agents.policy_file import PolicyFileError
 
@@ -157,9 +163,11 @@ def load_controller(
     return CompiledPolicy.load(path)
 
 
-def _named(
-    name: str, env: Any, contexts: ContextSet | None, params: NeuronParams | None, seed: int
-) -> Controller:
+def _played_on(
+    env: Any, contexts: ContextSet | None, params: NeuronParams | None
+) -> tuple[ContextSet | None, NeuronParams | None, float, bool, Any]:
+    """(contexts, params, noise_mV, allow_target, extensions) of what a controller plays:
+    ``env``'s where it is given, else ``contexts``', else ``params`` alone."""
     noise_mV, allow_target, extensions = 0.0, False, None
     if env is not None:
         unwrapped = getattr(env, "unwrapped", env)
@@ -180,6 +188,13 @@ def _named(
             contexts.check_params(params, "params=", "the controller plays the contexts' own: "
                                   "leave params out")  # fmt: skip
         params = contexts.params
+    return contexts, params, noise_mV, allow_target, extensions
+
+
+def _named(
+    name: str, env: Any, contexts: ContextSet | None, params: NeuronParams | None, seed: int
+) -> Controller:
+    contexts, params, noise_mV, allow_target, extensions = _played_on(env, contexts, params)
     if name in PRIVILEGED and contexts is None:
         raise ValueError(
             f"the {name} controller replays a known answer per context: give env= or contexts="

@@ -1,4 +1,5 @@
-"""Greedy evaluation of a trained network during training: the training loop's scores."""
+"""A trained network as a greedy controller, with the inputs it reads computed beside it,
+and its greedy evaluation during training: the training loop's scores."""
 
 from __future__ import annotations
 
@@ -8,6 +9,36 @@ import torch
 from spikectl.agents.greedy import GreedyController
 from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.neuron.params import NeuronParams
+from spikectl.planning.belief import TargetInputBelief
+
+
+def belief_input(
+    network: torch.nn.Module, params: NeuronParams | None, noise_mV: float
+) -> TargetInputBelief | None:
+    """What computes ``network``'s ``belief`` input (``AgentSizes.belief_in_input``) on an
+    environment with neuron model ``params`` (None: the paper's) and measurement noise
+    ``noise_mV``; None for a network that does not read it."""
+    sizes = getattr(network, "sizes", None)
+    if sizes is None or not sizes.belief_in_input:
+        return None
+    return TargetInputBelief(params or NeuronParams(), noise_mV)
+
+
+def greedy_controller(
+    network: torch.nn.Module,
+    params: NeuronParams | None,
+    noise_mV: float,
+    device: str = "cpu",
+    per_environment: bool = False,
+) -> GreedyController:
+    """``GreedyController(network)`` for an environment with ``params`` and ``noise_mV``:
+    every route that plays a trained network (training, ``spikectl evaluate``,
+    ``spikectl benchmark``, ``load_controller``) builds it here, so a network that reads
+    the belief gets it everywhere."""
+    return GreedyController(
+        network, device, per_environment, belief=belief_input(network, params, noise_mV)
+    )
 
 
 def greedy_returns(
@@ -17,6 +48,7 @@ def greedy_returns(
     environment's own draws (noise, ...) start from ``seed`` every time."""
     network.eval()
     env.reset(seed=seed)
-    episodes = run_episodes(env, np.arange(env.num_envs), GreedyController(network, device))
+    controller = greedy_controller(network, env.params, env.extensions.observation_noise_mV, device)
+    episodes = run_episodes(env, np.arange(env.num_envs), controller)
     network.train()
     return float(episodes.returns.mean())

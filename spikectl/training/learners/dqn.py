@@ -19,8 +19,11 @@ from typing import Any
 import numpy as np
 import torch
 
+from spikectl.agents.features import BELIEF_WIDTH
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
+from spikectl.planning.belief import episode_beliefs
+from spikectl.training.greedy import belief_input
 from spikectl.training.learners.dqn_losses import soft_update, training_losses
 from spikectl.training.learners.q_learning import (
     QLearner,
@@ -50,6 +53,10 @@ class DQNLearner(QLearner):
         self.network, self.target = build_networks(config)
         self.predictor = build_predictor(config, self.network)
         self.connectivity_head = self.build_connectivity_head(config)
+        self.belief = belief_input(
+            self.network, config.env.params, config.env.extensions.observation_noise_mV
+        )
+        """What computes the network's belief input (None where it reads none)."""
         self.trained = [
             parameter
             for module in (self.network, self.predictor, self.connectivity_head)
@@ -60,6 +67,7 @@ class DQNLearner(QLearner):
         self.replay = EpisodeReplay(
             self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
             labelled=self.labelled_replay, privileged=self.connectivity_head is not None,
+            belief_width=0 if self.belief is None else BELIEF_WIDTH,
         )  # fmt: skip
         self.targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
         self.patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
@@ -72,9 +80,24 @@ class DQNLearner(QLearner):
         return None
 
     def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
+        self.add_to_replay(episodes, contexts)
+
+    def add_to_replay(
+        self,
+        episodes: EpisodeBatch,
+        contexts: np.ndarray,
+        labels: np.ndarray | None = None,
+        target_inputs: np.ndarray | None = None,
+    ) -> None:
+        """Store finished episodes (with the belief input at each of their observations,
+        computed again from them: the numbers the policy read, whoever played)."""
+        targets = self.targets[contexts]
+        beliefs = None
+        if self.belief is not None:
+            beliefs = episode_beliefs(self.belief, episodes.voltage, episodes.actions, targets)
         self.replay.add(
-            episodes.voltage, episodes.actions, episodes.rewards, self.targets[contexts],
-            self.patterns[contexts], episodes.action_mask,
+            episodes.voltage, episodes.actions, episodes.rewards, targets,
+            self.patterns[contexts], episodes.action_mask, labels, target_inputs, beliefs,
         )  # fmt: skip
 
     def update(self, episode: int) -> None:

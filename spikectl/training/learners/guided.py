@@ -141,10 +141,7 @@ class GuidedDQNLearner(DQNLearner):
             )  # fmt: skip
             self.teacher_seconds += time.process_time() - started
         privileged = None if self.connectivity_head is None else self.target_inputs[contexts]
-        self.replay.add(
-            episodes.voltage, episodes.actions, episodes.rewards, self.targets[contexts],
-            self.patterns[contexts], episodes.action_mask, labels, privileged,
-        )  # fmt: skip
+        self.add_to_replay(episodes, contexts, labels, privileged)
 
     def batch_loss(self, batch, episode: int) -> torch.Tensor:
         weight = self.imitation_weight(episode)
