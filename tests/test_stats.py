@@ -107,3 +107,14 @@ def test_summarise():
     assert summary["std"] == pytest.approx(np.std([0.2, 0.4, 0.6, 0.8]))
     assert summary["iqm"] == pytest.approx(0.5)
     assert summary["iqm_low"] <= 0.5 <= summary["iqm_high"]
+
+
+def test_paired_difference_cells_give_the_mean_its_interval_and_the_counts_each_way():
+    from spikectl.experiments.stats import paired_difference_cells
+
+    assert paired_difference_cells([0.02] * 5) == "+0.020 [+0.020, +0.020] | 5 / 0"
+    cells = paired_difference_cells([0.1, 0.1, -0.1, 0.0])
+    estimate, counts = cells.split(" | ")
+    assert estimate.startswith("+0.025 [") and counts == "2 / 1"
+    low, high = (float(x) for x in estimate[8:-1].split(", "))
+    assert -0.1 <= low < 0.025 < high <= 0.1

@@ -123,6 +123,18 @@ def bootstrap_ci(
     return Interval(estimate, float(low), float(high))
 
 
+def paired_difference_cells(difference, n_resamples: int = 10_000, rng: int = 0) -> str:
+    """Two table cells for per-network differences ``new - old`` of two controllers on
+    the same networks: ``mean [low, high] | better / worse``, the mean with its 95%
+    bootstrap interval over the networks and how many networks each way."""
+    difference = _scores(difference, "difference")
+    interval = bootstrap_ci(difference, statistic=np.mean, n_resamples=n_resamples, rng=rng)
+    return (
+        f"{interval.estimate:+.3f} [{interval.low:+.3f}, {interval.high:+.3f}] | "
+        f"{(difference > 1e-12).sum()} / {(difference < -1e-12).sum()}"
+    )
+
+
 def summarise(
     values,
     n_resamples: int = 2000,

@@ -12,7 +12,7 @@ import csv
 
 import numpy as np
 
-from spikectl.experiments.stats import bootstrap_ci
+from spikectl.experiments.stats import paired_difference_cells as paired_cells
 
 
 def returns(path: str) -> dict[tuple[str, str], dict[int, float]]:
@@ -23,15 +23,6 @@ def returns(path: str) -> dict[tuple[str, str], dict[int, float]]:
                 row["return"]
             )
     return table
-
-
-def paired_cells(difference: np.ndarray) -> str:
-    """``mean [low, high] | better / worse`` of per-network differences new - old."""
-    interval = bootstrap_ci(difference, statistic=np.mean, n_resamples=10_000, rng=0)
-    return (
-        f"{interval.estimate:+.3f} [{interval.low:+.3f}, {interval.high:+.3f}] | "
-        f"{(difference > 1e-12).sum()} / {(difference < -1e-12).sum()}"
-    )
 
 
 def main() -> None:
