@@ -19,6 +19,11 @@ CLAIM_CHARS = 220
 # Folders whose first commits' subjects name something else (a folder committed beside
 # another change): their claim as the commit that reported the result stated it.
 CLAIMS = {
+    "belief-input": "identify-and-plan's belief about the target's inputs as the student's "
+    "input (3 seeds, validation): no change on the paper's task (-0.000 [-0.014, +0.014]), "
+    "+0.018 [-0.008, +0.043] played at n32, +0.035 [+0.016, +0.053] on heterogeneous "
+    "neurons; fine-tuned at 32 it follows its teacher more (0.50-0.53 against 0.35-0.37) "
+    "but never beats its zero-shot start",
     "bayes-identify": "identify-and-plan's Bayes observation models chosen on validation and "
     "played once on the suite's test sets: stochastic 0.505 -> 0.618 normalised, noise tasks "
     "unchanged within noise, suite mean 0.557 -> 0.567; then QMDP from 16 neurons on: n16 "
