@@ -3,10 +3,12 @@
 ``plan_episode`` knows a context's weights and searches action sequences with the
 batched simulator (the headroom of a network); ``IdentifyAndPlan`` knows only the
 neuron model, estimates the connectivity from what it observes and plans on its
-estimate every step. See docs/baselines.md.
+estimate every step. See docs/baselines.md. ``TargetInputBelief`` gives that estimate of
+the target's inputs to a learned policy (docs/agents.md).
 """
 
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
+from spikectl.planning.belief import TargetInputBelief, episode_beliefs
 from spikectl.planning.discrete import DiscreteConnectivityEstimate
 from spikectl.planning.identify import ConnectivityEstimate, ObservedState
 from spikectl.planning.oracle import (
@@ -26,7 +28,9 @@ __all__ = [
     "OraclePlanner",
     "Plan",
     "PlanningModel",
+    "TargetInputBelief",
     "beam_search",
+    "episode_beliefs",
     "model_of_context",
     "plan_episode",
 ]
