@@ -31,11 +31,11 @@ from pathlib import Path
 
 import numpy as np
 
-from spikectl.agents.greedy import GreedyController
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.experiments import suite
 from spikectl.files import atomic_write_text
 from spikectl.training.controllers import load_agent, load_controller
+from spikectl.training.greedy import greedy_controller
 
 HERE = Path(__file__).resolve().parent
 SEEDS = (0, 1, 2)
@@ -67,7 +67,8 @@ def seed_returns(preset: str, trained_on: str, seed: int, task: str) -> np.ndarr
         return committed_returns(kept, task)
     run = Path(f"runs/suite/{preset}/{trained_on}/seed={seed}")
     network = load_agent(run, n_neurons=suite.task(task).n_observed, model="best")
-    return suite.play(task, "test", GreedyController(network))[0]
+    noise_mV = suite.task(task).extensions.observation_noise_mV
+    return suite.play(task, "test", greedy_controller(network, None, noise_mV))[0]
 
 
 def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:
