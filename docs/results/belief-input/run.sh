@@ -42,3 +42,14 @@ python docs/results/student-n32-diagnosis/diagnose.py --task paper \
     --run "$runs/n8-seed1" --run "$runs/n8-seed2" > $here/diagnose-paper.txt
 python docs/results/student-n32-diagnosis/diagnose.py --task n32 \
     --run "$runs/n8-seed1:32" --run "$runs/n32-ft-seed0" > $here/diagnose-n32.txt
+
+# 5. The do-nothing value lowered by delta at play time (no retraining); RUN_N8_SEEDS are
+#    the main job's seeds without the belief.
+r8=(--run "$runs/n8-seed0" --run "$runs/n8-seed1" --run "$runs/n8-seed2"
+    --run "$RUN_N8_SEED0" --run "$RUN_N8_SEED1" --run "$RUN_N8_SEED2")
+r32=(); for ((i = 1; i < ${#r8[@]}; i += 2)); do r32+=(--run "${r8[i]}:32"); done
+{
+    python $here/do_nothing_bias.py --task paper "${r8[@]}" --delta 0 0.01 0.02 0.03 0.04 0.05 0.07
+    echo
+    python $here/do_nothing_bias.py --task n32 "${r32[@]}" --delta 0 0.01 0.02 0.03 0.05 0.07 0.1
+} > $here/do-nothing-bias.txt
