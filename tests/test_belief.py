@@ -187,11 +187,29 @@ def test_training_with_the_belief_is_scored_again_exactly_by_evaluate(tmp_path):
     assert isinstance(loaded.belief, TargetInputBelief)
 
 
-def test_learners_that_cannot_store_the_belief_refuse_it(tmp_path):
+def test_learners_that_cannot_store_the_belief_refuse_it():
     from test_pqn import pqn
 
-    from spikectl.training.run import train
+    with pytest.raises(ValueError, match="belief_in_input needs a learner that stores it"):
+        pqn(SMOKE.with_changes({"agent.sizes.belief_in_input": True}))
+    with pytest.raises(ValueError, match="belief_in_input is read by the per-neuron"):
+        SMOKE.with_changes({"agent.sizes.belief_in_input": True, "agent.arch": "drqn"})
 
-    config = pqn(SMOKE.with_changes({"agent.sizes.belief_in_input": True}))
-    with pytest.raises(ValueError, match="belief_in_input"):
-        train(config, tmp_path / "run")
+
+@pytest.mark.parametrize(
+    "flags, problem",
+    [(["pqn", "--sizes.belief-in-input"], "belief-in-input needs a learner that stores it"),
+     (["guided", "--arch", "drqn", "--sizes.belief-in-input"], "not by drqn"),
+     (["quick", "--sizes.belief-in-input", "--seeds", "0", "1", "--stacked"],
+      "does not compute the belief input")],
+)  # fmt: skip
+def test_the_cli_refuses_what_cannot_read_the_belief_before_making_a_run(
+    flags, problem, tmp_path, run_cli
+):
+    run = tmp_path / "run"
+    result = run_cli("train", *flags, "--total-env-steps", "2000", "--run-dir", str(run),
+                     check=False)  # fmt: skip
+    assert result.returncode == 2, result.stderr
+    lines = result.stderr.strip().splitlines()
+    assert problem in lines[-1] and lines[-1].startswith("spikectl: error:")
+    assert not run.exists()

@@ -33,7 +33,6 @@ from spikectl.agents.recurrent import voltage_range as voltage_range
 from spikectl.agents.sizes import ARCHITECTURES, AgentSizes
 from spikectl.agents.sizes import Architecture as Architecture
 from spikectl.agents.system_networks import DMDRQN, DRQN
-from spikectl.config_errors import ConfigError
 from spikectl.neuron.params import NeuronParams
 
 AGENTS: dict[str, type[nn.Module]] = dict(
@@ -65,11 +64,7 @@ def make_agent(
     if unknown:
         raise TypeError(f"make_agent: unknown size fields {unknown}; valid fields: {sorted(valid)}")
     sizes = replace(sizes or AgentSizes(), **overrides)
-    if sizes.belief_in_input and key == "drqn":
-        raise ConfigError(
-            "belief_in_input", "is read by the per-neuron networks (ddrqn, dmdrqn, tdrqn), "
-            "not by drqn", label="AgentSizes.belief_in_input",
-        )  # fmt: skip
+    sizes.check_architecture(key)
     return AGENTS[key](n_neurons, episode_length, sizes, params)
 
 

@@ -94,3 +94,12 @@ class AgentSizes:
             if not isinstance(getattr(self, name), bool):
                 raise ConfigError(name, f"must be a bool, got {getattr(self, name)!r}",
                                   label=f"AgentSizes.{name}")  # fmt: skip
+
+    def check_architecture(self, arch: str) -> None:
+        """Refuse the settings ``arch`` does not read (``belief_in_input``: the per-neuron
+        networks only)."""
+        if self.belief_in_input and arch == "drqn":
+            raise ConfigError(
+                "belief_in_input", "is read by the per-neuron networks (ddrqn, dmdrqn, tdrqn), "
+                "not by drqn", label="AgentSizes.belief_in_input",
+            )  # fmt: skip

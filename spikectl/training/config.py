@@ -188,6 +188,10 @@ class AgentConfig:
             raise ConfigError("arch", f"must be one of {ARCHITECTURES}, got {self.arch!r}")
         if not isinstance(self.sizes, AgentSizes):
             raise ConfigError("sizes", f"must be an AgentSizes, got {self.sizes!r}")
+        try:
+            self.sizes.check_architecture(self.arch)
+        except ConfigError as error:
+            raise error.within("sizes") from None
 
 
 @dataclass(frozen=True)
@@ -253,6 +257,14 @@ class Experiment:
             if not isinstance(getattr(self, name), kind):
                 value = getattr(self, name)
                 raise ConfigError(name, f"must be a {_kind_name(kind)}, got {value!r}")
+        if self.agent.sizes.belief_in_input and not getattr(
+            self.learner, "stores_belief_inputs", False
+        ):
+            raise ConfigError(
+                ("agent", "sizes", "belief_in_input"),
+                "needs a learner that stores it with its episodes (one with a replay buffer); "
+                f"the {self.learner.name} learner does not",
+            )
         length, train = self.env.episode_length, self.train
         try:
             self.learner.check_episode_length(length)

@@ -47,11 +47,6 @@ class StackedDQN:
     metric_fields = DQNLearner.metric_fields
 
     def __init__(self, configs, train_sets, rngs: list[np.random.Generator]) -> None:
-        if configs[0].agent.sizes.belief_in_input:
-            raise ValueError(
-                "agent.sizes.belief_in_input: a stacked group does not compute the belief "
-                "input; train the seeds unstacked"
-            )
         # Each seed's learner builds its networks, buffer and counters exactly as alone;
         # the group then computes with their stacked parameters.
         self.seeds = [

@@ -132,11 +132,6 @@ class PQNLearner(QLearner):
     metric_fields = ("epsilon", "aux_loss")
 
     def __init__(self, config, train_set: ContextSet, rng: np.random.Generator) -> None:
-        if config.agent.sizes.belief_in_input:
-            raise ValueError(
-                "agent.sizes.belief_in_input is read by the replay learners (dqn, guided); "
-                "pqn learns from its rounds without storing their belief inputs"
-            )
         self.settings: PQNConfig = config.learner
         self.total_episodes = config.total_episodes
         self.device = config.train.device
