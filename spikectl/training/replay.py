@@ -48,6 +48,13 @@ class EpisodeBatchArrays:
 NO_LABEL = -2
 """The label of a step no teacher labelled (actions are >= -1)."""
 
+_OPTIONAL_ARRAYS = {
+    "labels": "teacher labels",
+    "target_inputs": "the target's inputs (privileged)",
+    "beliefs": "belief inputs",
+}
+"""The arrays a buffer keeps only when made to, and how its errors name them."""
+
 
 class EpisodeReplay:
     """A ring buffer of ``capacity`` whole episodes of length ``episode_length``."""
@@ -186,7 +193,7 @@ class EpisodeReplay:
         held = slice(0, self.size)
         optional = {
             name: getattr(self, name)[held].copy()
-            for name in ("labels", "target_inputs", "beliefs")
+            for name in _OPTIONAL_ARRAYS
             if getattr(self, name) is not None
         }
         return {
@@ -208,36 +215,21 @@ class EpisodeReplay:
                 f"checkpointed replay capacity {state['capacity']} != configured {self.capacity}"
             )
         size = int(state["size"])
-        if (self.labels is None) != ("labels" not in state):
-            raise ValueError(
-                "the checkpointed replay buffer "
-                + ("keeps" if "labels" in state else "does not keep")
-                + " teacher labels, the configured one "
-                + ("does" if self.labels is not None else "does not")
-            )
         if not 0 <= size <= min(self.capacity, int(state["added"])):
             raise ValueError(
                 f"the checkpointed replay buffer holds {size} episodes of "
                 f"{state['added']} added, capacity {self.capacity}"
             )
-        if (self.target_inputs is None) != ("target_inputs" not in state):
-            raise ValueError(
-                "the checkpointed replay buffer "
-                + ("keeps" if "target_inputs" in state else "does not keep")
-                + " the target's inputs (privileged), the configured one "
-                + ("does" if self.target_inputs is not None else "does not")
-            )
-        if (self.beliefs is None) != ("beliefs" not in state):
-            raise ValueError(
-                "the checkpointed replay buffer "
-                + ("keeps" if "beliefs" in state else "does not keep")
-                + " belief inputs, the configured one "
-                + ("does" if self.beliefs is not None else "does not")
-            )
+        for name, what in _OPTIONAL_ARRAYS.items():
+            if (getattr(self, name) is None) != (name not in state):
+                raise ValueError(
+                    "the checkpointed replay buffer "
+                    + ("keeps" if name in state else "does not keep")
+                    + f" {what}, the configured one "
+                    + ("does" if getattr(self, name) is not None else "does not")
+                )
         names = ("voltage", "actions", "rewards", "targets", "patterns", "action_masks")
-        optional = tuple(
-            n for n in ("labels", "target_inputs", "beliefs") if getattr(self, n) is not None
-        )
+        optional = tuple(n for n in _OPTIONAL_ARRAYS if getattr(self, n) is not None)
         for name in names + optional:
             getattr(self, name)[:size] = state[name]
         # Indices the networks and the sampler use must lie in range (a crafted file's
