@@ -93,16 +93,17 @@ class GreedyController:
         check_controller_input(observation, info, "GreedyController")
         mask = np.asarray(info["action_mask"], dtype=bool)
         state = None if np.asarray(observation["step"]) == 0 else self.state  # a new episode
-        if self.belief is not None:
-            batch = {key: np.asarray(value)[None] for key, value in observation.items()}
-            observation = {**observation, "belief": self.belief(batch)[0]}
+        if self.belief is not None:  # a batch of one for the belief
+            batch = self._with_belief({key: np.asarray(v)[None] for key, v in observation.items()})
+            observation = {key: value[0] for key, value in batch.items()}
         action, self.state = self._alone(observation, mask, state)
         return action
 
-    def _with_belief(self, observations: Mapping[str, Any]) -> dict[str, Any]:
-        """The observation batch with its ``belief`` key where the controller has one."""
+    def _with_belief(self, observations: Mapping[str, Any]) -> Mapping[str, Any]:
+        """The observation batch with its ``belief`` key where the controller has one
+        (unchanged, not copied, where it has none)."""
         if self.belief is None:
-            return dict(observations)
+            return observations
         return {**observations, "belief": self.belief(observations)}
 
     @torch.no_grad()

@@ -29,14 +29,15 @@ from collections.abc import Mapping
 import numpy as np
 
 from spikectl.neuron.params import NeuronParams
-from spikectl.planning.identify import ConnectivityEstimate, ObservedState, erfc, residual_sd
+from spikectl.planning.identify import (
+    ConnectivityEstimate,
+    ObservedState,
+    residual_sd,
+    synapse_probabilities,
+)
 
 BELIEF_FEATURES = ("excites", "inhibits", "uncertainty")
 """The per-neuron features of :class:`TargetInputBelief`, in order."""
-
-_SYNAPSE_HALF_WEIGHT = 0.5
-"""A weight counts as a synapse when its magnitude exceeds half of w_in (the estimate's
-rounding, as identify-and-plan's)."""
 
 
 class TargetInputBelief:
@@ -93,9 +94,7 @@ class TargetInputBelief:
         if step > 0:
             estimate.add(*tracker.observe(voltage, action))
         mean, sd = estimate.column(target)  # [n] each
-        scale = np.maximum(sd, 1e-12) * np.sqrt(2.0)
-        excites = 0.5 * erfc((_SYNAPSE_HALF_WEIGHT - mean) / scale)  # P(w > 1/2)
-        inhibits = 0.5 * erfc((_SYNAPSE_HALF_WEIGHT + mean) / scale)  # P(w < -1/2)
+        excites, inhibits = synapse_probabilities(mean, sd)  # [n] each
         uncertainty = sd / np.sqrt(estimate.prior_variance[:, target])
         return np.stack([excites, inhibits, np.minimum(uncertainty, 1.0)], axis=-1)
 

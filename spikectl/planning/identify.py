@@ -48,6 +48,13 @@ def residual_sd(params: NeuronParams, noise_mV: float) -> float:
     return max(float(noise_sd), NOISE_FREE_SD)
 
 
+def synapse_probabilities(mean: np.ndarray, sd: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(P(w > 1/2), P(w < -1/2)) for w ~ N(mean, sd²) in units of w_in: that the rounded
+    weight is an excitatory synapse, an inhibitory one."""
+    scale = sd * np.sqrt(2.0)
+    return 0.5 * erfc((0.5 - mean) / scale), 0.5 * erfc((0.5 + mean) / scale)
+
+
 class ConnectivityEstimate:
     """Gaussian posterior over the signed weights G [n, n] in units of w_in.
 
@@ -156,9 +163,8 @@ class ConnectivityEstimate:
         signs, known = self.weights(known_sd)
         mean, sd = self.posterior()
         prior_sd = np.sqrt(self.prior_variance)
-        # P(|w| > 1/2) for w ~ N(mean, sd): the rounded weight is nonzero.
-        scale = sd * np.sqrt(2.0)
-        tail = 0.5 * (erfc((0.5 - mean) / scale) + erfc((0.5 + mean) / scale))
+        excites, inhibits = synapse_probabilities(mean, sd)
+        tail = excites + inhibits  # P(|w| > 1/2): the rounded weight is nonzero
         probability = np.where(sd >= 0.9 * prior_sd, self.prior_variance, tail)  # [n, n]
         probability = np.where(known, 0.0, probability)
         row_sign = np.sign(signs.sum(axis=1))  # [n]
