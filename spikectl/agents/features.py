@@ -14,8 +14,19 @@ import torch.nn.functional as F
 from spikectl.agents.spikes import VISIBLE_SPIKE_LEVEL
 
 BELIEF_WIDTH = 3
-"""Features per neuron in the ``belief`` observation key (``spikectl.planning.belief``'s
-``BELIEF_FEATURES``: excites, inhibits, uncertainty)."""
+"""Features per neuron of the planner's belief about its synapse onto the target
+(``spikectl.planning.belief``'s ``BELIEF_FEATURES``: excites, inhibits, uncertainty)."""
+
+ADVICE_WIDTH = 2
+"""Features per neuron of the planner's advice (``spikectl.planning.advice``'s
+``ADVICE_FEATURES``: advised, waits)."""
+
+
+def belief_width(sizes) -> int:
+    """Features per neuron in the ``belief`` observation key of a network with these
+    :class:`~spikectl.agents.AgentSizes`: the belief (``belief_in_input``), then the
+    advice (``advice_in_input``); 0 where it reads neither."""
+    return BELIEF_WIDTH * sizes.belief_in_input + ADVICE_WIDTH * sizes.advice_in_input
 
 
 def normalised_voltage(
@@ -57,14 +68,15 @@ def per_neuron_features(
     dtype: torch.dtype,
     with_target_voltage: bool = False,
     with_others_spiking: bool = False,
-    with_belief: bool = False,
+    belief_width: int = 0,
 ) -> torch.Tensor:
     """Per-neuron LSTM input [..., n, F]: normalised V, stimulated at t-1, (is target),
-    (the target's normalised V), (how many other neurons show a spike), (the belief about
-    its synapse onto the target: ``obs["belief"]`` [..., n, BELIEF_WIDTH]).
+    (the target's normalised V), (how many other neurons show a spike), (the planner's
+    belief about its synapse onto the target and its advice: ``obs["belief"]``
+    [..., n, belief_width], :func:`belief_width`).
 
-    F = 2 + with_target + with_target_voltage + with_others_spiking
-    + BELIEF_WIDTH·with_belief (docs/agents.md). The
+    F = 2 + with_target + with_target_voltage + with_others_spiking + belief_width
+    (docs/agents.md). The
     target's voltage, the same for every neuron, keeps the input permutation equivariant
     and lets each neuron's memory relate its own spikes to the target's response; the
     count of the others' visible spikes tells that memory whether a response that
@@ -81,9 +93,9 @@ def per_neuron_features(
     if with_others_spiking:
         spiking = (voltage >= VISIBLE_SPIKE_LEVEL).to(dtype)  # [..., n]
         columns.append(spiking.sum(-1, keepdim=True) - spiking)  # [..., n]
-    features = torch.stack(columns, dim=-1)  # [..., n, F - BELIEF_WIDTH·with_belief]
-    if with_belief:
-        belief = obs["belief"].to(dtype)  # [..., n, BELIEF_WIDTH]
+    features = torch.stack(columns, dim=-1)  # [..., n, F - belief_width]
+    if belief_width:
+        belief = obs["belief"].to(dtype)  # [..., n, belief_width]
         features = torch.cat([features, belief], dim=-1)  # [..., n, F]
     return features
 
@@ -92,7 +104,7 @@ def per_neuron_feature_count(sizes) -> int:
     """F of :func:`per_neuron_features` for an :class:`~spikectl.agents.AgentSizes`."""
     s = sizes
     flags = s.target_in_input + s.target_voltage_in_input + s.others_spiking_in_input
-    return 2 + flags + BELIEF_WIDTH * s.belief_in_input
+    return 2 + flags + belief_width(s)
 
 
 def system_features(

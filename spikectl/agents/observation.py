@@ -23,8 +23,9 @@ OBS_KEYS = ("voltage", "target", "pattern", "step", "last_action")
 """Keys every observation batch must hold (extra keys are ignored)."""
 
 OPTIONAL_KEYS = ("belief",)
-"""Keys a network reads only when its sizes say so (``belief``: float [n, 3], the belief
-about each neuron's synapse onto the target, ``AgentSizes.belief_in_input``)."""
+"""Keys a network reads only when its sizes say so (``belief``: float [n, W], the
+planner's belief about each neuron's synapse onto the target and its advice,
+``AgentSizes.belief_in_input`` / ``advice_in_input``, ``features.belief_width``)."""
 
 _INDEX_KEYS = ("target", "step", "last_action")
 """The integer-valued keys (int64 once converted)."""

@@ -55,6 +55,10 @@ class AgentSizes:
     """What the observations so far say about each neuron's synapse onto the target (the
     ``belief`` observation key: ``spikectl.planning.belief``), also in each neuron's LSTM
     input; per-neuron networks only (not in the paper)."""
+    advice_in_input: bool = False
+    """What identify-and-plan would do now (1 on the neuron it would stimulate, and a
+    do-nothing flag: ``spikectl.planning.advice``), also in each neuron's LSTM input, after
+    the belief; per-neuron networks only (not in the paper)."""
     layer_norm: bool = False
     """LayerNorm in every hidden layer of the Q heads and FF blocks (PQN; not in the paper)."""
 
@@ -89,6 +93,7 @@ class AgentSizes:
             "target_voltage_in_input",
             "others_spiking_in_input",
             "belief_in_input",
+            "advice_in_input",
             "layer_norm",
         ):
             if not isinstance(getattr(self, name), bool):
@@ -96,10 +101,17 @@ class AgentSizes:
                                   label=f"AgentSizes.{name}")  # fmt: skip
 
     def check_architecture(self, arch: str) -> None:
-        """Refuse the settings ``arch`` does not read (``belief_in_input``: the per-neuron
-        networks only)."""
-        if self.belief_in_input and arch == "drqn":
-            raise ConfigError(
-                "belief_in_input", "is read by the per-neuron networks (ddrqn, dmdrqn, tdrqn), "
-                "not by drqn", label="AgentSizes.belief_in_input",
-            )  # fmt: skip
+        """Refuse the settings ``arch`` does not read (``belief_in_input`` and
+        ``advice_in_input``: the per-neuron networks only)."""
+        for name in ("belief_in_input", "advice_in_input"):
+            if getattr(self, name) and arch == "drqn":
+                raise ConfigError(
+                    name, "is read by the per-neuron networks (ddrqn, dmdrqn, tdrqn), "
+                    "not by drqn", label=f"AgentSizes.{name}",
+                )  # fmt: skip
+
+    @property
+    def reads_belief(self) -> bool:
+        """Whether the network reads the ``belief`` observation key (the planner's belief,
+        its advice or both), computed beside it by ``spikectl.training.greedy``."""
+        return self.belief_in_input or self.advice_in_input

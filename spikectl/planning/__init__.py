@@ -4,11 +4,13 @@
 batched simulator (the headroom of a network); ``IdentifyAndPlan`` knows only the
 neuron model, estimates the connectivity from what it observes and plans on its
 estimate every step. See docs/baselines.md. ``TargetInputBelief`` gives that estimate of
-the target's inputs to a learned policy (docs/agents.md).
+the target's inputs to a learned policy, ``PlannerAdvice`` the planner's next action
+(docs/agents.md).
 """
 
+from spikectl.planning.advice import PlannerAdvice
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
-from spikectl.planning.belief import TargetInputBelief, episode_beliefs
+from spikectl.planning.belief import BeliefInputs, TargetInputBelief, episode_beliefs
 from spikectl.planning.discrete import DiscreteConnectivityEstimate
 from spikectl.planning.identify import ConnectivityEstimate, ObservedState
 from spikectl.planning.oracle import (
@@ -21,12 +23,14 @@ from spikectl.planning.policy import IdentifyAndPlan
 
 __all__ = [
     "DEFAULT_ORACLE_WIDTH",
+    "BeliefInputs",
     "ConnectivityEstimate",
     "DiscreteConnectivityEstimate",
     "IdentifyAndPlan",
     "ObservedState",
     "OraclePlanner",
     "Plan",
+    "PlannerAdvice",
     "PlanningModel",
     "TargetInputBelief",
     "beam_search",

@@ -62,9 +62,12 @@ class TargetInputBelief:
         """Forget every episode."""
         self._rows: list[tuple[ObservedState, ConnectivityEstimate] | None] = []
 
-    def __call__(self, observations: Mapping[str, np.ndarray]) -> np.ndarray:
+    def __call__(
+        self, observations: Mapping[str, np.ndarray], action_mask: np.ndarray | None = None
+    ) -> np.ndarray:
         """float32 [S, n, 3]: the features after this step's observation (``voltage``
-        [S, n], ``step``, ``last_action`` and ``target`` [S])."""
+        [S, n], ``step``, ``last_action`` and ``target`` [S]); ``action_mask`` is not read
+        (the signature of every belief input, :class:`BeliefInputs`)."""
         voltage = np.asarray(observations["voltage"], dtype=np.float64)  # [S, n]
         steps = np.asarray(observations["step"]).reshape(-1)  # [S]
         actions = np.asarray(observations["last_action"]).reshape(-1)  # [S]
@@ -99,21 +102,58 @@ class TargetInputBelief:
         return np.stack([excites, inhibits, np.minimum(uncertainty, 1.0)], axis=-1)
 
 
+class BeliefInputs:
+    """Several per-neuron inputs side by side: ``parts`` each map (observations [S, ...],
+    action_mask [S, n + 1]) to float32 [S, n, W_k] and reset with ``reset()``
+    (:class:`TargetInputBelief`, :class:`~spikectl.planning.advice.PlannerAdvice`);
+    this gives [S, n, sum W_k], in the order of ``parts``."""
+
+    def __init__(self, parts) -> None:
+        self.parts = tuple(parts)
+        if not self.parts:
+            raise ValueError("BeliefInputs needs at least one part")
+
+    def reset(self) -> None:
+        """Forget every episode, in every part."""
+        for part in self.parts:
+            part.reset()
+
+    def __call__(
+        self, observations: Mapping[str, np.ndarray], action_mask: np.ndarray
+    ) -> np.ndarray:
+        """float32 [S, n, W]: every part's features at this step, concatenated."""
+        return np.concatenate([part(observations, action_mask) for part in self.parts], axis=-1)
+
+
 def episode_beliefs(
-    belief: TargetInputBelief, voltage: np.ndarray, actions: np.ndarray, targets: np.ndarray
+    belief,
+    voltage: np.ndarray,
+    actions: np.ndarray,
+    targets: np.ndarray,
+    patterns: np.ndarray | None = None,
+    action_masks: np.ndarray | None = None,
 ) -> np.ndarray:
-    """float32 [E, N + 1, n, 3]: the features at every observation of E whole episodes
-    (``voltage`` [E, N + 1, n], ``actions`` [E, N], ``targets`` [E]), the same numbers
-    ``belief`` gives when it is called step by step as they are played."""
+    """float32 [E, N + 1, n, W]: the features ``belief`` (a :class:`TargetInputBelief`,
+    :class:`BeliefInputs`, ...) gives at every observation of E whole episodes
+    (``voltage`` [E, N + 1, n], ``actions`` [E, N], ``targets`` [E], ``patterns`` [E, N]
+    and ``action_masks`` [E, n + 1] where a part reads them: all legal and an empty
+    pattern where omitted), the same numbers it gives when called step by step as they
+    are played."""
     count, length, n = voltage.shape
+    if patterns is None:
+        patterns = np.zeros((count, length - 1), dtype=np.int8)
+    if action_masks is None:
+        action_masks = np.ones((count, n + 1), dtype=bool)
+    action_masks = np.asarray(action_masks, dtype=bool)
     belief.reset()
-    features = np.empty((count, length, n, len(BELIEF_FEATURES)), dtype=np.float32)
+    steps = []
     for step in range(length):
-        features[:, step] = belief({
+        steps.append(belief({
             "voltage": voltage[:, step],
+            "pattern": patterns,
             "step": np.full(count, step),
             "last_action": actions[:, step - 1] if step else np.full(count, -1),
             "target": targets,
-        })  # fmt: skip
+        }, action_masks))  # fmt: skip
     belief.reset()
-    return features
+    return np.stack(steps, axis=1).astype(np.float32, copy=False)  # [E, N + 1, n, W]

@@ -257,11 +257,11 @@ class Experiment:
             if not isinstance(getattr(self, name), kind):
                 value = getattr(self, name)
                 raise ConfigError(name, f"must be a {_kind_name(kind)}, got {value!r}")
-        if self.agent.sizes.belief_in_input and not getattr(
-            self.learner, "stores_belief_inputs", False
-        ):
+        sizes = self.agent.sizes
+        if sizes.reads_belief and not getattr(self.learner, "stores_belief_inputs", False):
+            name = "belief_in_input" if sizes.belief_in_input else "advice_in_input"
             raise ConfigError(
-                ("agent", "sizes", "belief_in_input"),
+                ("agent", "sizes", name),
                 "needs a learner that stores it with its episodes (one with a replay buffer); "
                 f"the {self.learner.name} learner does not",
             )

@@ -10,19 +10,27 @@ from spikectl.agents.greedy import GreedyController
 from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.params import NeuronParams
-from spikectl.planning.belief import TargetInputBelief
+from spikectl.planning.advice import PlannerAdvice
+from spikectl.planning.belief import BeliefInputs, TargetInputBelief
 
 
 def belief_input(
     network: torch.nn.Module, params: NeuronParams | None, noise_mV: float
-) -> TargetInputBelief | None:
-    """What computes ``network``'s ``belief`` input (``AgentSizes.belief_in_input``) on an
-    environment with neuron model ``params`` (None: the paper's) and measurement noise
-    ``noise_mV``; None for a network that does not read it."""
+) -> BeliefInputs | None:
+    """What computes ``network``'s ``belief`` input on an environment with neuron model
+    ``params`` (None: the paper's) and measurement noise ``noise_mV``: the planner's
+    belief (``AgentSizes.belief_in_input``), then its advice (``advice_in_input``); None
+    for a network that reads neither."""
     sizes = getattr(network, "sizes", None)
-    if sizes is None or not sizes.belief_in_input:
+    if sizes is None or not sizes.reads_belief:
         return None
-    return TargetInputBelief(params or NeuronParams(), noise_mV)
+    params = params or NeuronParams()
+    parts = []
+    if sizes.belief_in_input:
+        parts.append(TargetInputBelief(params, noise_mV))
+    if sizes.advice_in_input:
+        parts.append(PlannerAdvice(params, noise_mV))
+    return BeliefInputs(parts)
 
 
 def greedy_controller(

@@ -41,8 +41,9 @@ class EpisodeBatchArrays:
     the training network's weights (privileged), in a buffer made with
     ``privileged=True``; None otherwise."""
     beliefs: np.ndarray | None = None
-    """[B, N + 1, n, 3] float32 the belief input at every observation
-    (``spikectl.planning.belief``), in a buffer made with ``belief_width=3``; None otherwise."""
+    """[B, N + 1, n, W] float32 the belief input at every observation
+    (``spikectl.training.greedy.belief_input``), in a buffer made with ``belief_width=W``;
+    None otherwise."""
 
 
 NO_LABEL = -2

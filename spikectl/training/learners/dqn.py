@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from spikectl.agents.features import BELIEF_WIDTH
+from spikectl.agents.features import belief_width
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.planning.belief import episode_beliefs
@@ -67,7 +67,7 @@ class DQNLearner(QLearner):
         self.replay = EpisodeReplay(
             self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
             labelled=self.labelled_replay, privileged=self.connectivity_head is not None,
-            belief_width=0 if self.belief is None else BELIEF_WIDTH,
+            belief_width=belief_width(self.network.sizes) if self.belief is not None else 0,
         )  # fmt: skip
         self.targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
         self.patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
@@ -94,7 +94,10 @@ class DQNLearner(QLearner):
         targets = self.targets[contexts]
         beliefs = None
         if self.belief is not None:
-            beliefs = episode_beliefs(self.belief, episodes.voltage, episodes.actions, targets)
+            beliefs = episode_beliefs(
+                self.belief, episodes.voltage, episodes.actions, targets,
+                self.patterns[contexts], episodes.action_mask,
+            )  # fmt: skip
         self.replay.add(
             episodes.voltage, episodes.actions, episodes.rewards, targets,
             self.patterns[contexts], episodes.action_mask, labels, target_inputs, beliefs,
