@@ -69,8 +69,8 @@ def test_the_advice_on_anothers_episodes_is_the_guided_teachers_label(splits):
 
 
 def test_advice_refuses_bad_inputs():
-    with pytest.raises(ValueError, match="noise_mV"):
-        PlannerAdvice(NeuronParams(), noise_mV=-1.0)
+    with pytest.raises(TypeError, match="extensions must be an Extensions"):
+        PlannerAdvice(NeuronParams(), 2.0)
     observations = {"voltage": np.full((2, 4), -70.0), "step": np.array([3, 3]),
                     "last_action": np.array([-1, -1]), "target": np.array([0, 1]),
                     "pattern": np.zeros((2, 10), np.int8)}  # fmt: skip
@@ -154,3 +154,27 @@ def test_learners_that_cannot_store_the_advice_refuse_it(tmp_path, run_cli):
     assert result.returncode == 2, result.stderr
     assert "does not compute the belief or advice" in result.stderr.strip().splitlines()[-1]
     assert not run.exists()
+
+
+def test_the_advice_on_a_noisy_task_is_the_named_planner_of_that_task():
+    # Under measurement noise the named identify-and-plan plays with the Bayes
+    # observation model and filtered potentials (environment_settings); the advice is
+    # that planner, so on its own episodes it names exactly the actions it took.
+    from spikectl.envs.vector_env import NeuronControlVectorEnv
+    from spikectl.experiments.suite import load_split, task
+
+    contexts, extensions = load_split("noise2", "validation")[:4], task("noise2").extensions
+    env = NeuronControlVectorEnv(num_envs=4, contexts=contexts, extensions=extensions)
+    planner = spikectl.load_controller("identify-and-plan", env=env)
+    assert planner.identification == "bayes" and planner.filter_voltage
+    episodes = evaluate_policy(contexts, planner, extensions=extensions, seed=0)
+    targets = np.array([c.observed_target for c in contexts])
+    advice = episode_beliefs(
+        PlannerAdvice(contexts.params, extensions), episodes.voltage, episodes.actions,
+        targets, np.stack([c.pattern for c in contexts]), episodes.action_mask,
+    )  # fmt: skip
+    assert np.array_equal(_advised_actions(advice), episodes.actions)
+    paper = PlannerAdvice(contexts.params)  # the paper's planner reads them otherwise
+    advice = episode_beliefs(paper, episodes.voltage, episodes.actions, targets,
+                             np.stack([c.pattern for c in contexts]), episodes.action_mask)
+    assert not np.array_equal(_advised_actions(advice), episodes.actions)

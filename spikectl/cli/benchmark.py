@@ -191,9 +191,8 @@ def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
 
                 policy = CompiledPolicy.from_network(network)
                 return lambda seed: policy
-            noise_mV = task.extensions.observation_noise_mV  # the belief's, where it reads one
-            return lambda seed: greedy_controller(
-                network, None, noise_mV, per_environment=command.per_environment
+            return lambda seed: greedy_controller(  # the task's, for the inputs it reads
+                network, None, task.extensions, per_environment=command.per_environment
             )
 
         return trained

@@ -147,10 +147,10 @@ def load_controller(
 
             if env is None and contexts is None and params is None:
                 env_config = read_config(path).env  # the run's own environment
-                params, noise_mV = env_config.params, env_config.extensions.observation_noise_mV
+                params, extensions = env_config.params, env_config.extensions
             else:
-                _, params, noise_mV, _, _ = _played_on(env, contexts, params)
-            return greedy_controller(network, params, noise_mV, per_environment=per_environment)
+                _, params, _, _, extensions = _played_on(env, contexts, params)
+            return greedy_controller(network, params, extensions, per_environment=per_environment)
         from spikectl.agents.compiled import CompiledPolicy
         from spikectl.agents.policy_file import PolicyFileError
 
@@ -181,8 +181,9 @@ def _played_on(
         noise_mV = extensions.observation_noise_mV
         allow_target = extensions.allow_target_action
     elif contexts is not None:
-        noise_mV = contexts.extensions.observation_noise_mV
-        allow_target = contexts.extensions.allow_target_action
+        extensions = contexts.extensions
+        noise_mV = extensions.observation_noise_mV
+        allow_target = extensions.allow_target_action
     if contexts is not None:  # the contexts' own params, as the environment plays them
         if params is not None:
             contexts.check_params(params, "params=", "the controller plays the contexts' own: "

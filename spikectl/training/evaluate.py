@@ -57,7 +57,7 @@ def greedy_episodes(
     ``config``, in the run's environment (its params, extensions and evaluation seed,
     as its metrics.csv scored them)."""
     extensions = contexts.extensions if config is None else config.env.extensions
-    policy = greedy_controller(network, contexts.params, extensions.observation_noise_mV)
+    policy = greedy_controller(network, contexts.params, extensions)
     if config is None:
         return evaluate_policy(contexts, policy)
     return baseline_episodes(config, contexts, policy)

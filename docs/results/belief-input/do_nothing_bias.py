@@ -43,7 +43,6 @@ def main() -> None:
     args = parser.parse_args()
     torch.set_num_threads(1)
     contexts = load_split(args.task, "validation")
-    noise_mV = contexts.extensions.observation_noise_mV
     print(f"{args.task} validation, mean return with do nothing's Q lowered by delta")
     print("run".ljust(28) + "".join(f"{delta:>9g}" for delta in args.delta))
     for spec in args.run:
@@ -51,7 +50,9 @@ def main() -> None:
         network = load_agent(run, n_neurons=int(size) if size else None)
         returns = []
         for delta in args.delta:
-            controller = greedy_controller(DoNothingBias(network, delta), contexts.params, noise_mV)
+            controller = greedy_controller(
+                DoNothingBias(network, delta), contexts.params, contexts.extensions
+            )
             returns.append(evaluate_policy(contexts, controller).returns.mean())
         print(spec.rsplit("/", 1)[-1].ljust(28) + "".join(f"{r:9.3f}" for r in returns))
 

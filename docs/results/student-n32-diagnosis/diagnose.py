@@ -113,8 +113,7 @@ def main() -> None:
     for spec in args.run:
         run, _, size = spec.partition(":")
         network = load_agent(run, n_neurons=int(size) if size else None, model=args.model)
-        noise_mV = contexts.extensions.observation_noise_mV
-        student = greedy_controller(network, contexts.params, noise_mV)  # any inputs it reads
+        student = greedy_controller(network, contexts.params, contexts.extensions)  # its inputs
         beside = BesidePlanner(student)
         episodes = evaluate_policy(contexts, beside)
         report(spec, beside, episodes.returns, inputs, second)

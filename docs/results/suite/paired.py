@@ -67,8 +67,8 @@ def seed_returns(preset: str, trained_on: str, seed: int, task: str) -> np.ndarr
         return committed_returns(kept, task)
     run = Path(f"runs/suite/{preset}/{trained_on}/seed={seed}")
     network = load_agent(run, n_neurons=suite.task(task).n_observed, model="best")
-    noise_mV = suite.task(task).extensions.observation_noise_mV
-    return suite.play(task, "test", greedy_controller(network, None, noise_mV))[0]
+    extensions = suite.task(task).extensions
+    return suite.play(task, "test", greedy_controller(network, None, extensions))[0]
 
 
 def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:

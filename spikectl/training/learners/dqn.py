@@ -53,9 +53,7 @@ class DQNLearner(QLearner):
         self.network, self.target = build_networks(config)
         self.predictor = build_predictor(config, self.network)
         self.connectivity_head = self.build_connectivity_head(config)
-        self.belief = belief_input(
-            self.network, config.env.params, config.env.extensions.observation_noise_mV
-        )
+        self.belief = belief_input(self.network, config.env.params, config.env.extensions)
         """What computes the network's belief input (None where it reads none)."""
         self.trained = [
             parameter
