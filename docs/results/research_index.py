@@ -19,6 +19,10 @@ CLAIM_CHARS = 220
 # Folders whose first commits' subjects name something else (a folder committed beside
 # another change): their claim as the commit that reported the result stated it.
 CLAIMS = {
+    "advice-input": "identify-and-plan's next action as the student's input (3 seeds, "
+    "validation): the guided learner becomes the planner (0.866, every step advised, every "
+    "n = 8 suite task network by network); by reward alone it leaves the planner for the "
+    "worse (0.866 -> 0.802)",
     "belief-input": "identify-and-plan's belief about the target's inputs as the student's "
     "input (3 seeds, validation): no change on the paper's task (-0.000 [-0.014, +0.014]), "
     "+0.018 [-0.008, +0.043] played at n32, +0.035 [+0.016, +0.053] on heterogeneous "
