@@ -17,3 +17,27 @@ for seed in 0 1 2; do
 done
 spikectl train guided --sizes.advice-in-input --imitation-weight-end 0 --seed 0 \
     --run-dir "$runs/n8-rl-seed0"
+
+# 2. Every suite task on its validation set, network by network (n32 by seed 0 only: the
+#    planner's QMDP costs ~20 CPU minutes there), against identify-and-plan's run of
+#    ../belief-input/.
+bench() {  # bench NAME RUN TASKS...
+    local name=$1 run=$2; shift 2
+    spikectl benchmark "$run" --task "$@" --split validation \
+        --out "$here/validation/$name-val.csv" --per-network "$here/validation/$name-val-per-network.csv"
+}
+bench advice-s0 "$runs/n8-seed0" all
+for seed in 1 2; do
+    bench "advice-s$seed" "$runs/n8-seed$seed" paper n16 noise1 noise2 noise4 hidden25 \
+        stochastic heterogeneous background
+done
+python docs/results/belief-input/compare.py \
+    --old docs/results/belief-input/validation/identify-and-plan-val.csv \
+    --new $here/validation/advice-s{0,1,2}-val.csv \
+    --names "identify-and-plan" "with advice" > $here/validation.md
+
+# 3. How often each run does what its advice says (validation).
+{ python $here/agreement.py --task paper --run "$runs/n8-seed0" --count 25
+  python $here/agreement.py --task n16 --run "$runs/n8-seed0" --count 25; } > $here/agreement.txt
+python $here/agreement.py --task paper --run "$runs/n8-rl-seed0" --count 100 \
+    > $here/agreement-reward-alone.txt
