@@ -8,6 +8,7 @@ import numpy as np
 import pytest
 import torch
 from test_agents import SMALL, permute_neurons, random_obs, small_agent
+from test_belief import trained_and_scored_again
 from test_controllers import assert_same_play
 
 import spikectl
@@ -127,19 +128,8 @@ def test_greedy_controller_with_advice_plays_each_context_as_alone(splits):
 def test_training_with_advice_is_scored_again_exactly_by_evaluate(tmp_path):
     """The replay's advice (computed again from the stored episodes) and the
     controllers' (computed while playing) are one computation, belief beside it."""
-    from spikectl.training.evaluate import evaluate_run
-    from spikectl.training.run import train
-    from spikectl.training.run_files import read_metrics
-
-    config = SMOKE.with_changes(
-        {"agent.sizes.advice_in_input": True, "agent.sizes.belief_in_input": True}, n_val=3
-    )
-    train(config, tmp_path / "run")
-    final = read_metrics(tmp_path / "run")[-1]
-    results = {result.name: result.mean for result in evaluate_run(tmp_path / "run")}
-    assert results == {"train": final["train_return"], "test": final["test_return"],
-                       "validation": final["val_return"]}  # fmt: skip
-    loaded = spikectl.load_controller(tmp_path / "run")
+    changes = {"agent.sizes.advice_in_input": True, "agent.sizes.belief_in_input": True}
+    loaded = trained_and_scored_again(changes, tmp_path / "run")
     assert [type(part) for part in loaded.belief.parts] == [TargetInputBelief, PlannerAdvice]
 
 
@@ -169,12 +159,13 @@ def test_the_advice_on_a_noisy_task_is_the_named_planner_of_that_task():
     assert planner.identification == "bayes" and planner.filter_voltage
     episodes = evaluate_policy(contexts, planner, extensions=extensions, seed=0)
     targets = np.array([c.observed_target for c in contexts])
+    patterns = np.stack([c.pattern for c in contexts])
     advice = episode_beliefs(
         PlannerAdvice(contexts.params, extensions), episodes.voltage, episodes.actions,
-        targets, np.stack([c.pattern for c in contexts]), episodes.action_mask,
+        targets, patterns, episodes.action_mask,
     )  # fmt: skip
     assert np.array_equal(_advised_actions(advice), episodes.actions)
     paper = PlannerAdvice(contexts.params)  # the paper's planner reads them otherwise
-    advice = episode_beliefs(paper, episodes.voltage, episodes.actions, targets,
-                             np.stack([c.pattern for c in contexts]), episodes.action_mask)
+    played = (episodes.voltage, episodes.actions, targets, patterns, episodes.action_mask)
+    advice = episode_beliefs(paper, *played)
     assert not np.array_equal(_advised_actions(advice), episodes.actions)

@@ -169,21 +169,26 @@ def test_replay_keeps_the_beliefs_and_restores_them():
         EpisodeReplay(4, 3, 2).load_state_dict(replay.state_dict())
 
 
-def test_training_with_the_belief_is_scored_again_exactly_by_evaluate(tmp_path):
-    """The replay's beliefs (computed again from the stored episodes) and the
-    controllers' (computed while playing) are one computation: evaluate repeats the
-    last evaluation of metrics.csv exactly, and the run resumes from its replay."""
+def trained_and_scored_again(changes: dict, run_dir) -> GreedyController:
+    """Train SMOKE with ``changes`` into ``run_dir``, check that ``evaluate`` repeats the
+    last evaluation of metrics.csv exactly, and return the run's loaded controller."""
     from spikectl.training.evaluate import evaluate_run
     from spikectl.training.run import train
     from spikectl.training.run_files import read_metrics
 
-    config = SMOKE.with_changes({"agent.sizes.belief_in_input": True}, n_val=3)
-    train(config, tmp_path / "run")
-    final = read_metrics(tmp_path / "run")[-1]
-    results = {result.name: result.mean for result in evaluate_run(tmp_path / "run")}
+    train(SMOKE.with_changes(changes, n_val=3), run_dir)
+    final = read_metrics(run_dir)[-1]
+    results = {result.name: result.mean for result in evaluate_run(run_dir)}
     assert results == {"train": final["train_return"], "test": final["test_return"],
                        "validation": final["val_return"]}  # fmt: skip
-    loaded = spikectl.load_controller(tmp_path / "run")
+    return spikectl.load_controller(run_dir)
+
+
+def test_training_with_the_belief_is_scored_again_exactly_by_evaluate(tmp_path):
+    """The replay's beliefs (computed again from the stored episodes) and the
+    controllers' (computed while playing) are one computation: evaluate repeats the
+    last evaluation of metrics.csv exactly."""
+    loaded = trained_and_scored_again({"agent.sizes.belief_in_input": True}, tmp_path / "run")
     assert [type(part) for part in loaded.belief.parts] == [TargetInputBelief]
 
 
