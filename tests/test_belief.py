@@ -24,13 +24,16 @@ from spikectl.training.presets import SMOKE
 from spikectl.training.replay import EpisodeReplay
 
 
-def _episode(weights: np.ndarray, actions: list[int]) -> tuple[np.ndarray, np.ndarray]:
-    """(voltage [1, N + 1, n] from rest, actions [1, N]) of one noise-free episode."""
+def _episode(weights: np.ndarray, actions: list[int]) -> tuple[np.ndarray, ...]:
+    """(voltage [1, N + 1, n] from rest, actions [1, N], an empty pattern [1, N], every
+    action legal [1, n + 1]) of one noise-free episode: the belief reads neither of the
+    last two."""
     params = NeuronParams()
     after, _ = spikectl.simulate(weights, np.array(actions), params)  # [N, n] after each step
-    rest = np.full((1, weights.shape[0]), params.v_rest_mV)
+    n = weights.shape[0]
+    rest = np.full((1, n), params.v_rest_mV)
     voltage = np.concatenate([rest, after]).astype(np.float32)[None]  # [1, N + 1, n]
-    return voltage, np.array([actions])
+    return voltage, np.array([actions]), np.zeros((1, len(actions))), np.ones((1, n + 1))
 
 
 def test_the_belief_names_the_targets_inputs_on_a_hand_built_network():
@@ -38,8 +41,10 @@ def test_the_belief_names_the_targets_inputs_on_a_hand_built_network():
     # releases 0..4 (alone or told apart), so their synapses onto 4 become known; 5 never
     # releases, so its entry keeps the generator's prior.
     weights, actions = feed_forward_probe()
-    voltage, played = _episode(weights, actions)
-    features = episode_beliefs(TargetInputBelief(NeuronParams()), voltage, played, np.array([4]))
+    voltage, played, pattern, legal = _episode(weights, actions)
+    features = episode_beliefs(
+        TargetInputBelief(NeuronParams()), voltage, played, np.array([4]), pattern, legal
+    )
     assert features.shape == (1, len(actions) + 1, 6, len(BELIEF_FEATURES))
     excites, inhibits, uncertainty = np.moveaxis(features[0, -1], -1, 0)  # [n] each
     np.testing.assert_allclose(excites[[1, 3]], 1.0, atol=1e-6)
@@ -56,7 +61,9 @@ def test_the_belief_names_the_targets_inputs_on_a_hand_built_network():
     assert np.all(features[0, 0, :, 2] == 1.0)
     # The features are read from observations only: the same episode with another
     # neuron named the target gives that neuron's column.
-    column_3 = episode_beliefs(TargetInputBelief(NeuronParams()), voltage, played, np.array([3]))
+    column_3 = episode_beliefs(
+        TargetInputBelief(NeuronParams()), voltage, played, np.array([3]), pattern, legal
+    )
     np.testing.assert_allclose(column_3[0, -1, [1], 0], 1.0, atol=1e-6)  # 1 excites 3
     np.testing.assert_allclose(column_3[0, -1, [2], 1], 1.0, atol=1e-6)  # 2 inhibits 3
 
@@ -64,13 +71,16 @@ def test_the_belief_names_the_targets_inputs_on_a_hand_built_network():
 def test_a_rows_belief_does_not_depend_on_its_batch(splits):
     episodes = evaluate_policy(splits[1], spikectl.IdentifyAndPlan(NeuronParams()))
     targets = np.array([c.target for c in splits[1]])
+    patterns = np.stack([c.pattern for c in splits[1]])
     together = episode_beliefs(
-        TargetInputBelief(NeuronParams()), episodes.voltage, episodes.actions, targets
-    )
+        TargetInputBelief(NeuronParams()), episodes.voltage, episodes.actions, targets,
+        patterns, episodes.action_mask,
+    )  # fmt: skip
     for row in (0, 7):
+        one = slice(row, row + 1)
         alone = episode_beliefs(
-            TargetInputBelief(NeuronParams()), episodes.voltage[row : row + 1],
-            episodes.actions[row : row + 1], targets[row : row + 1],
+            TargetInputBelief(NeuronParams()), episodes.voltage[one], episodes.actions[one],
+            targets[one], patterns[one], episodes.action_mask[one],
         )  # fmt: skip
         assert np.array_equal(alone[0], together[row])
     # and it learns: at the end the true excitatory inputs stand out

@@ -27,12 +27,11 @@ import numpy as np
 
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING
 from spikectl.planning.policy import IdentifyAndPlan, environment_settings
 
 ADVICE_FEATURES = ("advised", "waits")
 """The per-neuron features of :class:`PlannerAdvice`, in order."""
-
-DO_NOTHING = -1
 
 
 class PlannerAdvice:

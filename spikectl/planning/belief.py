@@ -130,20 +130,15 @@ def episode_beliefs(
     voltage: np.ndarray,
     actions: np.ndarray,
     targets: np.ndarray,
-    patterns: np.ndarray | None = None,
-    action_masks: np.ndarray | None = None,
+    patterns: np.ndarray,
+    action_masks: np.ndarray,
 ) -> np.ndarray:
     """float32 [E, N + 1, n, W]: the features ``belief`` (a :class:`TargetInputBelief`,
     :class:`BeliefInputs`, ...) gives at every observation of E whole episodes
-    (``voltage`` [E, N + 1, n], ``actions`` [E, N], ``targets`` [E], ``patterns`` [E, N]
-    and ``action_masks`` [E, n + 1] where a part reads them: all legal and an empty
-    pattern where omitted), the same numbers it gives when called step by step as they
-    are played."""
+    (``voltage`` [E, N + 1, n], ``actions`` [E, N], ``targets`` [E], ``patterns`` [E, N],
+    ``action_masks`` [E, n + 1]), the same numbers it gives when called step by step as
+    they are played."""
     count, length, n = voltage.shape
-    if patterns is None:
-        patterns = np.zeros((count, length - 1), dtype=np.int8)
-    if action_masks is None:
-        action_masks = np.ones((count, n + 1), dtype=bool)
     action_masks = np.asarray(action_masks, dtype=bool)
     belief.reset()
     steps = []

@@ -14,7 +14,7 @@ import torch
 
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments.suite import load_split, task
-from spikectl.planning.advice import DO_NOTHING
+from spikectl.neuron.simulator import DO_NOTHING
 from spikectl.training.controllers import load_agent
 from spikectl.training.greedy import greedy_controller
 
