@@ -13,6 +13,7 @@ return (no training) is the dashed line.
 from __future__ import annotations
 
 import sys
+from fnmatch import fnmatch
 from pathlib import Path
 
 import numpy as np
@@ -42,7 +43,12 @@ GROUPS = {
     "the main job on 4 000 training networks, 4x steps (AVX-512 host)": "guided-ntrain4000-4x",
     "the main job with a 128-wide LSTM (AVX-512 host)": "guided-lstm128",
     "PQN": "pqn",
+    "the main job + its teacher's belief in the input": "belief-input:n8-seed*",
+    "the main job + the planner's next action in the input": "advice-input:n8-seed*",
+    "the same, imitation annealed to 0 (reward alone)": "advice-input:n8-rl-seed*",
 }
+"""Legend label -> results folder, or ``folder:glob`` for the trials of one folder whose
+names match the glob."""
 
 MAIN_JOB = "guided-ntrain1000"
 """The folder of the README's main job, drawn thicker."""
@@ -61,17 +67,24 @@ def curve(run_dirs: list[Path], column: str) -> tuple[np.ndarray, np.ndarray, np
     return grid, values.mean(axis=0), values.std(axis=0)
 
 
+def runs_of(results: Path, group: str) -> list[Path]:
+    """The run directories of a :data:`GROUPS` entry."""
+    folder, _, names = group.partition(":")
+    runs = trial_dirs(results / folder)
+    return [run for run in runs if fnmatch(run.name, names)] if names else runs
+
+
 def main(results: Path, out: Path) -> None:
     figure, axes = subplots(1, 2, figsize=(11.0, 5.6), sharey=True)
     panels = (("val_return", "validation networks"), ("test_return", "unseen test networks"))
     for axis, (column, title) in zip(axes, panels, strict=True):
         for index, (label, folder) in enumerate(GROUPS.items()):
-            runs = trial_dirs(results / folder)
+            runs = runs_of(results, folder)
             if not runs:
                 continue
             grid, mean, sd = curve(runs, column)
-            # tab20 keeps up to 20 groups apart (the default cycle repeats after 10).
-            color = colormaps["tab20"](index % 20)
+            # tab20 keeps 20 groups apart (the default cycle repeats after 10), Dark2 8 more.
+            color = colormaps["tab20"](index) if index < 20 else colormaps["Dark2"](index - 20)
             width = 2.5 if folder == MAIN_JOB else 1.2
             seeds = f"{len(runs)} seed{'s' if len(runs) > 1 else ''}"
             axis.plot(grid, mean, color=color, linewidth=width, label=f"{label} ({seeds})")
@@ -84,7 +97,7 @@ def main(results: Path, out: Path) -> None:
     axes[0].set_ylabel("greedy return (n = 8)")
     figure.legend(*axes[1].get_legend_handles_labels(), loc="lower center", ncol=3, fontsize=7,
                   frameon=False)  # fmt: skip
-    figure.tight_layout(rect=(0, 0.17, 1, 1))
+    figure.tight_layout(rect=(0, 0.2, 1, 1))
     save_figure(figure, out)
 
 
