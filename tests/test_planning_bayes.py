@@ -257,6 +257,71 @@ def test_filtered_state_values():
     assert tracker.spiked[1]  # raw -53 mV would not be a spike without a 3 mV margin
 
 
+def test_model_variance_is_zero_only_under_the_papers_dynamics():
+    """The filter trusts the model's step exactly where only the observation differs from
+    the paper (noise, bleaching) and keeps its extra variance where the step is wrong or
+    random."""
+    from spikectl.planning.filtering import MODEL_VARIANCE_MV2, model_variance
+
+    assert model_variance(None) == 0.0
+    assert model_variance(Extensions(observation_noise_mV=2.0)) == 0.0
+    assert model_variance(Extensions(bleaching_time_constant_steps=100.0)) == 0.0
+    for unmodelled in (
+        {"hidden_neurons": 2}, {"hidden_fraction": 0.25}, {"threshold_spread": 0.1},
+        {"time_constant_spread": 0.1}, {"synaptic_spread": 0.1}, {"stochastic_release": True},
+        {"background_rate": 0.005},
+    ):  # fmt: skip
+        extensions = Extensions(observation_noise_mV=1.0, **unmodelled)
+        assert model_variance(extensions) == MODEL_VARIANCE_MV2, unmodelled
+    with pytest.raises(ValueError, match="model_variance_mV2 must be >= 0"):
+        from spikectl.planning.filtering import FilteredState
+
+        FilteredState(2, PARAMS, noise_mV=1.0, spike_margin_sd=2.0, model_variance_mV2=-1.0)
+
+
+@pytest.mark.parametrize("noise_mV", [1.0, 4.0])
+def test_told_the_weights_the_filter_is_exact_under_noise(noise_mV):
+    """Under the paper's dynamics the filtered potentials of the loop told the weights are
+    the network's own, step by step, whatever the noise (the noise cannot move a resting
+    neuron or one landing exactly on the threshold), so it plays the actions it plays
+    without noise, told the weights."""
+    from spikectl.contexts import make_splits
+    from spikectl.envs.controller import play_episode
+    from spikectl.envs.env import NeuronControlEnv
+    from spikectl.neuron.simulator import simulate
+
+    contexts, _ = make_splits(4, 1, 8, 60, seed=11)
+    noisy = NeuronControlEnv(contexts=contexts, extensions=Extensions(observation_noise_mV=noise_mV))
+    exact = NeuronControlEnv(contexts=contexts)
+    for index in range(len(contexts)):
+        weights = contexts[index].weights
+        told = IdentifyAndPlan(PARAMS, known_weights=weights, noise_mV=noise_mV,
+                               filter_voltage=True, extensions=Extensions(observation_noise_mV=noise_mV))  # fmt: skip
+        seen: list[np.ndarray] = []
+        act = told.act
+
+        def recording(observation, info, act=act, seen=seen, told=told):
+            action = act(observation, info)
+            seen.append((told._tracker.filtered.copy(), told._tracker.spiked.copy()))
+            return action
+
+        told.act = recording
+        actions, _ = play_episode(noisy, told, index, seed=3)
+        potentials, spikes = simulate(weights, actions, PARAMS)  # [N, n] each
+        # What the filter holds at step t + 1 is the network after step t: its spikes, and
+        # its potential wherever it was not held refractory.
+        filtered = np.stack([potential for potential, _ in seen[1:]])  # [N - 1, n]
+        read = np.stack([spiked for _, spiked in seen[1:]])
+        np.testing.assert_array_equal(read, spikes[:-1])
+        refractory = np.zeros_like(spikes)
+        for lag in range(1, PARAMS.refractory_steps + 1):
+            refractory[lag:] |= spikes[:-lag]
+        free = ~refractory[:-1]
+        np.testing.assert_array_equal(filtered[free], potentials[:-1][free])
+        plain, _ = play_episode(exact, IdentifyAndPlan(PARAMS, known_weights=weights), index)
+        np.testing.assert_array_equal(actions, plain)
+
+
 def test_named_controller_takes_the_environments_observation_model():
     """`identify-and-plan` by name plays the Bayes model where the environment changes
     what an observation means, and the constructor's defaults (the guided learner's

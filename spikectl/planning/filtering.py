@@ -13,7 +13,9 @@ the observation (variance sigma^2) per neuron,
     V = m + K (V_obs - m),   K = P / (P + sigma^2),   P <- (1 - K) P,
 
 and reads a spike where the filtered potential is within ``spike_margin_sd`` posterior
-standard deviations of the threshold. The residuals the identification learns from are
+standard deviations of the threshold. The paper's dynamics are deterministic, so there the
+prediction's only variance is the synapses' (:func:`model_variance`): told the weights,
+the filter reproduces the potentials exactly whatever the noise. The residuals the identification learns from are
 what they were (the observation against the no-synapse step from the last potential).
 """
 
@@ -21,13 +23,31 @@ from __future__ import annotations
 
 import numpy as np
 
+from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.kernel import integrate
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning.identify import ObservedState
 
 MODEL_VARIANCE_MV2 = 0.25
-"""Variance (mV^2) the prediction of one step is given beyond the synapses' (round-off,
-what the model does not know), so that the filter never trusts it absolutely."""
+"""Variance (mV^2) the prediction of one step is given beyond the synapses' where the
+environment's dynamics are not the paper's (:func:`model_variance`): what the model does
+not know of them, so that the filter never trusts it absolutely."""
+
+
+def model_variance(extensions: Extensions | None) -> float:
+    """The variance (mV^2) :class:`FilteredState` adds to each step's prediction in an
+    environment with ``extensions``: 0 where the dynamics are the paper's (at most the
+    observation changes: measurement noise, bleaching), which are deterministic, so that
+    the prediction is exact once the weights are (a neuron at rest stays exactly at
+    V_r, one excitatory release from rest lands exactly on the threshold; any variance
+    would let the noise move both); :data:`MODEL_VARIANCE_MV2` where hidden or
+    heterogeneous neurons, stochastic release or background input make the model's step
+    wrong or random."""
+    if extensions is None:
+        return 0.0
+    unmodelled = (extensions.hidden_neurons > 0 or extensions.hidden_fraction > 0
+                  or extensions.heterogeneous or extensions.random_dynamics)  # fmt: skip
+    return MODEL_VARIANCE_MV2 if unmodelled else 0.0
 
 
 class FilteredState(ObservedState):
@@ -38,12 +58,18 @@ class FilteredState(ObservedState):
         noise_mV: sigma of the measurement noise (> 0).
         spike_margin_sd: a spike is read where the filtered potential is at least the
             threshold less this many posterior standard deviations.
+        model_variance_mV2: the variance added to each step's prediction beyond the
+            synapses' (:func:`model_variance` of the environment's extensions).
     """
 
     def __init__(self, n_neurons: int, params: NeuronParams, noise_mV: float,
-                 spike_margin_sd: float) -> None:  # fmt: skip
+                 spike_margin_sd: float, model_variance_mV2: float = MODEL_VARIANCE_MV2,
+                 ) -> None:  # fmt: skip
         if not noise_mV > 0:
             raise ValueError(f"noise_mV must be > 0 to filter, got {noise_mV!r}")
+        if not model_variance_mV2 >= 0:
+            raise ValueError(f"model_variance_mV2 must be >= 0, got {model_variance_mV2!r}")
+        self.model_variance_mV2 = float(model_variance_mV2)
         super().__init__(n_neurons, params, 0.0)
         self.noise_variance = float(noise_mV) ** 2
         self.spike_margin_sd = float(spike_margin_sd)
@@ -68,7 +94,7 @@ class FilteredState(ObservedState):
             drive[action] += params.stimulus_step_mV
         predicted = integrate(before, params.v_rest_mV, params.leak_per_step, drive)
         prior = (1.0 - params.leak_per_step) ** 2 * self.variance + input_variance
-        prior = prior + MODEL_VARIANCE_MV2
+        prior = prior + self.model_variance_mV2
         gain = prior / (prior + self.noise_variance)
         filtered = predicted + gain * (voltage - predicted)
         posterior = (1.0 - gain) * prior

@@ -42,7 +42,7 @@ from spikectl.neuron.simulator import DO_NOTHING, advance
 from spikectl.planning.bayes import BayesConnectivityEstimate, ObservationModel, release_chances
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.discrete import DiscreteConnectivityEstimate, column_hypotheses_fit
-from spikectl.planning.filtering import FilteredState
+from spikectl.planning.filtering import FilteredState, model_variance
 from spikectl.planning.identify import (
     ConnectivityEstimate,
     KnownConnectivity,
@@ -178,7 +178,9 @@ class IdentifyAndPlan:
             identification learns from each spike's release chance.
         filter_voltage: under measurement noise (``noise_mV`` > 0), plan from potentials
             filtered against the model's prediction (:class:`~spikectl.planning.
-            filtering.FilteredState`) instead of the raw observations.
+            filtering.FilteredState`) instead of the raw observations; where
+            ``extensions`` leave the dynamics the paper's, the filter trusts the model's
+            step exactly (:func:`~spikectl.planning.filtering.model_variance`).
 
     ```python
     policy = IdentifyAndPlan()
@@ -316,7 +318,8 @@ class IdentifyAndPlan:
                 raise ValueError("IdentifyAndPlan must see the episode from its first step")
             self.reset()
             if self.filter_voltage and self.noise_mV > 0:
-                self._tracker = FilteredState(n, self.params, self.noise_mV, self.spike_margin_sd)
+                self._tracker = FilteredState(n, self.params, self.noise_mV, self.spike_margin_sd,
+                                              model_variance(self.extensions))  # fmt: skip
             else:
                 self._tracker = ObservedState(n, self.params, self.spike_margin_sd * self.noise_mV)
             self.estimate = self._new_estimate(n)
