@@ -291,12 +291,13 @@ def test_told_the_weights_the_filter_is_exact_under_noise(noise_mV):
     from spikectl.neuron.simulator import simulate
 
     contexts, _ = make_splits(4, 1, 8, 60, seed=11)
-    noisy = NeuronControlEnv(contexts=contexts, extensions=Extensions(observation_noise_mV=noise_mV))
+    noise = Extensions(observation_noise_mV=noise_mV)
+    noisy = NeuronControlEnv(contexts=contexts, extensions=noise)
     exact = NeuronControlEnv(contexts=contexts)
     for index in range(len(contexts)):
         weights = contexts[index].weights
         told = IdentifyAndPlan(PARAMS, known_weights=weights, noise_mV=noise_mV,
-                               filter_voltage=True, extensions=Extensions(observation_noise_mV=noise_mV))  # fmt: skip
+                               filter_voltage=True, extensions=noise)  # fmt: skip
         seen: list[np.ndarray] = []
         act = told.act
 
@@ -342,7 +343,8 @@ def test_named_controller_takes_the_environments_observation_model():
     assert plain.identification == "gaussian" and not plain.filter_voltage
     assert plain.known_sd == 0.25 and controller.known_sd == 0.25
     assert environment_settings(Extensions(hidden_fraction=0.25)) == {}
-    assert environment_settings(Extensions(threshold_spread=0.1)) == {}
+    heterogeneous = Extensions(threshold_spread=0.1)
+    assert environment_settings(heterogeneous) == {"extensions": heterogeneous}
     assert environment_settings(Extensions(background_rate=0.005)) == {"known_sd": 0.35}
     stochastic = Extensions(stochastic_release=True)
     assert environment_settings(stochastic) == {"extensions": stochastic, "known_sd": 0.4}

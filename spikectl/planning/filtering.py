@@ -13,10 +13,11 @@ the observation (variance sigma^2) per neuron,
     V = m + K (V_obs - m),   K = P / (P + sigma^2),   P <- (1 - K) P,
 
 and reads a spike where the filtered potential is within ``spike_margin_sd`` posterior
-standard deviations of the threshold. The paper's dynamics are deterministic, so there the
-prediction's only variance is the synapses' (:func:`model_variance`): told the weights,
-the filter reproduces the potentials exactly whatever the noise. The residuals the identification learns from are
-what they were (the observation against the no-synapse step from the last potential).
+standard deviations of the threshold. The paper's dynamics are deterministic, so there
+the prediction's only variance is the synapses' (:func:`model_variance`): told the
+weights, the filter reproduces the potentials exactly whatever the noise. The residuals
+the identification learns from are what they were (the observation against the
+no-synapse step from the last potential).
 """
 
 from __future__ import annotations

@@ -43,6 +43,7 @@ from spikectl.planning.bayes import BayesConnectivityEstimate, ObservationModel,
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.discrete import DiscreteConnectivityEstimate, column_hypotheses_fit
 from spikectl.planning.filtering import FilteredState, model_variance
+from spikectl.planning.heterogeneity import NeuronTracker, tracks_neurons
 from spikectl.planning.identify import (
     ConnectivityEstimate,
     KnownConnectivity,
@@ -101,11 +102,13 @@ def environment_settings(
     model with filtered potentials (``identification="bayes"``, ``filter_voltage=True``);
     under stochastic release the extensions (the Gaussian estimate learns from each
     spike's release chance) and :data:`KNOWN_SD_STOCHASTIC_RELEASE`; under background
-    input :data:`KNOWN_SD_BACKGROUND`; from :data:`GAMBLE_FROM_NEURONS` neurons on, QMDP
-    where it would probe and :data:`KNOWN_SD_LARGE` (which then takes precedence: a
-    combination no suite task has); elsewhere the constructor's defaults, which are the
-    guided learner's teacher (heterogeneous and hidden neurons, where nothing tried
-    scored higher, and the paper's task)."""
+    input :data:`KNOWN_SD_BACKGROUND`; with heterogeneous neurons the extensions (each
+    neuron's threshold and leak learned, :mod:`spikectl.planning.heterogeneity`, and
+    known synapses planned at their estimated strength); from
+    :data:`GAMBLE_FROM_NEURONS` neurons on, QMDP where it would probe and
+    :data:`KNOWN_SD_LARGE` (which then takes precedence: a combination no suite task
+    has); elsewhere the constructor's defaults, which are the guided learner's teacher
+    (hidden neurons, where nothing tried scored higher, and the paper's task)."""
     settings: dict[str, Any] = {}
     if n_neurons is not None and n_neurons >= GAMBLE_FROM_NEURONS:
         settings = {"gamble_networks": GAMBLE_NETWORKS, "known_sd": KNOWN_SD_LARGE}
@@ -118,6 +121,8 @@ def environment_settings(
         return {"extensions": extensions, "known_sd": KNOWN_SD_STOCHASTIC_RELEASE, **settings}
     if extensions.background_rate > 0:
         return {"known_sd": KNOWN_SD_BACKGROUND, **settings}
+    if extensions.heterogeneous:
+        return {"extensions": extensions, **settings}
     return settings
 
 
@@ -175,7 +180,11 @@ class IdentifyAndPlan:
             its observation model from (measurement noise, stochastic release,
             background input, synaptic spread; :class:`ObservationModel`); None: the
             paper's model with ``noise_mV``. With stochastic release, every
-            identification learns from each spike's release chance.
+            identification learns from each spike's release chance. With
+            heterogeneous neurons (and no measurement noise) the policy learns each
+            neuron's threshold and leak (:class:`~spikectl.planning.heterogeneity.
+            NeuronTracker`) and plans with them; with a synaptic spread it plans each
+            known synapse at its estimated strength instead of its sign.
         filter_voltage: under measurement noise (``noise_mV`` > 0), plan from potentials
             filtered against the model's prediction (:class:`~spikectl.planning.
             filtering.FilteredState`) instead of the raw observations; where
@@ -277,6 +286,9 @@ class IdentifyAndPlan:
         # release chance instead of the deterministic rule's release (the Gaussian
         # estimate regresses on the chances, the Bayes one mixes over the releases).
         self._release_chances = self._observation.stochastic_release
+        # Synapses of different strengths (synaptic spread, told by ``extensions``): known
+        # ones are planned at their estimated strength.
+        self._strengths = extensions is not None and extensions.synaptic_spread > 0
         self.params, self.width, self.horizon = params, int(width), horizon
         self.known_sd, self.noise_mV = float(known_sd), float(noise_mV)
         # A plan is renewed when less than half its horizon is left, so that a wanted
@@ -292,6 +304,7 @@ class IdentifyAndPlan:
         self._plan: Plan | None = None
         self._plan_start = 0
         self._planned_weights: np.ndarray | None = None
+        self._planned_neurons: np.ndarray | None = None
         self._predicted_spikes: np.ndarray | None = None
         # The planning weights of the estimate's last version, and what each step of the
         # plan has still ahead that it misses (both pure functions, kept: issue 24).
@@ -317,7 +330,9 @@ class IdentifyAndPlan:
             if step != 0:
                 raise ValueError("IdentifyAndPlan must see the episode from its first step")
             self.reset()
-            if self.filter_voltage and self.noise_mV > 0:
+            if tracks_neurons(self.extensions, self.noise_mV):
+                self._tracker = NeuronTracker(n, self.params, self.extensions)
+            elif self.filter_voltage and self.noise_mV > 0:
                 self._tracker = FilteredState(n, self.params, self.noise_mV, self.spike_margin_sd,
                                               model_variance(self.extensions))  # fmt: skip
             else:
@@ -356,6 +371,7 @@ class IdentifyAndPlan:
             self._plan is None
             or surprised
             or not np.array_equal(weights, self._planned_weights)
+            or not np.array_equal(self._neurons(), self._planned_neurons)
             or self._plan_remaining(step, pattern.shape[0]) < self._replan_margin
         ):
             self._replan(weights, target, mask, pattern, step)
@@ -386,10 +402,22 @@ class IdentifyAndPlan:
         plan_on = self.plan_on
         if plan_on == "auto":
             plan_on = "mean" if self.noise_mV == 0 else "known"
+        if self._strengths:
+            # Synapses differ in strength (synaptic spread): a known synapse is planned at
+            # its estimated strength, not its sign.
+            mean, _ = self.estimate.posterior()
+            signs = np.where(known, np.round(mean, 2), signs)
         if plan_on == "known":
             return signs, known
         mean, _ = self.estimate.posterior()
         return np.where(known, signs, np.round(mean, 2)), known
+
+    def _neurons(self) -> np.ndarray | None:
+        """[1, 2, n] per-neuron kernel parameters to plan with where the policy learns
+        them (:class:`~spikectl.planning.heterogeneity.NeuronTracker`), else None."""
+        if isinstance(self._tracker, NeuronTracker):
+            return self._tracker.neurons()
+        return None
 
     def _new_estimate(self, n: int):
         if self.known_weights is not None:
@@ -412,6 +440,7 @@ class IdentifyAndPlan:
         )
         self._plan_start = step
         self._planned_weights = weights
+        self._planned_neurons = model.neurons
         # Whether the plan misses a wanted spike from each of its steps on.
         wanted = pattern[step : step + self._plan.rewards.shape[0]]
         missing = wanted & (self._plan.rewards == 0)
@@ -429,8 +458,8 @@ class IdentifyAndPlan:
         if self.hypotheses > 1:
             uniforms = (self._uniforms[0][: self.hypotheses], self._uniforms[1][: self.hypotheses])
             hypotheses = self.estimate.sample(self.known_sd, *uniforms)  # [K, n, n]
-            return PlanningModel(hypotheses, target, actions, self.params)
-        return PlanningModel(weights[None].copy(), target, actions, self.params)
+            return PlanningModel(hypotheses, target, actions, self.params, self._neurons())
+        return PlanningModel(weights[None].copy(), target, actions, self.params, self._neurons())
 
     def _misses_wanted_spikes(self, pattern: np.ndarray, offset: int) -> bool:
         """True when the current plan does not hit every wanted spike still ahead
@@ -482,7 +511,8 @@ class IdentifyAndPlan:
         n = weights.shape[0]
         voltage, spikes = np.empty((1, 1, n)), np.empty((1, 1, n), dtype=bool)
         actions = np.array([[action]], dtype=np.int64)
-        advance(state, np.ascontiguousarray(weights[None]), actions, self.params, voltage, spikes)
+        advance(state, np.ascontiguousarray(weights[None]), actions, self.params, voltage, spikes,
+                self._neurons())  # fmt: skip
         self._predicted_spikes = spikes[0, 0]
 
     def spawn(self, index: int) -> IdentifyAndPlan:
