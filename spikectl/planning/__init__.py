@@ -5,13 +5,17 @@ batched simulator (the headroom of a network); ``IdentifyAndPlan`` knows only th
 neuron model, estimates the connectivity from what it observes and plans on its
 estimate every step. See docs/baselines.md. ``TargetInputBelief`` gives that estimate of
 the target's inputs to a learned policy, ``PlannerAdvice`` the planner's next action
-(docs/agents.md).
+(docs/agents.md). ``ObservedState``, ``FilteredState`` (measurement noise) and
+``NeuronTracker`` (heterogeneous neurons) are the trackers identify-and-plan reads its
+observations with.
 """
 
 from spikectl.planning.advice import PlannerAdvice
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.belief import BeliefInputs, TargetInputBelief, episode_beliefs
 from spikectl.planning.discrete import DiscreteConnectivityEstimate
+from spikectl.planning.filtering import FilteredState
+from spikectl.planning.heterogeneity import NeuronTracker
 from spikectl.planning.identify import ConnectivityEstimate, ObservedState
 from spikectl.planning.oracle import (
     DEFAULT_ORACLE_WIDTH,
@@ -26,7 +30,9 @@ __all__ = [
     "BeliefInputs",
     "ConnectivityEstimate",
     "DiscreteConnectivityEstimate",
+    "FilteredState",
     "IdentifyAndPlan",
+    "NeuronTracker",
     "ObservedState",
     "OraclePlanner",
     "Plan",
