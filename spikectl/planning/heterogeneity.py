@@ -30,7 +30,6 @@ from __future__ import annotations
 import numpy as np
 
 from spikectl.neuron.extensions import Extensions
-from spikectl.neuron.kernel import integrate
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING
 from spikectl.planning.identify import ObservedState
@@ -65,7 +64,6 @@ class NeuronTracker(ObservedState):
         self.leak = np.full(n_neurons, params.leak_per_step)
         self._unsettled = np.zeros(n_neurons, dtype=bool)  # read provisionally last step
         self._last_voltage = np.zeros(n_neurons)  # what each neuron showed then
-        self._since_before = np.zeros(n_neurons, dtype=np.int64)  # its count before release
 
     def neurons(self) -> np.ndarray:
         """[1, 2, n] kernel parameters to plan with: each threshold at the middle of its
@@ -75,40 +73,35 @@ class NeuronTracker(ObservedState):
     def observe(self, voltage: np.ndarray, action: int) -> tuple[np.ndarray, ...]:
         """As :meth:`ObservedState.observe`, after settling last step's provisional
         reads by this observation and measuring the leaks it shows."""
-        state, params = self.state, self.params
         voltage = np.asarray(voltage, dtype=np.float64)
         self._settle(voltage)
-        before = state.voltage_mV[0].copy()
-        refractory = state.refractory_left[0] > 0
-        released_before = state.released[0].astype(np.float64)
-        stimulus = np.zeros_like(before)
-        if action != DO_NOTHING:
-            stimulus[action] = params.stimulus_step_mV
-        # The leak, where nothing drove the neuron: no release anywhere, no stimulus.
-        if not released_before.any():
-            decay = before - params.v_rest_mV
-            free = ~refractory & (stimulus == 0) & (np.abs(decay) >= MIN_DECAY_MV)
-            free &= voltage < self.high  # not (certainly) a spike
-            self.leak = np.where(free, (before - voltage) / np.where(free, decay, 1.0), self.leak)
-        predicted = integrate(before, params.v_rest_mV, self.leak, stimulus)
-        residual = (voltage - predicted) / params.synaptic_step_mV
-        observed = ~refractory
+        self._measure_leaks(voltage, action)
+        return super().observe(voltage, action)
+
+    def _leak(self) -> np.ndarray:
+        return self.leak
+
+    def _read(self, voltage: np.ndarray, observed: np.ndarray) -> np.ndarray:
+        """Certain where the potential is outside the threshold's interval; inside it, a
+        spike from the middle on, to be settled by the next observation."""
         unsettled = observed & (voltage > self.low) & (voltage < self.high)
         middle = 0.5 * (self.low + self.high)
-        spiked = observed & ((voltage >= self.high) | (unsettled & (voltage >= middle)))
-        since = np.minimum(state.steps_since_release[0] + 1, 2**30)
-        self._since_before = since.copy()
-        release = spiked & (since >= self._interval)
-        since[release] = 0
-        state.voltage_mV[0] = np.where(spiked | refractory, params.v_rest_mV, voltage)
-        state.refractory_left[0] = np.where(
-            spiked, params.refractory_steps, np.maximum(state.refractory_left[0] - 1, 0)
-        )
-        state.steps_since_release[0] = since
-        state.released[0] = release
-        self.spiked = spiked
         self._unsettled, self._last_voltage = unsettled, voltage
-        return released_before, residual, observed
+        return observed & ((voltage >= self.high) | (unsettled & (voltage >= middle)))
+
+    def _measure_leaks(self, voltage: np.ndarray, action: int) -> None:
+        """Each leak from this step where nothing drove the neuron: no release anywhere
+        (no synaptic input), no stimulus, not refractory, a potential off V_r."""
+        state, params = self.state, self.params
+        if state.released[0].any():
+            return
+        before = state.voltage_mV[0]
+        decay = before - params.v_rest_mV
+        free = (state.refractory_left[0] == 0) & (np.abs(decay) >= MIN_DECAY_MV)
+        free &= voltage < self.high  # not (certainly) a spike
+        if action != DO_NOTHING:
+            free[action] = False
+        self.leak = np.where(free, (before - voltage) / np.where(free, decay, 1.0), self.leak)
 
     def _settle(self, voltage: np.ndarray) -> None:
         """Correct last step's provisional reads by this step's potentials: a neuron that
@@ -121,7 +114,7 @@ class NeuronTracker(ObservedState):
         self.high = np.where(truly, np.minimum(self.high, shown), self.high)
         self.low = np.where(self._unsettled & ~truly, np.maximum(self.low, shown), self.low)
         for neuron in np.flatnonzero(self._unsettled & (truly != self.spiked)):
-            since = int(self._since_before[neuron])
+            since = int(self._since_before_release[neuron])
             if truly[neuron]:  # read as silent, it spiked
                 release = since >= self._interval
                 state.voltage_mV[0, neuron] = params.v_rest_mV

@@ -222,6 +222,9 @@ class ObservedState:
         self._threshold = params.v_spike_mV - spike_margin_mV
         self._interval = params.min_release_interval_steps
         self.spiked = np.zeros(n_neurons, dtype=bool)
+        # Each neuron's steps since its last release, counted before the last step's
+        # release reset them (what a correction of that step's reads needs).
+        self._since_before_release = np.zeros(n_neurons, dtype=np.int64)
 
     def observe(self, voltage: np.ndarray, action: int) -> tuple[np.ndarray, ...]:
         """Take the observation after a step with ``action``; update the state.
@@ -237,12 +240,26 @@ class ObservedState:
         if action != DO_NOTHING:
             stimulus[action] = params.stimulus_step_mV
         # The potential without synaptic input; the residual is what the synapses added.
-        predicted = integrate(before, params.v_rest_mV, params.leak_per_step, stimulus)
+        predicted = integrate(before, params.v_rest_mV, self._leak(), stimulus)
         residual = (voltage - predicted) / params.synaptic_step_mV
         released_before = state.released[0].astype(np.float64)
         observed = ~refractory
-        spiked = observed & (voltage >= self._threshold)
+        self._apply(self._read(voltage, observed), refractory, voltage)
+        return released_before, residual, observed
+
+    def _leak(self) -> float | np.ndarray:
+        """dt / RC of the neurons (the paper's, the same for all)."""
+        return self.params.leak_per_step
+
+    def _read(self, voltage: np.ndarray, observed: np.ndarray) -> np.ndarray:
+        """[n] which observed neurons spiked at the potentials ``voltage``."""
+        return observed & (voltage >= self._threshold)
+
+    def _apply(self, spiked: np.ndarray, refractory: np.ndarray, voltage: np.ndarray) -> None:
+        """Advance the tracked state by the step's reads (releases by the vesicle rule)."""
+        state, params = self.state, self.params
         since = np.minimum(state.steps_since_release[0] + 1, 2**30)
+        self._since_before_release = since.copy()
         release = spiked & (since >= self._interval)
         since[release] = 0
         state.voltage_mV[0] = np.where(spiked | refractory, params.v_rest_mV, voltage)
@@ -252,4 +269,3 @@ class ObservedState:
         state.steps_since_release[0] = since
         state.released[0] = release
         self.spiked = spiked
-        return released_before, residual, observed
