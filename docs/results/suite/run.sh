@@ -7,6 +7,10 @@ export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 for controller in do-nothing random identify-and-plan oracle; do
     spikectl benchmark "$controller" --task all --out "$out/$controller.csv"
 done
+# Identify-and-plan's CPU seconds per episode and per-decision CPU-time percentiles.
+python docs/results/bayes-identify/sweep.py --split test --settings '{"named": true}' \
+    --tasks paper noise1 noise2 noise4 hidden25 stochastic heterogeneous background n16 n32 \
+    --out "$out/identify-and-plan-decision-times.csv"
 # Size transfer: the quick preset's TDRQN (trained at n = 8 on the paper's task, runs not
 # committed), best_model.pt, zero-shot at n = 8, 16 and 32.
 for seed in 0 1 2; do
