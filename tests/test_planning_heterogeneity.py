@@ -109,15 +109,24 @@ def test_played_on_heterogeneous_networks_the_reads_intervals_and_leaks_are_true
 
 
 def test_which_environments_track_neurons():
-    assert tracks_neurons(SPREADS, 0.0)
-    assert tracks_neurons(Extensions(time_constant_spread=0.1), 0.0)
-    assert not tracks_neurons(Extensions(synaptic_spread=0.1), 0.0)  # neurons alike
-    assert not tracks_neurons(None, 0.0) and not tracks_neurons(Extensions(), 0.0)
-    assert not tracks_neurons(SPREADS, 1.0)  # a settled read needs V_r seen exactly
+    assert tracks_neurons(SPREADS, 0.0, PARAMS)
+    assert tracks_neurons(Extensions(time_constant_spread=0.1), 0.0, PARAMS)
+    assert not tracks_neurons(Extensions(synaptic_spread=0.1), 0.0, PARAMS)  # neurons alike
+    assert not tracks_neurons(None, 0.0, PARAMS) and not tracks_neurons(Extensions(), 0.0, PARAMS)
+    assert not tracks_neurons(SPREADS, 1.0, PARAMS)  # a settled read needs V_r seen exactly
     noisy = Extensions(threshold_spread=0.1, observation_noise_mV=1.0)
-    assert not tracks_neurons(noisy, 0.0)
+    assert not tracks_neurons(noisy, 0.0, PARAMS)
+    no_refractory = NeuronParams(refractory_steps=0)
+    assert not tracks_neurons(SPREADS, 0.0, no_refractory)  # nothing settles a read
     with pytest.raises(ValueError, match="refractory_steps must be >= 1"):
-        NeuronTracker(2, NeuronParams(refractory_steps=0), SPREADS)
+        NeuronTracker(2, no_refractory, SPREADS)
+    # The policy then keeps the paper's tracker and still plays.
+    contexts, _ = make_splits(1, 1, 8, 60, seed=3, params=no_refractory, extensions=SPREADS)
+    env = NeuronControlEnv(contexts=contexts, extensions=SPREADS)
+    policy = IdentifyAndPlan(no_refractory, extensions=SPREADS)
+    observation, info = env.reset(seed=0, options={"context": 0})
+    env.step(policy.act(observation, info))
+    assert type(policy._tracker).__name__ == "ObservedState"
 
 
 def test_the_paper_and_its_planner_are_unchanged_by_the_tracker():

@@ -130,10 +130,12 @@ class NeuronTracker(ObservedState):
         self._unsettled = np.zeros_like(self._unsettled)
 
 
-def tracks_neurons(extensions: Extensions | None, noise_mV: float) -> bool:
+def tracks_neurons(extensions: Extensions | None, noise_mV: float, params: NeuronParams) -> bool:
     """Whether identify-and-plan learns each neuron's threshold and leak: where neurons
-    differ in them and the potentials are seen without noise (under noise a settled
-    read needs V_r seen exactly)."""
+    differ in them, the potentials are seen without noise and a spike is followed by a
+    refractory step (a read is settled by V_r seen exactly)."""
     if extensions is None or noise_mV > 0 or extensions.observation_noise_mV > 0:
+        return False
+    if params.refractory_steps < 1:
         return False
     return extensions.threshold_spread > 0 or extensions.time_constant_spread > 0

@@ -330,7 +330,7 @@ class IdentifyAndPlan:
             if step != 0:
                 raise ValueError("IdentifyAndPlan must see the episode from its first step")
             self.reset()
-            if tracks_neurons(self.extensions, self.noise_mV):
+            if tracks_neurons(self.extensions, self.noise_mV, self.params):
                 self._tracker = NeuronTracker(n, self.params, self.extensions)
             elif self.filter_voltage and self.noise_mV > 0:
                 self._tracker = FilteredState(n, self.params, self.noise_mV, self.spike_margin_sd,
