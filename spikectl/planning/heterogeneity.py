@@ -108,25 +108,12 @@ class NeuronTracker(ObservedState):
         spiked shows V_r exactly (held refractory); narrow its threshold's interval."""
         if not self._unsettled.any():
             return
-        state, params = self.state, self.params
-        truly = self._unsettled & (voltage == params.v_rest_mV)
+        truly = self._unsettled & (voltage == self.params.v_rest_mV)
         shown = self._last_voltage
         self.high = np.where(truly, np.minimum(self.high, shown), self.high)
         self.low = np.where(self._unsettled & ~truly, np.maximum(self.low, shown), self.low)
         for neuron in np.flatnonzero(self._unsettled & (truly != self.spiked)):
-            since = int(self._since_before_release[neuron])
-            if truly[neuron]:  # read as silent, it spiked
-                release = since >= self._interval
-                state.voltage_mV[0, neuron] = params.v_rest_mV
-                state.refractory_left[0, neuron] = params.refractory_steps
-                state.steps_since_release[0, neuron] = 0 if release else since
-                state.released[0, neuron] = release
-            else:  # read as a spike, it was not
-                state.voltage_mV[0, neuron] = shown[neuron]
-                state.refractory_left[0, neuron] = 0
-                state.steps_since_release[0, neuron] = since
-                state.released[0, neuron] = False
-            self.spiked[neuron] = truly[neuron]
+            self._correct(int(neuron), bool(truly[neuron]), float(shown[neuron]))
         self._unsettled = np.zeros_like(self._unsettled)
 
 

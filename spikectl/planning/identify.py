@@ -269,3 +269,16 @@ class ObservedState:
         state.steps_since_release[0] = since
         state.released[0] = release
         self.spiked = spiked
+
+    def _correct(self, neuron: int, spiked: bool, potential: float) -> None:
+        """Change the last step's read of ``neuron`` to ``spiked`` (it showed
+        ``potential``): its potential, refractoriness and release as :meth:`_apply` would
+        have set them (what a tracker that settles reads a step later calls)."""
+        state, params = self.state, self.params
+        since = int(self._since_before_release[neuron])
+        release = spiked and since >= self._interval
+        state.voltage_mV[0, neuron] = params.v_rest_mV if spiked else potential
+        state.refractory_left[0, neuron] = params.refractory_steps if spiked else 0
+        state.steps_since_release[0, neuron] = 0 if release else since
+        state.released[0, neuron] = release
+        self.spiked[neuron] = spiked
