@@ -13,7 +13,10 @@ A Ctrl-C is recognised by the signal, not only by the error it leaves: an extens
 module interrupted while it initialises may replace the KeyboardInterrupt with an error
 of its own and no chain back to it (numpy on Python 3.10: ``PyCapsule_Import could not
 import module "datetime"``). So the launcher's SIGINT handler records the signal, then
-raises KeyboardInterrupt as Python's own handler does.
+raises KeyboardInterrupt as Python's own handler does. Raised inside a callback (a weak
+reference's, during an import), Python can only print the KeyboardInterrupt as "Exception
+ignored" and go on: the launcher keeps that print out and, once the import or the command
+returns, still ends with its one line and 130.
 
 What it cannot cover is Python's own start, before this module runs (a few tens of
 milliseconds: the interpreter and its ``site`` imports); a Ctrl-C then is Python's.
@@ -37,6 +40,7 @@ def main() -> None:
         # Only where Ctrl-C would interrupt anyway: a job started in the background
         # ignores SIGINT, and keeps ignoring it.
         signal.signal(signal.SIGINT, _record_interrupt)
+        sys.unraisablehook = _quiet_about_interrupts(sys.unraisablehook)
     try:
         from spikectl.cli import main as command  # the package, Numba, tyro, the commands
     except BaseException as error:  # noqa: B036 - a Ctrl-C is the point
@@ -49,6 +53,9 @@ def main() -> None:
         ):
             _exit_now(f"spikectl: error: {error}", 2)
         raise
+    if _signals_received:  # a Ctrl-C Python could only report (it came in a callback)
+        _ignore_interrupts()
+        _exit_now(INTERRUPTED_STARTING, 130)
     try:
         command()  # its own Ctrl-C handling: one line and 130 (spikectl.cli.main)
     except SystemExit:
@@ -59,6 +66,11 @@ def main() -> None:
             raise
         print(INTERRUPTED, file=sys.stderr)
         raise SystemExit(130) from None
+    else:
+        if _signals_received:  # as above: the command went on, but the user stopped it
+            _ignore_interrupts()
+            print(INTERRUPTED, file=sys.stderr)
+            raise SystemExit(130)
     finally:
         # The command has finished or is exiting: a Ctrl-C from here on, while Python
         # shuts down, would only be a traceback from its exit handlers.
@@ -69,6 +81,19 @@ def _record_interrupt(signum: int, frame: object) -> None:
     """Python's default SIGINT handler, which also remembers that the signal came."""
     _signals_received.append(signum)
     raise KeyboardInterrupt
+
+
+def _quiet_about_interrupts(hook):
+    """``sys.unraisablehook`` that leaves out a recorded Ctrl-C: raised inside a callback
+    (a weak reference's, a ``__del__``), Python can only print it as "Exception ignored"
+    and go on; the launcher reports it as its one line instead."""
+
+    def unraisable(report) -> None:
+        if isinstance(report.exc_value, KeyboardInterrupt) and _signals_received:
+            return
+        hook(report)
+
+    return unraisable
 
 
 def _ignore_interrupts() -> None:

@@ -208,6 +208,50 @@ SWALLOWING_IMPORT = (
 )
 
 
+# A Ctrl-C that lands while Python runs a weak reference's callback (importlib's module
+# locks use them): Python can only print it as "Exception ignored" and go on.
+INTERRUPTED_CALLBACK = (
+    "import os, signal, time, weakref\n"
+    "class Held: pass\n"
+    "def callback(reference):\n"
+    "    os.kill(os.getpid(), signal.SIGINT)\n"
+    "    time.sleep(5)\n"
+    "held = Held()\n"
+    "reference = weakref.ref(held, callback)\n"
+    "del held\n"
+)
+
+
+@pytest.mark.parametrize("where", ["spikectl.cli", "the command"])
+def test_ctrl_c_in_a_callback_is_still_one_line(tmp_path, where):
+    """A Ctrl-C Python could only report from a callback: no "Exception ignored" text,
+    and the launcher's one line and 130 once the import or the command returns."""
+    package = tmp_path / "spikectl"
+    (package / "cli").mkdir(parents=True)
+    (package / "__init__.py").write_text("")
+    if where == "spikectl.cli":
+        (package / "cli" / "__init__.py").write_text(
+            INTERRUPTED_CALLBACK + "def main():\n    print('usage: spikectl')\n"
+        )
+        expected = "spikectl: interrupted while starting (nothing was run)\n"
+    else:
+        (package / "cli" / "__init__.py").write_text(
+            "def main():\n    import interrupted_callback\n    print('usage: spikectl')\n"
+        )
+        (tmp_path / "interrupted_callback.py").write_text(INTERRUPTED_CALLBACK)
+        expected = "spikectl: interrupted\n"
+    launcher = Path(__file__).resolve().parents[1]
+    process = spikectl_command(
+        "--help",
+        env={"PYTHONPATH": os.pathsep.join([str(tmp_path), str(launcher)])},
+        cwd=tmp_path,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )
+    out, err = process.communicate(timeout=60)
+    assert (process.returncode, err) == (130, expected)
+    assert out in ("", "usage: spikectl\n")
+
+
 @pytest.mark.parametrize("where", ["spikectl.cli", "the command"])
 def test_ctrl_c_an_import_turned_into_another_error_is_still_one_line(tmp_path, where):
     """The launcher knows a Ctrl-C by its signal, whatever error the import left."""
