@@ -222,24 +222,23 @@ INTERRUPTED_CALLBACK = (
 )
 
 
-@pytest.mark.parametrize("where", ["spikectl.cli", "the command"])
-def test_ctrl_c_in_a_callback_is_still_one_line(tmp_path, where):
-    """A Ctrl-C Python could only report from a callback: no "Exception ignored" text,
-    and the launcher's one line and 130 once the import or the command returns."""
+INTERRUPTED_STARTING_LINE = "spikectl: interrupted while starting (nothing was run)\n"
+INTERRUPTED_LINE = "spikectl: interrupted\n"
+
+
+def run_stand_in(tmp_path, where: str, module: str, code: str, then: str = "") -> tuple:
+    """(exit code, stderr, stdout) of the launcher running ``spikectl --help`` on a
+    stand-in package whose ``spikectl.cli`` runs ``code`` while it is imported (``where``
+    "spikectl.cli"), or whose command imports ``module`` holding it (``"the command"``);
+    ``then`` is the command's body after that."""
     package = tmp_path / "spikectl"
     (package / "cli").mkdir(parents=True)
     (package / "__init__.py").write_text("")
     if where == "spikectl.cli":
-        (package / "cli" / "__init__.py").write_text(
-            INTERRUPTED_CALLBACK + "def main():\n    print('usage: spikectl')\n"
-        )
-        expected = "spikectl: interrupted while starting (nothing was run)\n"
-    else:
-        (package / "cli" / "__init__.py").write_text(
-            "def main():\n    import interrupted_callback\n    print('usage: spikectl')\n"
-        )
-        (tmp_path / "interrupted_callback.py").write_text(INTERRUPTED_CALLBACK)
-        expected = "spikectl: interrupted\n"
+        (package / "cli" / "__init__.py").write_text(code + f"def main():\n    pass{then}\n")
+    else:  # a library the command imports only when it runs
+        (package / "cli" / "__init__.py").write_text(f"def main():\n    import {module}{then}\n")
+        (tmp_path / f"{module}.py").write_text(code)
     launcher = Path(__file__).resolve().parents[1]
     process = spikectl_command(
         "--help",
@@ -248,29 +247,23 @@ def test_ctrl_c_in_a_callback_is_still_one_line(tmp_path, where):
         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
     )
     out, err = process.communicate(timeout=60)
-    assert (process.returncode, err) == (130, expected)
+    return process.returncode, err, out
+
+
+@pytest.mark.parametrize("where", ["spikectl.cli", "the command"])
+def test_ctrl_c_in_a_callback_is_still_one_line(tmp_path, where):
+    """A Ctrl-C Python could only report from a callback: no "Exception ignored" text,
+    and the launcher's one line and 130 once the import or the command returns."""
+    code, err, out = run_stand_in(tmp_path, where, "interrupted_callback", INTERRUPTED_CALLBACK,
+                                  then="\n    print('usage: spikectl')")  # fmt: skip
+    expected = INTERRUPTED_STARTING_LINE if where == "spikectl.cli" else INTERRUPTED_LINE
+    assert (code, err) == (130, expected)
     assert out in ("", "usage: spikectl\n")
 
 
 @pytest.mark.parametrize("where", ["spikectl.cli", "the command"])
 def test_ctrl_c_an_import_turned_into_another_error_is_still_one_line(tmp_path, where):
     """The launcher knows a Ctrl-C by its signal, whatever error the import left."""
-    package = tmp_path / "spikectl"
-    (package / "cli").mkdir(parents=True)
-    (package / "__init__.py").write_text("")
-    if where == "spikectl.cli":
-        (package / "cli" / "__init__.py").write_text(SWALLOWING_IMPORT)
-        expected = "spikectl: interrupted while starting (nothing was run)\n"
-    else:  # a library the command imports only when it runs
-        (package / "cli" / "__init__.py").write_text("def main():\n    import swallowing\n")
-        (tmp_path / "swallowing.py").write_text(SWALLOWING_IMPORT)
-        expected = "spikectl: interrupted\n"
-    launcher = Path(__file__).resolve().parents[1]
-    process = spikectl_command(
-        "--help",
-        env={"PYTHONPATH": os.pathsep.join([str(tmp_path), str(launcher)])},
-        cwd=tmp_path,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )
-    out, err = process.communicate(timeout=60)
-    assert (process.returncode, err, out) == (130, expected, "")
+    outcome = run_stand_in(tmp_path, where, "swallowing", SWALLOWING_IMPORT)
+    expected = INTERRUPTED_STARTING_LINE if where == "spikectl.cli" else INTERRUPTED_LINE
+    assert outcome == (130, expected, "")

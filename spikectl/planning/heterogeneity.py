@@ -64,11 +64,15 @@ class NeuronTracker(ObservedState):
         self.leak = np.full(n_neurons, params.leak_per_step)
         self._unsettled = np.zeros(n_neurons, dtype=bool)  # read provisionally last step
         self._last_voltage = np.zeros(n_neurons)  # what each neuron showed then
+        self._planning: np.ndarray | None = None  # neurons(), until an interval or leak moves
 
     def neurons(self) -> np.ndarray:
         """[1, 2, n] kernel parameters to plan with: each threshold at the middle of its
         interval, each leak as measured (the paper's until measured)."""
-        return np.ascontiguousarray(np.stack([0.5 * (self.low + self.high), self.leak])[None])
+        if self._planning is None:
+            middle = 0.5 * (self.low + self.high)
+            self._planning = np.ascontiguousarray(np.stack([middle, self.leak])[None])
+        return self._planning
 
     def observe(self, voltage: np.ndarray, action: int) -> tuple[np.ndarray, ...]:
         """As :meth:`ObservedState.observe`, after settling last step's provisional
@@ -101,7 +105,9 @@ class NeuronTracker(ObservedState):
         free &= voltage < self.high  # not (certainly) a spike
         if action != DO_NOTHING:
             free[action] = False
-        self.leak = np.where(free, (before - voltage) / np.where(free, decay, 1.0), self.leak)
+        if free.any():
+            self.leak = np.where(free, (before - voltage) / np.where(free, decay, 1.0), self.leak)
+            self._planning = None
 
     def _settle(self, voltage: np.ndarray) -> None:
         """Correct last step's provisional reads by this step's potentials: a neuron that
@@ -115,6 +121,7 @@ class NeuronTracker(ObservedState):
         for neuron in np.flatnonzero(self._unsettled & (truly != self.spiked)):
             self._correct(int(neuron), bool(truly[neuron]), float(shown[neuron]))
         self._unsettled = np.zeros_like(self._unsettled)
+        self._planning = None
 
 
 def tracks_neurons(extensions: Extensions | None, noise_mV: float, params: NeuronParams) -> bool:

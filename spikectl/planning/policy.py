@@ -402,15 +402,16 @@ class IdentifyAndPlan:
         plan_on = self.plan_on
         if plan_on == "auto":
             plan_on = "mean" if self.noise_mV == 0 else "known"
+        if plan_on == "known" and not self._strengths:
+            return signs, known
+        mean = np.round(self.estimate.posterior()[0], 2)
         if self._strengths:
             # Synapses differ in strength (synaptic spread): a known synapse is planned at
             # its estimated strength, not its sign.
-            mean, _ = self.estimate.posterior()
-            signs = np.where(known, np.round(mean, 2), signs)
+            signs = np.where(known, mean, signs)
         if plan_on == "known":
             return signs, known
-        mean, _ = self.estimate.posterior()
-        return np.where(known, signs, np.round(mean, 2)), known
+        return np.where(known, signs, mean), known
 
     def _neurons(self) -> np.ndarray | None:
         """[1, 2, n] per-neuron kernel parameters to plan with where the policy learns
