@@ -363,13 +363,15 @@ def test_named_controller_takes_the_environments_observation_model():
     assert environment_settings(None, 15) == {} and environment_settings(None, 16) != {}
 
 
-def test_gaussian_estimate_learns_from_release_chances():
-    """Told stochastic release, the Gaussian estimate's evidence is each spike's release
-    chance (the rule's probability), not the deterministic rule's 0/1."""
+def test_gaussian_estimate_learns_from_release_chances_under_noise():
+    """Told stochastic release under measurement noise (residuals not exact, so nothing
+    settles a release: tests/test_planning_release.py has the noise-free case), the
+    Gaussian estimate's evidence is each spike's release chance (the rule's
+    probability), not the deterministic rule's 0/1."""
     from spikectl.contexts import make_splits
     from spikectl.envs.env import NeuronControlEnv
 
-    extensions = Extensions(stochastic_release=True)
+    extensions = Extensions(stochastic_release=True, observation_noise_mV=1.0)
     contexts, _ = make_splits(1, 1, 8, 60, seed=2)
     env = NeuronControlEnv(contexts=contexts, params=PARAMS, extensions=extensions)
     policy = IdentifyAndPlan(PARAMS, extensions=extensions)

@@ -174,6 +174,18 @@ class ConnectivityEstimate:
         hypotheses = np.where(known, signs, np.where(connected, sign, 0))
         return np.ascontiguousarray(hypotheses, dtype=np.int8)
 
+    def entry_probabilities(self) -> tuple[np.ndarray, np.ndarray]:
+        """(P(G = +1), P(G = -1)), both [n (pre), n (post)]: for an entry the evidence
+        has not touched (posterior sd still at least 0.9 of the prior's) the topology's
+        connection probability for its distance, excitatory with probability 0.8; for
+        one it has narrowed, P(w > 1/2) and P(w < -1/2) under its Gaussian posterior."""
+        mean, sd = self.posterior()
+        excites, inhibits = synapse_probabilities(mean, sd)
+        untouched = sd >= 0.9 * np.sqrt(self.prior_variance)
+        prior = self.prior_variance
+        return (np.where(untouched, prior * EXCITATORY_PROBABILITY, excites),
+                np.where(untouched, prior * (1.0 - EXCITATORY_PROBABILITY), inhibits))  # fmt: skip
+
     def excitation_probability(self, target: int, known_sd: float) -> np.ndarray:
         """[n] probability that neuron i excites ``target`` (1/0 where known, else prior)."""
         weights, known = self.weights(known_sd)

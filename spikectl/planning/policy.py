@@ -51,6 +51,7 @@ from spikectl.planning.identify import (
     residual_sd,
 )
 from spikectl.planning.qmdp import qmdp_action
+from spikectl.planning.release import exact_residuals, settled_releases
 
 IDENTIFICATIONS = ("gaussian", "discrete", "bayes")
 """How the policy identifies G: a Gaussian posterior (ridge regression, any n), the
@@ -63,7 +64,7 @@ _SETTINGS = (
     "width", "horizon", "known_sd", "noise_mV", "hypotheses", "seed", "probe",
     "identification", "plan_on", "spike_margin_sd", "gamble_networks",
     "gamble_information", "gamble_horizon", "gamble_width", "gamble_candidates",
-    "known_weights", "extensions", "filter_voltage",
+    "known_weights", "extensions", "filter_voltage", "settle_releases",
 )  # fmt: skip
 
 
@@ -190,6 +191,12 @@ class IdentifyAndPlan:
             filtering.FilteredState`) instead of the raw observations; where
             ``extensions`` leave the dynamics the paper's, the filter trusts the model's
             step exactly (:func:`~spikectl.planning.filtering.model_variance`).
+        settle_releases: under stochastic release with exact residuals (no measurement
+            noise, hidden or heterogeneous neurons, background input;
+            :func:`~spikectl.planning.release.exact_residuals`), the Gaussian estimate
+            learns from each spike's release settled from the next step's residuals
+            (:func:`~spikectl.planning.release.settled_releases`) instead of its release
+            chance; False: the chance, as before.
 
     ```python
     policy = IdentifyAndPlan()
@@ -223,6 +230,7 @@ class IdentifyAndPlan:
         known_weights: np.ndarray | None = None,
         extensions: Extensions | None = None,
         filter_voltage: bool = False,
+        settle_releases: bool = True,
     ) -> None:
         params = NeuronParams() if params is None else params
         if not isinstance(params, NeuronParams):
@@ -286,6 +294,12 @@ class IdentifyAndPlan:
         # release chance instead of the deterministic rule's release (the Gaussian
         # estimate regresses on the chances, the Bayes one mixes over the releases).
         self._release_chances = self._observation.stochastic_release
+        # ... and where nothing else moves the potentials (no measurement noise, hidden
+        # or heterogeneous neurons, background input), the residuals are exact integers
+        # that tell which spikes released (:mod:`spikectl.planning.release`).
+        self.settle_releases = bool(settle_releases)
+        self._settles_releases = (self._release_chances and self.settle_releases
+                                  and not noise_mV and exact_residuals(extensions))  # fmt: skip
         # Synapses of different strengths (synaptic spread, told by ``extensions``): known
         # ones are planned at their estimated strength.
         self._strengths = extensions is not None and extensions.synaptic_spread > 0
@@ -354,7 +368,7 @@ class IdentifyAndPlan:
             else:
                 evidence = self._tracker.observe(voltage, int(observation["last_action"]))
             if self._release_chances:
-                evidence = (self._chances, *evidence[1:])
+                evidence = self._release_evidence(*evidence[1:])
                 self._chances = release_chances(
                     self._tracker.spiked, np.minimum(since + 1, 2**30), self.params
                 )
@@ -384,6 +398,16 @@ class IdentifyAndPlan:
                 action = self._probe(known, target, mask)
         self._predict(weights, action)
         return action
+
+    def _release_evidence(self, residual: np.ndarray, observed: np.ndarray) -> tuple:
+        """Under stochastic release, the evidence of the last step's spikes: where the
+        residuals are exact (:data:`_settles_releases`), each release settled from them
+        (:func:`~spikectl.planning.release.settled_releases`) for the Gaussian
+        estimate; otherwise each spike's release chance."""
+        if self._settles_releases and isinstance(self.estimate, ConnectivityEstimate):
+            excites, inhibits = self.estimate.entry_probabilities()
+            return settled_releases(self._chances, residual, observed, excites, inhibits)
+        return self._chances, residual, observed
 
     def _planning_weights(self) -> tuple[np.ndarray, np.ndarray]:
         """(weights [n, n] to plan with, known [n, n]): known entries at their value;
