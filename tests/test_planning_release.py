@@ -110,18 +110,19 @@ def test_on_stochastic_networks_every_settled_release_and_known_weight_is_true(m
     arrived is one the environment drew, and each it settles as failed either failed or
     reached no synapse the residuals saw (the same evidence: nothing arrived); at each
     episode's end every weight the estimate calls known is the network's (with the
-    release chance as evidence, about one in nine was wrong on the suite's validation
+    release chance as evidence, about one in eight was wrong on the suite's validation
     networks)."""
     extensions = Extensions(stochastic_release=True)
     contexts, _ = make_splits(6, 1, 8, 60, seed=3)
     env = NeuronControlEnv(contexts=contexts, params=PARAMS, extensions=extensions)
     policy = IdentifyAndPlan(PARAMS, extensions=extensions, known_sd=0.4)
-    settled = []  # (posterior, chances) of each step's evidence
+    settled = []  # (step acted on, posterior, chances, observed) of each settling
     real = policy_module.settled_releases
+    acting = [0]  # the step the policy is acting on
 
     def record(chances, residual, observed, excites, inhibits):
         posterior = release_posterior(chances, residual, observed, excites, inhibits)
-        settled.append((posterior, np.asarray(chances).copy(), observed.copy()))
+        settled.append((acting[0], posterior, np.asarray(chances).copy(), observed.copy()))
         return real(chances, residual, observed, excites, inhibits)
 
     monkeypatch.setattr(policy_module, "settled_releases", record)
@@ -132,16 +133,17 @@ def test_on_stochastic_networks_every_settled_release_and_known_weight_is_true(m
         policy.reset()
         truth = []
         settled.clear()
-        for _ in range(60):
+        for step in range(60):
+            acting[0] = step
             observation, _, terminated, _, info = env.step(policy.act(observation, info))
             truth.append(env._state.released[0].copy())  # the releases of this step
             if terminated:
                 break
-        # The potentials after step t carry the releases of step t - 1: the evidence read
-        # after step t (the first is after step 0, with nothing released before it).
-        assert not settled[0][1].any()
-        # (the last step's releases are never read: one fewer evidence than steps)
-        for (posterior, chances, observed), released in zip(settled[1:], truth, strict=False):
+        assert settled
+        # Acting at step s, the policy reads the potentials after step s - 1, which carry
+        # the releases of step s - 2.
+        for acted_at, posterior, chances, observed in settled:
+            released = truth[acted_at - 2]
             spiked = chances > 0
             arrived = spiked & (posterior >= 1 - SETTLED)
             failed = spiked & (posterior <= SETTLED)

@@ -27,6 +27,10 @@ CLAIMS = {
     "plans known synapses at their strength: heterogeneous validation 0.769 -> 0.855 "
     "(+0.086 [+0.051, +0.121]), test 0.768 -> 0.869 (+0.101 [+0.073, +0.129]); suite mean "
     "0.605 -> 0.626",
+    "release-settling": "identify-and-plan settles stochastic releases from the next "
+    "step's residuals: known weights right 0.879 -> 0.997; stochastic train + validation "
+    "0.675 -> 0.688 (+0.013 [+0.002, +0.025]), test 0.670 -> 0.678 (+0.007 [-0.014, "
+    "+0.028], within noise); suite mean 0.626 -> 0.629",
     "first-action": "identify-and-plan's first action chosen from the target and the pattern "
     "(12 000 generator contexts, every legal first action played): +0.002 +- 0.002 on "
     "held-out contexts, nothing to gain at step 0; a 16-network look-ahead at step 0 "

@@ -404,7 +404,8 @@ class IdentifyAndPlan:
         residuals are exact (:data:`_settles_releases`), each release settled from them
         (:func:`~spikectl.planning.release.settled_releases`) for the Gaussian
         estimate; otherwise each spike's release chance."""
-        if self._settles_releases and isinstance(self.estimate, ConnectivityEstimate):
+        if (self._settles_releases and self._chances.any()
+                and isinstance(self.estimate, ConnectivityEstimate)):  # fmt: skip
             excites, inhibits = self.estimate.entry_probabilities()
             return settled_releases(self._chances, residual, observed, excites, inhibits)
         return self._chances, residual, observed

@@ -12,7 +12,7 @@ so the releases are a hidden 0/1 vector behind one step's residuals. Giving a re
 the chance itself (released_i = 0.65) where the release failed tells it that
 0.65 * G[i, j] = 0, which, noise-free, nails every synapse of the row to 0: that was the
 Gaussian estimate's largest error under stochastic release (about one known entry in
-nine wrong on the ``stochastic`` validation networks).
+eight wrong on the ``stochastic`` validation networks).
 
 :func:`release_posterior` weighs every combination of the m spikes' releases (2^m, m
 rarely above 3) by its chances and by how well it explains each observed residual,
@@ -25,6 +25,7 @@ learned from a guess.
 
 from __future__ import annotations
 
+import functools
 import itertools
 
 import numpy as np
@@ -82,7 +83,7 @@ def release_posterior(
     m = uncertain.size
     if m == 0 or m > MAX_UNCERTAIN:
         return chances.copy()
-    combos = np.array(list(itertools.product((False, True), repeat=m)))  # [C, m]
+    combos = _combinations(m)  # [C, m]
     chance = np.clip(chances[uncertain], 1e-12, 1.0 - 1e-12)
     log_weight = np.where(combos, np.log(chance), np.log1p(-chance)).sum(axis=1)  # [C]
     columns = np.flatnonzero(observed)
@@ -108,6 +109,14 @@ def release_posterior(
     posterior = chances.copy()
     posterior[uncertain] = (weight / weight.sum()) @ combos
     return posterior
+
+
+@functools.cache
+def _combinations(m: int) -> np.ndarray:
+    """[2^m, m] bool, every combination of m releases (made once per m)."""
+    combos = np.array(list(itertools.product((False, True), repeat=m)))
+    combos.flags.writeable = False
+    return combos
 
 
 def settled_releases(
