@@ -257,6 +257,36 @@ def test_filtered_state_values():
     assert tracker.spiked[1]  # raw -53 mV would not be a spike without a 3 mV margin
 
 
+def test_the_filter_plans_spikes_within_its_margin_of_the_threshold():
+    """Neuron 0 excites the target (2); the target's filtered potential is 0.3 mV below
+    rest, where unknown weights can leave it: the paper's neurons need the whole
+    20 mV to the threshold and the planner gives the wanted spike up; the filter's
+    neurons (spiking from 2 x 2 mV below it) plan it, stimulating 0 at step 1."""
+    from spikectl.neuron.simulator import SimulatorState
+    from spikectl.planning.beam import PlanningModel, beam_search
+    from spikectl.planning.filtering import FilteredState
+
+    tracker = FilteredState(3, PARAMS, noise_mV=2.0, spike_margin_sd=2.0)
+    neurons = tracker.neurons()
+    assert neurons.shape == (1, 2, 3)
+    assert neurons[0, 0] == pytest.approx(PARAMS.v_spike_mV - 4.0)  # V_th less 2 x 2 mV
+    assert neurons[0, 1] == pytest.approx(PARAMS.leak_per_step)
+    weights = np.zeros((1, 3, 3), dtype=np.int8)
+    weights[0, 0, 2] = 1
+    state = SimulatorState.at_rest(1, 3, PARAMS)
+    state.voltage_mV[0, 2] = PARAMS.v_rest_mV - 0.3
+    pattern = np.zeros(60, dtype=bool)
+    pattern[2] = True  # stimulated at step 1, neuron 0's release reaches 2 at step 2
+    actions = np.array([-1, 0, 1], dtype=np.int64)
+    plans = {}
+    for label, kind in (("paper", None), ("filter", neurons)):
+        model = PlanningModel(weights, 2, actions, PARAMS, kind)
+        plans[label] = beam_search(model, state.copy(), pattern, 0, 8, 10)
+    assert plans["paper"].rewards[2] == 0  # predicted at -50.3 mV: no spike
+    assert plans["filter"].rewards[2] == pytest.approx(0.5)  # R_max / m, m = 1
+    assert plans["filter"].actions[1] == 0
+
+
 def test_model_variance_is_zero_only_under_the_papers_dynamics():
     """The filter trusts the model's step exactly where only the observation differs from
     the paper (noise, bleaching) and keeps its extra variance where the step is wrong or

@@ -439,9 +439,11 @@ class IdentifyAndPlan:
         return np.where(known, signs, mean), known
 
     def _neurons(self) -> np.ndarray | None:
-        """[1, 2, n] per-neuron kernel parameters to plan with where the policy learns
-        them (:class:`~spikectl.planning.heterogeneity.NeuronTracker`), else None."""
-        if isinstance(self._tracker, NeuronTracker):
+        """[1, 2, n] per-neuron kernel parameters to plan with where the tracker has its
+        own (:class:`~spikectl.planning.heterogeneity.NeuronTracker`: the neurons it
+        learned; :class:`~spikectl.planning.filtering.FilteredState`: a threshold with a
+        margin for the noise), else None (the paper's)."""
+        if isinstance(self._tracker, (NeuronTracker, FilteredState)):
             return self._tracker.neurons()
         return None
 
