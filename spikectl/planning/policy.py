@@ -19,10 +19,11 @@ The policy knows the neuron model (``NeuronParams``) but not the weights. Each s
 Under the extensions (``extensions=``, ``identification="bayes"``,
 ``filter_voltage=True``) it learns with the task's own observation model: measurement
 noise, release chances under stochastic release, background input, synaptic spread
-(:mod:`spikectl.planning.bayes`), and plans from potentials filtered against the
-model (:mod:`spikectl.planning.filtering`). :func:`environment_settings` is what the
-named controller ``identify-and-plan`` plays on an environment; the constructor's
-defaults are the paper's model.
+(:mod:`spikectl.planning.bayes`; under stochastic release alone each release is read
+back from the next step's residuals, :mod:`spikectl.planning.release`), and plans from
+potentials filtered against the model (:mod:`spikectl.planning.filtering`).
+:func:`environment_settings` is what the named controller ``identify-and-plan`` plays
+on an environment; the constructor's defaults are the paper's model.
 
 It acts through the public interface only (observation and ``info["action_mask"]``)
 and never takes an illegal action.

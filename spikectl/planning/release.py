@@ -38,7 +38,7 @@ posterior is not computed: the chances are returned, and :func:`settled_releases
 settles none of them."""
 SETTLED = 0.05
 """A release counts as settled when its posterior is within this of 0 or 1: chosen on
-the ``stochastic`` train and validation sets (0.02 and 0.1 scored within noise of it)."""
+the ``stochastic`` train and validation sets (0.02 and 0.1 scored within 0.003 of it)."""
 INTEGER_TOLERANCE = 0.25
 """A residual further than this (in units of w_in) from an integer is not explained by
 any release and is left out of the posterior (noise-free, it never is)."""
