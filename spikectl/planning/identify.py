@@ -78,6 +78,7 @@ class ConnectivityEstimate:
         self.version = 0
         """Counts the changes of the posterior (what may be cached against it)."""
         self._weights: dict[float, tuple[np.ndarray, np.ndarray]] = {}
+        self._parts: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
         prior = self._PRIORS.get(n)
         if prior is None:
             index = np.arange(n)
@@ -104,6 +105,7 @@ class ConnectivityEstimate:
         self.observations += int(observed.sum())
         self.version += 1
         self._cache = None
+        self._parts = None
         self._weights.clear()
 
     def posterior(self) -> tuple[np.ndarray, np.ndarray]:
@@ -161,11 +163,9 @@ class ConnectivityEstimate:
             sign_uniforms: [K, n] uniforms in [0, 1), one per hypothesis and row.
         """
         signs, known = self.weights(known_sd)
-        mean, sd = self.posterior()
-        prior_sd = np.sqrt(self.prior_variance)
-        excites, inhibits = synapse_probabilities(mean, sd)
+        excites, inhibits, untouched = self._synapse_parts()
         tail = excites + inhibits  # P(|w| > 1/2): the rounded weight is nonzero
-        probability = np.where(sd >= 0.9 * prior_sd, self.prior_variance, tail)  # [n, n]
+        probability = np.where(untouched, self.prior_variance, tail)  # [n, n]
         probability = np.where(known, 0.0, probability)
         row_sign = np.sign(signs.sum(axis=1))  # [n]
         drawn_sign = np.where(sign_uniforms < EXCITATORY_PROBABILITY, 1, -1)  # [K, n]
@@ -179,12 +179,21 @@ class ConnectivityEstimate:
         has not touched (posterior sd still at least 0.9 of the prior's) the topology's
         connection probability for its distance, excitatory with probability 0.8; for
         one it has narrowed, P(w > 1/2) and P(w < -1/2) under its Gaussian posterior."""
-        mean, sd = self.posterior()
-        excites, inhibits = synapse_probabilities(mean, sd)
-        untouched = sd >= 0.9 * np.sqrt(self.prior_variance)
+        excites, inhibits, untouched = self._synapse_parts()
         prior = self.prior_variance
         return (np.where(untouched, prior * EXCITATORY_PROBABILITY, excites),
                 np.where(untouched, prior * (1.0 - EXCITATORY_PROBABILITY), inhibits))  # fmt: skip
+
+    def _synapse_parts(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(P(w > 1/2), P(w < -1/2), untouched), each [n (pre), n (post)], under the
+        Gaussian posterior; untouched where its sd is still at least 0.9 of the prior's.
+        What :meth:`sample` and :meth:`entry_probabilities` read, kept until the
+        posterior changes (the acting loop asks every step with a spike)."""
+        if self._parts is None:
+            mean, sd = self.posterior()
+            excites, inhibits = synapse_probabilities(mean, sd)
+            self._parts = (excites, inhibits, sd >= 0.9 * np.sqrt(self.prior_variance))
+        return self._parts
 
     def excitation_probability(self, target: int, known_sd: float) -> np.ndarray:
         """[n] probability that neuron i excites ``target`` (1/0 where known, else prior)."""

@@ -292,8 +292,9 @@ class IdentifyAndPlan:
         if extensions is None and noise_mV:
             self._observation = ObservationModel(noise_mV=float(noise_mV))
         # Stochastic release, told by ``extensions``: the evidence carries each spike's
-        # release chance instead of the deterministic rule's release (the Gaussian
-        # estimate regresses on the chances, the Bayes one mixes over the releases).
+        # release chance instead of the deterministic rule's release (the Bayes estimate
+        # mixes over the releases; the Gaussian one regresses on the chances, or on the
+        # releases settled from the residuals, below).
         self._release_chances = self._observation.stochastic_release
         # ... and where nothing else moves the potentials (no measurement noise, hidden
         # or heterogeneous neurons, background input), the residuals are exact integers
