@@ -88,8 +88,7 @@ class FilteredState(ObservedState):
         ``spike_margin_sd`` times the noise below the threshold. One release from rest
         lands a neuron exactly on the threshold; a filtered potential a fraction of a mV
         below rest (where unknown weights left the filter unsure) would make the planner
-        expect no spike from it and give up on wanted spikes it can hit (on the noise
-        tasks' train and validation sets, margins from 2 to 8 mV all gained about 0.03;
+        expect no spike from it and give up on wanted spikes it can hit (measured in
         docs/baselines.md)."""
         return self._planning
 

@@ -11,8 +11,7 @@ w_in, :mod:`spikectl.planning.identify`):
 so the releases are a hidden 0/1 vector behind one step's residuals. Giving a regression
 the chance itself (released_i = 0.65) where the release failed tells it that
 0.65 * G[i, j] = 0, which, noise-free, nails every synapse of the row to 0: that was the
-Gaussian estimate's largest error under stochastic release (about one known entry in
-eight wrong on the ``stochastic`` validation networks).
+Gaussian estimate's largest error under stochastic release (docs/baselines.md).
 
 :func:`release_posterior` weighs every combination of the m spikes' releases (2^m, m
 rarely above 3) by its chances and by how well it explains each observed residual,
@@ -38,7 +37,7 @@ posterior is not computed: the chances are returned, and :func:`settled_releases
 settles none of them."""
 SETTLED = 0.05
 """A release counts as settled when its posterior is within this of 0 or 1: chosen on
-the ``stochastic`` train and validation sets (0.02 and 0.1 scored within 0.003 of it)."""
+the ``stochastic`` train and validation sets (docs/results/release-settling)."""
 INTEGER_TOLERANCE = 0.25
 """A residual further than this (in units of w_in) from an integer is not explained by
 any release and is left out of the posterior (noise-free, it never is)."""
