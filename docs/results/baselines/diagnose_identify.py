@@ -20,29 +20,11 @@ import numpy as np
 
 import spikectl.planning.policy as policy_module
 from spikectl import IdentifyAndPlan, make_splits
+from spikectl.planning.identify import KnownConnectivity
 from spikectl.envs.env_support import step_rewards
 from spikectl.envs.rollout import evaluate_policy
 
 STEP_BINS = (0, 5, 10, 20, 30, 60)
-
-
-class _TrueWeights:
-    """Stands in for ConnectivityEstimate: every weight known and right."""
-
-    def __init__(self, weights: np.ndarray) -> None:
-        self._weights = weights.astype(np.int8)
-
-    def add(self, *evidence) -> None:
-        pass
-
-    def weights(self, known_sd: float) -> tuple[np.ndarray, np.ndarray]:
-        return self._weights, np.ones(self._weights.shape, dtype=bool)
-
-    def posterior(self) -> tuple[np.ndarray, np.ndarray]:
-        return self._weights.astype(np.float64), np.zeros(self._weights.shape)
-
-    def excitation_probability(self, target: int, known_sd: float) -> np.ndarray:
-        return (self._weights[:, target] > 0).astype(float)
 
 
 class _ToldTheTargetColumn(policy_module.ConnectivityEstimate):
@@ -51,10 +33,22 @@ class _ToldTheTargetColumn(policy_module.ConnectivityEstimate):
     def __init__(self, n, residual_sd, weights, target, told_from):
         super().__init__(n, residual_sd)
         self._true, self._target, self._told_from = weights, target, told_from
-        self.step = 0
+        self._step = 0
+
+    @property
+    def step(self) -> int:
+        return self._step
+
+    @step.setter
+    def step(self, step: int) -> None:
+        # The policy re-reads its planning weights only when the estimate's version
+        # changes: being told the column is a change.
+        if self._step < self._told_from <= step:
+            self.version += 1
+        self._step = step
 
     def _told(self) -> bool:
-        return self.step >= self._told_from
+        return self._step >= self._told_from
 
     def weights(self, known_sd):
         signs, known = super().weights(known_sd)
@@ -110,7 +104,7 @@ def _told_the_weights(contexts):
     """Each new estimate (one per episode, in context order) is the true weights."""
     queue = iter([context.weights for context in contexts])
     original = policy_module.ConnectivityEstimate
-    policy_module.ConnectivityEstimate = lambda n, sd: _TrueWeights(next(queue))
+    policy_module.ConnectivityEstimate = lambda n, sd: KnownConnectivity(next(queue))
     try:
         yield
     finally:
