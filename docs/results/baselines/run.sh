@@ -23,5 +23,7 @@ spikectl baselines --split test --env spikectl/NeuronControl32-v0 --identify-wid
 python $out/diagnose_identify.py | tee $out/diagnose_identify_n8.txt
 python $out/diagnose_identify.py --n-neurons 32 --size 20 --skip-first-action \
   | tee $out/diagnose_identify_n32.txt
+python $out/diagnose_identify.py --n-neurons 16 --size 40 --skip-first-action \
+  | tee $out/diagnose_identify_n16.txt
 # Tables and figure from the CSVs above
 python $out/plot_baselines.py $out docs/images/baselines.png

@@ -19,7 +19,9 @@ from pathlib import Path
 import numpy as np
 
 from spikectl.experiments import suite
+from spikectl.planning.identify import ConnectivityEstimate
 from spikectl.planning.policy import IdentifyAndPlan, environment_settings
+from spikectl.planning.release import settled_releases
 
 TASKS = ("paper", "noise1", "noise2", "noise4", "hidden25", "stochastic", "background")
 """The suite's n = 8 tasks but ``heterogeneous``, whose planner plans known synapses at
@@ -101,6 +103,17 @@ class Told(IdentifyAndPlan):
 
     def spawn(self, index: int) -> IdentifyAndPlan:
         return copy.copy(self)
+
+    def _release_evidence(self, residual, observed) -> tuple:
+        # The policy settles stochastic releases only for its own Gaussian estimate (a
+        # type check the wrapper does not pass): settle them here as the named
+        # controller does, with the told column's synapse probabilities.
+        wrapped = isinstance(self.estimate, ToldColumn)
+        if (wrapped and self._settles_releases and self._chances.any()
+                and isinstance(self.estimate._inner, ConnectivityEstimate)):  # fmt: skip
+            excites, inhibits = self.estimate.entry_probabilities()
+            return settled_releases(self._chances, residual, observed, excites, inhibits)
+        return super()._release_evidence(residual, observed)
 
     def act(self, observation, info) -> int:
         step = int(observation["step"])
