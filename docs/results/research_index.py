@@ -36,8 +36,8 @@ CLAIMS = {
     "+0.030, test 0.803 / 0.795 / 0.769 -> 0.827 / 0.815 / 0.796 (+0.024 [+0.016, +0.032] "
     "pooled); suite mean 0.629 -> 0.643",
     "reachable": "what better identification could buy at n = 8 (validation): identify-and-"
-    "plan 0.694 normalised over seven tasks, told the target's inputs from step 5 0.795, "
-    "from step 1 0.848, told every weight 0.968",
+    "plan 0.694 normalised over seven tasks, told the target's inputs from step 5 0.792, "
+    "from step 1 0.845, told every weight 0.968",
     "first-action": "identify-and-plan's first action chosen from the target and the pattern "
     "(12 000 generator contexts, every legal first action played): +0.002 +- 0.002 on "
     "held-out contexts, nothing to gain at step 0; a 16-network look-ahead at step 0 "
