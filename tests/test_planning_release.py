@@ -1,6 +1,7 @@
 """Settling stochastic releases from the next step's residuals (spikectl.planning.release):
 posteriors on hand-built cases, computed here by hand, and on stochastic-release networks
-every settled release is the environment's and every known weight is the network's."""
+every settled release is the environment's and every known weight is the network's. And
+the policy's use of unrested inputs under stochastic release, on hand-built networks."""
 
 from __future__ import annotations
 
@@ -157,3 +158,64 @@ def test_on_stochastic_networks_every_settled_release_and_known_weight_is_true(m
         learned += int(known.sum()) - 8  # the diagonal is known from the start
     assert agree[True] > 20 and agree[False] > 10  # both kinds settled, many times
     assert learned > 6 * 8  # more than a row's worth per network
+
+
+def _play_by_hand(policy, weights, pattern, target, first_actions):
+    """Plays ``policy`` on the deterministic simulator (what a stochastic run shows
+    when every release arrives) with ``first_actions`` forced, and returns its action
+    at the step after them."""
+    from spikectl.neuron.simulator import SimulatorState, advance
+
+    n = weights.shape[0]
+    state = SimulatorState.at_rest(1, n, PARAMS)
+    mask = np.ones(n + 1, dtype=bool)
+    mask[target + 1] = False
+    voltage, spikes = np.full((1, 1, n), PARAMS.v_rest_mV), np.zeros((1, 1, n), dtype=bool)
+    last = -1
+    for step in range(len(first_actions) + 1):
+        observation = {"voltage": voltage[0, 0].copy(), "step": step, "last_action": last,
+                       "pattern": pattern, "target": target}  # fmt: skip
+        action = policy.act(observation, {"action_mask": mask})
+        if step == len(first_actions):
+            return action
+        last = first_actions[step]
+        advance(state, weights[None].astype(np.int8), np.array([[last]]), PARAMS, voltage, spikes)
+        if step == 1:
+            assert spikes[0, 0, target], "the release of step 0 reached the target"
+
+
+@pytest.mark.parametrize("unrested", [True, False])
+def test_an_unrested_known_input_is_stimulated_where_the_plan_misses_the_next_spike(unrested):
+    """Neuron 0 is the target's only input (told); it released at step 0 and the target
+    spiked at step 1. Spikes are wanted at steps 1 and 3: by the paper's rule neuron 0's
+    vesicles are back only at step 5, so the plan misses step 3; under stochastic release
+    it releases at step 2 with chance p_r (1 - exp(-2 dt / tau_R)) = 0.32, and the
+    policy stimulates it (unrested_inputs=True) or follows the plan (do nothing)."""
+    weights = np.zeros((3, 3), dtype=np.int8)
+    weights[0, 2] = 1
+    pattern = np.zeros(60, dtype=np.int8)
+    pattern[[1, 3]] = 1
+    stochastic = Extensions(stochastic_release=True)
+    policy = IdentifyAndPlan(known_weights=weights, extensions=stochastic,
+                             unrested_inputs=unrested)  # fmt: skip
+    action = _play_by_hand(policy, weights, pattern, target=2, first_actions=[0, -1])
+    assert action == (0 if unrested else -1)
+    # Without stochastic release the rule is exact: the input stays silent, no stimulus.
+    paper = IdentifyAndPlan(known_weights=weights, unrested_inputs=unrested)
+    assert _play_by_hand(paper, weights, pattern, target=2, first_actions=[0, -1]) == -1
+
+
+def test_the_unrested_input_with_the_highest_release_chance_is_chosen():
+    """Two inputs of the target, neuron 0 released at step 0 and neuron 1 at step 2
+    (their chances at step 4: 0.48 and 0.32); a spike wanted at step 5 that the plan
+    misses: neuron 0, whose vesicles have had longer."""
+    weights = np.zeros((3, 3), dtype=np.int8)
+    weights[0, 2] = weights[1, 2] = 1
+    pattern = np.zeros(60, dtype=np.int8)
+    pattern[[1, 3, 5]] = 1
+    stochastic = Extensions(stochastic_release=True)
+    for unrested, chosen in ((True, 0), (False, -1)):
+        policy = IdentifyAndPlan(known_weights=weights, extensions=stochastic,
+                                 unrested_inputs=unrested)  # fmt: skip
+        action = _play_by_hand(policy, weights, pattern, target=2, first_actions=[0, -1, 1, -1])
+        assert action == chosen

@@ -20,8 +20,10 @@ Under the extensions (``extensions=``, ``identification="bayes"``,
 ``filter_voltage=True``) it learns with the task's own observation model: measurement
 noise, release chances under stochastic release, background input, synaptic spread
 (:mod:`spikectl.planning.bayes`; under stochastic release alone each release is read
-back from the next step's residuals, :mod:`spikectl.planning.release`), and plans from
-potentials filtered against the model (:mod:`spikectl.planning.filtering`).
+back from the next step's residuals, :mod:`spikectl.planning.release`, and where the
+plan misses the next wanted spike a known input is stimulated at its release chance,
+rested or not), and plans from potentials filtered against the model
+(:mod:`spikectl.planning.filtering`).
 :func:`environment_settings` is what the named controller ``identify-and-plan`` plays
 on an environment; the constructor's defaults are the paper's model.
 
@@ -65,7 +67,7 @@ _SETTINGS = (
     "width", "horizon", "known_sd", "noise_mV", "hypotheses", "seed", "probe",
     "identification", "plan_on", "spike_margin_sd", "gamble_networks",
     "gamble_information", "gamble_horizon", "gamble_width", "gamble_candidates",
-    "known_weights", "extensions", "filter_voltage", "settle_releases",
+    "known_weights", "extensions", "filter_voltage", "settle_releases", "unrested_inputs",
 )  # fmt: skip
 
 
@@ -198,6 +200,11 @@ class IdentifyAndPlan:
             learns from each spike's release settled from the next step's residuals
             (:func:`~spikectl.planning.release.settled_releases`) instead of its release
             chance; False: the chance, as before.
+        unrested_inputs: under stochastic release, where the plan misses the next
+            wanted spike, stimulate the target's known excitatory input with the highest
+            release chance even before its vesicles are back by the paper's rule (the
+            plan counts such an input as silent; it releases with its chance,
+            :func:`~spikectl.planning.bayes.release_chances`). False: the plan's action.
 
     ```python
     policy = IdentifyAndPlan()
@@ -232,6 +239,7 @@ class IdentifyAndPlan:
         extensions: Extensions | None = None,
         filter_voltage: bool = False,
         settle_releases: bool = True,
+        unrested_inputs: bool = True,
     ) -> None:
         params = NeuronParams() if params is None else params
         if not isinstance(params, NeuronParams):
@@ -300,6 +308,7 @@ class IdentifyAndPlan:
         # or heterogeneous neurons, background input), the residuals are exact integers
         # that tell which spikes released (:mod:`spikectl.planning.release`).
         self.settle_releases = bool(settle_releases)
+        self.unrested_inputs = bool(unrested_inputs)
         self._settles_releases = (self._release_chances and self.settle_releases
                                   and not noise_mV and exact_residuals(extensions))  # fmt: skip
         # Synapses of different strengths (synaptic spread, told by ``extensions``): known
@@ -398,8 +407,29 @@ class IdentifyAndPlan:
                 action = self._gamble(known, target, mask, pattern, step)
             else:
                 action = self._probe(known, target, mask)
+        if self._release_chances and self.unrested_inputs:
+            action = self._unrested_input(weights, known, target, mask, pattern, step, action)
         self._predict(weights, action)
         return action
+
+    def _unrested_input(self, weights, known, target, mask, pattern, step, action) -> int:
+        """Under stochastic release, where the plan does not hit the spike wanted at the
+        next step: the target's known excitatory input (not refractory) with the
+        highest release chance, which the plan's deterministic rule counts as silent
+        until its vesicles are back; else ``action``."""
+        offset = step - self._plan_start + 1  # the action reaches the target a step later
+        if step + 1 >= pattern.shape[0] or not pattern[step + 1]:
+            return action
+        if offset < self._plan.rewards.shape[0] and self._plan.rewards[offset] > 0:
+            return action
+        state = self._tracker.state
+        inputs = (known[:, target] & (weights[:, target] > 0)
+                  & (state.refractory_left[0] == 0) & mask[1:])  # fmt: skip
+        if not inputs.any():
+            return action
+        since = np.minimum(state.steps_since_release[0] + 1, 2**30)  # at the coming step
+        chance = release_chances(inputs, since, self.params)  # 0 where not an input
+        return int(np.argmax(chance))
 
     def _release_evidence(self, residual: np.ndarray, observed: np.ndarray) -> tuple:
         """Under stochastic release, the evidence of the last step's spikes: where the
