@@ -35,6 +35,14 @@ CLAIMS = {
     "filter's read margin of the threshold: noise tasks' train + validation +0.030 / +0.029 / "
     "+0.030, test 0.803 / 0.795 / 0.769 -> 0.827 / 0.815 / 0.796 (+0.024 [+0.016, +0.032] "
     "pooled); suite mean 0.629 -> 0.643",
+    "unrested-inputs": "under stochastic release identify-and-plan stimulates a known input "
+    "at its release chance where its plan misses the next wanted spike: train + validation "
+    "+0.008 [+0.002, +0.014], test 0.678 -> 0.686 (+0.008 [+0.001, +0.016]); suite mean "
+    "0.643 -> 0.646",
+    "probing-rules": "identify-and-plan's probing rule against three others (probe also when "
+    "idle and no spike is near, only when a missed spike is near, candidates ranked by "
+    "Dale's law): none better on paper train / validation or n16 validation (-0.000 to "
+    "-0.067)",
     "reachable": "what better identification could buy at n = 8 (validation): identify-and-"
     "plan 0.694 normalised over seven tasks, told the target's inputs from step 5 0.792, "
     "from step 1 0.845, told every weight 0.968",
