@@ -28,7 +28,7 @@ from math import erfc as _erfc
 import numpy as np
 
 from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
-from spikectl.neuron.kernel import integrate
+from spikectl.neuron.kernel import SINCE_RELEASE_CAP, integrate
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, SimulatorState
 
@@ -279,7 +279,7 @@ class ObservedState:
     def _apply(self, spiked: np.ndarray, refractory: np.ndarray, voltage: np.ndarray) -> None:
         """Advance the tracked state by the step's reads (releases by the vesicle rule)."""
         state, params = self.state, self.params
-        since = np.minimum(state.steps_since_release[0] + 1, 2**30)
+        since = np.minimum(state.steps_since_release[0] + 1, SINCE_RELEASE_CAP)
         self._since_before_release = since.copy()
         release = spiked & (since >= self._interval)
         since[release] = 0

@@ -40,6 +40,7 @@ import numpy as np
 
 from spikectl.envs.controller import check_controller_input
 from spikectl.neuron.extensions import Extensions
+from spikectl.neuron.kernel import SINCE_RELEASE_CAP
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, advance
 from spikectl.planning.bayes import BayesConnectivityEstimate, ObservationModel, release_chances
@@ -380,9 +381,7 @@ class IdentifyAndPlan:
                 evidence = self._tracker.observe(voltage, int(observation["last_action"]))
             if self._release_chances:
                 evidence = self._release_evidence(*evidence[1:])
-                self._chances = release_chances(
-                    self._tracker.spiked, np.minimum(since + 1, 2**30), self.params
-                )
+                self._chances = self._release_chances_after(self._tracker.spiked, since)
             self.estimate.add(*evidence)
         pattern = np.asarray(observation["pattern"], dtype=bool)
         if step >= pattern.shape[0]:
@@ -427,9 +426,14 @@ class IdentifyAndPlan:
                   & (state.refractory_left[0] == 0) & mask[1:])  # fmt: skip
         if not inputs.any():
             return action
-        since = np.minimum(state.steps_since_release[0] + 1, 2**30)  # at the coming step
-        chance = release_chances(inputs, since, self.params)  # 0 where not an input
+        # At the coming step; 0 where not an input.
+        chance = self._release_chances_after(inputs, state.steps_since_release[0])
         return int(np.argmax(chance))
+
+    def _release_chances_after(self, spiking: np.ndarray, since: np.ndarray) -> np.ndarray:
+        """[n] the release chance of each ``spiking`` neuron one step after the tracked
+        ``since`` steps since its last release (0 where not spiking)."""
+        return release_chances(spiking, np.minimum(since + 1, SINCE_RELEASE_CAP), self.params)
 
     def _release_evidence(self, residual: np.ndarray, observed: np.ndarray) -> tuple:
         """Under stochastic release, the evidence of the last step's spikes: where the
