@@ -12,6 +12,7 @@ from spikectl.contexts import make_splits
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import SimulatorState, advance
 from spikectl.planning import IdentifyAndPlan
 from spikectl.planning import policy as policy_module
 from spikectl.planning.release import (
@@ -164,8 +165,6 @@ def _play_by_hand(policy, weights, pattern, target, first_actions):
     """Plays ``policy`` on the deterministic simulator (what a stochastic run shows
     when every release arrives) with ``first_actions`` forced, and returns its action
     at the step after them."""
-    from spikectl.neuron.simulator import SimulatorState, advance
-
     n = weights.shape[0]
     state = SimulatorState.at_rest(1, n, PARAMS)
     mask = np.ones(n + 1, dtype=bool)
