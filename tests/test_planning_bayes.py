@@ -372,7 +372,7 @@ def test_named_controller_takes_the_environments_observation_model():
     plain = load_controller("identify-and-plan", env=NeuronControlEnv(contexts=contexts))
     assert plain.identification == "gaussian" and not plain.filter_voltage
     assert plain.known_sd == 0.25 and controller.known_sd == 0.25
-    assert environment_settings(Extensions(hidden_fraction=0.25)) == {}
+    assert environment_settings(Extensions(hidden_fraction=0.25)) == {"relays": True}
     heterogeneous = Extensions(threshold_spread=0.1)
     assert environment_settings(heterogeneous) == {"extensions": heterogeneous}
     assert environment_settings(Extensions(background_rate=0.005)) == {"known_sd": 0.35}

@@ -39,6 +39,10 @@ CLAIMS = {
     "at its release chance where its plan misses the next wanted spike: train + validation "
     "+0.008 [+0.002, +0.014], test 0.678 -> 0.686 (+0.008 [+0.001, +0.016]); suite mean "
     "0.643 -> 0.646",
+    "hidden-relays": "with hidden neurons identify-and-plan learns each observed neuron's "
+    "effect two steps after its release and plans it through virtual relay neurons: train + "
+    "validation +0.022 [+0.006, +0.038], hidden25 test 0.814 -> 0.831 (+0.017 [-0.003, "
+    "+0.037]); suite mean 0.646 -> 0.649",
     "probing-rules": "identify-and-plan's probing rule against three others (probe also when "
     "idle and no spike is near, only when a missed spike is near, candidates ranked by "
     "Dale's law): none better on paper train / validation or n16 validation (-0.000 to "

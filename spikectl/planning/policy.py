@@ -23,7 +23,9 @@ noise, release chances under stochastic release, background input, synaptic spre
 back from the next step's residuals, :mod:`spikectl.planning.release`, and where the
 plan misses the next wanted spike a known input is stimulated at its release chance,
 rested or not), and plans from potentials filtered against the model
-(:mod:`spikectl.planning.filtering`).
+(:mod:`spikectl.planning.filtering`). With hidden neurons (``relays=True``) it also
+learns each observed neuron's effect two steps after its release, through hidden
+neurons, and plans with it (:mod:`spikectl.planning.relays`).
 :func:`environment_settings` is what the named controller ``identify-and-plan`` plays
 on an environment; the constructor's defaults are the paper's model.
 
@@ -42,7 +44,7 @@ from spikectl.envs.controller import check_controller_input
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.kernel import SINCE_RELEASE_CAP
 from spikectl.neuron.params import NeuronParams
-from spikectl.neuron.simulator import DO_NOTHING, advance
+from spikectl.neuron.simulator import DO_NOTHING, advance, uniform_neuron_parameters
 from spikectl.planning.bayes import BayesConnectivityEstimate, ObservationModel, release_chances
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.discrete import DiscreteConnectivityEstimate, column_hypotheses_fit
@@ -55,6 +57,7 @@ from spikectl.planning.identify import (
     residual_sd,
 )
 from spikectl.planning.qmdp import qmdp_action
+from spikectl.planning.relays import RelayConnectivityEstimate, relay_state, relay_weights
 from spikectl.planning.release import exact_residuals, settled_releases
 
 IDENTIFICATIONS = ("gaussian", "discrete", "bayes")
@@ -69,6 +72,7 @@ _SETTINGS = (
     "identification", "plan_on", "spike_margin_sd", "gamble_networks",
     "gamble_information", "gamble_horizon", "gamble_width", "gamble_candidates",
     "known_weights", "extensions", "filter_voltage", "settle_releases", "unrested_inputs",
+    "relays",
 )  # fmt: skip
 
 
@@ -109,11 +113,12 @@ def environment_settings(
     spike's release chance) and :data:`KNOWN_SD_STOCHASTIC_RELEASE`; under background
     input :data:`KNOWN_SD_BACKGROUND`; with heterogeneous neurons the extensions (each
     neuron's threshold and leak learned, :mod:`spikectl.planning.heterogeneity`, and
-    known synapses planned at their estimated strength); from
+    known synapses planned at their estimated strength); with hidden neurons (and none
+    of the above) the relays through them (``relays=True``); from
     :data:`GAMBLE_FROM_NEURONS` neurons on, QMDP where it would probe and
     :data:`KNOWN_SD_LARGE` (which then takes precedence: a combination no suite task
     has); elsewhere the constructor's defaults, which are the guided learner's teacher
-    (hidden neurons, where nothing tried scored higher, and the paper's task)."""
+    on the paper's task."""
     settings: dict[str, Any] = {}
     if n_neurons is not None and n_neurons >= GAMBLE_FROM_NEURONS:
         settings = {"gamble_networks": GAMBLE_NETWORKS, "known_sd": KNOWN_SD_LARGE}
@@ -128,6 +133,8 @@ def environment_settings(
         return {"known_sd": KNOWN_SD_BACKGROUND, **settings}
     if extensions.heterogeneous:
         return {"extensions": extensions, **settings}
+    if extensions.hidden_neurons or extensions.hidden_fraction:
+        return {"relays": True, **settings}
     return settings
 
 
@@ -206,6 +213,10 @@ class IdentifyAndPlan:
             release chance even before its vesicles are back by the paper's rule (the
             plan counts such an input as silent; it releases with its chance,
             :func:`~spikectl.planning.bayes.release_chances`). False: the plan's action.
+        relays: with hidden neurons, learn each observed neuron's effect two steps after
+            its release (through a hidden neuron it excites) beside G, and plan with it
+            through a virtual relay neuron per observed neuron
+            (:mod:`spikectl.planning.relays`); needs ``identification="gaussian"``.
 
     ```python
     policy = IdentifyAndPlan()
@@ -241,6 +252,7 @@ class IdentifyAndPlan:
         filter_voltage: bool = False,
         settle_releases: bool = True,
         unrested_inputs: bool = True,
+        relays: bool = False,
     ) -> None:
         params = NeuronParams() if params is None else params
         if not isinstance(params, NeuronParams):
@@ -268,6 +280,9 @@ class IdentifyAndPlan:
                 f"got {identification!r}"
             )
         self.identification = identification
+        if relays and identification != "gaussian":
+            raise ValueError(f"relays=True needs identification='gaussian', got {identification!r}")
+        self.relays = bool(relays)
         if plan_on not in ("auto", "mean", "known"):
             raise ValueError(f"plan_on must be 'auto', 'mean' or 'known', got {plan_on!r}")
         if not spike_margin_sd >= 0:
@@ -422,7 +437,8 @@ class IdentifyAndPlan:
         if offset < self._plan.rewards.shape[0] and self._plan.rewards[offset] > 0:
             return action
         state = self._tracker.state
-        inputs = (known[:, target] & (weights[:, target] > 0)
+        n = known.shape[0]  # weights also holds the relays where they are planned
+        inputs = (known[:, target] & (weights[:n, target] > 0)
                   & (state.refractory_left[0] == 0) & mask[1:])  # fmt: skip
         if not inputs.any():
             return action
@@ -459,6 +475,14 @@ class IdentifyAndPlan:
         return self._weights_cache
 
     def _compute_planning_weights(self) -> tuple[np.ndarray, np.ndarray]:
+        weights, known = self._observed_planning_weights()
+        if self._plans_relays:
+            # [2n, 2n]: the observed neurons and their virtual relay neurons; known
+            # stays [n, n] (what is known among the observed).
+            weights = relay_weights(weights, self.estimate.relay_signs(self.known_sd))
+        return weights, known
+
+    def _observed_planning_weights(self) -> tuple[np.ndarray, np.ndarray]:
         signs, known = self.estimate.weights(self.known_sd)
         plan_on = self.plan_on
         if plan_on == "auto":
@@ -475,13 +499,32 @@ class IdentifyAndPlan:
         return np.where(known, signs, mean), known
 
     def _neurons(self) -> np.ndarray | None:
-        """[1, 2, n] per-neuron kernel parameters to plan with where the tracker has its
+        """[1, 2, m] per-neuron kernel parameters to plan with where the tracker has its
         own (:class:`~spikectl.planning.heterogeneity.NeuronTracker`: the neurons it
         learned; :class:`~spikectl.planning.filtering.FilteredState`: a threshold with a
-        margin for the noise), else None (the paper's)."""
-        if isinstance(self._tracker, (NeuronTracker, FilteredState)):
-            return self._tracker.neurons()
-        return None
+        margin for the noise), the paper's for virtual relay neurons; else None (the
+        paper's)."""
+        if not isinstance(self._tracker, (NeuronTracker, FilteredState)):
+            return None
+        neurons = self._tracker.neurons()
+        if self._plans_relays:
+            relays = uniform_neuron_parameters(self.params, 1, neurons.shape[-1])
+            neurons = np.ascontiguousarray(np.concatenate([neurons, relays], axis=-1))
+        return neurons
+
+    @property
+    def _plans_relays(self) -> bool:
+        """Whether the plan holds virtual relay neurons: ``relays`` asked for and the
+        weights not told (told weights are the observed neurons' alone). The estimate
+        (or what stands in for it) then answers ``relay_signs``."""
+        return self.relays and self.known_weights is None
+
+    def _planning_state(self):
+        """The simulator state the plan starts from: the tracker's, with the virtual
+        relay neurons' appended where the policy plans relays."""
+        if self._plans_relays:
+            return relay_state(self._tracker.state, self.params)
+        return self._tracker.state
 
     def _new_estimate(self, n: int):
         if self.known_weights is not None:
@@ -491,6 +534,8 @@ class IdentifyAndPlan:
                     f"observation has {n} neurons"
                 )
             return KnownConnectivity(self.known_weights)
+        if self.relays:
+            return RelayConnectivityEstimate(n, self._residual_sd)
         if self.identification == "discrete":
             return DiscreteConnectivityEstimate(n, self._residual_sd)
         if self.identification == "bayes" and column_hypotheses_fit(n):
@@ -500,7 +545,7 @@ class IdentifyAndPlan:
     def _replan(self, weights, target, mask, pattern, step) -> None:
         model = self._model(weights, target, mask)
         self._plan = beam_search(
-            model, self._tracker.state, pattern, step, self.width, self.horizon
+            model, self._planning_state(), pattern, step, self.width, self.horizon
         )
         self._plan_start = step
         self._planned_weights = weights
@@ -522,6 +567,9 @@ class IdentifyAndPlan:
         if self.hypotheses > 1:
             uniforms = (self._uniforms[0][: self.hypotheses], self._uniforms[1][: self.hypotheses])
             hypotheses = self.estimate.sample(self.known_sd, *uniforms)  # [K, n, n]
+            if self._plans_relays:
+                relays = self.estimate.relay_signs(self.known_sd)
+                hypotheses = np.stack([relay_weights(drawn, relays) for drawn in hypotheses])
             return PlanningModel(hypotheses, target, actions, self.params, self._neurons())
         return PlanningModel(weights[None].copy(), target, actions, self.params, self._neurons())
 
@@ -571,13 +619,13 @@ class IdentifyAndPlan:
 
     def _predict(self, weights: np.ndarray, action: int) -> None:
         """The spikes the estimate predicts for the coming step (to detect surprises)."""
-        state = self._tracker.state.copy()
-        n = weights.shape[0]
-        voltage, spikes = np.empty((1, 1, n)), np.empty((1, 1, n), dtype=bool)
+        state = self._planning_state().copy()
+        m = weights.shape[0]  # the observed neurons, and their relays where planned
+        voltage, spikes = np.empty((1, 1, m)), np.empty((1, 1, m), dtype=bool)
         actions = np.array([[action]], dtype=np.int64)
         advance(state, np.ascontiguousarray(weights[None]), actions, self.params, voltage, spikes,
                 self._neurons())  # fmt: skip
-        self._predicted_spikes = spikes[0, 0]
+        self._predicted_spikes = spikes[0, 0, : self._tracker.spiked.shape[0]]
 
     def spawn(self, index: int) -> IdentifyAndPlan:
         """A fresh copy with the same settings, seeded ``seed + index``: what

@@ -84,6 +84,11 @@ class ToldColumn:
             return (self._truth[:, target] > 0).astype(np.float64)
         return self._inner.excitation_probability(target, known_sd)
 
+    def relay_signs(self, known_sd: float) -> np.ndarray:
+        """The relays through hidden neurons (``hidden25``), learned as before: the told
+        column is the target's direct inputs."""
+        return self._inner.relay_signs(known_sd)
+
     def sample(self, known_sd, connection_uniforms, sign_uniforms) -> np.ndarray:
         drawn = self._inner.sample(known_sd, connection_uniforms, sign_uniforms)
         if self._told():
