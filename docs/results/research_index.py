@@ -43,6 +43,10 @@ CLAIMS = {
     "effect two steps after its release and plans it through virtual relay neurons: train + "
     "validation +0.022 [+0.006, +0.038], hidden25 test 0.814 -> 0.831 (+0.017 [-0.003, "
     "+0.037]); suite mean 0.646 -> 0.649",
+    "confounded-zeros": "what a probe teaches about the target's column (about half of the early "
+    "probes are lost to the target's refractory step or another release), and a column that "
+    "did not move while several neurons released counted as no synapse from each: n16 train + "
+    "validation +0.010 [-0.000, +0.020], n32 validation -0.008, n16 test +0.000; not kept",
     "probing-rules": "identify-and-plan's probing rule against three others (probe also when "
     "idle and no spike is near, only when a missed spike is near, candidates ranked by "
     "Dale's law): none better on paper train / validation or n16 validation (-0.000 to "

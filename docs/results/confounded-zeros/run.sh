@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# The commands of this folder, from the repository root with the package installed.
+set -euo pipefail
+here=docs/results/confounded-zeros
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
+# What a stimulation teaches about the target's column (the named controller, validation).
+python $here/diagnose_probes.py paper 100 > $here/diagnose-paper.txt
+python $here/diagnose_probes.py n16 20 > $here/diagnose-n16.txt
+# The choice: train + validation (n16), the first 70 validation networks (n32), and paper.
+for task in paper n16 n32; do
+    python $here/validation.py $here $task > $here/validation-$task.txt
+done
+# The n16 candidate played once on the test set, against the named controller's row.
+(cd $here && python test.py .)
+python docs/results/bayes-identify/paired_benchmark.py \
+    docs/results/bayes-identify/test-benchmark-known-sd-per-network.csv \
+    $here/test-n16-per-network.csv --task n16 > $here/test-paired.md
