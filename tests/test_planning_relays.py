@@ -5,8 +5,10 @@ input is a hidden neuron, on a hand-built network simulated in full."""
 
 from __future__ import annotations
 
+import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import play_legally
 
 from spikectl.contexts.generation import connection_probability
 from spikectl.neuron.extensions import Extensions
@@ -137,3 +139,25 @@ def test_relays_need_the_gaussian_estimate():
         IdentifyAndPlan(relays=True, identification="discrete")
     with pytest.raises(ValueError, match="relay_variance must be > 0"):
         RelayConnectivityEstimate(3, NOISE_FREE_SD, relay_variance=0.0)
+
+
+@pytest.mark.parametrize(
+    ("extensions", "settings"),
+    [(None, {}), (None, {"hypotheses": 4}),
+     ({"hidden_fraction": 0.25, "threshold_spread": 0.1, "time_constant_spread": 0.1},
+      {"with_extensions": True}),
+     ({"hidden_fraction": 0.25, "observation_noise_mV": 2.0}, {"filter_voltage": True})],
+    ids=["observed state", "sampled hypotheses", "neuron tracker", "filtered state"],
+)  # fmt: skip
+def test_relays_play_legally_with_every_tracker(extensions, settings):
+    """Relays on hidden-neuron environments beside each tracker the policy can have (the
+    virtual relay neurons get the paper's parameters beside the tracked ones)."""
+    env = gym.make("spikectl/NeuronControlPartial-v0", n_train=4, n_test=4,
+                   **({} if extensions is None else {"extensions": extensions}))  # fmt: skip
+    told = env.unwrapped.extensions
+    settings = dict(settings)
+    if settings.pop("with_extensions", False):
+        settings["extensions"] = told
+    policy = IdentifyAndPlan(relays=True, noise_mV=told.observation_noise_mV, width=8, **settings)
+    play_legally(env, policy, range(3))
+    assert policy.estimate.relays()[0].shape == (6, 6)
