@@ -132,14 +132,16 @@ def relay_state(state: SimulatorState, params: NeuronParams) -> SimulatorState:
     where i released the step before (then refractory), and its vesicles were last
     released one step after i's; else at rest with no release on record (a release of
     i at the last step fires v_i at the next, through the weights)."""
-    n = state.voltage_mV.shape[1]
-    planned = SimulatorState.at_rest(1, 2 * n, params)
-    for name in ("voltage_mV", "refractory_left", "steps_since_release", "released"):
-        getattr(planned, name)[:, :n] = getattr(state, name)
-    since = state.steps_since_release[0]  # [n] steps since each i's last release
-    fired = since == 1  # v_i fired at the last step
-    planned.released[0, n:] = fired
-    planned.refractory_left[0, n:] = np.where(fired, params.refractory_steps, 0)
+    since = state.steps_since_release  # [1, n] steps since each i's last release
+    fired = since == 1  # [1, n] v_i fired at the last step
     relayed = (since >= 1) & (since < SINCE_RELEASE_CAP)  # v_i has released since
-    planned.steps_since_release[0, n:] = np.where(relayed, since - 1, SINCE_RELEASE_CAP)
-    return planned
+    relay_since = np.where(relayed, since - 1, SINCE_RELEASE_CAP).astype(since.dtype)
+    relay_refractory = np.where(fired, params.refractory_steps, 0).astype(
+        state.refractory_left.dtype
+    )
+    return SimulatorState(
+        np.concatenate([state.voltage_mV, np.full_like(state.voltage_mV, params.v_rest_mV)], 1),
+        np.concatenate([state.refractory_left, relay_refractory], 1),
+        np.concatenate([since, relay_since], 1),
+        np.concatenate([state.released, fired], 1),
+    )  # each [1, 2n]
