@@ -7,7 +7,8 @@ estimate every step. See docs/baselines.md. ``TargetInputBelief`` gives that est
 the target's inputs to a learned policy, ``PlannerAdvice`` the planner's next action
 (docs/agents.md). ``ObservedState``, ``FilteredState`` (measurement noise) and
 ``NeuronTracker`` (heterogeneous neurons) are the trackers identify-and-plan reads its
-observations with.
+observations with; ``RelayConnectivityEstimate`` is its estimate with the relays through
+hidden neurons (``IdentifyAndPlan(relays=True)``).
 """
 
 from spikectl.planning.advice import PlannerAdvice
@@ -24,6 +25,7 @@ from spikectl.planning.oracle import (
     plan_episode,
 )
 from spikectl.planning.policy import IdentifyAndPlan
+from spikectl.planning.relays import RelayConnectivityEstimate
 
 __all__ = [
     "DEFAULT_ORACLE_WIDTH",
@@ -38,6 +40,7 @@ __all__ = [
     "Plan",
     "PlannerAdvice",
     "PlanningModel",
+    "RelayConnectivityEstimate",
     "TargetInputBelief",
     "beam_search",
     "episode_beliefs",
