@@ -152,6 +152,37 @@ def play_legally(env, policy, seeds) -> None:
             observation, _, terminated, _, info = env.step(action)
 
 
+def play_by_hand(policy, weights, target, pattern, first_actions, observed=None, steps=None):
+    """Play ``policy`` on the paper's deterministic simulator of the full network
+    ``weights`` [n, n] (int8), showing it only the neurons ``observed`` (agent indexing;
+    None: all, the others hidden), with ``first_actions`` forced, for ``steps`` steps
+    (None: the pattern's length). Returns (the actions played, the target's spike at
+    each step), both lists."""
+    import numpy as np
+
+    from spikectl.neuron.params import NeuronParams
+    from spikectl.neuron.simulator import SimulatorState, advance
+
+    params = NeuronParams()
+    n = weights.shape[0]
+    observed = np.arange(n) if observed is None else np.asarray(observed)
+    state = SimulatorState.at_rest(1, n, params)
+    mask = np.ones(len(observed) + 1, dtype=bool)
+    mask[target + 1] = False
+    voltage, spikes = np.full((1, 1, n), params.v_rest_mV), np.zeros((1, 1, n), dtype=bool)
+    last, actions, fired = -1, [], []
+    for step in range(pattern.shape[0] if steps is None else steps):
+        observation = {"voltage": voltage[0, 0, observed].copy(), "step": step,
+                       "last_action": last, "pattern": pattern, "target": target}  # fmt: skip
+        action = policy.act(observation, {"action_mask": mask})
+        last = first_actions[step] if step < len(first_actions) else action
+        actions.append(last)
+        simulated = -1 if last == -1 else int(observed[last])
+        advance(state, weights[None], np.array([[simulated]]), params, voltage, spikes)
+        fired.append(bool(spikes[0, 0, observed[target]]))
+    return actions, fired
+
+
 @pytest.fixture
 def interrupt_after_rounds(monkeypatch) -> Callable[[int], Callable[[], None]]:
     """``stop = interrupt_after_rounds(n)``: the training loop raises KeyboardInterrupt

@@ -8,13 +8,13 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import play_legally
+from conftest import play_by_hand, play_legally
 
 from spikectl.contexts.generation import connection_probability
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.kernel import SINCE_RELEASE_CAP
 from spikectl.neuron.params import NeuronParams
-from spikectl.neuron.simulator import SimulatorState, advance
+from spikectl.neuron.simulator import SimulatorState
 from spikectl.planning import IdentifyAndPlan
 from spikectl.planning.identify import NOISE_FREE_SD
 from spikectl.planning.policy import environment_settings
@@ -84,27 +84,6 @@ def test_relay_state_and_weights():
         [0, 1, 1, 0], [-1, 0, 0, 1], [0, 0, 0, 0], [0, 1, 0, 0]]  # fmt: skip
 
 
-def _play(policy, weights, observed, target, pattern, first_actions):
-    """An episode of ``policy`` on the full network ``weights`` (the neurons not in
-    ``observed`` hidden), ``first_actions`` forced; returns (actions, target spikes)."""
-    n = weights.shape[0]
-    state = SimulatorState.at_rest(1, n, PARAMS)
-    mask = np.ones(len(observed) + 1, dtype=bool)
-    mask[target + 1] = False
-    voltage, spikes = np.full((1, 1, n), PARAMS.v_rest_mV), np.zeros((1, 1, n), dtype=bool)
-    last, actions, fired = -1, [], []
-    for step in range(pattern.shape[0]):
-        observation = {"voltage": voltage[0, 0, observed].copy(), "step": step,
-                       "last_action": last, "pattern": pattern, "target": target}  # fmt: skip
-        action = policy.act(observation, {"action_mask": mask})
-        last = first_actions[step] if step < len(first_actions) else action
-        actions.append(last)
-        simulated = -1 if last == -1 else observed[last]
-        advance(state, weights[None], np.array([[simulated]]), PARAMS, voltage, spikes)
-        fired.append(bool(spikes[0, 0, observed[target]]))
-    return actions, np.array(fired)
-
-
 @pytest.mark.parametrize("relays", [True, False])
 def test_a_target_driven_only_through_a_hidden_neuron(relays):
     """Observed 0, 1, 2 (the target), hidden 3; the only path to the target is
@@ -118,7 +97,8 @@ def test_a_target_driven_only_through_a_hidden_neuron(relays):
     pattern = np.zeros(20, dtype=bool)
     pattern[[2, 12]] = True
     policy = IdentifyAndPlan(relays=relays)
-    actions, fired = _play(policy, weights, [0, 1, 2], 2, pattern, first_actions=[0, -1])
+    actions, fired = play_by_hand(policy, weights, 2, pattern, [0, -1], observed=[0, 1, 2])
+    fired = np.array(fired)
     assert fired[2]
     assert (actions[10] == 0) == relays
     assert fired[12] == relays

@@ -7,12 +7,12 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from conftest import play_by_hand
 
 from spikectl.contexts import make_splits
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.neuron.simulator import SimulatorState, advance
 from spikectl.planning import IdentifyAndPlan
 from spikectl.planning import policy as policy_module
 from spikectl.planning.release import (
@@ -165,22 +165,11 @@ def _play_by_hand(policy, weights, pattern, target, first_actions):
     """Plays ``policy`` on the deterministic simulator (what a stochastic run shows
     when every release arrives) with ``first_actions`` forced, and returns its action
     at the step after them."""
-    n = weights.shape[0]
-    state = SimulatorState.at_rest(1, n, PARAMS)
-    mask = np.ones(n + 1, dtype=bool)
-    mask[target + 1] = False
-    voltage, spikes = np.full((1, 1, n), PARAMS.v_rest_mV), np.zeros((1, 1, n), dtype=bool)
-    last = -1
-    for step in range(len(first_actions) + 1):
-        observation = {"voltage": voltage[0, 0].copy(), "step": step, "last_action": last,
-                       "pattern": pattern, "target": target}  # fmt: skip
-        action = policy.act(observation, {"action_mask": mask})
-        if step == len(first_actions):
-            return action
-        last = first_actions[step]
-        advance(state, weights[None].astype(np.int8), np.array([[last]]), PARAMS, voltage, spikes)
-        if step == 1:
-            assert spikes[0, 0, target], "the release of step 0 reached the target"
+    steps = len(first_actions) + 1
+    actions, fired = play_by_hand(policy, weights.astype(np.int8), target, pattern,
+                                  first_actions, steps=steps)  # fmt: skip
+    assert fired[1], "the release of step 0 reached the target"
+    return actions[-1]
 
 
 @pytest.mark.parametrize("unrested", [True, False])
