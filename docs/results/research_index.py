@@ -43,6 +43,10 @@ CLAIMS = {
     "effect two steps after its release and plans it through virtual relay neurons: train + "
     "validation +0.022 [+0.006, +0.038], hidden25 test 0.814 -> 0.831 (+0.017 [-0.003, "
     "+0.037]); suite mean 0.646 -> 0.649",
+    "rollout-improvement": "where identify-and-plan would probe, each candidate valued by "
+    "playing the controller itself on networks drawn from its estimate (rollout policy "
+    "improvement): paper train + validation -0.010 [-0.025, +0.003] at about 300x the CPU "
+    "time; not kept",
     "confounded-zeros": "what a probe teaches about the target's column (about half of the early "
     "probes are lost to the target's refractory step or another release), and a column that "
     "did not move while several neurons released counted as no synapse from each: n16 train + "
