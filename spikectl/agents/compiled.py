@@ -149,6 +149,21 @@ class CompiledPolicy:
         """The Q-values of the last decision [n + 1] (a copy; empty before any)."""
         return self._q.copy()
 
+    @staticmethod
+    def _positions(observation: Mapping[str, Any], n: int) -> np.ndarray:
+        """[n] float32: ``observation["position"]`` (each neuron's position on the line)
+        where it is given, else the neurons' indices (as the PyTorch network reads them)."""
+        position = observation.get("position")
+        if position is None:
+            return np.arange(n, dtype=np.float32)
+        position = np.ascontiguousarray(position, dtype=np.float32)
+        if position.shape != (n,) or not np.isfinite(position).all():
+            raise ValueError(
+                f"CompiledPolicy.act: observation['position'] must hold {n} finite positions "
+                f"(one per neuron), got shape {position.shape}"
+            )
+        return position
+
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
         """The legal action of highest Q-value for this observation (-1 = do nothing).
 
@@ -188,8 +203,9 @@ class CompiledPolicy:
                 f"this observation has n = {n}"
             )
         best = _decide(
-            self._params, self._rows, self._ints, self._floats, voltage, target, pattern,
-            step, last_action, self._h, self._c, mask, self._q,
+            self._params, self._rows, self._ints, self._floats, voltage,
+            self._positions(observation, n), target, pattern, step, last_action, self._h,
+            self._c, mask, self._q,
         )  # fmt: skip
         if best < 0:
             raise ControllerInputError("CompiledPolicy.act: the action mask allows no action")

@@ -12,6 +12,10 @@ import torch
 import torch.nn.functional as F
 
 from spikectl.agents.spikes import VISIBLE_SPIKE_LEVEL
+from spikectl.contexts.generation import (
+    CONNECTION_PROBABILITY_BANDS,
+    LONG_RANGE_CONNECTION_PROBABILITY,
+)
 
 BELIEF_WIDTH = 3
 """Features per neuron of the planner's belief about its synapse onto the target
@@ -59,6 +63,31 @@ def shift_pattern(pattern: torch.Tensor, step: torch.Tensor, dtype: torch.dtype)
     return torch.where(index < N, shifted, torch.full_like(shifted, -1.0))  # [..., N]
 
 
+def neuron_positions(obs: Mapping[str, torch.Tensor], n: int, dtype: torch.dtype) -> torch.Tensor:
+    """[..., n] each neuron's position on the generator's line: ``obs["position"]`` where
+    the observation holds it, else the neuron's index (the environments' neurons lie on
+    the line in index order; docs/model.md)."""
+    position = obs.get("position")
+    if position is not None:
+        return position.to(dtype)  # [..., n]
+    index = torch.arange(n, device=obs["voltage"].device, dtype=dtype)  # [n]
+    return index.expand(obs["voltage"].shape)  # [..., n]
+
+
+def target_proximity(position: torch.Tensor, target: torch.Tensor) -> torch.Tensor:
+    """[..., n] the generator's prior probability of a synapse from each neuron onto
+    the target, by their distance on the line (``connection_probability`` of
+    |p_i - p_target|: 0.3 within 4, 0.2 within 8, 0.1 within 12, 0.01 beyond), and 0
+    at the target itself. Relative: it moves with the neurons under any relabelling
+    that keeps each neuron's position."""
+    target_position = torch.gather(position, -1, target.unsqueeze(-1))  # [..., 1]
+    distance = (position - target_position).abs()  # [..., n]
+    proximity = torch.full_like(distance, LONG_RANGE_CONNECTION_PROBABILITY)
+    for max_distance, probability in reversed(CONNECTION_PROBABILITY_BANDS):
+        proximity = torch.where(distance <= max_distance, probability, proximity)
+    return torch.where(distance == 0, 0.0, proximity)  # [..., n]
+
+
 def per_neuron_features(
     obs: Mapping[str, torch.Tensor],
     *,
@@ -68,15 +97,17 @@ def per_neuron_features(
     dtype: torch.dtype,
     with_target_voltage: bool = False,
     with_others_spiking: bool = False,
+    with_proximity: bool = False,
     belief_width: int = 0,
 ) -> torch.Tensor:
     """Per-neuron LSTM input [..., n, F]: normalised V, stimulated at t-1, (is target),
-    (the target's normalised V), (how many other neurons show a spike), (the planner's
-    belief about its synapse onto the target and its advice: ``obs["belief"]``
-    [..., n, belief_width], :func:`belief_width`).
+    (the target's normalised V), (how many other neurons show a spike), (the prior
+    probability of its synapse onto the target by their distance,
+    :func:`target_proximity`), (the planner's belief about its synapse onto the target
+    and its advice: ``obs["belief"]`` [..., n, belief_width], :func:`belief_width`).
 
-    F = 2 + with_target + with_target_voltage + with_others_spiking + belief_width
-    (docs/agents.md). The
+    F = 2 + with_target + with_target_voltage + with_others_spiking + with_proximity
+    + belief_width (docs/agents.md). The
     target's voltage, the same for every neuron, keeps the input permutation equivariant
     and lets each neuron's memory relate its own spikes to the target's response; the
     count of the others' visible spikes tells that memory whether a response that
@@ -93,6 +124,8 @@ def per_neuron_features(
     if with_others_spiking:
         spiking = (voltage >= VISIBLE_SPIKE_LEVEL).to(dtype)  # [..., n]
         columns.append(spiking.sum(-1, keepdim=True) - spiking)  # [..., n]
+    if with_proximity:
+        columns.append(target_proximity(neuron_positions(obs, n, dtype), obs["target"]))
     features = torch.stack(columns, dim=-1)  # [..., n, F - belief_width]
     if belief_width:
         belief = obs["belief"].to(dtype)  # [..., n, belief_width]
@@ -104,7 +137,7 @@ def per_neuron_feature_count(sizes) -> int:
     """F of :func:`per_neuron_features` for an :class:`~spikectl.agents.AgentSizes`."""
     s = sizes
     flags = s.target_in_input + s.target_voltage_in_input + s.others_spiking_in_input
-    return 2 + flags + belief_width(s)
+    return 2 + flags + s.proximity_in_input + belief_width(s)
 
 
 def system_features(

@@ -22,10 +22,12 @@ import torch
 OBS_KEYS = ("voltage", "target", "pattern", "step", "last_action")
 """Keys every observation batch must hold (extra keys are ignored)."""
 
-OPTIONAL_KEYS = ("belief",)
+OPTIONAL_KEYS = ("belief", "position")
 """Keys a network reads only when its sizes say so (``belief``: float [n, W], the
 planner's belief about each neuron's synapse onto the target and its advice,
-``AgentSizes.belief_in_input`` / ``advice_in_input``, ``features.belief_width``)."""
+``AgentSizes.belief_in_input`` / ``advice_in_input``, ``features.belief_width``;
+``position``: float [n], each neuron's position on the generator's line, read by
+``AgentSizes.proximity_in_input``, the neurons' indices where absent)."""
 
 _INDEX_KEYS = ("target", "step", "last_action")
 """The integer-valued keys (int64 once converted)."""
@@ -96,6 +98,16 @@ def check_observation(
             f"{where}: obs['pattern'] must have shape {lead + (episode_length,)} (pattern "
             f"length = episode length {episode_length}), got {tuple(pattern.shape)}"
         )
+    position = obs.get("position")
+    if position is not None:
+        if not isinstance(position, torch.Tensor) or position.is_complex():
+            got = position.dtype if isinstance(position, torch.Tensor) else type(position).__name__
+            raise TypeError(f"{where}: obs['position'] must be a real tensor, got {got}")
+        if tuple(position.shape) != tuple(voltage.shape):
+            raise ValueError(
+                f"{where}: obs['position'] must have the shape of obs['voltage'] "
+                f"{tuple(voltage.shape)} (one position per neuron), got {tuple(position.shape)}"
+            )
 
     # Inside vmap (stacked seed groups) values cannot be read without leaving the
     # transform; shapes and dtypes are still checked, and the trainer's inputs come

@@ -75,13 +75,14 @@ class PolicySpec:
     # Fields added after format version 1 have a default: files written before them read
     # as that default.
     others_spiking_in_input: bool = False
+    proximity_in_input: bool = False
 
     @property
     def input_features(self) -> int:
-        """F: [v_norm, stimulated, (is target), (target's v_norm), (others spiking)]."""
-        return (
-            2 + self.target_in_input + self.target_voltage_in_input + self.others_spiking_in_input
-        )
+        """F: [v_norm, stimulated, (is target), (target's v_norm), (others spiking),
+        (the target's proximity)]."""
+        flags = self.target_in_input + self.target_voltage_in_input + self.others_spiking_in_input
+        return 2 + flags + self.proximity_in_input
 
     @property
     def mix_width(self) -> int:
@@ -195,6 +196,7 @@ def _spec_of(network: Any) -> PolicySpec:
         target_in_input=s.target_in_input,
         target_voltage_in_input=s.target_voltage_in_input,
         others_spiking_in_input=s.others_spiking_in_input,
+        proximity_in_input=s.proximity_in_input,
     )
 
 
@@ -218,11 +220,20 @@ def _policy_bytes(network: Any) -> bytes:
     return buffer.getvalue()
 
 
+_HASHED_WHEN_SET = ("proximity_in_input",)
+"""Header fields added after the checksum: hashed only when set, so that the files
+written before them still match."""
+
+
 def policy_checksum(spec: PolicySpec, weights: Mapping[str, np.ndarray]) -> str:
     """SHA-256 over the header's values (as read, defaults filled in) and every weight's
     name, dtype, shape and bytes: a header changed over the same weights, or weights
     changed under the same header, no longer match."""
-    digest = hashlib.sha256(json.dumps(asdict(spec), sort_keys=True).encode())
+    header = asdict(spec)
+    for name in _HASHED_WHEN_SET:  # files written before these fields hash without them
+        if header[name] is False:
+            del header[name]
+    digest = hashlib.sha256(json.dumps(header, sort_keys=True).encode())
     for name in sorted(weights):
         array = np.ascontiguousarray(weights[name])
         digest.update(f"{name}|{array.dtype.str}|{array.shape}|".encode())

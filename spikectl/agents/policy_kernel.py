@@ -17,11 +17,18 @@ import numpy as np
 
 from spikectl.agents.policy_file import PolicySpec
 from spikectl.agents.spikes import VISIBLE_SPIKE_LEVEL
+from spikectl.contexts.generation import (
+    CONNECTION_PROBABILITY_BANDS,
+    LONG_RANGE_CONNECTION_PROBABILITY,
+)
 
 _ARCH_CODES = {"tdrqn": 0, "ddrqn": 1}
 # ints: the layout's counts and the options, by index.
 _I_ARCH, _I_H, _I_PROJECT, _I_LAYERS, _I_HEADS, _I_ADV, _I_VALUE = range(7)
-_I_DUELING, _I_TARGET_IN, _I_TARGET_V, _I_OTHERS, _I_SIZE = 7, 8, 9, 10, 11
+_I_DUELING, _I_TARGET_IN, _I_TARGET_V, _I_OTHERS, _I_PROXIMITY, _I_SIZE = 7, 8, 9, 10, 11, 12
+# The generator's bands (largest distance, probability) as arrays the kernel can read.
+_BAND_DISTANCES = np.array([d for d, _ in CONNECTION_PROBABILITY_BANDS], dtype=np.float32)
+_BAND_PROBABILITIES = np.array([p for _, p in CONNECTION_PROBABILITY_BANDS], dtype=np.float32)
 
 
 def _layout(
@@ -80,6 +87,7 @@ def _layout(
     ints[_I_TARGET_IN] = spec.target_in_input
     ints[_I_TARGET_V] = spec.target_voltage_in_input
     ints[_I_OTHERS] = spec.others_spiking_in_input
+    ints[_I_PROXIMITY] = spec.proximity_in_input
     floats = np.array(
         [spec.v_rest_mV, spec.v_threshold_mV - spec.v_rest_mV, spec.layer_norm_eps,
          VISIBLE_SPIKE_LEVEL],
@@ -242,7 +250,20 @@ def _attention(qkv, heads, out):  # pragma: no cover - compiled
 
 @numba.njit(**_JIT)
 def _decide(
-    params, rows, ints, floats, voltage, target, pattern, step, last_action, h, c, mask, q
+    params,
+    rows,
+    ints,
+    floats,
+    voltage,
+    position,
+    target,
+    pattern,
+    step,
+    last_action,
+    h,
+    c,
+    mask,
+    q,
 ):  # pragma: no cover - compiled
     """One decision: features → LSTM (h, c [n, H] updated in place) → mixing → context →
     heads → q [n+1] (filled) → the index of the best legal entry of q (-1 if none)."""
@@ -250,8 +271,9 @@ def _decide(
     H = ints[_I_H]
     N = pattern.shape[0]
     # Per-neuron features x [n, F]: (V - V_r) / (V_th - V_r), stimulated at t-1, (is
-    # target), (the target's normalised V), (how many other neurons show a spike).
-    width = 2 + ints[_I_TARGET_IN] + ints[_I_TARGET_V] + ints[_I_OTHERS]
+    # target), (the target's normalised V), (how many other neurons show a spike), (the
+    # generator's prior of a synapse onto the target at its distance; 0 at the target).
+    width = 2 + ints[_I_TARGET_IN] + ints[_I_TARGET_V] + ints[_I_OTHERS] + ints[_I_PROXIMITY]
     x = np.zeros((n, width), dtype=np.float32)
     v_rest, v_scale = np.float32(floats[0]), np.float32(floats[1])
     spike_level = np.float32(floats[3])
@@ -273,6 +295,14 @@ def _decide(
             column += 1
         if ints[_I_OTHERS]:
             x[i, column] = spiking - (x[i, 0] >= spike_level)
+            column += 1
+        if ints[_I_PROXIMITY]:
+            distance = abs(position[i] - position[target])
+            proximity = np.float32(LONG_RANGE_CONNECTION_PROBABILITY)
+            for band in range(_BAND_DISTANCES.shape[0] - 1, -1, -1):
+                if distance <= _BAND_DISTANCES[band]:
+                    proximity = _BAND_PROBABILITIES[band]
+            x[i, column] = 0.0 if distance == 0 else proximity
     # LSTM cell, gates [n, 4H] in PyTorch's order: input, forget, cell, output.
     gates = np.empty((n, 4 * H), dtype=np.float32)
     _linear(params, rows[0], x, gates, False, False)

@@ -203,6 +203,7 @@ class PerNeuronMemory(RecurrentQNetworkBase):
             with_target=s.target_in_input,
             with_target_voltage=s.target_voltage_in_input,
             with_others_spiking=s.others_spiking_in_input,
+            with_proximity=s.proximity_in_input,
             belief_width=width,
             dtype=self.param_dtype(),
         )  # [B, T, n, F]

@@ -51,6 +51,11 @@ class AgentSizes:
     """The target's normalised voltage also in each neuron's LSTM input (not in the paper)."""
     others_spiking_in_input: bool = False
     """How many other neurons show a spike, also in each neuron's LSTM input (not in the paper)."""
+    proximity_in_input: bool = False
+    """The generator's prior probability of each neuron's synapse onto the target, by
+    their distance on the line (``features.target_proximity``; positions from the
+    ``position`` observation key, else the neurons' indices), also in each neuron's
+    LSTM input; per-neuron networks only (not in the paper)."""
     belief_in_input: bool = False
     """What the observations so far say about each neuron's synapse onto the target (the
     ``belief`` observation key: ``spikectl.planning.belief``), also in each neuron's LSTM
@@ -92,6 +97,7 @@ class AgentSizes:
             "target_in_input",
             "target_voltage_in_input",
             "others_spiking_in_input",
+            "proximity_in_input",
             "belief_in_input",
             "advice_in_input",
             "layer_norm",
@@ -101,9 +107,9 @@ class AgentSizes:
                                   label=f"AgentSizes.{name}")  # fmt: skip
 
     def check_architecture(self, arch: str) -> None:
-        """Refuse the settings ``arch`` does not read (``belief_in_input`` and
-        ``advice_in_input``: the per-neuron networks only)."""
-        for name in ("belief_in_input", "advice_in_input"):
+        """Refuse the settings ``arch`` does not read (``proximity_in_input``,
+        ``belief_in_input`` and ``advice_in_input``: the per-neuron networks only)."""
+        for name in ("proximity_in_input", "belief_in_input", "advice_in_input"):
             if getattr(self, name) and arch == "drqn":
                 raise ConfigError(
                     name, "is read by the per-neuron networks (ddrqn, dmdrqn, tdrqn), "
