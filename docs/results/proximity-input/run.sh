@@ -1,0 +1,20 @@
+#!/usr/bin/env bash
+# The runs behind docs/results/proximity-input/README.md, from the repository root on the
+# project's 2-core AMD EPYC (AVX2), one Torch thread each, two at a time. Each run's
+# config.json and metrics.csv are copied to trials/<n>/seed=S/ (weights are not
+# committed); table.py prints the tables of README.md.
+set -euo pipefail
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
+here=docs/results/proximity-input
+runs=${RUNS:-runs/proximity}
+train() {  # train SIZE SEED [FLAGS...]: the main job's preset with the proximity input
+    local size=$1 seed=$2; shift 2
+    spikectl train guided --sizes.proximity-in-input --seed "$seed" "$@" \
+        --run-dir "$runs/$size-seed$seed"
+    mkdir -p "$here/trials/$size/seed=$seed"
+    cp "$runs/$size-seed$seed/config.json" "$runs/$size-seed$seed/metrics.csv" \
+        "$here/trials/$size/seed=$seed/"
+}
+for seed in 0 1 2; do train n8 "$seed"; done
+for seed in 0 1; do train n16 "$seed" --task n16; done
+python $here/table.py > $here/table.md

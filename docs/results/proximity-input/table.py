@@ -1,0 +1,96 @@
+"""The tables of README.md: the guided learner with the target's proximity as an input
+(``--sizes.proximity-in-input``) against the same preset without it, by the validation
+return its metrics.csv records during training and the test return recorded at its best
+validation return (its best model).
+
+    python docs/results/proximity-input/table.py   # also draws curves.png
+
+The runs without it are the committed main job (``guided-ntrain1000``, n = 8) and the
+suite's learned rows (``suite/trained/guided-upr24/n16``): the same preset and flags.
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).parent
+RESULTS = HERE.parent
+WITHOUT = {
+    "n8": RESULTS / "guided-ntrain1000" / "trials",
+    "n16": RESULTS / "suite" / "trained" / "guided-upr24" / "n16",
+}
+PLANNER_VALIDATION = {"n8": 0.866, "n16": 0.799}
+"""Identify-and-plan (the named controller) on the same validation networks: the
+research record (identify-and-plan.md, the reachable and n16-settings entries)."""
+EPISODES = (800, 1600, 2400, 3200, 4000, 4400)
+
+
+def metrics(folder: Path) -> dict[int, dict]:
+    with open(folder / "metrics.csv", newline="") as handle:
+        return {int(row["episode"]): row for row in csv.DictReader(handle)}
+
+
+def best(folder: Path) -> dict:
+    """The evaluation row of the best validation return (the run's best model)."""
+    return max(metrics(folder).values(), key=lambda row: float(row["val_return"]))
+
+
+def plot(groups: dict[str, dict[str, list[Path]]]) -> None:
+    """curves.png: validation return against episodes, each run, one panel a size."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    figure, axes = plt.subplots(1, len(groups), figsize=(5 * len(groups), 3.6))
+    for ax, (size, runs) in zip(axes, groups.items(), strict=True):
+        for (label, folders), colour in zip(runs.items(), ("tab:red", "tab:gray"), strict=True):
+            for index, folder in enumerate(folders):
+                rows = metrics(folder)
+                name = f"{label} the proximity input" if index == 0 else None
+                values = [float(r["val_return"]) for r in rows.values()]
+                ax.plot(list(rows), values, color=colour, alpha=0.8, label=name)
+        ax.axhline(PLANNER_VALIDATION[size], color="black", linestyle="--", linewidth=1,
+                   label="identify-and-plan")  # fmt: skip
+        ax.set(title=f"{size}: the guided learner", xlabel="episode", ylabel="validation return")
+        ax.legend(loc="lower right")
+    figure.tight_layout()
+    figure.savefig(HERE / "curves.png", dpi=120)
+
+
+def main() -> None:
+    groups = {}
+    for size, baseline in WITHOUT.items():
+        runs = {"with": sorted((HERE / "trials" / size).glob("seed=*")),
+                "without": sorted(baseline.glob("seed=*"))}  # fmt: skip
+        groups[size] = runs
+        print(f"\n{size}: validation return during training (mean over seeds, each seed)\n")
+        print("| episode | " + " | ".join(f"{k} ({len(v)} seeds)" for k, v in runs.items()) + " |")
+        print("|---:|---|---|")
+        for episode in EPISODES:
+            cells = []
+            for folders in runs.values():
+                values = [float(metrics(f)[episode]["val_return"]) for f in folders
+                          if episode in metrics(f)]  # fmt: skip
+                each = ", ".join(f"{v:.3f}" for v in values)
+                cells.append(f"{np.mean(values):.3f} ({each})" if values else "")
+            print(f"| {episode} | " + " | ".join(cells) + " |")
+        print("\n| | best validation (mean ± sd) | test return there | core-minutes |")
+        print("|---|---|---|---|")
+        for label, folders in runs.items():
+            chosen = [best(f) for f in folders]
+            best_val = [float(row["val_return"]) for row in chosen]
+            tests = [float(row["test_return"]) for row in chosen]
+            cpu = [float(list(metrics(f).values())[-1]["cpu_time_s"]) / 60 for f in folders]
+            sd = np.std(best_val, ddof=1) if len(best_val) > 1 else 0.0
+            print(f"| {label} | {np.mean(best_val):.3f} ± {sd:.3f} "
+                  f"| {np.mean(tests):.3f} ({', '.join(f'{t:.3f}' for t in tests)}) "
+                  f"| {', '.join(f'{c:.1f}' for c in cpu)} |")  # fmt: skip
+    plot(groups)
+
+
+if __name__ == "__main__":
+    main()
