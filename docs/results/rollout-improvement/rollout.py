@@ -37,7 +37,12 @@ class RolloutImprovement(IdentifyAndPlan):
         self.networks, self.horizon, self.candidates = networks, horizon, candidates
         self.margin = margin
         self.in_rollout = False
-        self.counts = {"decisions": 0, "changed": 0, "do nothing": 0, "other probe": 0}  # shared with the spawned copies
+        self.counts = {
+            "decisions": 0,
+            "changed": 0,
+            "do nothing": 0,
+            "other probe": 0,
+        }  # shared with the spawned copies
 
     def spawn(self, index: int) -> IdentifyAndPlan:
         return copy.copy(self)
