@@ -83,6 +83,8 @@ def test_bad_positions_and_architectures_are_refused_by_name() -> None:
     obs = random_obs(2, 3, 5)
     with pytest.raises(ValueError, match=r"obs\['position'\] must have the shape of"):
         net({**obs, "position": torch.zeros(2, 3, 4)})
+    with pytest.raises(ValueError, match=r"obs\['position'\] must be finite"):
+        net({**obs, "position": torch.full((2, 3, 5), float("nan"))})
     with pytest.raises(TypeError, match=r"obs\['position'\] must be a real tensor"):
         net({**obs, "position": [0, 1, 2, 3, 4]})
     with pytest.raises(ValueError, match="proximity_in_input.*not by drqn"):

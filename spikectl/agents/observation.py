@@ -116,6 +116,8 @@ def check_observation(
         _check_range(obs["target"], 0, n - 1, "target", where)
         _check_range(obs["last_action"], -1, n - 1, "last_action", where)
         _check_range(obs["step"], 0, episode_length, "step", where)
+        if position is not None and not bool(torch.isfinite(position).all()):
+            raise ValueError(f"{where}: obs['position'] must be finite (one place per neuron)")
     return lead, n
 
 
