@@ -45,7 +45,8 @@ CLAIMS = {
     "+0.037]); suite mean 0.646 -> 0.649",
     "proximity-input": "the guided learner with the generator's prior of a synapse onto the "
     "target at each neuron's distance as an input: n = 8 (3 seeds) within noise, validation "
-    "0.839 vs 0.834, test 0.813 vs 0.809; n16 seed 0 test 0.716 vs 0.680-0.694 without it",
+    "0.839 vs 0.834, test 0.813 vs 0.809; n16 (2 seeds) faster, within noise at the end, test "
+    "0.703 vs 0.686",
     "rollout-improvement": "where identify-and-plan would probe, each candidate valued by "
     "playing the controller itself on networks drawn from its estimate (rollout policy "
     "improvement): paper train + validation -0.010 [-0.025, +0.003] at about 300x the CPU "
