@@ -149,13 +149,13 @@ class CompiledPolicy:
         """The Q-values of the last decision [n + 1] (a copy; empty before any)."""
         return self._q.copy()
 
-    @staticmethod
-    def _positions(observation: Mapping[str, Any], n: int) -> np.ndarray:
+    def _positions(self, observation: Mapping[str, Any], n: int) -> np.ndarray:
         """[n] float32: ``observation["position"]`` (each neuron's position on the line)
-        where it is given, else the neurons' indices (as the PyTorch network reads them)."""
+        where it is given, else the neurons' indices (as the PyTorch network reads them),
+        made once an episode."""
         position = observation.get("position")
         if position is None:
-            return np.arange(n, dtype=np.float32)
+            return self._index_positions
         position = np.ascontiguousarray(position, dtype=np.float32)
         if position.shape != (n,) or not np.isfinite(position).all():
             raise ValueError(
@@ -197,6 +197,7 @@ class CompiledPolicy:
             self._h = np.zeros((n, self.spec.lstm_hidden), dtype=np.float32)  # [n, H]
             self._c = np.zeros((n, self.spec.lstm_hidden), dtype=np.float32)  # [n, H]
             self._q = np.zeros(n + 1, dtype=np.float32)
+            self._index_positions = np.arange(n, dtype=np.float32)  # [n]
         elif self._h.shape[0] != n:
             raise ValueError(
                 f"CompiledPolicy.act: the episode started with n = {self._h.shape[0]}, "
