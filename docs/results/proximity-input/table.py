@@ -6,7 +6,13 @@ validation return (its best model).
     python docs/results/proximity-input/table.py   # also draws curves.png
 
 The runs without it are the committed main job (``guided-ntrain1000``, n = 8) and the
-suite's learned rows (``suite/trained/guided-upr24/n16``): the same preset and flags.
+suite's learned rows (``suite/trained/guided-upr24/n16``, ``n32``): the same preset and
+flags. Network by network on the test set: each seed's best model played on the suite
+task's 100 test networks (``spikectl benchmark RUN --model best --task T --per-network
+trials/SIZE/seed=S/per_network.csv``), the seeds' mean on each network against
+identify-and-plan's committed rows (``bayes-identify/test-benchmark-known-sd-per-network.csv``,
+the named controller of the suite's leaderboard on these tasks) and, at 32 neurons,
+against the runs without the input (their committed ``per_network.csv``).
 """
 
 from __future__ import annotations
@@ -21,8 +27,12 @@ RESULTS = HERE.parent
 WITHOUT = {
     "n8": RESULTS / "guided-ntrain1000" / "trials",
     "n16": RESULTS / "suite" / "trained" / "guided-upr24" / "n16",
+    "n32": RESULTS / "suite" / "trained" / "guided-upr24" / "n32",
 }
-PLANNER_VALIDATION = {"n8": 0.866, "n16": 0.799}
+TASKS = {"n8": "paper", "n16": "n16", "n32": "n32"}
+"""The suite task whose test set each size's per_network.csv holds."""
+PLANNER_TEST = RESULTS / "bayes-identify" / "test-benchmark-known-sd-per-network.csv"
+PLANNER_VALIDATION = {"n8": 0.866, "n16": 0.799, "n32": 0.749}
 """Identify-and-plan (the named controller) on the same validation networks: the
 research record (identify-and-plan.md, the reachable and n16-settings entries)."""
 EPISODES = (800, 1600, 2400, 3200, 4000, 4400)
@@ -36,6 +46,47 @@ def metrics(folder: Path) -> dict[int, dict]:
 def best(folder: Path) -> dict:
     """The evaluation row of the best validation return (the run's best model)."""
     return max(metrics(folder).values(), key=lambda row: float(row["val_return"]))
+
+
+def per_network(path: Path, task: str) -> np.ndarray:
+    """[100] the test return on each network of ``task`` in a per-network CSV."""
+    with open(path, newline="") as handle:
+        rows = [row for row in csv.DictReader(handle) if row["task"] == task]
+    if [int(row["context"]) for row in rows] != list(range(100)):
+        raise ValueError(f"{path} lacks the 100 test networks of {task}")
+    return np.array([float(row["return"]) for row in rows])
+
+
+def paired(difference: np.ndarray) -> str:
+    """Mean of a per-network difference, its 95% bootstrap interval (10 000 resamples,
+    seed 0) and the networks better / worse."""
+    resampled = np.random.default_rng(0).integers(0, difference.size, (10_000, difference.size))
+    low, high = np.quantile(difference[resampled].mean(axis=1), [0.025, 0.975])
+    return (f"{difference.mean():+.3f} [{low:+.3f}, {high:+.3f}] "
+            f"| {(difference > 0).sum()} / {(difference < 0).sum()}")  # fmt: skip
+
+
+def paired_rows(groups: dict[str, dict[str, list[Path]]]) -> None:
+    """Network by network on the test set (the seeds' mean on each network)."""
+    print("\nNetwork by network on the test set (each network's return averaged over the"
+          " seeds first)\n")  # fmt: skip
+    print("| size | comparison | seeds | mean returns | difference [95% CI] | better / worse |")
+    print("|---|---|---|---|---|---|")
+    for size, runs in groups.items():
+        task = TASKS[size]
+        files = [f / "per_network.csv" for f in runs["with"] if (f / "per_network.csv").exists()]
+        if not files:
+            continue
+        learned = np.mean([per_network(f, task) for f in files], axis=0)  # [100]
+        planner = per_network(PLANNER_TEST, task)
+        print(f"| {size} | with − identify-and-plan | {len(files)} "
+              f"| {learned.mean():.3f} − {planner.mean():.3f} | {paired(learned - planner)} |")
+        without_files = [f / "per_network.csv" for f in runs["without"]]
+        if all(f.exists() for f in without_files):
+            without = np.mean([per_network(f, task) for f in without_files], axis=0)
+            print(f"| {size} | with − without | {len(files)}, {len(without_files)} "
+                  f"| {learned.mean():.3f} − {without.mean():.3f} "
+                  f"| {paired(learned - without)} |")  # fmt: skip
 
 
 def plot(groups: dict[str, dict[str, list[Path]]]) -> None:
@@ -66,6 +117,8 @@ def main() -> None:
     for size, baseline in WITHOUT.items():
         runs = {"with": sorted((HERE / "trials" / size).glob("seed=*")),
                 "without": sorted(baseline.glob("seed=*"))}  # fmt: skip
+        if not runs["with"]:
+            continue
         groups[size] = runs
         print(f"\n{size}: validation return during training (mean over seeds, each seed)\n")
         print("| episode | " + " | ".join(f"{k} ({len(v)} seeds)" for k, v in runs.items()) + " |")
@@ -89,6 +142,7 @@ def main() -> None:
             print(f"| {label} | {np.mean(best_val):.3f} ± {sd:.3f} "
                   f"| {np.mean(tests):.3f} ({', '.join(f'{t:.3f}' for t in tests)}) "
                   f"| {', '.join(f'{c:.1f}' for c in cpu)} |")  # fmt: skip
+    paired_rows(groups)
     plot(groups)
 
 

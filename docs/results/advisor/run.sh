@@ -1,0 +1,18 @@
+#!/usr/bin/env bash
+# The runs behind docs/results/advisor/README.md, from the repository root on the
+# project's 2-core AMD EPYC (AVX2), one Torch thread each, two to four at a time. Each
+# run's config.json and metrics.csv are copied to trials/NAME/ (weights are not
+# committed); table.py prints the tables of README.md.
+set -euo pipefail
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
+here=docs/results/advisor
+runs=${RUNS:-runs/advisor}
+advisor() {  # advisor NAME SEED ALPHA TEACHER IMITATION_END
+    local name=$1; shift
+    python $here/advisor.py "$runs/$name" "$@"
+    mkdir -p "$here/trials/$name"
+    cp "$runs/$name/config.json" "$runs/$name/metrics.csv" "$here/trials/$name/"
+}
+advisor identify-a4-end1-seed0 0 4 identify 1.0
+advisor identify-a0-end1-seed0 0 0 identify 1.0
+python $here/table.py > $here/table.md
