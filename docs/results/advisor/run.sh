@@ -15,4 +15,5 @@ advisor() {  # advisor NAME SEED ALPHA TEACHER IMITATION_END
 }
 advisor identify-a4-end1-seed0 0 4 identify 1.0
 advisor identify-a0-end1-seed0 0 0 identify 1.0
+advisor told-weights-a4-end1-seed0 0 4 told-weights 1.0
 python $here/table.py > $here/table.md
