@@ -45,8 +45,12 @@ CLAIMS = {
     "+0.037]); suite mean 0.646 -> 0.649",
     "proximity-input": "the guided learner with the generator's prior of a synapse onto the "
     "target at each neuron's distance as an input: n = 8 (3 seeds) within noise, validation "
-    "0.839 vs 0.834, test 0.813 vs 0.809; n16 (2 seeds) faster, within noise at the end, test "
-    "0.703 vs 0.686",
+    "0.839 vs 0.834, test 0.813 vs 0.809; n16 (3 seeds) faster, within noise at the end, test "
+    "0.695 vs 0.686",
+    "advisor": "ADVISOR on the guided learner (imitation weighted per step by how well an "
+    "imitation-only head matches the teacher; one seed each, validation): with "
+    "identify-and-plan 0.826 vs 0.837 for its control and 0.834 for the main job; with the "
+    "teacher told the weights 0.781 vs 0.733 (an older preset); not adopted",
     "rollout-improvement": "where identify-and-plan would probe, each candidate valued by "
     "playing the controller itself on networks drawn from its estimate (rollout policy "
     "improvement): paper train + validation -0.010 [-0.025, +0.003] at about 300x the CPU "
