@@ -124,21 +124,27 @@ def test_guided_runs_script_reruns_its_trials_exactly():
 
 
 def test_suite_train_script_reruns_its_trials_exactly():
-    """docs/results/suite/train.sh TASK SEED [PRESET FOLDER] gives the config of every
-    committed run trained on a suite task: `quick` under trained/quick, the main job
-    under trained/guided-upr24 (the progress bar aside: `paper`'s quick seeds are a
-    sweep's, which draws none)."""
+    """docs/results/suite/train.sh TASK SEED [PRESET FOLDER FLAGS] gives the config of
+    every committed run trained on a suite task: `quick` under trained/quick, the main
+    job under trained/guided-upr24 with the teacher it had (the progress bar aside:
+    `paper`'s quick seeds are a sweep's, which draws none)."""
     import dataclasses
     import json
 
     from spikectl.cli.training import parse_train
     from spikectl.training.config import Experiment
 
-    for folder, preset in [("quick", "quick"), ("guided-upr24", "guided")]:
+    pinned_teacher = ["--teacher-settings", "defaults"]
+    for folder, preset, flags in [
+        ("quick", "quick", []),
+        ("guided-upr24", "guided", pinned_teacher),
+    ]:
         trials = sorted((ROOT / "docs/results/suite/trained" / folder).glob("*/seed=*"))
         assert len(trials) >= 30, f"trained/{folder} has {len(trials)} runs"
         for trial in trials:
-            argv = [preset, "--task", trial.parent.name, "--seed", trial.name.removeprefix("seed=")]
+            seed, task = trial.name.removeprefix("seed="), trial.parent.name
+            # On `paper` the constructor's teacher is the task's own: no flag needed.
+            argv = [preset, "--task", task, "--seed", seed, *(flags if task != "paper" else [])]
             rerun = parse_train(argv).config
             saved = Experiment.from_dict(json.loads((trial / "config.json").read_text()))
             saved = dataclasses.replace(

@@ -6,6 +6,7 @@ from __future__ import annotations
 import dataclasses
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -15,6 +16,7 @@ from spikectl.config_errors import ConfigError
 from spikectl.contexts import make_splits
 from spikectl.envs.controller import RandomLegal, batched
 from spikectl.envs.rollout import evaluate_policy
+from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning import IdentifyAndPlan
 from spikectl.training.config import Experiment
@@ -27,6 +29,7 @@ from spikectl.training.run import train
 from spikectl.training.run_files import CLOCK_FIELDS
 
 CLOCKS = (*CLOCK_FIELDS, "teacher_seconds")
+ROOT = Path(__file__).resolve().parents[1]
 
 
 def guided(config: Experiment = SMOKE, **changes) -> Experiment:
@@ -88,6 +91,76 @@ def told_weights_policy(contexts):
         ])  # fmt: skip
 
     return policy
+
+
+def test_the_teacher_plays_the_training_tasks_settings():
+    """With ``teacher_settings="task"`` (the default) the identify teacher is the named
+    identify-and-plan of the training environment in its fast form; with ``"defaults"``
+    (every earlier run's) the constructor's; on the paper's task the two are the same."""
+    from spikectl.planning.policy import environment_settings
+    from spikectl.training.learners.guided import GuidedDQNLearner
+    from spikectl.training.learners.teachers import make_teacher
+
+    assert PRESETS["guided"].learner.teacher_settings == "task"
+    assert GuidedConfig().teacher_settings == "task"
+    noisy = Extensions(observation_noise_mV=2.0)
+    for n_neurons, extensions in ((8, Extensions()), (8, noisy), (16, Extensions())):
+        env = dataclasses.replace(SMOKE.env, n_neurons=n_neurons, extensions=extensions)
+        train_set = make_splits(2, 1, n_neurons, 20, seed=0, n_val=0)[0]
+        for choice in ("task", "defaults"):
+            config = dataclasses.replace(guided(teacher_settings=choice), env=env)
+            learner = GuidedDQNLearner(config, train_set, np.random.default_rng(0))
+            expected = (environment_settings(extensions, n_neurons, fast=True)
+                        if choice == "task" else {})  # fmt: skip
+            assert learner.teacher_settings == expected
+            teacher = make_teacher("identify", train_set[0], NeuronParams(),
+                                   extensions.observation_noise_mV, 32,
+                                   learner.teacher_settings)  # fmt: skip
+            task = choice == "task"
+            assert teacher.filter_voltage == (task and extensions == noisy)
+            assert teacher.known_sd == (0.4 if task and n_neurons == 16 else 0.25)
+            assert teacher.gamble_networks == 0
+    assert GuidedDQNLearner(
+        dataclasses.replace(guided(teacher_settings="task")),
+        make_splits(2, 1, seed=0, n_val=0)[0], np.random.default_rng(0),
+    ).teacher_settings == {}  # fmt: skip
+    with pytest.raises(ConfigError, match="teacher_settings"):
+        Experiment.from_dict({"learner": {"name": "guided", "teacher_settings": "named"}})
+
+
+def test_configs_saved_before_teacher_settings_read_back_as_they_ran():
+    """A guided config saved before ``teacher_settings`` existed ran the constructor's
+    teacher: it reads back as ``defaults`` where that differs from the task's settings,
+    and as ``task`` (today's preset) on the paper's environment, where it does not."""
+    results = ROOT / "docs" / "results" / "suite" / "trained" / "guided-upr24"
+    for task, expected in (("paper", "task"), ("n16", "defaults"), ("noise1", "defaults"),
+                           ("heterogeneous", "defaults")):  # fmt: skip
+        saved = json.loads((results / task / "seed=0" / "config.json").read_text())
+        assert "teacher_settings" not in saved["learner"]
+        assert Experiment.from_dict(saved).learner.teacher_settings == expected
+        saved["learner"]["teacher_settings"] = "task"  # a field the config names is kept
+        assert Experiment.from_dict(saved).learner.teacher_settings == "task"
+    # Today's configs name it, so they read back as saved.
+    config = guided(teacher_settings="defaults")
+    assert Experiment.from_dict(config.to_dict()) == config
+
+
+def test_labels_under_noise_with_the_tasks_settings_are_the_teachers_actions():
+    """Label exactness holds for the task's teacher too: under measurement noise the
+    named controller's fast form, played beside its own episodes, says what it did."""
+    from spikectl.planning.policy import environment_settings
+
+    contexts = make_splits(3, 1, seed=4, n_val=0)[0]
+    noisy = Extensions(observation_noise_mV=2.0)
+    settings = environment_settings(noisy, 8, fast=True)
+    episodes = evaluate_policy(
+        contexts, batched(IdentifyAndPlan(noise_mV=2.0, **settings)), extensions=noisy, seed=1
+    )
+    labels = teacher_labels(episodes, list(contexts), "identify", NeuronParams(), 2.0,
+                            settings=settings)  # fmt: skip
+    np.testing.assert_array_equal(labels, episodes.actions)
+    plain = teacher_labels(episodes, list(contexts), "identify", NeuronParams(), 2.0)
+    assert (plain != episodes.actions).any()  # the defaults would have taught otherwise
 
 
 def test_teachers_label_other_trajectories_legally(contexts):

@@ -393,6 +393,25 @@ def test_named_controller_takes_the_environments_observation_model():
     assert environment_settings(None, 15) == {} and environment_settings(None, 16) != {}
 
 
+def test_the_fast_form_drops_qmdp_and_nothing_else():
+    """``fast=True`` (the guided learner's teacher) replaces QMDP from 16 neurons on by an
+    earlier commitment alone, and changes nothing below 16."""
+    from spikectl.planning.policy import KNOWN_SD_FAST_LARGE, environment_settings
+
+    noisy, stochastic = Extensions(observation_noise_mV=2.0), Extensions(stochastic_release=True)
+    others = (Extensions(hidden_fraction=0.25), Extensions(background_rate=0.005),
+              Extensions(threshold_spread=0.1))  # fmt: skip
+    for extensions in (None, Extensions(), noisy, stochastic, *others):
+        assert environment_settings(extensions, 8, fast=True) == environment_settings(extensions, 8)
+    assert environment_settings(None, 8, fast=True) == {}
+    assert environment_settings(None, 32, fast=True) == {"known_sd": KNOWN_SD_FAST_LARGE}
+    assert environment_settings(noisy, 16, fast=True) == {
+        "identification": "bayes", "extensions": noisy, "filter_voltage": True,
+        "known_sd": KNOWN_SD_FAST_LARGE,
+    }  # fmt: skip
+    assert KNOWN_SD_FAST_LARGE == 0.4
+
+
 def test_gaussian_estimate_learns_from_release_chances_under_noise():
     """Told stochastic release under measurement noise (residuals not exact, so nothing
     settles a release: tests/test_planning_release.py has the noise-free case), the

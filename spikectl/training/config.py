@@ -351,6 +351,10 @@ class Experiment:
         for name, kind, part in (("env", EnvConfig, env), ("agent", AgentConfig, agent),
                                  ("train", TrainConfig, nested.get("train", {})),
                                  ("learner", learner_type, learner)):  # fmt: skip
+            if name == "learner":  # a field added since the config was saved: as it ran
+                saved_without = getattr(learner_type, "fields_saved_without", None)
+                for key, value in (saved_without(parts["env"]) if saved_without else {}).items():
+                    part.setdefault(key, value)
             try:
                 parts[name] = kind(**part)
             except ConfigError as error:

@@ -31,7 +31,7 @@ python $here/compare.py \
 
 # 3. Fine-tuned at 32 neurons from seed 0 (as ../curriculum-n32-pilot/ without the
 #    belief): with the teacher, and by reward alone.
-ft=(--task n32 --seed 0 --init-from "$runs/n8-seed0" --sizes.belief-in-input
+ft=(--task n32 --seed 0 --init-from "$runs/n8-seed0" --sizes.belief-in-input --teacher-settings defaults
     --total-env-steps 66000 --epsilon-start 0.1 --learning-rate 5e-4 --eval-every-episodes 160)
 spikectl train guided "${ft[@]}" --run-dir "$runs/n32-ft-seed0"
 spikectl train guided "${ft[@]}" --imitation-weight 0 --imitation-weight-end 0 \

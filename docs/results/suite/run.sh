@@ -50,6 +50,7 @@ python docs/results/suite/paired.py --connectivity
 # The main job since the fourth stop (the same with 24 updates a round; links to
 # runs/guided-upr24/seed=S, made by docs/results/guided_runs.sh guided-upr24 S), and
 # network by network (paired-guided-upr24.csv). Its seeds trained on a task itself are
-# train.sh's: `bash docs/results/suite/train.sh TASK SEED guided guided-upr24`.
+# train.sh's: `bash docs/results/suite/train.sh TASK SEED guided guided-upr24
+# --teacher-settings defaults` (the teacher they had; not needed on `paper`).
 transfer_from_paper guided-upr24
 python docs/results/suite/paired.py --preset guided-upr24

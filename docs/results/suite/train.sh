@@ -5,7 +5,7 @@
 # per_network.csv), and the run's config.json / metrics.csv kept here (the weights are
 # not committed). Run from the repository root, one Torch thread per run:
 #
-#     bash docs/results/suite/train.sh TASK SEED [LEARNER-PRESET [FOLDER]]
+#     bash docs/results/suite/train.sh TASK SEED [LEARNER-PRESET [FOLDER [FLAGS...]]]
 #
 # e.g. `bash docs/results/suite/train.sh stochastic 0`; two at a time on the 2-core machine.
 # FOLDER (the preset's name by default) names the folder under runs/suite and trained/:
@@ -13,9 +13,14 @@
 # round) is kept under `guided-upr24`, since trained/guided and trained/guided-conn hold
 # the runs of the guided presets before it:
 #
-#     bash docs/results/suite/train.sh hidden25 0 guided guided-upr24
+#     bash docs/results/suite/train.sh hidden25 0 guided guided-upr24 --teacher-settings defaults
+#
+# (its teacher was the constructor's identify-and-plan on every task: FLAGS, passed on to
+# `spikectl train`, say so on every task but `paper`, where the preset's teacher, which
+# plays each task's own settings, is the constructor's).
 set -euo pipefail
 task=$1 seed=$2 preset=${3:-quick} folder=${4:-${3:-quick}}
+shift $(( $# < 4 ? $# : 4 ))
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 run=runs/suite/$folder/$task/seed=$seed
 out=docs/results/suite/trained/$folder/$task/seed=$seed
@@ -24,7 +29,7 @@ if [ -f "$run/model.pt" ]; then
 elif [ -d "$run" ]; then
     spikectl train --resume "$run"  # an interrupted run continues where it stopped
 else
-    spikectl train "$preset" --task "$task" --seed "$seed" --run-dir "$run"
+    spikectl train "$preset" --task "$task" --seed "$seed" "$@" --run-dir "$run"
 fi
 mkdir -p "$out"
 cp "$run/config.json" "$run/metrics.csv" "$out/"

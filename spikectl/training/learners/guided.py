@@ -32,6 +32,7 @@ from spikectl.agents import make_connectivity_predictor, masked_q
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.planning import IdentifyAndPlan
+from spikectl.planning.policy import environment_settings
 from spikectl.seeds import CONNECTIVITY_HEAD_STREAM, torch_seed
 from spikectl.training.learners.dqn import DQNLearner
 from spikectl.training.learners.dqn_losses import connectivity_loss, training_losses
@@ -79,6 +80,13 @@ class GuidedDQNLearner(DQNLearner):
         self.contexts = list(train_set)
         self.params = config.env.params
         self.noise_mV = float(config.env.extensions.observation_noise_mV)
+        # The identify teacher's settings: the named controller's on this environment, in
+        # the form whose every decision is fast (it labels every step), or the defaults.
+        self.teacher_settings = (
+            environment_settings(config.env.extensions, config.env.n_observed, fast=True)
+            if self.settings.teacher_settings == "task"
+            else {}
+        )
         if (
             self.settings.teacher == "told-weights"
             and config.env.n_observed != config.env.n_neurons
@@ -122,7 +130,7 @@ class GuidedDQNLearner(DQNLearner):
         teacher_plays = self.rng.random(self.num_envs) < share  # [S]
         # Only the realisable teacher plays (GuidedConfig refuses the other).
         teacher = functools.partial(IdentifyAndPlan, self.params, width=self.settings.teacher_width,
-                                    noise_mV=self.noise_mV)  # fmt: skip
+                                    noise_mV=self.noise_mV, **self.teacher_settings)  # fmt: skip
         self.mixed_policy = TeacherMixedPolicy(student, teacher_plays, teacher)
         return self.mixed_policy
 
@@ -137,7 +145,7 @@ class GuidedDQNLearner(DQNLearner):
             labels = teacher_labels(
                 episodes, [self.contexts[i] for i in contexts], self.settings.teacher,
                 self.params, self.noise_mV, self.settings.teacher_width,
-                played=played,
+                played=played, settings=self.teacher_settings,
             )  # fmt: skip
             self.teacher_seconds += time.process_time() - started
         privileged = None if self.connectivity_head is None else self.target_inputs[contexts]

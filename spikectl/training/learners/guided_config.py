@@ -35,6 +35,14 @@ class GuidedConfig(DQNConfig):
     """Who labels the visited states: identify-and-plan or the same loop told the weights."""
     teacher_width: int = 32
     """Beam width of the teacher's plans (identify-and-plan's default)."""
+    teacher_settings: Literal["task", "defaults"] = "task"
+    """The ``identify`` teacher's other settings. ``task``: those the named
+    ``identify-and-plan`` plays on the training environment, in the form whose every
+    decision is fast (``environment_settings(..., fast=True)``: the task's observation
+    model under noise, the extensions, the relays through hidden neurons; from 16 neurons
+    on ``known_sd`` 0.4 and no QMDP). ``defaults``: the constructor's defaults on every
+    environment (the teacher of the runs saved before this setting existed). On the
+    paper's task the two are the same."""
     imitation_weight: float = 1.0
     """Weight of the large-margin imitation loss at the start of training."""
     imitation_weight_end: float = 0.0
@@ -71,6 +79,17 @@ class GuidedConfig(DQNConfig):
                 f"only teacher 'identify' can play episodes itself, not {self.teacher!r} "
                 "(set teacher_episodes to 0)",
             )
+
+    @classmethod
+    def fields_saved_without(cls, env: Any) -> dict[str, Any]:
+        """The values of fields a config saved before they existed lacks, as its run had
+        them on the environment ``env`` (an ``EnvConfig``): ``teacher_settings`` was the
+        constructor's defaults, which are the task's own where the two are the same (the
+        paper's environment), so those runs read back as today's preset."""
+        from spikectl.planning.policy import environment_settings
+
+        same = environment_settings(env.extensions, env.n_observed, fast=True) == {}
+        return {"teacher_settings": "task" if same else "defaults"}
 
     def teacher_share_at(self, episode: int, total_episodes: int) -> float:
         """The share of episodes the teacher plays after ``episode`` episodes: linear from

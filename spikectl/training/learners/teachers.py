@@ -11,7 +11,8 @@ on nothing but those observations (and, for the privileged teacher, the weights)
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -22,12 +23,19 @@ from spikectl.planning import IdentifyAndPlan
 
 
 def make_teacher(
-    teacher: str, context: Context, params: NeuronParams, noise_mV: float, width: int
+    teacher: str,
+    context: Context,
+    params: NeuronParams,
+    noise_mV: float,
+    width: int,
+    settings: Mapping[str, Any] | None = None,
 ) -> IdentifyAndPlan:
     """A fresh teacher for one episode on ``context``: identify-and-plan
-    (``"identify"``) or the same loop told the context's weights (``"told-weights"``)."""
+    (``"identify"``, with the constructor's further ``settings``, e.g. the environment's
+    from :func:`~spikectl.planning.policy.environment_settings`) or the constructor's
+    loop told the context's weights (``"told-weights"``)."""
     if teacher == "identify":
-        return IdentifyAndPlan(params, width=width, noise_mV=noise_mV)
+        return IdentifyAndPlan(params, width=width, noise_mV=noise_mV, **(settings or {}))
     if teacher == "told-weights":
         if context.n_observed != context.n_neurons:
             raise ValueError(
@@ -70,9 +78,11 @@ def teacher_labels(
     noise_mV: float = 0.0,
     width: int = 32,
     played: np.ndarray | None = None,
+    settings: Mapping[str, Any] | None = None,
 ) -> np.ndarray:
     """[S, N] int16: the teacher's action at every step of each of the S episodes
-    (episode s played ``contexts[s]``), in the agent's indexing (-1 = do nothing).
+    (episode s played ``contexts[s]``), in the agent's indexing (-1 = do nothing);
+    ``settings`` as :func:`make_teacher`'s.
     Episodes the teacher played itself (``played[s]``) are labelled with their actions
     (what it would do again), without playing it a second time."""
     count, length = episodes.actions.shape
@@ -83,7 +93,7 @@ def teacher_labels(
         if played is not None and played[s]:
             labels[s] = episodes.actions[s]
             continue
-        policy = make_teacher(teacher, context, params, noise_mV, width)
+        policy = make_teacher(teacher, context, params, noise_mV, width, settings)
         info = {"action_mask": episodes.action_mask[s]}
         pattern = np.asarray(context.pattern, dtype=np.int8)
         target = context.observed_target
