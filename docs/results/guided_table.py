@@ -3,7 +3,7 @@
     python docs/results/guided_table.py docs/results
 
 Per group (every trial on one Torch thread, on the project's 2-core AMD EPYC machine,
-without AVX-512 but for the two groups that say so): final validation and test return
+without AVX-512 but for the groups that say so): final validation and test return
 (mean ± sd over seeds, ddof 0), the test IQM with its 95% stratified-bootstrap
 interval, the network selected on the validation set (the evaluation with the highest
 validation return) scored on the test set, and core-minutes (process CPU time) in all
@@ -15,10 +15,10 @@ from pathlib import Path
 
 import numpy as np
 
-from spikectl.experiments.report import load_runs
 from spikectl.experiments.stats import bootstrap_ci, iqm
 from spikectl.experiments.sweep import trial_dirs
 from spikectl.training.run import best_on_validation
+from spikectl.training.run_files import read_metrics
 
 GROUPS = {
     "TDRQN, quick preset, committed (made on another CPU kind)": "learn-fast-pooled-decay",
@@ -45,7 +45,25 @@ GROUPS = {
     "the main job on 4 000 training networks, 4x the steps (AVX-512 host)": "guided-ntrain4000-4x",
     "the main job with a 128-wide LSTM (pilot, 2 seeds, AVX-512 host)": "guided-lstm128",
     "PQN (`spikectl train pqn`)": "pqn",
+    "the main job, this host (`spikectl train guided`)": "cleo-sim-to-sim:tdrqn-seed*",
+    "the main job + the target's proximity in the input": "proximity-input:trials/n8/seed=*",
+    "the main job + its teacher's belief in the input": "belief-input:trials/n8-seed*",
+    "the main job + the planner's next action in the input": "advice-input:trials/n8-seed*",
+    "the same, imitation annealed to 0 (reward alone)": "advice-input:trials/n8-rl-seed*",
+    "ADVISOR, alpha 4 (pilot)": "advisor:trials/identify-a4-end1-seed*",
+    "ADVISOR's control: policy head, imitation held at 1 (pilot)":
+        "advisor:trials/identify-a0-end1-seed*",
 }
+"""Row label -> results folder (its trials/), or ``folder:glob`` for the run directories
+under the folder that match the glob."""
+
+
+def runs_of(results: Path, group: str) -> list[Path]:
+    """The run directories (those with a config.json) of a :data:`GROUPS` entry."""
+    folder, _, pattern = group.partition(":")
+    if not pattern:
+        return trial_dirs(results / folder)
+    return sorted(run for run in (results / folder).glob(pattern) if (run / "config.json").exists())
 
 
 def mean_sd(values) -> str:
@@ -56,12 +74,12 @@ def main(results: Path) -> None:
     print("| learner | seeds | final val | final test | test IQM [95% CI] | selected on val: "
           "test | core-minutes | of which teacher |")
     print("|---|---:|---:|---:|---:|---:|---:|---:|")
-    for label, folder in GROUPS.items():
-        if not trial_dirs(results / folder):
+    for label, group in GROUPS.items():
+        if not runs_of(results, group):
             continue
-        runs = load_runs(trial_dirs(results / folder))
-        final = [run.metrics[-1] for run in runs]
-        selected = [best_on_validation(run.metrics) for run in runs]
+        runs = [read_metrics(run) for run in runs_of(results, group)]  # research learners too
+        final = [metrics[-1] for metrics in runs]
+        selected = [best_on_validation(metrics) for metrics in runs]
         tests = np.array([row["test_return"] for row in final])
         interval = bootstrap_ci(tests, iqm, rng=0)
         teacher = [row.get("teacher_seconds", 0.0) / 60 for row in final]

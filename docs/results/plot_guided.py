@@ -13,14 +13,14 @@ return (no training) is the dashed line.
 from __future__ import annotations
 
 import sys
-from fnmatch import fnmatch
 from pathlib import Path
 
 import numpy as np
 from matplotlib import colormaps
 
+from guided_table import runs_of  # docs/results/guided_table.py, beside this script
+
 from spikectl.experiments.figures import save_figure, subplots
-from spikectl.experiments.sweep import trial_dirs
 from spikectl.training.run_files import read_metrics
 
 IDENTIFY_AND_PLAN = {"val_return": 0.866, "test_return": 0.837}  # docs/baselines.md
@@ -43,12 +43,15 @@ GROUPS = {
     "the main job on 4 000 training networks, 4x steps (AVX-512 host)": "guided-ntrain4000-4x",
     "the main job with a 128-wide LSTM (AVX-512 host)": "guided-lstm128",
     "PQN": "pqn",
-    "the main job + its teacher's belief in the input": "belief-input:n8-seed*",
-    "the main job + the planner's next action in the input": "advice-input:n8-seed*",
-    "the same, imitation annealed to 0 (reward alone)": "advice-input:n8-rl-seed*",
+    "the main job + the target's proximity in the input": "proximity-input:trials/n8/seed=*",
+    "the main job + its teacher's belief in the input": "belief-input:trials/n8-seed*",
+    "the main job + the planner's next action in the input": "advice-input:trials/n8-seed*",
+    "the same, imitation annealed to 0 (reward alone)": "advice-input:trials/n8-rl-seed*",
+    "ADVISOR, alpha 4 (pilot)": "advisor:trials/identify-a4-end1-seed*",
+    "ADVISOR's control: policy head, imitation held at 1 (pilot)":
+        "advisor:trials/identify-a0-end1-seed*",
 }
-"""Legend label -> results folder, or ``folder:glob`` for the trials of one folder whose
-names match the glob."""
+"""Legend label -> results folder, or ``folder:glob`` (:func:`guided_table.runs_of`)."""
 
 MAIN_JOB = "guided-ntrain1000"
 """The folder of the README's main job, drawn thicker."""
@@ -65,13 +68,6 @@ def curve(run_dirs: list[Path], column: str) -> tuple[np.ndarray, np.ndarray, np
     grid = np.linspace(0.0, end, 60)
     values = np.stack([np.interp(grid, minutes, value) for minutes, value in series])
     return grid, values.mean(axis=0), values.std(axis=0)
-
-
-def runs_of(results: Path, group: str) -> list[Path]:
-    """The run directories of a :data:`GROUPS` entry."""
-    folder, _, names = group.partition(":")
-    runs = trial_dirs(results / folder)
-    return [run for run in runs if fnmatch(run.name, names)] if names else runs
 
 
 def main(results: Path, out: Path) -> None:
