@@ -1,0 +1,22 @@
+#!/usr/bin/env bash
+# The runs behind docs/results/task-teacher/README.md, from the repository root on the
+# project's 2-core AMD EPYC (AVX2), one Torch thread each, beside one other training run.
+# The main job trained on `heterogeneous` with its teacher playing the task's own settings
+# (`--teacher-settings task`, the default): identify-and-plan's extensions, each neuron's
+# threshold and leak learned. The runs it is compared with are the suite's
+# (../suite/trained/guided-upr24/heterogeneous/, the same command with
+# `--teacher-settings defaults`). Each run's config.json, metrics.csv and its best
+# model's test networks, network by network, are kept in trials/heterogeneous/seed=S.
+set -euo pipefail
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
+here=docs/results/task-teacher
+runs=${RUNS:-runs/task-teacher}
+for seed in 0 1 2; do
+    run=$runs/heterogeneous/seed=$seed out=$here/trials/heterogeneous/seed=$seed
+    spikectl train guided --task heterogeneous --seed "$seed" --run-dir "$run"
+    mkdir -p "$out"
+    cp "$run/config.json" "$run/metrics.csv" "$out/"
+    spikectl benchmark "$run" --model best --task heterogeneous --out "$out/benchmark.csv" \
+        --per-network "$out/per_network.csv"
+done
+python $here/table.py > $here/table.md

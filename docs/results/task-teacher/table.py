@@ -1,0 +1,94 @@
+"""The tables of docs/results/task-teacher/README.md, from committed files only.
+
+    python docs/results/task-teacher/table.py > docs/results/task-teacher/table.md
+
+The main job trained on `heterogeneous` with the teacher playing the task's settings
+(trials/heterogeneous/seed=S) against the same runs with the constructor's teacher
+(../suite/trained/guided-upr24/heterogeneous/seed=S): the validation return its
+metrics.csv records during training (mean over seeds, then each seed), the best
+evaluation's validation return, the end's teacher agreement and core-minutes, and the
+best model's test return (benchmark.csv). Then each new run's best model on the 100 test
+networks against the named identify-and-plan's committed rows (with the extensions,
+../heterogeneous-neurons/test-per-network.csv), network by network: the
+mean difference over networks of the seeds' mean, with a 95% bootstrap interval over
+networks (10 000 resamples).
+"""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+RESULTS = HERE.parent
+TASK = "heterogeneous"
+GROUPS = {
+    "teacher: the task's settings": HERE / "trials" / TASK,
+    "teacher: the constructor's (suite runs)": RESULTS / "suite" / "trained" / "guided-upr24" / TASK,
+}
+PLANNER_TEST = RESULTS / "heterogeneous-neurons" / "test-per-network.csv"  # the named setting
+
+
+def rows(path: Path) -> list[dict]:
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def seeds(folder: Path) -> list[Path]:
+    return sorted(folder.glob("seed=*"))
+
+
+def per_network(path: Path) -> np.ndarray:
+    table = [row for row in rows(path) if row["task"] == TASK]
+    return np.array([float(row["return"]) for row in sorted(table, key=lambda r: int(r["context"]))])
+
+
+def paired(difference: np.ndarray) -> str:
+    rng = np.random.default_rng(0)
+    means = rng.choice(difference, (10_000, difference.size)).mean(axis=1)
+    low, high = np.quantile(means, [0.025, 0.975])
+    better, worse = int((difference > 1e-9).sum()), int((difference < -1e-9).sum())
+    return f"{difference.mean():+.3f} [{low:+.3f}, {high:+.3f}] | {better} / {worse}"
+
+
+def main() -> None:
+    runs = {label: [rows(seed / "metrics.csv") for seed in seeds(folder)]
+            for label, folder in GROUPS.items()}  # fmt: skip
+    print("Validation return during training (mean over seeds; each seed)\n")
+    print("| episode | " + " | ".join(runs) + " |")
+    print("|---:|" + "---:|" * len(runs))
+    for index, row in enumerate(next(iter(runs.values()))[0]):
+        cells = []
+        for metrics in runs.values():
+            values = [float(seed[index]["val_return"]) for seed in metrics]
+            cells.append(f"{np.mean(values):.3f} ({' / '.join(f'{v:.3f}' for v in values)})")
+        print(f"| {row['episode']} | " + " | ".join(cells) + " |")
+    print("\n| teacher | seeds | validation at the end | best validation | test return of the "
+          "best | teacher agreement at the end | core-minutes (teacher) |")
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for label, folder in GROUPS.items():
+        metrics = runs[label]
+        end = [float(seed[-1]["val_return"]) for seed in metrics]
+        best = [max(float(row["val_return"]) for row in seed) for seed in metrics]
+        tests = [float(rows(seed / "benchmark.csv")[0]["mean_return"]) for seed in seeds(folder)]
+        agreement = [float(seed[-1]["teacher_agreement"]) for seed in metrics]
+        minutes = [float(seed[-1]["cpu_time_s"]) / 60 for seed in metrics]
+        teacher = [float(seed[-1]["teacher_seconds"]) / 60 for seed in metrics]
+        print(f"| {label} | {len(metrics)} | {np.mean(end):.3f} ± {np.std(end):.3f} | "
+              f"{np.mean(best):.3f} ± {np.std(best):.3f} | "
+              f"{np.mean(tests):.3f} ± {np.std(tests):.3f} | {np.mean(agreement):.3f} | "
+              f"{np.mean(minutes):.1f} ({np.mean(teacher):.1f}) |")  # fmt: skip
+    new = [seed / "per_network.csv" for seed in seeds(GROUPS["teacher: the task's settings"])]
+    if new and all(path.exists() for path in new):
+        student = np.mean([per_network(path) for path in new], axis=0)
+        planner = per_network(PLANNER_TEST)
+        print("\nTest networks, network by network: the new runs' mean against identify-and-plan\n")
+        print("| | student − planner | mean difference [95% CI] | better / worse |")
+        print("|---|---:|---:|---:|")
+        print(f"| {TASK} | {student.mean():.3f} − {planner.mean():.3f} | {paired(student - planner)} |")
+
+
+if __name__ == "__main__":
+    main()
