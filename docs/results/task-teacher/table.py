@@ -2,16 +2,15 @@
 
     python docs/results/task-teacher/table.py > docs/results/task-teacher/table.md
 
-The main job trained on `heterogeneous` with the teacher playing the task's settings
-(trials/heterogeneous/seed=S) against the same runs with the constructor's teacher
-(../suite/trained/guided-upr24/heterogeneous/seed=S): the validation return its
-metrics.csv records during training (mean over seeds, then each seed), the best
-evaluation's validation return, the end's teacher agreement and core-minutes, and the
-best model's test return (benchmark.csv). Then each new run's best model on the 100 test
-networks against the named identify-and-plan's committed rows (with the extensions,
-../heterogeneous-neurons/test-per-network.csv), network by network: the
-mean difference over networks of the seeds' mean, with a 95% bootstrap interval over
-networks (10 000 resamples).
+Per task, the main job trained on it with the teacher playing the task's settings
+(trials/TASK/seed=S) against the same runs with the constructor's teacher
+(../suite/trained/guided-upr24/TASK/seed=S): the validation return its metrics.csv
+records during training (mean over seeds, then each seed), the best evaluation's
+validation return, the end's teacher agreement and core-minutes, and the best model's
+test return (benchmark.csv). Then each new run's best model on the 100 test networks
+against the named identify-and-plan's committed rows (:data:`PLANNER_TEST`), network by
+network: the mean difference over networks of the seeds' mean, with a 95% bootstrap
+interval over networks (10 000 resamples).
 """
 
 from __future__ import annotations
@@ -23,12 +22,12 @@ import numpy as np
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE.parent
-TASK = "heterogeneous"
-GROUPS = {
-    "teacher: the task's settings": HERE / "trials" / TASK,
-    "teacher: the constructor's (suite runs)": RESULTS / "suite" / "trained" / "guided-upr24" / TASK,
+OLD = RESULTS / "suite" / "trained" / "guided-upr24"
+PLANNER_TEST = {
+    "heterogeneous": RESULTS / "heterogeneous-neurons" / "test-per-network.csv",
+    "n16": RESULTS / "bayes-identify" / "test-benchmark-known-sd-per-network.csv",
 }
-PLANNER_TEST = RESULTS / "heterogeneous-neurons" / "test-per-network.csv"  # the named setting
+"""Each task's named identify-and-plan, network by network on its test set."""
 
 
 def rows(path: Path) -> list[dict]:
@@ -40,9 +39,10 @@ def seeds(folder: Path) -> list[Path]:
     return sorted(folder.glob("seed=*"))
 
 
-def per_network(path: Path) -> np.ndarray:
-    table = [row for row in rows(path) if row["task"] == TASK]
-    return np.array([float(row["return"]) for row in sorted(table, key=lambda r: int(r["context"]))])
+def per_network(path: Path, task: str) -> np.ndarray:
+    table = [row for row in rows(path) if row["task"] == task]
+    table.sort(key=lambda row: int(row["context"]))
+    return np.array([float(row["return"]) for row in table])
 
 
 def paired(difference: np.ndarray) -> str:
@@ -53,11 +53,12 @@ def paired(difference: np.ndarray) -> str:
     return f"{difference.mean():+.3f} [{low:+.3f}, {high:+.3f}] | {better} / {worse}"
 
 
-def main() -> None:
+def report(task: str) -> None:
+    groups = {"the task's settings": HERE / "trials" / task, "the constructor's": OLD / task}
     runs = {label: [rows(seed / "metrics.csv") for seed in seeds(folder)]
-            for label, folder in GROUPS.items()}  # fmt: skip
-    print("Validation return during training (mean over seeds; each seed)\n")
-    print("| episode | " + " | ".join(runs) + " |")
+            for label, folder in groups.items()}  # fmt: skip
+    print(f"## `{task}`\n\nValidation return during training (mean over seeds; each seed)\n")
+    print("| episode | teacher: " + " | teacher: ".join(runs) + " |")
     print("|---:|" + "---:|" * len(runs))
     for index, row in enumerate(next(iter(runs.values()))[0]):
         cells = []
@@ -68,7 +69,7 @@ def main() -> None:
     print("\n| teacher | seeds | validation at the end | best validation | test return of the "
           "best | teacher agreement at the end | core-minutes (teacher) |")
     print("|---|---:|---:|---:|---:|---:|---:|")
-    for label, folder in GROUPS.items():
+    for label, folder in groups.items():
         metrics = runs[label]
         end = [float(seed[-1]["val_return"]) for seed in metrics]
         best = [max(float(row["val_return"]) for row in seed) for seed in metrics]
@@ -78,16 +79,21 @@ def main() -> None:
         teacher = [float(seed[-1]["teacher_seconds"]) / 60 for seed in metrics]
         print(f"| {label} | {len(metrics)} | {np.mean(end):.3f} ± {np.std(end):.3f} | "
               f"{np.mean(best):.3f} ± {np.std(best):.3f} | "
-              f"{np.mean(tests):.3f} ± {np.std(tests):.3f} | {np.mean(agreement):.3f} | "
-              f"{np.mean(minutes):.1f} ({np.mean(teacher):.1f}) |")  # fmt: skip
-    new = [seed / "per_network.csv" for seed in seeds(GROUPS["teacher: the task's settings"])]
-    if new and all(path.exists() for path in new):
-        student = np.mean([per_network(path) for path in new], axis=0)
-        planner = per_network(PLANNER_TEST)
-        print("\nTest networks, network by network: the new runs' mean against identify-and-plan\n")
-        print("| | student − planner | mean difference [95% CI] | better / worse |")
-        print("|---|---:|---:|---:|")
-        print(f"| {TASK} | {student.mean():.3f} − {planner.mean():.3f} | {paired(student - planner)} |")
+              f"{np.mean(tests):.3f} ({' / '.join(f'{t:.3f}' for t in tests)}) | "
+              f"{np.mean(agreement):.3f} | {np.mean(minutes):.1f} ({np.mean(teacher):.1f}) |")  # fmt: skip
+    new = [seed / "per_network.csv" for seed in seeds(groups["the task's settings"])]
+    student = np.mean([per_network(path, task) for path in new], axis=0)
+    planner = per_network(PLANNER_TEST[task], task)
+    print("\nTest networks, network by network: the new runs' mean against identify-and-plan\n")
+    print("| | student − planner | mean difference [95% CI] | better / worse |")
+    print("|---|---:|---:|---:|")
+    print(f"| {task} | {student.mean():.3f} − {planner.mean():.3f} | {paired(student - planner)} |\n")
+
+
+def main() -> None:
+    for task in PLANNER_TEST:
+        if seeds(HERE / "trials" / task):
+            report(task)
 
 
 if __name__ == "__main__":
