@@ -120,9 +120,10 @@ def test_the_teacher_plays_the_training_tasks_settings():
             assert teacher.filter_voltage == (task and extensions == noisy)
             assert teacher.known_sd == (0.4 if task and n_neurons == 16 else 0.25)
             assert teacher.gamble_networks == 0
+    # The paper's environment: the task's settings are the constructor's.
     assert GuidedDQNLearner(
-        dataclasses.replace(guided(teacher_settings="task")),
-        make_splits(2, 1, seed=0, n_val=0)[0], np.random.default_rng(0),
+        guided(teacher_settings="task"), make_splits(2, 1, seed=0, n_val=0)[0],
+        np.random.default_rng(0),
     ).teacher_settings == {}  # fmt: skip
     with pytest.raises(ConfigError, match="teacher_settings"):
         Experiment.from_dict({"learner": {"name": "guided", "teacher_settings": "named"}})

@@ -16,9 +16,8 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from matplotlib import colormaps
-
 from guided_table import GROUPS, runs_of  # docs/results/guided_table.py, beside this script
+from matplotlib import colormaps
 
 from spikectl.experiments.figures import save_figure, subplots
 from spikectl.training.run_files import read_metrics

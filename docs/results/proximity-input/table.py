@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from spikectl.experiments.stats import paired_difference_cells
+
 HERE = Path(__file__).parent
 RESULTS = HERE.parent
 WITHOUT = {
@@ -57,15 +59,6 @@ def per_network(path: Path, task: str) -> np.ndarray:
     return np.array([float(row["return"]) for row in rows])
 
 
-def paired(difference: np.ndarray) -> str:
-    """Mean of a per-network difference, its 95% bootstrap interval (10 000 resamples,
-    seed 0) and the networks better / worse."""
-    resampled = np.random.default_rng(0).integers(0, difference.size, (10_000, difference.size))
-    low, high = np.quantile(difference[resampled].mean(axis=1), [0.025, 0.975])
-    return (f"{difference.mean():+.3f} [{low:+.3f}, {high:+.3f}] "
-            f"| {(difference > 0).sum()} / {(difference < 0).sum()}")  # fmt: skip
-
-
 def paired_rows(groups: dict[str, dict[str, list[Path]]]) -> None:
     """Network by network on the test set (the seeds' mean on each network)."""
     print("\nNetwork by network on the test set (each network's return averaged over the"
@@ -80,13 +73,14 @@ def paired_rows(groups: dict[str, dict[str, list[Path]]]) -> None:
         learned = np.mean([per_network(f, task) for f in files], axis=0)  # [100]
         planner = per_network(PLANNER_TEST, task)
         print(f"| {size} | with − identify-and-plan | {len(files)} "
-              f"| {learned.mean():.3f} − {planner.mean():.3f} | {paired(learned - planner)} |")
+              f"| {learned.mean():.3f} − {planner.mean():.3f} "
+              f"| {paired_difference_cells(learned - planner)} |")
         without_files = [f / "per_network.csv" for f in runs["without"]]
         if all(f.exists() for f in without_files):
             without = np.mean([per_network(f, task) for f in without_files], axis=0)
             print(f"| {size} | with − without | {len(files)}, {len(without_files)} "
                   f"| {learned.mean():.3f} − {without.mean():.3f} "
-                  f"| {paired(learned - without)} |")  # fmt: skip
+                  f"| {paired_difference_cells(learned - without)} |")  # fmt: skip
 
 
 def plot(groups: dict[str, dict[str, list[Path]]]) -> None:

@@ -10,7 +10,7 @@ validation return, the end's teacher agreement and core-minutes, and the best mo
 test return (benchmark.csv). Then each new run's best model on the 100 test networks
 against the named identify-and-plan's committed rows (:data:`PLANNER_TEST`), network by
 network: the mean difference over networks of the seeds' mean, with a 95% bootstrap
-interval over networks (10 000 resamples).
+interval over networks (``spikectl.experiments.stats.paired_difference_cells``).
 """
 
 from __future__ import annotations
@@ -19,6 +19,8 @@ import csv
 from pathlib import Path
 
 import numpy as np
+
+from spikectl.experiments.stats import paired_difference_cells
 
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE.parent
@@ -43,14 +45,6 @@ def per_network(path: Path, task: str) -> np.ndarray:
     table = [row for row in rows(path) if row["task"] == task]
     table.sort(key=lambda row: int(row["context"]))
     return np.array([float(row["return"]) for row in table])
-
-
-def paired(difference: np.ndarray) -> str:
-    rng = np.random.default_rng(0)
-    means = rng.choice(difference, (10_000, difference.size)).mean(axis=1)
-    low, high = np.quantile(means, [0.025, 0.975])
-    better, worse = int((difference > 1e-9).sum()), int((difference < -1e-9).sum())
-    return f"{difference.mean():+.3f} [{low:+.3f}, {high:+.3f}] | {better} / {worse}"
 
 
 def report(task: str) -> None:
@@ -80,14 +74,16 @@ def report(task: str) -> None:
         print(f"| {label} | {len(metrics)} | {np.mean(end):.3f} ± {np.std(end):.3f} | "
               f"{np.mean(best):.3f} ± {np.std(best):.3f} | "
               f"{np.mean(tests):.3f} ({' / '.join(f'{t:.3f}' for t in tests)}) | "
-              f"{np.mean(agreement):.3f} | {np.mean(minutes):.1f} ({np.mean(teacher):.1f}) |")  # fmt: skip
+              f"{np.mean(agreement):.3f} | "
+              f"{np.mean(minutes):.1f} ({np.mean(teacher):.1f}) |")  # fmt: skip
     new = [seed / "per_network.csv" for seed in seeds(groups["the task's settings"])]
     student = np.mean([per_network(path, task) for path in new], axis=0)
     planner = per_network(PLANNER_TEST[task], task)
     print("\nTest networks, network by network: the new runs' mean against identify-and-plan\n")
     print("| | student − planner | mean difference [95% CI] | better / worse |")
     print("|---|---:|---:|---:|")
-    print(f"| {task} | {student.mean():.3f} − {planner.mean():.3f} | {paired(student - planner)} |\n")
+    cells = paired_difference_cells(student - planner)
+    print(f"| {task} | {student.mean():.3f} − {planner.mean():.3f} | {cells} |\n")
 
 
 def main() -> None:
