@@ -8,7 +8,9 @@ the target's inputs to a learned policy, ``PlannerAdvice`` the planner's next ac
 (docs/agents.md). ``ObservedState``, ``FilteredState`` (measurement noise) and
 ``NeuronTracker`` (heterogeneous neurons) are the trackers identify-and-plan reads its
 observations with; ``RelayConnectivityEstimate`` is its estimate with the relays through
-hidden neurons (``IdentifyAndPlan(relays=True)``).
+hidden neurons (``IdentifyAndPlan(relays=True)``). ``environment_settings`` gives the
+settings the named ``identify-and-plan`` plays on an environment (``fast=True``: the form
+the guided learner's teacher plays).
 """
 
 from spikectl.planning.advice import PlannerAdvice
@@ -24,7 +26,7 @@ from spikectl.planning.oracle import (
     model_of_context,
     plan_episode,
 )
-from spikectl.planning.policy import IdentifyAndPlan
+from spikectl.planning.policy import IdentifyAndPlan, environment_settings
 from spikectl.planning.relays import RelayConnectivityEstimate
 
 __all__ = [
@@ -43,6 +45,7 @@ __all__ = [
     "RelayConnectivityEstimate",
     "TargetInputBelief",
     "beam_search",
+    "environment_settings",
     "episode_beliefs",
     "model_of_context",
     "plan_episode",
