@@ -267,6 +267,9 @@ class Experiment:
             )
         length, train = self.env.episode_length, self.train
         try:
+            check_agent = getattr(self.learner, "check_agent", None)
+            if check_agent is not None:  # a learner that builds on the agent's network
+                check_agent(self.agent.arch, sizes)
             self.learner.check_episode_length(length)
         except ConfigError as error:
             raise error.within("learner") from None

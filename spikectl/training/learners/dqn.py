@@ -53,18 +53,20 @@ class DQNLearner(QLearner):
         self.network, self.target = build_networks(config)
         self.predictor = build_predictor(config, self.network)
         self.connectivity_head = self.build_connectivity_head(config)
+        self.critic, self.critic_target = self.build_critic(config)
         self.belief = belief_input(self.network, config.env.params, config.env.extensions)
         """What computes the network's belief input (None where it reads none)."""
         self.trained = [
             parameter
-            for module in (self.network, self.predictor, self.connectivity_head)
+            for module in (self.network, self.predictor, self.connectivity_head, self.critic)
             if module is not None
             for parameter in module.parameters()
         ]
         self.optimizer = torch.optim.Adam(self.trained, lr=self.settings.learning_rate)
         self.replay = EpisodeReplay(
             self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
-            labelled=self.labelled_replay, privileged=self.connectivity_head is not None,
+            labelled=self.labelled_replay,
+            privileged=self.connectivity_head is not None or self.critic is not None,
             belief_width=belief_width(self.network.sizes) if self.belief is not None else 0,
         )  # fmt: skip
         self.targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
@@ -76,6 +78,11 @@ class DQNLearner(QLearner):
         """A privileged auxiliary head trained beside the network (the guided learner's
         ``connectivity_weight``); None here."""
         return None
+
+    def build_critic(self, config) -> tuple[torch.nn.Module | None, torch.nn.Module | None]:
+        """A privileged critic and its target copy trained beside the network (the guided
+        learner's ``asymmetric_critic``); (None, None) here."""
+        return None, None
 
     def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
         self.add_to_replay(episodes, contexts)
@@ -110,6 +117,8 @@ class DQNLearner(QLearner):
             batch = self.replay.sample(settings.batch_size, self.rng)
             gradient_step(self, self.batch_loss(batch, episode))
             soft_update(self.target, self.network, settings.tau)
+            if self.critic is not None:
+                soft_update(self.critic_target, self.critic, settings.tau)
 
     def batch_loss(self, batch, episode: int) -> torch.Tensor:
         """The loss of one sampled batch (the TD loss plus the weighted auxiliary loss);

@@ -34,8 +34,13 @@ from spikectl.envs.rollout import EpisodeBatch
 from spikectl.planning import IdentifyAndPlan
 from spikectl.planning.policy import environment_settings
 from spikectl.seeds import CONNECTIVITY_HEAD_STREAM, torch_seed
+from spikectl.training.learners.asymmetric import asymmetric_losses, make_critic
 from spikectl.training.learners.dqn import DQNLearner
-from spikectl.training.learners.dqn_losses import connectivity_loss, training_losses
+from spikectl.training.learners.dqn_losses import (
+    batch_tensors,
+    connectivity_loss,
+    losses_on_tensors,
+)
 from spikectl.training.learners.teachers import TeacherMixedPolicy, teacher_labels
 
 
@@ -101,6 +106,9 @@ class GuidedDQNLearner(DQNLearner):
         """This round's policy when the teacher plays some of its episodes, else None."""
         self.imitation_loss_sum, self.agreement_sum, self.imitation_count = 0.0, 0.0, 0
         self.connectivity_loss_sum, self.connectivity_count = 0.0, 0
+        self.critic_loss_sum, self.critic_count = 0.0, 0
+        if self.critic is not None:  # a column of its own only where there is a critic
+            self.metric_fields = type(self).metric_fields + ("critic_loss",)
         # Each training network's observed neurons' synapses onto its target: [C, n].
         self.target_inputs = np.stack(
             [np.sign(c.weights[c.observable, c.target]) for c in train_set]
@@ -116,6 +124,11 @@ class GuidedDQNLearner(DQNLearner):
             torch.manual_seed(torch_seed(config.train.seed, CONNECTIVITY_HEAD_STREAM))
             head = make_connectivity_predictor(self.network)
         return head.to(config.train.device)
+
+    def build_critic(self, config) -> tuple[torch.nn.Module | None, torch.nn.Module | None]:
+        """The privileged critic and its target copy when ``asymmetric_critic``
+        (``learners.asymmetric``)."""
+        return make_critic(config) if config.learner.asymmetric_critic else (None, None)
 
     def imitation_weight(self, episode: int) -> float:
         return self.settings.imitation_weight_at(episode, self.total_episodes)
@@ -148,20 +161,33 @@ class GuidedDQNLearner(DQNLearner):
                 played=played, settings=self.teacher_settings,
             )  # fmt: skip
             self.teacher_seconds += time.process_time() - started
-        privileged = None if self.connectivity_head is None else self.target_inputs[contexts]
-        self.add_to_replay(episodes, contexts, labels, privileged)
+        told = self.connectivity_head is not None or self.critic is not None
+        self.add_to_replay(
+            episodes, contexts, labels, self.target_inputs[contexts] if told else None
+        )
 
     def batch_loss(self, batch, episode: int) -> torch.Tensor:
         weight = self.imitation_weight(episode)
-        privileged = self.connectivity_head is not None
-        if weight <= 0 and not privileged:
+        head = self.connectivity_head is not None
+        if weight <= 0 and not head and self.critic is None:
             return super().batch_loss(batch, episode)
-        td, aux, q_values, *features = training_losses(
-            self.network, self.target, batch, self.settings, self.predictor, self.device,
-            return_q_values=True, return_features=privileged,
-        )  # fmt: skip
-        loss = self.td_and_aux_loss(td, aux)
-        if privileged:
+        tensors = batch_tensors(batch, self.device)
+        if self.critic is None:
+            td, aux, q_values, *features = losses_on_tensors(
+                self.network, self.target, tensors, self.settings, self.predictor,
+                return_q_values=True, return_features=head,
+            )  # fmt: skip
+            loss = self.td_and_aux_loss(td, aux)
+        else:
+            target_inputs = torch.as_tensor(batch.target_inputs, device=self.device)  # [B, n]
+            td, critic_loss, aux, q_values, *features = asymmetric_losses(
+                self.network, self.critic, self.critic_target, tensors, target_inputs,
+                self.settings, self.predictor, return_features=head,
+            )  # fmt: skip
+            self.critic_loss_sum += critic_loss.item()
+            self.critic_count += 1
+            loss = self.td_and_aux_loss(td, aux) + critic_loss
+        if head:
             target_inputs = torch.as_tensor(batch.target_inputs, device=self.device)  # [B, n]
             connectivity = connectivity_loss(self.connectivity_head, features[0], target_inputs)
             self.connectivity_loss_sum += connectivity.item()
@@ -196,14 +222,27 @@ class GuidedDQNLearner(DQNLearner):
         }  # fmt: skip
         self.imitation_loss_sum, self.agreement_sum, self.imitation_count = 0.0, 0.0, 0
         self.connectivity_loss_sum, self.connectivity_count = 0.0, 0
+        if self.critic is not None:
+            n = self.critic_count
+            row["critic_loss"] = self.critic_loss_sum / n if n else math.nan
+            self.critic_loss_sum, self.critic_count = 0.0, 0
         return row
 
     def progress(self, episode: int) -> dict[str, str]:
         return {**super().progress(episode), "imit": f"{self.imitation_weight(episode):.2f}"}
 
     def state_dict(self) -> dict[str, Any]:
+        critic = {}
+        if self.critic is not None:
+            critic = {
+                "critic": self.critic.state_dict(),
+                "critic_target": self.critic_target.state_dict(),
+                "critic_loss_sum": float(self.critic_loss_sum),
+                "critic_count": int(self.critic_count),
+            }
         return {
             **super().state_dict(),
+            **critic,
             "teacher_seconds": float(self.teacher_seconds),
             "imitation_loss_sum": float(self.imitation_loss_sum),
             "agreement_sum": float(self.agreement_sum),
@@ -226,6 +265,11 @@ class GuidedDQNLearner(DQNLearner):
         # Checkpoints of guided runs from before the connectivity head have no sums.
         self.connectivity_loss_sum = float(state.get("connectivity_loss_sum", 0.0))
         self.connectivity_count = int(state.get("connectivity_count", 0))
+        if self.critic is not None:
+            self.critic.load_state_dict(state["critic"])
+            self.critic_target.load_state_dict(state["critic_target"])
+            self.critic_loss_sum = float(state["critic_loss_sum"])
+            self.critic_count = int(state["critic_count"])
 
 
 __all__ = ["GuidedDQNLearner", "large_margin_loss"]
