@@ -16,7 +16,8 @@ How to add a learner (three files of spikectl, nothing outside this package):
 
 1. ``NAME_config.py``: a frozen dataclass with ``name: ClassVar[str] = "NAME"``, a
    docstring per field, ``__post_init__`` checking values (``check_field_types`` first) and
-   ``check_episode_length(episode_length)``; beside it, its presets
+   ``check_episode_length(episode_length)`` (and, where it builds on the agent's network,
+   ``check_agent(arch, sizes)``, which the config tree calls); beside it, its presets
    (``PRESETS = (Preset("NAME", "one line of help", build),)``, ``build`` making the
    Experiment from the base presets). A Q-learner takes its epsilon and learning-rate
    settings from :class:`~spikectl.training.learners.q_settings.QSettings`.

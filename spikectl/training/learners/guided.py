@@ -14,7 +14,9 @@ which is zero once the teacher's action a_E leads every other by the margin, so 
 shapes the ranking of the actions and leaves the values to the TD loss. Its weight
 decays linearly to ``imitation_weight_end`` (0: pure Q-learning from then on, and no
 more labels). The teacher runs in the training process: its CPU time is part of the
-run's, and metrics.csv reports it (``teacher_seconds``).
+run's, and metrics.csv reports it (``teacher_seconds``). With ``asymmetric_critic`` the
+TD loss is replaced by asymmetric double Q-learning (``learners.asymmetric``): a
+privileged critic learns by TD and the agent regresses onto it.
 """
 
 from __future__ import annotations
