@@ -10,6 +10,8 @@ import math
 import numpy as np
 import pytest
 import torch
+from test_guided import SHORT as SHORT_GUIDED
+from test_guided import guided, without_clocks_or_nan
 
 from spikectl.agents import make_agent
 from spikectl.config_errors import ConfigError
@@ -23,14 +25,6 @@ from spikectl.training.learners.asymmetric import (
 from spikectl.training.learners.dqn_config import DQNConfig
 from spikectl.training.presets import SMOKE
 from spikectl.training.run import train
-from spikectl.training.run_files import CLOCK_FIELDS
-
-CLOCKS = (*CLOCK_FIELDS, "teacher_seconds")
-
-
-def guided(config=SMOKE, **changes):
-    learner = GuidedConfig(**{**dataclasses.asdict(config.learner), **changes})
-    return dataclasses.replace(config, learner=learner)
 
 
 class Fixed(torch.nn.Module):
@@ -139,22 +133,9 @@ def test_cli_refuses_an_agent_without_room_for_the_critic(tmp_path, capsys):
     assert not (tmp_path / "run").exists()  # refused before anything was written
 
 
-SHORT = guided(
-    SMOKE.with_changes(
-        total_env_steps=6 * 20 * 8, eval_every_episodes=16, checkpoint_every_episodes=16
-    ),  # fmt: skip
-    teacher="told-weights",
-    imitation_anneal_fraction=0.5,
-    asymmetric_critic=True,
+SHORT = dataclasses.replace(
+    SHORT_GUIDED, learner=dataclasses.replace(SHORT_GUIDED.learner, asymmetric_critic=True)
 )
-
-
-def without_clocks_or_nan(rows):
-    return [
-        {k: v for k, v in row.items()
-         if k not in CLOCKS and not (isinstance(v, float) and math.isnan(v))}
-        for row in rows
-    ]  # fmt: skip
 
 
 def test_run_with_the_critic_learns_and_resumes_exactly(tmp_path, interrupt_after_rounds):
