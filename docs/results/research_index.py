@@ -53,8 +53,8 @@ CLAIMS = {
     "teacher told the weights 0.781 vs 0.733 (an older preset); not adopted",
     "task-teacher": "the guided learner's teacher on the task's own settings (identify-and-plan "
     "with the extensions on heterogeneous, 0.869 test against 0.768): validation 0.768 vs "
-    "0.767 (3 seeds each), test 0.767 vs 0.777, 0.10 below its teacher; n16 (1 seed) "
-    "0.723 vs 0.707",
+    "0.767 (3 seeds each), test 0.767 vs 0.777, 0.10 below its teacher; n16 (2 seeds) "
+    "0.706 vs 0.707",
     "rollout-improvement": "where identify-and-plan would probe, each candidate valued by "
     "playing the controller itself on networks drawn from its estimate (rollout policy "
     "improvement): paper train + validation -0.010 [-0.025, +0.003] at about 300x the CPU "

@@ -19,12 +19,14 @@ for seed in 0 1 2; do
     spikectl benchmark "$run" --model best --task heterogeneous --out "$out/benchmark.csv" \
         --per-network "$out/per_network.csv"
 done
-# At 16 neurons, one seed (a pilot); the same comparison.
-run=$runs/n16/seed=0 out=$here/trials/n16/seed=0
-spikectl train guided --task n16 --seed 0 --run-dir "$run"
-mkdir -p "$out"
-cp "$run/config.json" "$run/metrics.csv" "$out/"
-spikectl benchmark "$run" --model best --task n16 --out "$out/benchmark.csv" \
-    --per-network "$out/per_network.csv"
+# At 16 neurons, seeds 0 and 1 (a later session); the same comparison.
+for seed in 0 1; do
+    run=$runs/n16/seed=$seed out=$here/trials/n16/seed=$seed
+    spikectl train guided --task n16 --seed "$seed" --run-dir "$run"
+    mkdir -p "$out"
+    cp "$run/config.json" "$run/metrics.csv" "$out/"
+    spikectl benchmark "$run" --model best --task n16 --out "$out/benchmark.csv" \
+        --per-network "$out/per_network.csv"
+done
 python $here/teacher_cost.py > $here/teacher-cost.md
 python $here/table.py > $here/table.md
