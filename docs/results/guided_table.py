@@ -53,6 +53,7 @@ GROUPS = {
     "ADVISOR, alpha 4 (pilot)": "advisor:trials/identify-a4-end1-seed*",
     "ADVISOR's control: policy head, imitation held at 1 (pilot)":
         "advisor:trials/identify-a0-end1-seed*",
+    "the main job + a privileged critic (`--asymmetric-critic`)": "asymmetric-critic:trials/seed=*",
 }
 """Row label -> results folder (its trials/), or ``folder:glob`` for the run directories
 under the folder that match the glob."""

@@ -3,7 +3,8 @@
     python docs/results/asymmetric-critic/table.py > docs/results/asymmetric-critic/table.md
 
 The README's main job with the privileged critic (trials/seed=S) against the main job's
-committed seeds (../guided-ntrain1000/trials/seed=S, the same preset without it): the
+committed seeds on the same CPU kind (../cleo-sim-to-sim/tdrqn-seedS, the same preset
+without it, AVX2; those of ../guided-ntrain1000 ran with AVX-512): the
 validation return each metrics.csv records during training, the end's and the best
 evaluation's validation return, the test return recorded at the best (the run's
 best_model.pt), the teacher agreement at the end and core-minutes. Then the seeds' mean
@@ -26,8 +27,8 @@ from spikectl.training.run_files import read_metrics
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE.parent
 GROUPS = {
-    "with the critic": HERE / "trials",
-    "the main job": RESULTS / "guided-ntrain1000" / "trials",
+    "with the critic": sorted((HERE / "trials").glob("seed=*")),
+    "the main job": sorted((RESULTS / "cleo-sim-to-sim").glob("tdrqn-seed*")),
 }
 PLANNER_TEST = RESULTS / "bayes-identify" / "test-benchmark-known-sd-per-network.csv"
 PLANNER_VALIDATION = 0.866
@@ -51,8 +52,7 @@ def spread(values: list[float]) -> str:
 
 
 def main() -> None:
-    runs = {label: [read_metrics(seed) for seed in sorted(folder.glob("seed=*"))]
-            for label, folder in GROUPS.items()}  # fmt: skip
+    runs = {label: [read_metrics(seed) for seed in seeds] for label, seeds in GROUPS.items()}
     print("Validation return during training (mean over seeds; identify-and-plan "
           f"{PLANNER_VALIDATION})\n")  # fmt: skip
     print("| episode | " + " | ".join(runs) + " | critic's TD loss |")
@@ -74,7 +74,7 @@ def main() -> None:
               f"| {spread([b['test_return'] for b in best])} "
               f"| {np.mean([s[-1]['teacher_agreement'] for s in metrics]):.3f} "
               f"| {np.mean([s[-1]['cpu_time_s'] for s in metrics]) / 60:.1f} |")  # fmt: skip
-    files = sorted(GROUPS["with the critic"].glob("seed=*/per_network.csv"))
+    files = [seed / "per_network.csv" for seed in GROUPS["with the critic"]]
     learned = np.mean([test_returns(path) for path in files], axis=0)  # [100]
     planner = test_returns(PLANNER_TEST)
     print("\nThe paper task's test networks, network by network (the seeds' mean on each)\n")
