@@ -51,6 +51,9 @@ CLAIMS = {
     "imitation-only head matches the teacher; one seed each, validation): with "
     "identify-and-plan 0.826 vs 0.837 for its control and 0.834 for the main job; with the "
     "teacher told the weights 0.781 vs 0.733 (an older preset); not adopted",
+    "asymmetric-critic": "the main job with a privileged critic that reads the target's true "
+    "inputs (asymmetric DQN): validation 0.828 vs 0.832 at the end, test 0.816 vs 0.810 (3 "
+    "seeds each), -0.021 [-0.048, +0.005] vs identify-and-plan; no change",
     "task-teacher": "the guided learner's teacher on the task's own settings (identify-and-plan "
     "with the extensions on heterogeneous, 0.869 test against 0.768): validation 0.768 vs "
     "0.767 (3 seeds each), test 0.767 vs 0.777, 0.10 below its teacher; n16 (2 seeds) "
