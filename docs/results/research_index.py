@@ -46,7 +46,7 @@ CLAIMS = {
     "proximity-input": "the guided learner with the generator's prior of a synapse onto the "
     "target at each neuron's distance as an input: n = 8 (3 seeds) within noise, validation "
     "0.839 vs 0.834, test 0.813 vs 0.809; n16 (3 seeds) faster, within noise at the end, test "
-    "0.695 vs 0.686; n32 (2 seeds) best validation 0.568 vs 0.555, test 0.573 vs 0.535",
+    "0.695 vs 0.686; n32 (3 seeds) best validation 0.571 vs 0.555, test 0.572 vs 0.535",
     "advisor": "ADVISOR on the guided learner (imitation weighted per step by how well an "
     "imitation-only head matches the teacher; one seed each, validation): with "
     "identify-and-plan 0.826 vs 0.837 for its control and 0.834 for the main job; with the "

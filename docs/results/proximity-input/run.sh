@@ -20,10 +20,10 @@ for seed in 0 1 2; do train n8 "$seed"; done
 # `--teacher-settings`, whose default now plays the task's own settings).
 for seed in 0 1; do train n16 "$seed" --task n16 --teacher-settings defaults; done
 python $here/table.py > $here/table.md
-# Later: the third n16 seed, n32 (one seed: 87 core-minutes a run on this host beside
+# Later: the third n16 seed, n32 (three seeds, over three sessions: 87-90 core-minutes a run beside
 # other jobs) and every best model on its task's test networks, network by network.
 train n16 2 --task n16 --teacher-settings defaults
-for seed in 0 1; do train n32 "$seed" --task n32 --teacher-settings defaults; done
+for seed in 0 1 2; do train n32 "$seed" --task n32 --teacher-settings defaults; done
 for trial in "$here"/trials/*/seed=*; do
     size=$(basename "$(dirname "$trial")"); seed=${trial##*=}
     task=$([ "$size" = n8 ] && echo paper || echo "$size")
