@@ -11,22 +11,17 @@ set -euo pipefail
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
 here=docs/results/task-teacher
 runs=${RUNS:-runs/task-teacher}
-for seed in 0 1 2; do
-    run=$runs/heterogeneous/seed=$seed out=$here/trials/heterogeneous/seed=$seed
-    spikectl train guided --task heterogeneous --seed "$seed" --run-dir "$run"
+train() {  # train TASK SEED: the main job on TASK with the task's teacher, then its test
+    local task=$1 seed=$2
+    local run=$runs/$task/seed=$seed out=$here/trials/$task/seed=$seed
+    spikectl train guided --task "$task" --seed "$seed" --run-dir "$run"
     mkdir -p "$out"
     cp "$run/config.json" "$run/metrics.csv" "$out/"
-    spikectl benchmark "$run" --model best --task heterogeneous --out "$out/benchmark.csv" \
+    spikectl benchmark "$run" --model best --task "$task" --out "$out/benchmark.csv" \
         --per-network "$out/per_network.csv"
-done
+}
+for seed in 0 1 2; do train heterogeneous "$seed"; done
 # At 16 neurons, seeds 0 and 1 (a later session); the same comparison.
-for seed in 0 1; do
-    run=$runs/n16/seed=$seed out=$here/trials/n16/seed=$seed
-    spikectl train guided --task n16 --seed "$seed" --run-dir "$run"
-    mkdir -p "$out"
-    cp "$run/config.json" "$run/metrics.csv" "$out/"
-    spikectl benchmark "$run" --model best --task n16 --out "$out/benchmark.csv" \
-        --per-network "$out/per_network.csv"
-done
+for seed in 0 1; do train n16 "$seed"; done
 python $here/teacher_cost.py > $here/teacher-cost.md
 python $here/table.py > $here/table.md
