@@ -54,6 +54,15 @@ class DQNLearner(QLearner):
         self.predictor = build_predictor(config, self.network)
         self.connectivity_head = self.build_connectivity_head(config)
         self.critic, self.critic_target = self.build_critic(config)
+        self.stores_target_inputs = self.connectivity_head is not None or self.critic is not None
+        """Whether each stored episode keeps its network's target inputs (privileged)."""
+        # The (target, online) pairs each update moves: the critic's, where the agent
+        # regresses onto it and so never reads its own target network.
+        self.soft_updated = (
+            [(self.target, self.network)]
+            if self.critic is None
+            else [(self.critic_target, self.critic)]
+        )
         self.belief = belief_input(self.network, config.env.params, config.env.extensions)
         """What computes the network's belief input (None where it reads none)."""
         self.trained = [
@@ -65,8 +74,7 @@ class DQNLearner(QLearner):
         self.optimizer = torch.optim.Adam(self.trained, lr=self.settings.learning_rate)
         self.replay = EpisodeReplay(
             self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
-            labelled=self.labelled_replay,
-            privileged=self.connectivity_head is not None or self.critic is not None,
+            labelled=self.labelled_replay, privileged=self.stores_target_inputs,
             belief_width=belief_width(self.network.sizes) if self.belief is not None else 0,
         )  # fmt: skip
         self.targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
@@ -116,9 +124,8 @@ class DQNLearner(QLearner):
         for _ in range(settings.updates_per_round):
             batch = self.replay.sample(settings.batch_size, self.rng)
             gradient_step(self, self.batch_loss(batch, episode))
-            soft_update(self.target, self.network, settings.tau)
-            if self.critic is not None:
-                soft_update(self.critic_target, self.critic, settings.tau)
+            for target, online in self.soft_updated:
+                soft_update(target, online, settings.tau)
 
     def batch_loss(self, batch, episode: int) -> torch.Tensor:
         """The loss of one sampled batch (the TD loss plus the weighted auxiliary loss);

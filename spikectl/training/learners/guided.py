@@ -163,10 +163,8 @@ class GuidedDQNLearner(DQNLearner):
                 played=played, settings=self.teacher_settings,
             )  # fmt: skip
             self.teacher_seconds += time.process_time() - started
-        told = self.connectivity_head is not None or self.critic is not None
-        self.add_to_replay(
-            episodes, contexts, labels, self.target_inputs[contexts] if told else None
-        )
+        told = self.target_inputs[contexts] if self.stores_target_inputs else None
+        self.add_to_replay(episodes, contexts, labels, told)
 
     def batch_loss(self, batch, episode: int) -> torch.Tensor:
         weight = self.imitation_weight(episode)
@@ -174,6 +172,8 @@ class GuidedDQNLearner(DQNLearner):
         if weight <= 0 and not head and self.critic is None:
             return super().batch_loss(batch, episode)
         tensors = batch_tensors(batch, self.device)
+        if self.stores_target_inputs:
+            target_inputs = torch.as_tensor(batch.target_inputs, device=self.device)  # [B, n]
         if self.critic is None:
             td, aux, q_values, *features = losses_on_tensors(
                 self.network, self.target, tensors, self.settings, self.predictor,
@@ -181,7 +181,6 @@ class GuidedDQNLearner(DQNLearner):
             )  # fmt: skip
             loss = self.td_and_aux_loss(td, aux)
         else:
-            target_inputs = torch.as_tensor(batch.target_inputs, device=self.device)  # [B, n]
             td, critic_loss, aux, q_values, *features = asymmetric_losses(
                 self.network, self.critic, self.critic_target, tensors, target_inputs,
                 self.settings, self.predictor, return_features=head,
@@ -190,7 +189,6 @@ class GuidedDQNLearner(DQNLearner):
             self.critic_count += 1
             loss = self.td_and_aux_loss(td, aux) + critic_loss
         if head:
-            target_inputs = torch.as_tensor(batch.target_inputs, device=self.device)  # [B, n]
             connectivity = connectivity_loss(self.connectivity_head, features[0], target_inputs)
             self.connectivity_loss_sum += connectivity.item()
             self.connectivity_count += 1
