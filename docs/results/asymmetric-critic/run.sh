@@ -18,3 +18,4 @@ for seed in 0 1 2; do
         --per-network "$out/per_network.csv"
 done
 python $here/table.py > $here/table.md
+python $here/update_cost.py  # update-cost.txt
