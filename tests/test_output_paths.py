@@ -212,6 +212,31 @@ def test_ctrl_c_inside_a_numba_kernel_is_one_line_and_130(tmp_path):
     assert err.strip().splitlines() == [err.strip()] and "interrupted" in err
 
 
+def test_a_second_ctrl_c_while_exiting_changes_nothing():
+    """Class 5: a second Ctrl-C while the process shut down (about a second with
+    PyTorch and Numba loaded) ended it by the signal (exit -2) instead of 130; under
+    load it once crashed a half-finalised module (SIGSEGV)."""
+    process = subprocess.Popen(
+        [sys.executable, "-c",
+         "from spikectl.cli import main\n"
+         "import spikectl.planning.beam as beam\n"
+         "print('ready', flush=True)\n"
+         "main(['benchmark', 'do-nothing', '--task', 'all'])\n"],
+        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
+    )  # fmt: skip
+    assert process.stdout.readline().strip() == "ready"
+    assert process.stdout.readline().startswith("benchmark suite")
+    time.sleep(1.0)
+    process.send_signal(signal.SIGINT)
+    first_line = process.stderr.readline()  # written as the exit begins
+    process.send_signal(signal.SIGINT)  # a no-op if the process has already gone
+    rest = process.stderr.read()
+    process.wait(timeout=120)
+    assert "interrupted" in first_line and rest == "", rest
+    assert process.returncode == 130
+
+
 def test_a_system_error_caused_by_ctrl_c_is_the_interrupt(monkeypatch, capsys):
     """Class 5, deterministically: Numba returns a KeyboardInterrupt raised inside a
     kernel as a SystemError caused by it; any other SystemError keeps its traceback."""

@@ -10,6 +10,7 @@ becomes one line naming the flag). This module holds the command table and ``mai
 from __future__ import annotations
 
 import os
+import signal
 import sys
 from typing import Annotated, Union
 
@@ -88,6 +89,7 @@ def main(argv: list[str] | None = None) -> None:
         # KeyboardInterrupt; any other SystemError is a bug and keeps its traceback.
         if not _interrupted(error):
             raise
+        _ignore_further_interrupts()
         print(
             "spikectl: interrupted (a training run or sweep continues from its last "
             "checkpoint: spikectl train --resume RUN_DIR, or the same sweep command)",
@@ -100,6 +102,19 @@ def main(argv: list[str] | None = None) -> None:
         where = f"{error.filename}: " if error.filename else ""
         print(f"spikectl: error: {where}{describe_os_error(error)}", file=sys.stderr)
         raise SystemExit(2) from error
+
+
+def _ignore_further_interrupts() -> None:
+    """Let a second Ctrl-C pass while the process exits.
+
+    Shutting down with PyTorch and Numba loaded takes about a second; a second press
+    then would end the process by the signal instead of 130, or interrupt a module
+    half-way through its teardown.
+    """
+    try:
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
+    except ValueError:  # not the main thread (main() called from a worker thread)
+        pass
 
 
 def _interrupted(error: BaseException) -> bool:
