@@ -109,7 +109,8 @@ def _ignore_further_interrupts() -> None:
 
     Shutting down with PyTorch and Numba loaded takes about a second; a second press
     then would end the process by the signal instead of 130, or interrupt a module
-    half-way through its teardown.
+    half-way through its teardown. The ``spikectl`` command's launcher does the same
+    around this function; this covers ``main`` called from Python.
     """
     try:
         signal.signal(signal.SIGINT, signal.SIG_IGN)
