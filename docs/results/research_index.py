@@ -98,6 +98,10 @@ CLAIMS = {
     "curriculum-n32-pilot": "The main job's n = 8 network fine-tuned at n = 32 with its "
     "teacher (1 seed, 25 core-minutes): never above its zero-shot start (0.622 test); teacher "
     "agreement stays 0.35-0.37",
+    "curriculum": "A curriculum over sizes (3 seeds): the n = 8 main job with the proximity "
+    "input fine-tuned on n16, then n32: within noise of the n = 8 network played zero-shot "
+    "(+0.005 [-0.009, +0.018], +0.005 [-0.012, +0.024]), above training from scratch (+0.030, "
+    "+0.059), below identify-and-plan (-0.057, -0.105)",
     "student-n32-diagnosis": "Why the student does not follow its teacher at 32 neurons "
     "(validation): it does not identify the target's inputs (16-26% of its stimulations where "
     "the planner plans are true inputs, against 57-59%); the distance prior is worth -0.015 "
