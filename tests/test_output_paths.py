@@ -180,12 +180,11 @@ def test_a_task_trains_on_its_own_episode_length():
     assert command.config.env.n_train == suite.SET_SIZE
 
 
-def test_ctrl_c_inside_a_numba_kernel_is_one_line_and_130(tmp_path):
-    """Class 5: Ctrl-C while the oracle's beam search runs (Numba) was a SystemError
-    traceback and exit 1."""
+def benchmark_all_in_a_child() -> subprocess.Popen:
+    """``spikectl.cli.main(["benchmark", "do-nothing", "--task", "all"])`` in a child
+    process, returned once its first line is out (Numba and the command loaded)."""
     process = subprocess.Popen(
         [sys.executable, "-c",
-         "import sys, time\n"
          "from spikectl.cli import main\n"
          "import spikectl.planning.beam as beam\n"
          "print('ready', flush=True)\n"
@@ -197,6 +196,13 @@ def test_ctrl_c_inside_a_numba_kernel_is_one_line_and_130(tmp_path):
     )  # fmt: skip
     assert process.stdout.readline().strip() == "ready"
     assert process.stdout.readline().startswith("benchmark suite")
+    return process
+
+
+def test_ctrl_c_inside_a_numba_kernel_is_one_line_and_130(tmp_path):
+    """Class 5: Ctrl-C while the oracle's beam search runs (Numba) was a SystemError
+    traceback and exit 1."""
+    process = benchmark_all_in_a_child()
     time.sleep(2.0)  # into the references' planning (Numba) of the first task
     # Numba's dispatcher may clear a pending interrupt (it calls PyErr_Clear in some
     # paths), so, like a user, press Ctrl-C again until the command stops.
@@ -216,17 +222,7 @@ def test_a_second_ctrl_c_while_exiting_changes_nothing():
     """Class 5: a second Ctrl-C while the process shut down (about a second with
     PyTorch and Numba loaded) ended it by the signal (exit -2) instead of 130; under
     load it once crashed a half-finalised module (SIGSEGV)."""
-    process = subprocess.Popen(
-        [sys.executable, "-c",
-         "from spikectl.cli import main\n"
-         "import spikectl.planning.beam as beam\n"
-         "print('ready', flush=True)\n"
-         "main(['benchmark', 'do-nothing', '--task', 'all'])\n"],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
-    )  # fmt: skip
-    assert process.stdout.readline().strip() == "ready"
-    assert process.stdout.readline().startswith("benchmark suite")
+    process = benchmark_all_in_a_child()
     time.sleep(1.0)
     process.send_signal(signal.SIGINT)
     first_line = process.stderr.readline()  # written as the exit begins

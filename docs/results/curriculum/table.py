@@ -72,6 +72,15 @@ def curves(stage: str) -> None:
             for r, a in zip(row, agreement, strict=True)) + " |")  # fmt: skip
 
 
+def print_best(task: str, label: str, runs: list[Path]) -> None:
+    """One row: the runs' best validation returns, their test returns, their core-minutes."""
+    chosen = [best(run) for run in runs]
+    cpu = [float(list(metrics(run).values())[-1]["cpu_time_s"]) / 60 for run in runs]
+    print(f"| {task} | {label} | {cells([float(r['val_return']) for r in chosen])} | "
+          f"{cells([float(r['test_return']) for r in chosen])} | "
+          f"{', '.join(f'{c:.1f}' for c in cpu)} |")  # fmt: skip
+
+
 def summary() -> None:
     print("\nEach size: validation and test return (mean ± sd over seeds, each seed)\n")
     print("| size | controller | validation | test | core-minutes a run |")
@@ -83,19 +92,8 @@ def summary() -> None:
         zero_val = [zero_shot(s, "validation", task).mean() for s in SEEDS]
         zero_test = [zero_shot(s, "test", task).mean() for s in SEEDS]
         print(f"| {task} | n = 8 network, zero-shot | {cells(zero_val)} | {cells(zero_test)} | 0 |")
-        chosen = [best(run) for run in runs]
-        cpu = [float(list(metrics(run).values())[-1]["cpu_time_s"]) / 60 for run in runs]
-        print(f"| {task} | curriculum (best model) | "
-              f"{cells([float(r['val_return']) for r in chosen])} | "
-              f"{cells([float(r['test_return']) for r in chosen])} | "
-              f"{', '.join(f'{c:.1f}' for c in cpu)} |")  # fmt: skip
-        scratch = [SCRATCH / task / f"seed={s}" for s in SEEDS]
-        chosen = [best(run) for run in scratch]
-        cpu = [float(list(metrics(run).values())[-1]["cpu_time_s"]) / 60 for run in scratch]
-        print(f"| {task} | from scratch (best model) | "
-              f"{cells([float(r['val_return']) for r in chosen])} | "
-              f"{cells([float(r['test_return']) for r in chosen])} | "
-              f"{', '.join(f'{c:.1f}' for c in cpu)} |")  # fmt: skip
+        print_best(task, "curriculum (best model)", runs)
+        print_best(task, "from scratch (best model)", [SCRATCH / task / f"seed={s}" for s in SEEDS])
         print(f"| {task} | identify-and-plan | {PLANNER_VALIDATION[task]:.3f} | "
               f"{per_network(PLANNER_TEST, task).mean():.3f} | |")
 
