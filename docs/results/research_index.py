@@ -48,9 +48,10 @@ CLAIMS = {
     "0.839 vs 0.834, test 0.813 vs 0.809; n16 (3 seeds) faster, within noise at the end, test "
     "0.695 vs 0.686; n32 (3 seeds) best validation 0.571 vs 0.555, test 0.572 vs 0.535",
     "advisor": "ADVISOR on the guided learner (imitation weighted per step by how well an "
-    "imitation-only head matches the teacher; one seed each, validation): with "
-    "identify-and-plan 0.826 vs 0.837 for its control and 0.834 for the main job; with the "
-    "teacher told the weights 0.781 vs 0.733 (an older preset); not adopted",
+    "imitation-only head matches the teacher): with identify-and-plan, 3 seeds, validation "
+    "0.814 vs 0.834 for the main job, test 0.807 vs 0.809, -0.031 [-0.055, -0.009] vs the "
+    "planner; with the teacher told the weights 0.781 vs 0.733 (pilot, an older preset); "
+    "not adopted",
     "asymmetric-critic": "the main job with a privileged critic that reads the target's true "
     "inputs (asymmetric DQN): validation 0.828 vs 0.832 at the end, test 0.816 vs 0.810 (3 "
     "seeds each), -0.021 [-0.048, +0.005] vs identify-and-plan; no change",

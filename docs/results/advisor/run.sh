@@ -17,3 +17,11 @@ advisor identify-a4-end1-seed0 0 4 identify 1.0
 advisor identify-a0-end1-seed0 0 0 identify 1.0
 advisor told-weights-a4-end1-seed0 0 4 told-weights 1.0
 python $here/table.py > $here/table.md
+# Later (2026-11-28): alpha 4 with the realisable teacher at seeds 1 and 2, and each seed's
+# best model on the paper task's test networks, network by network.
+for seed in 1 2; do advisor "identify-a4-end1-seed$seed" "$seed" 4 identify 1.0; done
+for seed in 0 1 2; do
+    python $here/benchmark.py "$runs/identify-a4-end1-seed$seed" \
+        "$here/trials/identify-a4-end1-seed$seed/per_network.csv"
+done
+python $here/table.py > $here/table.md

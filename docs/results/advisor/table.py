@@ -4,6 +4,11 @@ preset with DQfD's imitation alone, ``guided-ntrain1000``) and, for the teacher 
 weights, against that teacher's plain pilot (``guided-told-weights-pilot``).
 
     python docs/results/advisor/table.py
+
+With three seeds of ``identify-a4-end1``, also their mean against the main job's and,
+network by network on the test set, their best models (``trials/NAME/per_network.csv``,
+written by ``benchmark.py``; each network's return averaged over the seeds) against
+identify-and-plan's committed row.
 """
 
 from __future__ import annotations
@@ -13,11 +18,16 @@ from pathlib import Path
 
 import numpy as np
 
+from spikectl.experiments.stats import paired_difference_cells
+
 HERE = Path(__file__).parent
 RESULTS = HERE.parent
 MAIN_JOB = sorted((RESULTS / "guided-ntrain1000" / "trials").glob("seed=*"))
 TOLD_WEIGHTS = sorted((RESULTS / "guided-told-weights-pilot" / "trials").glob("seed=*"))
 EPISODES = (400, 800, 1200, 1600, 2400, 3200, 4000, 4400)
+SEEDED = "identify-a4-end1"
+"""The ADVISOR setting run with three seeds (the others are one-seed pilots)."""
+PLANNER_TEST = RESULTS / "bayes-identify" / "test-benchmark-known-sd-per-network.csv"
 
 
 def metrics(folder: Path) -> dict[int, dict]:
@@ -61,6 +71,48 @@ def main() -> None:
         f"\nMain job, mean over its {len(MAIN_JOB)} seeds at the end: validation "
         f"{np.mean([float(metrics(f)[4400]['val_return']) for f in MAIN_JOB]):.3f}"
     )
+    seeded = sorted((HERE / "trials").glob(f"{SEEDED}-seed*"))
+    if len(seeded) >= 3:
+        print_seeds({f"ADVISOR, alpha 4 ({SEEDED})": seeded, "main job": MAIN_JOB})
+        print_paired(seeded)
+
+
+def print_seeds(groups: dict[str, list[Path]]) -> None:
+    """Mean ± sd over seeds: validation at the end, best validation, test return there."""
+    print("\n| | seeds | validation at the end | best validation | test return of the best |")
+    print("|---|---:|---:|---:|---:|")
+    for name, folders in groups.items():
+        ends, bests, tests = [], [], []
+        for folder in folders:
+            rows = metrics(folder)
+            chosen = max(rows.values(), key=lambda row: float(row["val_return"]))
+            ends.append(float(rows[max(rows)]["val_return"]))
+            bests.append(float(chosen["val_return"]))
+            tests.append(float(chosen["test_return"]))
+        print(f"| {name} | {len(folders)} | {spread(ends)} | {spread(bests)} | {spread(tests)} |")
+
+
+def spread(values: list[float]) -> str:
+    each = " / ".join(f"{v:.3f}" for v in values)
+    return f"{np.mean(values):.3f} ± {np.std(values, ddof=1):.3f} ({each})"
+
+
+def per_network(path: Path) -> np.ndarray:
+    """[100] the return on each of the paper task's test networks in a per-network CSV."""
+    with open(path, newline="") as handle:
+        rows = [row for row in csv.DictReader(handle) if row["task"] == "paper"]
+    return np.array([float(row["return"]) for row in rows])
+
+
+def print_paired(seeded: list[Path]) -> None:
+    learned = np.mean([per_network(folder / "per_network.csv") for folder in seeded], axis=0)
+    planner = per_network(PLANNER_TEST)
+    print("\nThe paper task's test networks, network by network (the seeds' mean on each)\n")
+    print("| | seeds | learned − planner | mean difference [95% CI] | better / worse |")
+    print("|---|---:|---:|---:|---:|")
+    print(f"| ADVISOR, alpha 4 − identify-and-plan | {len(seeded)} "
+          f"| {learned.mean():.3f} − {planner.mean():.3f} "
+          f"| {paired_difference_cells(learned - planner)} |")  # fmt: skip
 
 
 if __name__ == "__main__":
