@@ -221,16 +221,34 @@ def test_ctrl_c_inside_a_numba_kernel_is_one_line_and_130(tmp_path):
 def test_a_second_ctrl_c_while_exiting_changes_nothing():
     """Class 5: a second Ctrl-C while the process shut down (about a second with
     PyTorch and Numba loaded) ended it by the signal (exit -2) instead of 130; under
-    load it once crashed a half-finalised module (SIGSEGV)."""
+    load it once crashed a half-finalised module (SIGSEGV). A caller that catches the
+    SystemExit keeps its Ctrl-C (next test)."""
     process = benchmark_all_in_a_child()
     time.sleep(1.0)
     process.send_signal(signal.SIGINT)
     first_line = process.stderr.readline()  # written as the exit begins
+    time.sleep(0.2)  # into the interpreter's shutdown, which takes about a second
     process.send_signal(signal.SIGINT)  # a no-op if the process has already gone
     rest = process.stderr.read()
     process.wait(timeout=120)
     assert "interrupted" in first_line and rest == "", rest
     assert process.returncode == 130
+
+
+def test_a_caller_that_catches_the_exit_keeps_its_ctrl_c(monkeypatch, capsys):
+    """Ignoring a second Ctrl-C is for the process's shutdown only: a notebook or a docs
+    build that catches the SystemExit still stops on the next one."""
+    import spikectl.cli as spikectl_cli
+    from spikectl.cli.benchmark import BenchmarkCommand
+
+    def interrupted(command):
+        raise KeyboardInterrupt
+
+    monkeypatch.setitem(spikectl_cli.COMMANDS, "benchmark", (interrupted, BenchmarkCommand))
+    before = signal.getsignal(signal.SIGINT)
+    code, _, err = cli(["benchmark", "do-nothing"], capsys)
+    assert code == 130 and "interrupted" in err
+    assert signal.getsignal(signal.SIGINT) is before
 
 
 def test_a_system_error_caused_by_ctrl_c_is_the_interrupt(monkeypatch, capsys):

@@ -9,6 +9,8 @@ becomes one line naming the flag). This module holds the command table and ``mai
 
 from __future__ import annotations
 
+import atexit
+import contextlib
 import os
 import signal
 import sys
@@ -105,17 +107,21 @@ def main(argv: list[str] | None = None) -> None:
 
 
 def _ignore_further_interrupts() -> None:
-    """Let a second Ctrl-C pass while the process exits.
+    """Let a second Ctrl-C pass while the process shuts down.
 
-    Shutting down with PyTorch and Numba loaded takes about a second; a second press
-    then would end the process by the signal instead of 130, or interrupt a module
-    half-way through its teardown. The ``spikectl`` command's launcher does the same
-    around this function; this covers ``main`` called from Python.
+    Shutting down with PyTorch and Numba loaded takes about a second, after the exit
+    handlers start; a second press then would end the process by the signal instead of
+    130, or interrupt a module half-way through its teardown. Only at exit: a caller that
+    catches the SystemExit (a notebook, a docs build) keeps its Ctrl-C. The ``spikectl``
+    command's launcher does the same around this function.
     """
-    try:
+    atexit.unregister(_ignore_interrupts)  # once, however often main was interrupted
+    atexit.register(_ignore_interrupts)
+
+
+def _ignore_interrupts() -> None:
+    with contextlib.suppress(ValueError):  # not the main thread
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-    except ValueError:  # not the main thread (main() called from a worker thread)
-        pass
 
 
 def _interrupted(error: BaseException) -> bool:
