@@ -50,7 +50,7 @@ GROUPS = {
     "the main job + its teacher's belief in the input": "belief-input:trials/n8-seed*",
     "the main job + the planner's next action in the input": "advice-input:trials/n8-seed*",
     "the same, imitation annealed to 0 (reward alone)": "advice-input:trials/n8-rl-seed*",
-    "ADVISOR, alpha 4 (pilot)": "advisor:trials/identify-a4-end1-seed*",
+    "ADVISOR, alpha 4": "advisor:trials/identify-a4-end1-seed*",
     "ADVISOR's control: policy head, imitation held at 1 (pilot)":
         "advisor:trials/identify-a0-end1-seed*",
     "the main job + a privileged critic (`--asymmetric-critic`)": "asymmetric-critic:trials/seed=*",
