@@ -13,12 +13,15 @@ identify-and-plan's committed row.
 
 from __future__ import annotations
 
-import csv
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from spikectl.experiments.stats import paired_difference_cells
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from result_tables import PLANNER_TEST, best, metrics, per_network  # noqa: E402
 
 HERE = Path(__file__).parent
 RESULTS = HERE.parent
@@ -27,12 +30,6 @@ TOLD_WEIGHTS = sorted((RESULTS / "guided-told-weights-pilot" / "trials").glob("s
 EPISODES = (400, 800, 1200, 1600, 2400, 3200, 4000, 4400)
 SEEDED = "identify-a4-end1"
 """The ADVISOR setting run with three seeds (the others are one-seed pilots)."""
-PLANNER_TEST = RESULTS / "bayes-identify" / "test-benchmark-known-sd-per-network.csv"
-
-
-def metrics(folder: Path) -> dict[int, dict]:
-    with open(folder / "metrics.csv", newline="") as handle:
-        return {int(row["episode"]): row for row in csv.DictReader(handle)}
 
 
 def cell(rows: dict[int, dict], episode: int, field: str) -> str:
@@ -60,7 +57,7 @@ def main() -> None:
     print("|---|---:|---:|---:|---:|")
     for name, folder in runs.items():
         rows = metrics(folder)
-        chosen = max(rows.values(), key=lambda row: float(row["val_return"]))
+        chosen = best(folder)
         last = rows[max(rows)]
         weight = cell(rows, max(rows), "advisor_weight") or "–"
         print(
@@ -85,7 +82,7 @@ def print_seeds(groups: dict[str, list[Path]]) -> None:
         ends, bests, tests = [], [], []
         for folder in folders:
             rows = metrics(folder)
-            chosen = max(rows.values(), key=lambda row: float(row["val_return"]))
+            chosen = best(folder)
             ends.append(float(rows[max(rows)]["val_return"]))
             bests.append(float(chosen["val_return"]))
             tests.append(float(chosen["test_return"]))
@@ -97,16 +94,11 @@ def spread(values: list[float]) -> str:
     return f"{np.mean(values):.3f} ± {np.std(values, ddof=1):.3f} ({each})"
 
 
-def per_network(path: Path) -> np.ndarray:
-    """[100] the return on each of the paper task's test networks in a per-network CSV."""
-    with open(path, newline="") as handle:
-        rows = [row for row in csv.DictReader(handle) if row["task"] == "paper"]
-    return np.array([float(row["return"]) for row in rows])
-
-
 def print_paired(seeded: list[Path]) -> None:
-    learned = np.mean([per_network(folder / "per_network.csv") for folder in seeded], axis=0)
-    planner = per_network(PLANNER_TEST)
+    learned = np.mean(
+        [per_network(folder / "per_network.csv", "paper") for folder in seeded], axis=0
+    )
+    planner = per_network(PLANNER_TEST, "paper")
     print("\nThe paper task's test networks, network by network (the seeds' mean on each)\n")
     print("| | seeds | learned − planner | mean difference [95% CI] | better / worse |")
     print("|---|---:|---:|---:|---:|")

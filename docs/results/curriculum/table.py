@@ -15,37 +15,29 @@ each other at n16: ``../task-teacher``).
 
 from __future__ import annotations
 
-import csv
-import importlib.util
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from spikectl.experiments.stats import paired_difference_cells
 
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from result_tables import PLANNER_TEST, best, metrics, per_network  # noqa: E402
+
 HERE = Path(__file__).parent
 RESULTS = HERE.parent
-_spec = importlib.util.spec_from_file_location(
-    "proximity", RESULTS / "proximity-input" / "table.py"
-)
-proximity = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(proximity)  # its readers of metrics.csv and per-network CSVs
-metrics, best, per_network = proximity.metrics, proximity.best, proximity.per_network
-
 SEEDS = (0, 1, 2)
 STAGES = {"n16": "n16-imit", "n32": "n32-imit"}
 """The fine-tuning run of each size (its source: the n = 8 run, then the n16 stage)."""
 SCRATCH = RESULTS / "proximity-input" / "trials"
-PLANNER_TEST = proximity.PLANNER_TEST
-PLANNER_VALIDATION = proximity.PLANNER_VALIDATION
+PLANNER_VALIDATION = {"n16": 0.799, "n32": 0.749}
+"""Identify-and-plan on the same validation networks (as ../proximity-input/table.py)."""
 
 
 def zero_shot(seed: int, split: str, task: str) -> np.ndarray:
     """[100] the n = 8 network of ``seed`` played on ``task``'s ``split`` set."""
-    path = HERE / "zero-shot" / f"n8-seed{seed}-{split}.csv"
-    with open(path, newline="") as handle:
-        rows = [row for row in csv.DictReader(handle) if row["task"] == task]
-    return np.array([float(row["return"]) for row in rows])
+    return per_network(HERE / "zero-shot" / f"n8-seed{seed}-{split}.csv", task)
 
 
 def stage_runs(stage: str) -> list[Path]:

@@ -17,12 +17,15 @@ against the runs without the input (their committed ``per_network.csv``).
 
 from __future__ import annotations
 
-import csv
+import sys
 from pathlib import Path
 
 import numpy as np
 
 from spikectl.experiments.stats import paired_difference_cells
+
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
+from result_tables import PLANNER_TEST, best, metrics, per_network  # noqa: E402
 
 HERE = Path(__file__).parent
 RESULTS = HERE.parent
@@ -33,30 +36,10 @@ WITHOUT = {
 }
 TASKS = {"n8": "paper", "n16": "n16", "n32": "n32"}
 """The suite task whose test set each size's per_network.csv holds."""
-PLANNER_TEST = RESULTS / "bayes-identify" / "test-benchmark-known-sd-per-network.csv"
 PLANNER_VALIDATION = {"n8": 0.866, "n16": 0.799, "n32": 0.749}
 """Identify-and-plan (the named controller) on the same validation networks: the
 research record (identify-and-plan.md, the reachable and n16-settings entries)."""
 EPISODES = (800, 1600, 2400, 3200, 4000, 4400)
-
-
-def metrics(folder: Path) -> dict[int, dict]:
-    with open(folder / "metrics.csv", newline="") as handle:
-        return {int(row["episode"]): row for row in csv.DictReader(handle)}
-
-
-def best(folder: Path) -> dict:
-    """The evaluation row of the best validation return (the run's best model)."""
-    return max(metrics(folder).values(), key=lambda row: float(row["val_return"]))
-
-
-def per_network(path: Path, task: str) -> np.ndarray:
-    """[100] the test return on each network of ``task`` in a per-network CSV."""
-    with open(path, newline="") as handle:
-        rows = [row for row in csv.DictReader(handle) if row["task"] == task]
-    if [int(row["context"]) for row in rows] != list(range(100)):
-        raise ValueError(f"{path} lacks the 100 test networks of {task}")
-    return np.array([float(row["return"]) for row in rows])
 
 
 def paired_rows(groups: dict[str, dict[str, list[Path]]]) -> None:
