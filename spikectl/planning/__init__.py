@@ -8,9 +8,10 @@ the target's inputs to a learned policy, ``PlannerAdvice`` the planner's next ac
 (docs/agents.md). ``ObservedState``, ``FilteredState`` (measurement noise) and
 ``NeuronTracker`` (heterogeneous neurons) are the trackers identify-and-plan reads its
 observations with; ``RelayConnectivityEstimate`` is its estimate with the relays through
-hidden neurons (``IdentifyAndPlan(relays=True)``). ``environment_settings`` gives the
-settings the named ``identify-and-plan`` plays on an environment (``fast=True``: the form
-the guided learner's teacher plays).
+hidden neurons (``IdentifyAndPlan(relays=True)``); ``DiscreteConnectivityEstimate``
+(n <= 11) and ``ParticleConnectivityEstimate`` (any n) its posteriors over {-1, 0, +1}.
+``environment_settings`` gives the settings the named ``identify-and-plan`` plays on an
+environment (``fast=True``: the form the guided learner's teacher plays).
 """
 
 from spikectl.planning.advice import PlannerAdvice
@@ -26,6 +27,7 @@ from spikectl.planning.oracle import (
     model_of_context,
     plan_episode,
 )
+from spikectl.planning.particles import ParticleConnectivityEstimate
 from spikectl.planning.policy import IdentifyAndPlan, environment_settings
 from spikectl.planning.relays import RelayConnectivityEstimate
 
@@ -41,6 +43,7 @@ __all__ = [
     "OraclePlanner",
     "Plan",
     "PlannerAdvice",
+    "ParticleConnectivityEstimate",
     "PlanningModel",
     "RelayConnectivityEstimate",
     "TargetInputBelief",

@@ -56,14 +56,17 @@ from spikectl.planning.identify import (
     ObservedState,
     residual_sd,
 )
+from spikectl.planning.particles import ParticleConnectivityEstimate
 from spikectl.planning.qmdp import qmdp_action
 from spikectl.planning.relays import RelayConnectivityEstimate, relay_state, relay_weights
 from spikectl.planning.release import exact_residuals, settled_releases
 
-IDENTIFICATIONS = ("gaussian", "discrete", "bayes")
+IDENTIFICATIONS = ("gaussian", "discrete", "bayes", "particles")
 """How the policy identifies G: a Gaussian posterior (ridge regression, any n), the
-exact posterior over {-1, 0, +1} (n <= 11), or that posterior under the task's own
-observation model (:mod:`spikectl.planning.bayes`; the Gaussian one above n = 11)."""
+exact posterior over {-1, 0, +1} (n <= 11), that posterior under the task's own
+observation model (:mod:`spikectl.planning.bayes`; the Gaussian one above n = 11), or
+the posterior over {-1, 0, +1} on the entries the evidence touched, its likeliest
+hypotheses per column (:mod:`spikectl.planning.particles`, any n)."""
 
 # The constructor's arguments besides ``params``, each kept as an attribute of that name
 # (what :meth:`IdentifyAndPlan.spawn` copies).
@@ -178,7 +181,10 @@ class IdentifyAndPlan:
             (the exact posterior over {-1, 0, +1}, n <= 11; it knows more entries,
             docs/baselines.md compares the two) or
             ``"bayes"`` (that posterior under the observation model of ``extensions``,
-            :mod:`spikectl.planning.bayes`; the Gaussian estimate above n = 11).
+            :mod:`spikectl.planning.bayes`; the Gaussian estimate above n = 11) or
+            ``"particles"`` (the posterior over {-1, 0, +1} at any n, enumerated on the
+            entries the evidence touched, the likeliest hypotheses of each column kept:
+            :mod:`spikectl.planning.particles`).
         plan_on: what the planner takes for weights that are not known: ``"mean"``
             their posterior mean, ``"known"`` 0 (under measurement noise the mean is
             noisy), ``"auto"``: ``"mean"`` without measurement noise, ``"known"`` with
@@ -552,6 +558,8 @@ class IdentifyAndPlan:
             return RelayConnectivityEstimate(n, self._residual_sd)
         if self.identification == "discrete":
             return DiscreteConnectivityEstimate(n, self._residual_sd)
+        if self.identification == "particles":
+            return ParticleConnectivityEstimate(n, self._residual_sd)
         if self.identification == "bayes" and column_hypotheses_fit(n):
             return BayesConnectivityEstimate(n, self._observation, self.params)
         return ConnectivityEstimate(n, self._residual_sd)
