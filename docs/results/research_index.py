@@ -57,8 +57,8 @@ CLAIMS = {
     "seeds each), -0.021 [-0.048, +0.005] vs identify-and-plan; no change",
     "task-teacher": "the guided learner's teacher on the task's own settings (identify-and-plan "
     "with the extensions on heterogeneous, 0.869 test against 0.768): validation 0.768 vs "
-    "0.767 (3 seeds each), test 0.767 vs 0.777, 0.10 below its teacher; n16 (2 seeds) "
-    "0.706 vs 0.707",
+    "0.767 (3 seeds each), test 0.767 vs 0.777, 0.10 below its teacher; n16 (3 seeds) "
+    "0.712 vs 0.707",
     "rollout-improvement": "where identify-and-plan would probe, each candidate valued by "
     "playing the controller itself on networks drawn from its estimate (rollout policy "
     "improvement): paper train + validation -0.010 [-0.025, +0.003] at about 300x the CPU "

@@ -21,7 +21,8 @@ train() {  # train TASK SEED: the main job on TASK with the task's teacher, then
         --per-network "$out/per_network.csv"
 }
 for seed in 0 1 2; do train heterogeneous "$seed"; done
-# At 16 neurons, seeds 0 and 1 (a later session); the same comparison.
-for seed in 0 1; do train n16 "$seed"; done
+# At 16 neurons, seeds 0, 1 and 2 (later sessions; seed 2 was stopped and resumed with
+# `spikectl train --resume runs/task-teacher/n16/seed=2`); the same comparison.
+for seed in 0 1 2; do train n16 "$seed"; done
 python $here/teacher_cost.py > $here/teacher-cost.md
 python $here/table.py > $here/table.md
