@@ -391,6 +391,15 @@ def test_named_controller_takes_the_environments_observation_model():
     }  # fmt: skip
     assert environment_settings(stochastic, 16)["known_sd"] == KNOWN_SD_LARGE
     assert environment_settings(None, 15) == {} and environment_settings(None, 16) != {}
+    # From 32 on, under the paper's dynamics only, the particle posterior (not in the fast
+    # form, nor where a task has its own identification or relays).
+    assert "identification" not in environment_settings(None, 16)
+    assert environment_settings(None, 32)["identification"] == "particles"
+    assert environment_settings(Extensions(), 32)["identification"] == "particles"
+    assert "identification" not in environment_settings(None, 32, fast=True)
+    assert "identification" not in environment_settings(stochastic, 32)
+    assert environment_settings(Extensions(hidden_fraction=0.25), 32)["relays"]
+    assert "identification" not in environment_settings(Extensions(hidden_fraction=0.25), 32)
 
 
 def test_the_fast_form_drops_qmdp_and_nothing_else():
