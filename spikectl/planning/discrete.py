@@ -44,7 +44,41 @@ def column_hypotheses_fit(n_neurons: int) -> bool:
     return 3 ** (n_neurons - 1) <= MAX_COLUMN_HYPOTHESES
 
 
-class DiscreteConnectivityEstimate:
+class SignMarginals:
+    """What a posterior over G in {-1, 0, +1} gives from its marginals: the mean and
+    standard deviation, the weights to plan with and the chance of an excitatory synapse.
+    A subclass provides ``_marginals()`` -> (P(G = +1), P(G = -1)), both [n (pre), n
+    (post)], and clears ``_cache`` whenever they change."""
+
+    _cache: tuple[np.ndarray, np.ndarray] | None
+
+    def _marginals(self) -> tuple[np.ndarray, np.ndarray]:
+        raise NotImplementedError
+
+    def posterior(self) -> tuple[np.ndarray, np.ndarray]:
+        """(mean, standard deviation) of G, both [n (pre), n (post)]."""
+        if self._cache is None:
+            plus, minus = self._marginals()
+            mean = plus - minus
+            sd = np.sqrt(np.maximum(plus + minus - mean**2, 0.0))
+            self._cache = (mean, sd)
+        return self._cache
+
+    def weights(self, known_sd: float) -> tuple[np.ndarray, np.ndarray]:
+        """(signs [n, n] to plan with, known [n, n]) as :meth:`ConnectivityEstimate.weights`:
+        known entries (posterior sd below ``known_sd``) are the rounded mean, others 0."""
+        mean, sd = self.posterior()
+        known = sd < known_sd
+        signs = np.where(known, np.clip(np.rint(mean), -1, 1), 0.0)
+        return signs.astype(np.int8), known
+
+    def excitation_probability(self, target: int, known_sd: float) -> np.ndarray:
+        """[n] posterior probability that neuron i excites ``target``."""
+        plus, _ = self._marginals()
+        return plus[:, target]
+
+
+class DiscreteConnectivityEstimate(SignMarginals):
     """Posterior over each column G[:, j] in {-1, 0, +1}^(n-1) (exact, per column).
 
     Columns are independent given the rows' signs; Dale's law couples them once a
@@ -120,28 +154,6 @@ class DiscreteConnectivityEstimate:
             self.log_weights += np.where(against, _AGAINST_DALE, 0.0)
             self._row_sign[row] = signs[row]
             self._cache = None
-
-    def posterior(self) -> tuple[np.ndarray, np.ndarray]:
-        """(mean, standard deviation) of G, both [n (pre), n (post)]."""
-        if self._cache is None:
-            plus, minus = self._marginals()
-            mean = plus - minus
-            sd = np.sqrt(np.maximum(plus + minus - mean**2, 0.0))
-            self._cache = (mean, sd)
-        return self._cache
-
-    def weights(self, known_sd: float) -> tuple[np.ndarray, np.ndarray]:
-        """(signs [n, n] to plan with, known [n, n]) as :meth:`ConnectivityEstimate.weights`:
-        known entries (posterior sd below ``known_sd``) are the rounded mean, others 0."""
-        mean, sd = self.posterior()
-        known = sd < known_sd
-        signs = np.where(known, np.clip(np.rint(mean), -1, 1), 0.0)
-        return signs.astype(np.int8), known
-
-    def excitation_probability(self, target: int, known_sd: float) -> np.ndarray:
-        """[n] posterior probability that neuron i excites ``target``."""
-        plus, _ = self._marginals()
-        return plus[:, target]
 
     def sample(
         self, known_sd: float, connection_uniforms: np.ndarray, sign_uniforms: np.ndarray

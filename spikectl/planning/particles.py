@@ -28,6 +28,7 @@ from spikectl.planning.discrete import (
     _SIGN_KNOWN,
     MIN_RESIDUAL_SD,
     OUTLIER_PROBABILITY,
+    SignMarginals,
 )
 
 MAX_HYPOTHESES = 2048
@@ -38,7 +39,7 @@ _NEGLIGIBLE = 40.0  # hypotheses this many nats below the best are dropped (e^-4
 _VALUES = np.array([-1, 0, 1], dtype=np.int8)
 
 
-class ParticleConnectivityEstimate:
+class ParticleConnectivityEstimate(SignMarginals):
     """Posterior over each column G[:, j] in {-1, 0, +1}^(n-1), on the touched entries.
 
     Args:
@@ -173,28 +174,6 @@ class ParticleConnectivityEstimate:
                 against = self.hypotheses[j][:, row] == -signs[row]  # [M_j]
                 self.log_weights[j] = self.log_weights[j] + np.where(against, _AGAINST_DALE, 0.0)
             self._cache = self._marginal_cache = None
-
-    def posterior(self) -> tuple[np.ndarray, np.ndarray]:
-        """(mean, standard deviation) of G, both [n (pre), n (post)]."""
-        if self._cache is None:
-            plus, minus = self._marginals()
-            mean = plus - minus
-            sd = np.sqrt(np.maximum(plus + minus - mean**2, 0.0))
-            self._cache = (mean, sd)
-        return self._cache
-
-    def weights(self, known_sd: float) -> tuple[np.ndarray, np.ndarray]:
-        """(signs [n, n] to plan with, known [n, n]) as :meth:`ConnectivityEstimate.weights`:
-        known entries (posterior sd below ``known_sd``) are the rounded mean, others 0."""
-        mean, sd = self.posterior()
-        known = sd < known_sd
-        signs = np.where(known, np.clip(np.rint(mean), -1, 1), 0.0)
-        return signs.astype(np.int8), known
-
-    def excitation_probability(self, target: int, known_sd: float) -> np.ndarray:
-        """[n] posterior probability that neuron i excites ``target``."""
-        plus, _ = self._marginals()
-        return plus[:, target]
 
     def sample(
         self, known_sd: float, connection_uniforms: np.ndarray, sign_uniforms: np.ndarray
