@@ -14,9 +14,13 @@ from pathlib import Path
 import numpy as np
 
 RESULTS = Path(__file__).parent
-PLANNER_TEST = RESULTS / "bayes-identify" / "test-benchmark-known-sd-per-network.csv"
+PLANNER_TEST = RESULTS / "suite" / "identify-and-plan-per-network.csv"
 """Identify-and-plan (the named controller of the suite's leaderboard) on every task's
-test networks, one row per network."""
+test networks, one row per network: what ``spikectl benchmark identify-and-plan --task
+all --per-network`` writes (suite/run.sh), beside the suite's identify-and-plan.csv."""
+PLANNER_VALIDATION = {"paper": 0.866, "n16": 0.799, "n32": 0.772}
+"""The named identify-and-plan's mean return on each task's 100 validation networks
+(bayes-identify's sweeps and particles/: the settings ``spikectl benchmark`` plays)."""
 
 
 def metrics(folder: Path) -> dict[int, dict]:

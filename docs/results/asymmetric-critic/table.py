@@ -16,6 +16,7 @@ against the named identify-and-plan's committed rows, network by network
 from __future__ import annotations
 
 import csv
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -30,9 +31,8 @@ GROUPS = {
     "with the critic": sorted((HERE / "trials").glob("seed=*")),
     "the main job": sorted((RESULTS / "cleo-sim-to-sim").glob("tdrqn-seed*")),
 }
-PLANNER_TEST = RESULTS / "bayes-identify" / "test-benchmark-known-sd-per-network.csv"
-PLANNER_VALIDATION = 0.866
-"""Identify-and-plan on the same 100 validation networks (docs/baselines.md)."""
+sys.path.insert(0, str(RESULTS))
+from result_tables import PLANNER_TEST, PLANNER_VALIDATION  # noqa: E402
 
 
 def test_returns(path: Path) -> np.ndarray:
@@ -54,7 +54,7 @@ def spread(values: list[float]) -> str:
 def main() -> None:
     runs = {label: [read_metrics(seed) for seed in seeds] for label, seeds in GROUPS.items()}
     print("Validation return during training (mean over seeds; identify-and-plan "
-          f"{PLANNER_VALIDATION})\n")  # fmt: skip
+          f"{PLANNER_VALIDATION['paper']})\n")  # fmt: skip
     print("| episode | " + " | ".join(runs) + " | critic's TD loss |")
     print("|---:|" + "---:|" * (len(runs) + 1))
     for index, row in enumerate(runs["with the critic"][0]):

@@ -96,3 +96,6 @@ for task in n16 n32; do
     python $here/paired_benchmark.py $here/test-benchmark-$task-per-network.csv \
         $here/test-benchmark-known-sd-per-network.csv --task $task
 done
+# Decision time against return (docs/baselines.md's table), from the sweeps above and
+# ../particles/ (a later session).
+python $here/tradeoff_table.py

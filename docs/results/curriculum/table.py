@@ -23,7 +23,7 @@ import numpy as np
 from spikectl.experiments.stats import paired_difference_cells
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from result_tables import PLANNER_TEST, best, metrics, per_network  # noqa: E402
+from result_tables import PLANNER_TEST, PLANNER_VALIDATION, best, metrics, per_network  # noqa: E402
 
 HERE = Path(__file__).parent
 RESULTS = HERE.parent
@@ -31,8 +31,6 @@ SEEDS = (0, 1, 2)
 STAGES = {"n16": "n16-imit", "n32": "n32-imit"}
 """The fine-tuning run of each size (its source: the n = 8 run, then the n16 stage)."""
 SCRATCH = RESULTS / "proximity-input" / "trials"
-PLANNER_VALIDATION = {"n16": 0.799, "n32": 0.749}
-"""Identify-and-plan on the same validation networks (as ../proximity-input/table.py)."""
 
 
 def zero_shot(seed: int, split: str, task: str) -> np.ndarray:

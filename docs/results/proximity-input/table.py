@@ -25,7 +25,7 @@ import numpy as np
 from spikectl.experiments.stats import paired_difference_cells
 
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
-from result_tables import PLANNER_TEST, best, metrics, per_network  # noqa: E402
+from result_tables import PLANNER_TEST, PLANNER_VALIDATION, best, metrics, per_network  # noqa: E402
 
 HERE = Path(__file__).parent
 RESULTS = HERE.parent
@@ -36,9 +36,6 @@ WITHOUT = {
 }
 TASKS = {"n8": "paper", "n16": "n16", "n32": "n32"}
 """The suite task whose test set each size's per_network.csv holds."""
-PLANNER_VALIDATION = {"n8": 0.866, "n16": 0.799, "n32": 0.749}
-"""Identify-and-plan (the named controller) on the same validation networks: the
-research record (identify-and-plan.md, the reachable and n16-settings entries)."""
 EPISODES = (800, 1600, 2400, 3200, 4000, 4400)
 
 
@@ -81,7 +78,7 @@ def plot(groups: dict[str, dict[str, list[Path]]]) -> None:
                 name = f"{label} the proximity input" if index == 0 else None
                 values = [float(r["val_return"]) for r in rows.values()]
                 ax.plot(list(rows), values, color=colour, alpha=0.8, label=name)
-        ax.axhline(PLANNER_VALIDATION[size], color="black", linestyle="--", linewidth=1,
+        ax.axhline(PLANNER_VALIDATION[TASKS[size]], color="black", linestyle="--", linewidth=1,
                    label="identify-and-plan")  # fmt: skip
         ax.set(title=f"{size}: the guided learner", xlabel="episode", ylabel="validation return")
         ax.legend(loc="lower right")

@@ -4,9 +4,13 @@
 set -euo pipefail
 out=docs/results/suite
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
-for controller in do-nothing random identify-and-plan oracle; do
+for controller in do-nothing random oracle; do
     spikectl benchmark "$controller" --task all --out "$out/$controller.csv"
 done
+# Identify-and-plan's rows and its return on every test network (the per-network file the
+# result tables compare learners with: docs/results/result_tables.py's PLANNER_TEST).
+spikectl benchmark identify-and-plan --task all --out "$out/identify-and-plan.csv" \
+    --per-network "$out/identify-and-plan-per-network.csv"
 # Identify-and-plan's CPU seconds per episode and per-decision CPU-time percentiles.
 python docs/results/bayes-identify/sweep.py --split test --settings '{"named": true}' \
     --tasks paper noise1 noise2 noise4 hidden25 stochastic heterogeneous background n16 n32 \

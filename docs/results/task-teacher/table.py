@@ -16,6 +16,7 @@ interval over networks (``spikectl.experiments.stats.paired_difference_cells``).
 from __future__ import annotations
 
 import csv
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -25,11 +26,11 @@ from spikectl.experiments.stats import paired_difference_cells
 HERE = Path(__file__).resolve().parent
 RESULTS = HERE.parent
 OLD = RESULTS / "suite" / "trained" / "guided-upr24"
-PLANNER_TEST = {
-    "heterogeneous": RESULTS / "heterogeneous-neurons" / "test-per-network.csv",
-    "n16": RESULTS / "bayes-identify" / "test-benchmark-known-sd-per-network.csv",
-}
-"""Each task's named identify-and-plan, network by network on its test set."""
+sys.path.insert(0, str(RESULTS))
+from result_tables import PLANNER_TEST  # noqa: E402  (each task's named identify-and-plan)
+
+TASKS = ("heterogeneous", "n16")
+"""The tasks with students of the task's teacher (trials/TASK/seed=S), in the table's order."""
 
 
 def rows(path: Path) -> list[dict]:
@@ -78,7 +79,7 @@ def report(task: str) -> None:
               f"{np.mean(minutes):.1f} ({np.mean(teacher):.1f}) |")  # fmt: skip
     new = [seed / "per_network.csv" for seed in seeds(groups["the task's settings"])]
     student = np.mean([per_network(path, task) for path in new], axis=0)
-    planner = per_network(PLANNER_TEST[task], task)
+    planner = per_network(PLANNER_TEST, task)
     print("\nTest networks, network by network: the new runs' mean against identify-and-plan\n")
     print("| | student − planner | mean difference [95% CI] | better / worse |")
     print("|---|---:|---:|---:|")
@@ -87,7 +88,7 @@ def report(task: str) -> None:
 
 
 def main() -> None:
-    for task in PLANNER_TEST:
+    for task in TASKS:
         if seeds(HERE / "trials" / task):
             report(task)
 
