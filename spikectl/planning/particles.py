@@ -32,8 +32,8 @@ from spikectl.planning.discrete import (
 )
 
 MAX_HYPOTHESES = 2048
-"""Hypotheses kept per column after each step's evidence (3^7 = 2,187 is n = 8's whole
-set less one entry: below it the estimate is exact until a column's eighth entry)."""
+"""Hypotheses kept per column after each step's evidence; the estimate is exact while no
+column holds more (n = 8's whole set is 3^7 = 2 187 per column)."""
 _EXPANSION_LIMIT = 8 * MAX_HYPOTHESES  # pruned by weight while one step splits many entries
 _NEGLIGIBLE = 40.0  # hypotheses this many nats below the best are dropped (e^-40)
 _VALUES = np.array([-1, 0, 1], dtype=np.int8)

@@ -139,8 +139,7 @@ def environment_settings(
     form whose every decision is fast, which the guided learner's teacher plays (its
     labels cover every step of training): the same but for QMDP and the particles,
     replaced from :data:`GAMBLE_FROM_NEURONS` neurons on by :data:`KNOWN_SD_FAST_LARGE`
-    alone. On the paper's task both forms are
-    the constructor's defaults."""
+    alone. On the paper's task both forms are the constructor's defaults."""
     settings = _task_settings(extensions, n_neurons, fast)
     paper_dynamics = extensions is None or extensions == Extensions(
         allow_target_action=extensions.allow_target_action
