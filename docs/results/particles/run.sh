@@ -30,4 +30,7 @@ python $sweep --tasks n32 --split train \
 # named controller before, the Gaussian estimate).
 spikectl benchmark identify-and-plan --task n32 --out $here/test.csv \
     --per-network $here/test-per-network.csv
+# The fast form's CPU time against the Gaussian estimate's, both in one run.
+python $sweep --tasks n16 n32 --split validation --size 30 \
+    --settings '{"known_sd": 0.4}' "{$P, \"known_sd\": 0.4}" --out $here/timing-fast-form.csv
 python $here/table.py > $here/table.md
