@@ -39,6 +39,15 @@ _SIGN_KNOWN = 0.99  # a row's sign counts as known above this probability
 _AGAINST_DALE = -30.0  # log-weight of a column that breaks a known row sign
 
 
+def residual_log_likelihood(error: np.ndarray, residual_sd: float) -> np.ndarray:
+    """log p(residual | hypothesis) for each standardised ``error`` (residual minus the
+    hypothesis's prediction, over ``residual_sd``): Gaussian, mixed with the outlier part."""
+    gaussian = (
+        np.log1p(-OUTLIER_PROBABILITY) - 0.5 * error**2 - np.log(residual_sd * np.sqrt(2 * np.pi))
+    )
+    return np.logaddexp(gaussian, np.log(OUTLIER_PROBABILITY / _OUTLIER_RANGE))
+
+
 def column_hypotheses_fit(n_neurons: int) -> bool:
     """True when exact identification fits a network of ``n_neurons``."""
     return 3 ** (n_neurons - 1) <= MAX_COLUMN_HYPOTHESES
@@ -51,9 +60,20 @@ class SignMarginals:
     (post)], and clears ``_cache`` whenever they change."""
 
     _cache: tuple[np.ndarray, np.ndarray] | None
+    _row_sign: np.ndarray  # [n] each row's known sign (Dale's law), 0 while unknown
 
     def _marginals(self) -> tuple[np.ndarray, np.ndarray]:
         raise NotImplementedError
+
+    def _sign_rows(self) -> list[tuple[int, int]]:
+        """The rows whose sign the marginals now know (beyond 0.99), as (row, sign), each
+        recorded in ``_row_sign``: the subclass then rules out the other sign."""
+        plus, minus = self._marginals()
+        signs = np.where(plus.max(axis=1) > _SIGN_KNOWN, 1, 0)
+        signs = np.where(minus.max(axis=1) > _SIGN_KNOWN, -1, signs)
+        new = np.flatnonzero((signs != 0) & (self._row_sign == 0))
+        self._row_sign[new] = signs[new]
+        return [(int(row), int(signs[row])) for row in new]
 
     def posterior(self) -> tuple[np.ndarray, np.ndarray]:
         """(mean, standard deviation) of G, both [n (pre), n (post)]."""
@@ -123,13 +143,7 @@ class DiscreteConnectivityEstimate(SignMarginals):
             return
         predicted = self.hypotheses[observed] @ np.asarray(released, dtype=np.float64)  # [k, M]
         error = (residual[observed, None] - predicted) / self.residual_sd
-        gaussian = (
-            np.log1p(-OUTLIER_PROBABILITY)
-            - 0.5 * error**2
-            - np.log(self.residual_sd * np.sqrt(2 * np.pi))
-        )
-        outlier = np.log(OUTLIER_PROBABILITY / _OUTLIER_RANGE)
-        self.log_weights[observed] += np.logaddexp(gaussian, outlier)
+        self.log_weights[observed] += residual_log_likelihood(error, self.residual_sd)
         self.log_weights[observed] -= self.log_weights[observed].max(axis=1, keepdims=True)
         self.observations += int(observed.sum())
         self.version += 1
@@ -145,14 +159,9 @@ class DiscreteConnectivityEstimate(SignMarginals):
         return plus, minus
 
     def _apply_dale(self) -> None:
-        plus, minus = self._marginals()
-        signs = np.where(plus.max(axis=1) > _SIGN_KNOWN, 1, 0)
-        signs = np.where(minus.max(axis=1) > _SIGN_KNOWN, -1, signs)
-        new = (signs != 0) & (self._row_sign == 0)
-        for row in np.flatnonzero(new):
-            against = self.hypotheses[:, :, row] == -signs[row]  # [post, M]
+        for row, sign in self._sign_rows():
+            against = self.hypotheses[:, :, row] == -sign  # [post, M]
             self.log_weights += np.where(against, _AGAINST_DALE, 0.0)
-            self._row_sign[row] = signs[row]
             self._cache = None
 
     def sample(

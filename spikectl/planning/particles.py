@@ -24,11 +24,9 @@ import numpy as np
 from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
 from spikectl.planning.discrete import (
     _AGAINST_DALE,
-    _OUTLIER_RANGE,
-    _SIGN_KNOWN,
     MIN_RESIDUAL_SD,
-    OUTLIER_PROBABILITY,
     SignMarginals,
+    residual_log_likelihood,
 )
 
 MAX_HYPOTHESES = 2048
@@ -66,7 +64,7 @@ class ParticleConnectivityEstimate(SignMarginals):
              probability * EXCITATORY_PROBABILITY]
         )  # [3 (value -1, 0, +1), n (pre), n (post)]  # fmt: skip
         with np.errstate(divide="ignore"):
-            self._log_prior = np.log(prior)
+            self._log_prior = np.log(prior)  # Dale's law added once a row's sign is known
         self.residual_sd = max(float(residual_sd), MIN_RESIDUAL_SD)
         self.touched = np.zeros((n, n), dtype=bool)  # [post, pre]: entries enumerated
         self.hypotheses = [np.zeros((1, n), dtype=np.int8) for _ in range(n)]  # [M_j, pre]
@@ -84,30 +82,19 @@ class ParticleConnectivityEstimate(SignMarginals):
             return
         released = np.asarray(released, dtype=np.float64)
         active = np.flatnonzero(released)  # the neurons in this step's sums
-        outlier = np.log(OUTLIER_PROBABILITY / _OUTLIER_RANGE)
         for j in np.flatnonzero(observed):
             for pre in active[(active != j) & ~self.touched[j, active]]:
                 self._split(j, pre)
             predicted = self.hypotheses[j][:, active] @ released[active]  # [M_j]
             error = (residual[j] - predicted) / self.residual_sd
-            gaussian = (
-                np.log1p(-OUTLIER_PROBABILITY)
-                - 0.5 * error**2
-                - np.log(self.residual_sd * np.sqrt(2 * np.pi))
+            self.log_weights[j] = self.log_weights[j] + residual_log_likelihood(
+                error, self.residual_sd
             )
-            self.log_weights[j] = self.log_weights[j] + np.logaddexp(gaussian, outlier)
             self._prune(j, self.max_hypotheses)
         self.observations += int(observed.sum())
         self.version += 1
         self._cache = self._marginal_cache = None
         self._apply_dale()
-
-    def _entry_log_prior(self, pre: int, post: int) -> np.ndarray:
-        """[3] log prior of G[pre, post] over (-1, 0, +1), Dale's law applied (unnormalised)."""
-        log_prior = self._log_prior[:, pre, post].copy()
-        if self._row_sign[pre] != 0:
-            log_prior[_VALUES == -self._row_sign[pre]] += _AGAINST_DALE
-        return log_prior
 
     def _split(self, post: int, pre: int) -> None:
         """Enumerate G[pre, post]: every hypothesis of column ``post`` splits in three."""
@@ -115,7 +102,7 @@ class ParticleConnectivityEstimate(SignMarginals):
         count = hypotheses.shape[0]
         split = np.repeat(hypotheses, 3, axis=0)  # [3 M, pre]
         split[:, pre] = np.tile(_VALUES, count)
-        log_prior = self._entry_log_prior(pre, post)
+        log_prior = self._log_prior[:, pre, post]  # [3], unnormalised
         self.hypotheses[post] = split
         self.log_weights[post] = (log_weights[:, None] + log_prior[None, :]).ravel()  # [3 M]
         self.touched[post, pre] = True
@@ -139,10 +126,7 @@ class ParticleConnectivityEstimate(SignMarginals):
     def _prior_marginals(self) -> tuple[np.ndarray, np.ndarray]:
         """(P(G = +1), P(G = -1)) [pre, post] of the untouched entries under the prior,
         with Dale's law where a row's sign is known."""
-        against = (_VALUES[:, None] == -self._row_sign[None, :]) & (self._row_sign != 0)
-        log_prior = self._log_prior + np.where(against[:, :, None], _AGAINST_DALE, 0.0)
-        # [3, pre, post]
-        prior = np.exp(log_prior)
+        prior = np.exp(self._log_prior)  # [3, pre, post]
         prior /= prior.sum(axis=0, keepdims=True)
         return prior[2], prior[0]
 
@@ -165,13 +149,10 @@ class ParticleConnectivityEstimate(SignMarginals):
         return plus, minus
 
     def _apply_dale(self) -> None:
-        plus, minus = self._marginals()
-        signs = np.where(plus.max(axis=1) > _SIGN_KNOWN, 1, 0)
-        signs = np.where(minus.max(axis=1) > _SIGN_KNOWN, -1, signs)
-        for row in np.flatnonzero((signs != 0) & (self._row_sign == 0)):
-            self._row_sign[row] = signs[row]
+        for row, sign in self._sign_rows():
+            self._log_prior[_VALUES == -sign, row, :] += _AGAINST_DALE  # untouched, later splits
             for j in np.flatnonzero(self.touched[:, row]):
-                against = self.hypotheses[j][:, row] == -signs[row]  # [M_j]
+                against = self.hypotheses[j][:, row] == -sign  # [M_j]
                 self.log_weights[j] = self.log_weights[j] + np.where(against, _AGAINST_DALE, 0.0)
             self._cache = self._marginal_cache = None
 

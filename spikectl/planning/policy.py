@@ -97,8 +97,8 @@ probes only the target's neighbours and plans sooner on what it knows: chosen on
 ``n16`` and ``n32`` validation sets (the best mean of the two, docs/baselines.md)."""
 PARTICLES_FROM_NEURONS = 32
 """From this many neurons on, the named controller (not its fast form) identifies with the
-discrete posterior kept by particles (``identification="particles"``) under the paper's
-dynamics (the other tasks keep their own identification): chosen on the ``n32``
+discrete posterior kept by particles (``identification="particles"``) where the task's
+extensions ask for nothing of their own (the other tasks keep theirs): chosen on the ``n32``
 validation set with QMDP, where it also takes less CPU time, and checked on training
 networks; on ``n16`` it did not score more, so 16 neurons keep the Gaussian estimate
 (docs/results/particles)."""
@@ -134,26 +134,12 @@ def environment_settings(
     of the above) the relays through them (``relays=True``); from
     :data:`GAMBLE_FROM_NEURONS` neurons on, QMDP where it would probe and
     :data:`KNOWN_SD_LARGE` (which then takes precedence: a combination no suite task
-    has), and from :data:`PARTICLES_FROM_NEURONS` on, under the paper's dynamics, the
-    particle posterior; elsewhere the constructor's defaults. ``fast=True`` gives the
+    has), and from :data:`PARTICLES_FROM_NEURONS` on, where the task asks for none of
+    the above, the particle posterior; elsewhere the constructor's defaults. ``fast=True`` gives the
     form whose every decision is fast, which the guided learner's teacher plays (its
     labels cover every step of training): the same but for QMDP and the particles,
     replaced from :data:`GAMBLE_FROM_NEURONS` neurons on by :data:`KNOWN_SD_FAST_LARGE`
     alone. On the paper's task both forms are the constructor's defaults."""
-    settings = _task_settings(extensions, n_neurons, fast)
-    paper_dynamics = extensions is None or extensions == Extensions(
-        allow_target_action=extensions.allow_target_action
-    )
-    large = n_neurons is not None and n_neurons >= PARTICLES_FROM_NEURONS
-    if large and not fast and paper_dynamics:
-        settings["identification"] = "particles"
-    return settings
-
-
-def _task_settings(
-    extensions: Extensions | None, n_neurons: int | None, fast: bool
-) -> dict[str, Any]:
-    """:func:`environment_settings` but for the particle posterior at large sizes."""
     settings: dict[str, Any] = {}
     if n_neurons is not None and n_neurons >= GAMBLE_FROM_NEURONS:
         settings = (
@@ -161,20 +147,30 @@ def _task_settings(
             if fast
             else {"gamble_networks": GAMBLE_NETWORKS, "known_sd": KNOWN_SD_LARGE}
         )
-    if extensions is None:
-        return settings
-    if extensions.observation_noise_mV > 0:
-        return {"identification": "bayes", "extensions": extensions, "filter_voltage": True,
-                **settings}  # fmt: skip
-    if extensions.stochastic_release:
-        return {"extensions": extensions, "known_sd": KNOWN_SD_STOCHASTIC_RELEASE, **settings}
-    if extensions.background_rate > 0:
-        return {"known_sd": KNOWN_SD_BACKGROUND, **settings}
-    if extensions.heterogeneous:
-        return {"extensions": extensions, **settings}
-    if extensions.hidden_neurons or extensions.hidden_fraction:
-        return {"relays": True, **settings}
+    own = _task_settings(extensions)
+    if own is not None:
+        return {**own, **settings}
+    if n_neurons is not None and n_neurons >= PARTICLES_FROM_NEURONS and not fast:
+        settings["identification"] = "particles"
     return settings
+
+
+def _task_settings(extensions: Extensions | None) -> dict[str, Any] | None:
+    """What the task's extensions make the named controller play, or None where they
+    ask for nothing of their own (the paper's dynamics)."""
+    if extensions is None:
+        return None
+    if extensions.observation_noise_mV > 0:
+        return {"identification": "bayes", "extensions": extensions, "filter_voltage": True}
+    if extensions.stochastic_release:
+        return {"extensions": extensions, "known_sd": KNOWN_SD_STOCHASTIC_RELEASE}
+    if extensions.background_rate > 0:
+        return {"known_sd": KNOWN_SD_BACKGROUND}
+    if extensions.heterogeneous:
+        return {"extensions": extensions}
+    if extensions.hidden_neurons or extensions.hidden_fraction:
+        return {"relays": True}
+    return None
 
 
 class IdentifyAndPlan:
