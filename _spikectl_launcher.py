@@ -15,8 +15,9 @@ of its own and no chain back to it (numpy on Python 3.10: ``PyCapsule_Import cou
 import module "datetime"``). So the launcher's SIGINT handler records the signal, then
 raises KeyboardInterrupt as Python's own handler does. Raised inside a callback (a weak
 reference's, during an import), Python can only print the KeyboardInterrupt as "Exception
-ignored" and go on: the launcher keeps that print out and, once the import or the command
-returns, still ends with its one line and 130.
+ignored" and go on: the launcher keeps that print out and, once the import returns, still
+ends with its one line and 130 (during the command, ``spikectl.cli.interrupts`` raises it
+again as soon as the callback has returned).
 
 What it cannot cover is Python's own start, before this module runs (a few tens of
 milliseconds: the interpreter and its ``site`` imports); a Ctrl-C then is Python's.

@@ -3,16 +3,14 @@
 One module per concept: ``training`` (``spikectl train``: the presets as subcommands, the
 run or seed group), ``context_sets`` (``demo``, ``contexts``), ``runs`` (``evaluate``,
 ``sweep``, ``plot``), ``baseline_policies`` (``baselines``), ``realtime`` (the 1 kHz
-rig), ``benchmark`` (the frozen suite) and ``errors`` (how a refusal
-becomes one line naming the flag). This module holds the command table and ``main``.
+rig), ``benchmark`` (the frozen suite), ``errors`` (how a refusal
+becomes one line naming the flag) and ``interrupts`` (how a Ctrl-C becomes one line and
+exit 130). This module holds the command table and ``main``.
 """
 
 from __future__ import annotations
 
-import atexit
-import contextlib
 import os
-import signal
 import sys
 from typing import Annotated, Union
 
@@ -28,6 +26,12 @@ from spikectl.cli.errors import (
     flag_message,
     parse_error_line,
     run_tyro,
+)
+from spikectl.cli.interrupts import (
+    INTERRUPTED,
+    caused_by_interrupt,
+    ignore_interrupts_at_exit,
+    interrupts_delivered,
 )
 from spikectl.cli.realtime import RealtimeCommand, realtime
 from spikectl.cli.runs import EvaluateCommand, PlotCommand, SweepCommand, evaluate, plot, sweep
@@ -60,19 +64,12 @@ def main(argv: list[str] | None = None) -> None:
     argv = sys.argv[1:] if argv is None else list(argv)
     command_types = tuple(config_type for _, config_type in COMMANDS.values())
     try:
-        if argv and argv[0] == "train":
-            command = parse_train(argv[1:], command_types)
-        else:
-            choices = tuple(
-                Annotated[config_type, tyro.conf.subcommand(name, description=run.__doc__)]
-                for name, (run, config_type) in COMMANDS.items()
+        with interrupts_delivered():
+            command = _parse(argv, command_types)
+            run = next(
+                run for run, config_type in COMMANDS.values() if isinstance(command, config_type)
             )
-            command = run_tyro(Union[choices], args=argv, prog="spikectl",  # noqa: UP007
-                               command_types=command_types)  # fmt: skip
-        run = next(
-            run for run, config_type in COMMANDS.values() if isinstance(command, config_type)
-        )
-        run(command)
+            run(command)
     except ConfigError as error:
         command_type = COMMANDS[argv[0]][1] if argv and argv[0] in COMMANDS else None
         print(f"spikectl: error: {config_error_line(error, command_type)}", file=sys.stderr)
@@ -89,14 +86,10 @@ def main(argv: list[str] | None = None) -> None:
     except (KeyboardInterrupt, SystemError) as error:
         # Ctrl-C inside a Numba kernel comes back as a SystemError whose cause is the
         # KeyboardInterrupt; any other SystemError is a bug and keeps its traceback.
-        if not _interrupted(error):
+        if not caused_by_interrupt(error):
             raise
-        _ignore_further_interrupts()
-        print(
-            "spikectl: interrupted (a training run or sweep continues from its last "
-            "checkpoint: spikectl train --resume RUN_DIR, or the same sweep command)",
-            file=sys.stderr,
-        )
+        ignore_interrupts_at_exit()
+        print(INTERRUPTED, file=sys.stderr)
         raise SystemExit(130) from None
     except OSError as error:
         # The machine's problem, not spikectl's (a full disk under TensorBoard's writer,
@@ -106,30 +99,14 @@ def main(argv: list[str] | None = None) -> None:
         raise SystemExit(2) from error
 
 
-def _ignore_further_interrupts() -> None:
-    """Let a second Ctrl-C pass while the process shuts down.
-
-    Shutting down with PyTorch and Numba loaded takes about a second, after the exit
-    handlers start; a second press then would end the process by the signal instead of
-    130, or interrupt a module half-way through its teardown. Only at exit: a caller that
-    catches the SystemExit (a notebook, a docs build) keeps its Ctrl-C. The ``spikectl``
-    command's launcher does the same around this function.
-    """
-    atexit.unregister(_ignore_interrupts)  # once, however often main was interrupted
-    atexit.register(_ignore_interrupts)
-
-
-def _ignore_interrupts() -> None:
-    with contextlib.suppress(ValueError):  # not the main thread
-        signal.signal(signal.SIGINT, signal.SIG_IGN)
-
-
-def _interrupted(error: BaseException) -> bool:
-    """Whether ``error`` is, or was caused by, a KeyboardInterrupt."""
-    seen = set()
-    while error is not None and id(error) not in seen:
-        if isinstance(error, KeyboardInterrupt):
-            return True
-        seen.add(id(error))
-        error = error.__cause__ or error.__context__
-    return False
+def _parse(argv: list[str], command_types: tuple[type, ...]) -> object:
+    """The typed config of the command ``argv`` names (``train``'s presets have their own
+    parser)."""
+    if argv and argv[0] == "train":
+        return parse_train(argv[1:], command_types)
+    choices = tuple(
+        Annotated[config_type, tyro.conf.subcommand(name, description=run.__doc__)]
+        for name, (run, config_type) in COMMANDS.items()
+    )
+    return run_tyro(Union[choices], args=argv, prog="spikectl",  # noqa: UP007
+                    command_types=command_types)  # fmt: skip
