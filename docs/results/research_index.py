@@ -19,6 +19,9 @@ CLAIM_CHARS = 220
 # Folders whose first commits' subjects name something else (a folder committed beside
 # another change): their claim as the commit that reported the result stated it.
 CLAIMS = {
+    "reliability": "the measurements behind docs/reliability.md: round 4's probes (all "
+    "ok); Ctrl-C while Python starts and while Numba compiles (32/40 clean before the fix, "
+    "40/40 after); round 3's CPU-kind numbers; tolerances",
     "exact-filter": "identify-and-plan's filter trusts the paper's deterministic step under "
     "measurement noise: told the weights 0.949 -> 0.993 (validation); named controller "
     "+0.014 [+0.005, +0.024] on the validation sets, +0.019 [+0.008, +0.030] on the test "
