@@ -114,7 +114,7 @@ def _interrupted(error: BaseException | None) -> bool:
     """Whether a Ctrl-C came, or ``error`` is or was caused by a KeyboardInterrupt (an
     extension module interrupted while it initialises may report it as the cause of
     another error, or replace it: see the module's docstring). The chain test is
-    ``spikectl.cli``'s, which this module cannot import to share."""
+    ``spikectl.cli.interrupts.caused_by_interrupt``, which this module cannot import."""
     if _signals_received:
         return True
     seen = set()
