@@ -11,9 +11,11 @@ command has loaded, and classifies the outcome:
   then pressed again until it stops, and its output is classified as above too.
 
 Run: ``python benchmarks/ctrl_c_while_compiling.py [--trials 40] [--seed 0]
-[--python PYTHON] [--source DIR]`` (PYTHON: the interpreter whose spikectl is tested;
-DIR: a checkout whose ``spikectl`` package the child imports instead of the installed
-one, to compare two commits with one environment). Prints each trial that is not ``ok``
+[--python PYTHON] [--source DIR] [--launcher]`` (PYTHON: the interpreter whose spikectl is
+tested; DIR: a checkout whose ``spikectl`` package the child imports instead of the
+installed one, to compare two commits with one environment; ``--launcher``: enter
+through ``_spikectl_launcher.main``, as the installed ``spikectl`` script does, with its
+SIGINT handler). Prints each trial that is not ``ok``
 and the counts; exits 1 unless every trial is ``ok``.
 """
 
@@ -40,15 +42,22 @@ from spikectl.cli import main
 import spikectl
 assert not source or spikectl.__file__.startswith(source), spikectl.__file__
 print("ready", flush=True)
-main(["benchmark", "do-nothing", "--task", "all"])
+if os.environ.get("THROUGH_LAUNCHER"):  # as the installed spikectl script enters
+    import _spikectl_launcher
+    sys.argv = ["spikectl", "benchmark", "do-nothing", "--task", "all"]
+    _spikectl_launcher.main()
+else:
+    main(["benchmark", "do-nothing", "--task", "all"])
 """
 
 
-def one_trial(python: str, source: str | None, delay_s: float) -> tuple[str, str]:
+def one_trial(python: str, source: str | None, delay_s: float, launcher: bool) -> tuple[str, str]:
     """The outcome of one Ctrl-C ``delay_s`` after the command loaded, and its stderr."""
     environment = dict(os.environ, NUMBA_CACHE_DIR=tempfile.mkdtemp())
     if source:
         environment["SPIKECTL_SOURCE"] = source
+    if launcher:
+        environment["THROUGH_LAUNCHER"] = "1"
     child = subprocess.Popen(
         [python, "-c", CHILD], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
         env=environment,
@@ -85,12 +94,13 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0, help="seeds the delays")
     parser.add_argument("--python", default=sys.executable)
     parser.add_argument("--source", default=None, help="a checkout to import spikectl from")
+    parser.add_argument("--launcher", action="store_true", help="enter as the spikectl script does")
     args = parser.parse_args()
     delays = random.Random(args.seed)
     counts = {"ok": 0, "garbled": 0, "lost": 0}
     for trial in range(args.trials):
         delay_s = delays.uniform(0.0, MAX_DELAY_S)
-        outcome, err = one_trial(args.python, args.source, delay_s)
+        outcome, err = one_trial(args.python, args.source, delay_s, args.launcher)
         counts[outcome] += 1
         if outcome != "ok":
             print(f"trial {trial}, Ctrl-C at {delay_s:.2f} s: {outcome}\n{err}", flush=True)
