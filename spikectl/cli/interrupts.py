@@ -53,27 +53,25 @@ class _Redelivery:
     """At most one timer that simulates SIGINT again (``_thread.interrupt_main``)."""
 
     def __init__(self) -> None:
-        self.waiting: list[threading.Timer] = []
+        self.timer: threading.Timer | None = None  # the redelivery not yet fired
         self.lost_in_a_callback = False
 
     def arm(self) -> None:
-        if not self.waiting:
-            timer = threading.Timer(REDELIVERY_DELAY_S, self._fire)
-            timer.daemon = True
-            self.waiting.append(timer)
-            timer.start()
+        if self.timer is None:
+            self.timer = threading.Timer(REDELIVERY_DELAY_S, self._fire)
+            self.timer.daemon = True
+            self.timer.start()
 
     def _fire(self) -> None:
-        self.waiting.clear()  # first, so that a second hold or loss re-arms
+        self.timer = None  # first, so that a second hold or loss re-arms
         _thread.interrupt_main()
 
     def cancel(self) -> bool:
         """Cancel a redelivery not yet fired; whether there was one."""
-        waiting = list(self.waiting)
-        for timer in waiting:
+        timer, self.timer = self.timer, None
+        if timer is not None:
             timer.cancel()
-        self.waiting.clear()
-        return bool(waiting)
+        return timer is not None
 
 
 @contextlib.contextmanager
@@ -94,7 +92,11 @@ def interrupts_delivered() -> Iterator[None]:
     previous_handler = signal.getsignal(signal.SIGINT)
     # Only where a Python handler would raise (a job started in the background ignores
     # SIGINT), and only in the main thread, the one Python's signal handlers run in.
-    in_main_thread = threading.current_thread() is threading.main_thread()
+    wrapped = (
+        previous_handler
+        if callable(previous_handler) and threading.current_thread() is threading.main_thread()
+        else None
+    )
 
     def unraisable(report: sys.UnraisableHookArgs) -> None:
         if not isinstance(report.exc_value, KeyboardInterrupt):
@@ -104,8 +106,8 @@ def interrupts_delivered() -> Iterator[None]:
         redelivery.arm()
 
     sys.unraisablehook = unraisable
-    if callable(previous_handler) and in_main_thread:
-        signal.signal(signal.SIGINT, _held_inside(previous_handler, redelivery))
+    if wrapped is not None:
+        signal.signal(signal.SIGINT, _held_inside(wrapped, redelivery))
     try:
         yield
     except BaseException as error:  # noqa: B036 - only re-labelled, always re-raised
@@ -114,8 +116,8 @@ def interrupts_delivered() -> Iterator[None]:
         raise
     finally:
         sys.unraisablehook = previous_hook
-        if callable(previous_handler) and in_main_thread:
-            signal.signal(signal.SIGINT, previous_handler)
+        if wrapped is not None:
+            signal.signal(signal.SIGINT, wrapped)
         held = redelivery.cancel()
     if held:  # only reached when the block itself raised nothing
         raise KeyboardInterrupt
