@@ -239,18 +239,25 @@ def test_a_second_ctrl_c_while_exiting_changes_nothing():
     assert process.returncode == 130
 
 
+def run_as_benchmark(command, monkeypatch, capsys) -> tuple[int, str]:
+    """``main(["benchmark", "do-nothing"])`` with ``command`` in the benchmark's place."""
+    import spikectl.cli as spikectl_cli
+    from spikectl.cli.benchmark import BenchmarkCommand
+
+    monkeypatch.setitem(spikectl_cli.COMMANDS, "benchmark", (command, BenchmarkCommand))
+    code, _, err = cli(["benchmark", "do-nothing"], capsys)
+    return code, err
+
+
 def test_a_caller_that_catches_the_exit_keeps_its_ctrl_c(monkeypatch, capsys):
     """Ignoring a second Ctrl-C is for the process's shutdown only: a notebook or a docs
     build that catches the SystemExit still stops on the next one."""
-    import spikectl.cli as spikectl_cli
-    from spikectl.cli.benchmark import BenchmarkCommand
 
     def interrupted(command):
         raise KeyboardInterrupt
 
-    monkeypatch.setitem(spikectl_cli.COMMANDS, "benchmark", (interrupted, BenchmarkCommand))
     before = signal.getsignal(signal.SIGINT)
-    code, _, err = cli(["benchmark", "do-nothing"], capsys)
+    code, err = run_as_benchmark(interrupted, monkeypatch, capsys)
     assert code == 130 and "interrupted" in err
     assert signal.getsignal(signal.SIGINT) is before
 
@@ -263,16 +270,6 @@ def python_handles_sigint():
     before = signal.signal(signal.SIGINT, signal.default_int_handler)
     yield
     signal.signal(signal.SIGINT, before)
-
-
-def run_as_benchmark(command, monkeypatch, capsys) -> tuple[int, str]:
-    """``main(["benchmark", "do-nothing"])`` with ``command`` in the benchmark's place."""
-    import spikectl.cli as spikectl_cli
-    from spikectl.cli.benchmark import BenchmarkCommand
-
-    monkeypatch.setitem(spikectl_cli.COMMANDS, "benchmark", (command, BenchmarkCommand))
-    code, _, err = cli(["benchmark", "do-nothing"], capsys)
-    return code, err
 
 
 @pytest.mark.parametrize("carries_on", [True, False], ids=["carries-on", "returns"])
@@ -341,8 +338,6 @@ def test_a_ctrl_c_waits_for_llvmlite(python_handles_sigint, monkeypatch, capsys)
 def test_a_system_error_caused_by_ctrl_c_is_the_interrupt(monkeypatch, capsys):
     """Class 5, deterministically: Numba returns a KeyboardInterrupt raised inside a
     kernel as a SystemError caused by it; any other SystemError keeps its traceback."""
-    import spikectl.cli as spikectl_cli
-    from spikectl.cli.benchmark import BenchmarkCommand
 
     def numba_interrupted(command):
         try:
@@ -352,17 +347,14 @@ def test_a_system_error_caused_by_ctrl_c_is_the_interrupt(monkeypatch, capsys):
                 interrupt
             )
 
-    commands = spikectl_cli.COMMANDS
-    monkeypatch.setitem(commands, "benchmark", (numba_interrupted, BenchmarkCommand))
-    code, _, err = cli(["benchmark", "do-nothing"], capsys)
+    code, err = run_as_benchmark(numba_interrupted, monkeypatch, capsys)
     assert code == 130 and err.startswith("spikectl: interrupted") and len(err.splitlines()) == 1
 
     def a_bug(command):
         raise SystemError("a real bug")
 
-    monkeypatch.setitem(commands, "benchmark", (a_bug, BenchmarkCommand))
     with pytest.raises(SystemError, match="a real bug"):
-        main(["benchmark", "do-nothing"])
+        run_as_benchmark(a_bug, monkeypatch, capsys)
 
 
 def test_a_file_name_is_never_reported_as_a_flag():
