@@ -135,11 +135,12 @@ def environment_settings(
     :data:`GAMBLE_FROM_NEURONS` neurons on, QMDP where it would probe and
     :data:`KNOWN_SD_LARGE` (which then takes precedence: a combination no suite task
     has), and from :data:`PARTICLES_FROM_NEURONS` on, where the task asks for none of
-    the above, the particle posterior; elsewhere the constructor's defaults. ``fast=True`` gives the
-    form whose every decision is fast, which the guided learner's teacher plays (its
-    labels cover every step of training): the same but for QMDP and the particles,
-    replaced from :data:`GAMBLE_FROM_NEURONS` neurons on by :data:`KNOWN_SD_FAST_LARGE`
-    alone. On the paper's task both forms are the constructor's defaults."""
+    the above, the particle posterior; elsewhere the constructor's defaults.
+    ``fast=True`` gives the form whose every decision is fast, which the guided learner's
+    teacher plays (its labels cover every step of training): the same but for QMDP and
+    the particles, replaced from :data:`GAMBLE_FROM_NEURONS` neurons on by
+    :data:`KNOWN_SD_FAST_LARGE` alone. On the paper's task both forms are the
+    constructor's defaults."""
     settings: dict[str, Any] = {}
     if n_neurons is not None and n_neurons >= GAMBLE_FROM_NEURONS:
         settings = (
