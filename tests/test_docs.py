@@ -1,8 +1,11 @@
-"""The README's Python example runs as written."""
+"""The docs as a reader meets them: the README's example runs, every link and anchor
+resolves, the results tables are what their data say."""
 
 from __future__ import annotations
 
+import importlib.util
 import re
+from functools import cache
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parent.parent
@@ -25,6 +28,89 @@ def test_every_relative_link_in_the_docs_exists():
             if "://" in target or target.startswith("mailto:"):
                 continue
             assert (page.parent / target).exists(), f"{page.name} links to missing {target}"
+
+
+@cache
+def github_slug():
+    """docs/hooks.py's slug function: the one the site's headings are given."""
+    spec = importlib.util.spec_from_file_location("spikectl_docs_hooks", ROOT / "docs" / "hooks.py")
+    hooks = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(hooks)
+    return hooks.github_slug
+
+
+FENCE = re.compile(r"^(```|~~~).*?^\1", flags=re.MULTILINE | re.DOTALL)
+HEADING = re.compile(r"^#{1,6}[ \t]+(.+?)[ \t]*$", flags=re.MULTILINE)
+EXPLICIT_ID = re.compile(r"\{[^}]*#([\w-]+)[^}]*\}\s*$")
+HTML_ID = re.compile(r"<a\s[^>]*(?:id|name)=\"([^\"]+)\"")
+ANCHORED_LINK = re.compile(r"\]\(([^)#\s]*)#([^)\s]+)\)")
+
+
+def heading_text(markdown: str) -> str:
+    """A heading's text as rendered (what a slug is made from): links, code spans,
+    emphasis and HTML reduced to their text."""
+    text = re.sub(r"!?\[([^\]]*)\]\([^)]*\)", r"\1", markdown)  # [text](url) -> text
+    text = re.sub(r"`([^`]*)`", r"\1", text)
+    text = re.sub(r"<[^>]+>", "", text)
+    text = re.sub(r"(\*{1,3})(\S.*?\S|\S)\1", r"\2", text)
+    return text.replace("\\", "")
+
+
+def anchors(page: Path) -> set[str]:
+    """Every anchor a page has: its headings' slugs, explicit ``{#id}`` and HTML ids."""
+    text = FENCE.sub("", page.read_text())
+    found = set(HTML_ID.findall(text))
+    for heading in HEADING.findall(text):
+        explicit = EXPLICIT_ID.search(heading)
+        found.add(explicit.group(1) if explicit else github_slug()(heading_text(heading)))
+    return found
+
+
+def every_markdown_page() -> list[Path]:
+    """The README, CONTRIBUTING, CHANGELOG and every Markdown file under docs/ (the site
+    builds the results folders' notes too)."""
+    pages = [ROOT / "README.md", ROOT / "CONTRIBUTING.md", ROOT / "CHANGELOG.md"]
+    return pages + sorted((ROOT / "docs").rglob("*.md"))
+
+
+def test_github_slug_is_githubs():
+    slug = github_slug()
+    assert slug("Teacher-guided learning (learner.name = \"guided\")") == (
+        "teacher-guided-learning-learnername--guided"
+    )
+    assert slug("Under the task's observation model (issue 43)") == (
+        "under-the-tasks-observation-model-issue-43"
+    )
+    assert slug("n = 32, with CPU time") == "n--32-with-cpu-time"
+    assert slug("Größe – 1 µs") == "größe--1-µs"
+
+
+def test_every_anchor_in_the_docs_exists():
+    """A link's #anchor names a heading of its target page, with the slug the site gives
+    it (docs/hooks.py), independent of the installed Markdown libraries."""
+    dead = []
+    for page in every_markdown_page():
+        for target, anchor in ANCHORED_LINK.findall(FENCE.sub("", page.read_text())):
+            if "://" in target or (target and not target.endswith(".md")):
+                continue
+            linked = (page.parent / target).resolve() if target else page
+            if anchor not in anchors(linked):
+                dead.append(f"{page.relative_to(ROOT)} -> {target}#{anchor}")
+    assert not dead, f"{len(dead)} dead anchors: {dead}"
+
+
+def test_no_site_page_links_outside_the_docs_folder():
+    """The site is built from docs/: a link from a page there to a file outside it
+    (a source file, say) is a dead link on the site; name the file in a code span."""
+    docs = ROOT / "docs"
+    outside = []
+    for page in sorted(docs.rglob("*.md")):
+        for target in re.findall(r"\]\(([^)#\s]+)(?:#[^)]*)?\)", page.read_text()):
+            if "://" in target or target.startswith("mailto:"):
+                continue
+            if not (page.parent / target).resolve().is_relative_to(docs):
+                outside.append(f"{page.relative_to(ROOT)} -> {target}")
+    assert not outside, f"links that leave docs/: {outside}"
 
 
 def test_committed_results_table_is_what_its_trials_say():
