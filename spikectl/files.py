@@ -6,7 +6,10 @@ flushed to disk, and the temporary file is renamed over the target. A crash, a
 ``SIGKILL`` or a full disk at any moment leaves either the previous file or the new
 one, never half of one. Failures of the file system (no space, read-only, no
 permission, a file where a folder should be) become one :class:`FileWriteError`
-naming the file and the problem.
+naming the file and the problem. ``replace=False`` never replaces an existing file.
+
+A command's output file is held with :func:`output_lock` while the command runs (a
+second writer of the same file is refused), as a folder is with :func:`folder_lock`.
 
 Every file spikectl reads that a user could have replaced (run files, sweep files,
 context sets, checkpoints) is opened through :func:`open_regular_file`: a FIFO would
@@ -218,6 +221,91 @@ def folder_lock(
         os.close(descriptor)
 
 
+class OutputBusyError(FolderBusyError):
+    """Another process is writing the same output file (one's results would be lost)."""
+
+
+def lock_path_of(path: str | os.PathLike) -> Path:
+    """The lock file :func:`output_lock` holds for the output ``path``: ``.NAME.lock``
+    beside the file the path resolves to, so every spelling of one file shares it."""
+    real = Path(os.path.realpath(path))
+    return real.parent / f".{real.name}.lock"
+
+
+@contextmanager
+def output_lock(path: str | os.PathLike, flag: str) -> Iterator[None]:
+    """Hold the lock of the output file ``path`` for the block: while another process
+    holds it, an :class:`OutputBusyError` naming ``flag``, the file and that process.
+
+    The lock is ``fcntl.flock`` on :func:`lock_path_of`, which the kernel releases when its
+    process ends however it ends (Ctrl-C, SIGKILL, a crash): a lock file left behind by a
+    dead process holds nothing and is taken over. The file is removed on release; folders
+    made for it are removed again if nothing else was written in them.
+    """
+    import fcntl
+
+    lock = lock_path_of(path)
+    made = _missing_folders(lock.parent)
+    make_dirs(lock.parent)
+    try:
+        descriptor = _take_lock(lock, flag, path)
+        try:
+            yield
+        finally:
+            lock.unlink(missing_ok=True)  # before unlocking: a waiter sees a new file
+            fcntl.flock(descriptor, fcntl.LOCK_UN)
+            os.close(descriptor)
+    finally:
+        for folder in made:  # deepest first; only empty ones go
+            try:
+                folder.rmdir()
+            except OSError:
+                break
+
+
+def _missing_folders(folder: Path) -> list[Path]:
+    missing = []
+    while not folder.exists() and folder != folder.parent:
+        missing.append(folder)
+        folder = folder.parent
+    return missing
+
+
+def _take_lock(lock: Path, flag: str, path: str | os.PathLike) -> int:
+    """An open descriptor of ``lock`` holding its exclusive flock, or OutputBusyError."""
+    import fcntl
+
+    while True:
+        try:
+            descriptor = os.open(lock, os.O_RDWR | os.O_CREAT | getattr(os, "O_CLOEXEC", 0), 0o644)
+        except OSError as error:
+            raise FileWriteError(
+                error.errno, f"cannot write {lock}: {describe_os_error(error)}"
+            ) from error
+        try:
+            fcntl.flock(descriptor, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            owner = os.pread(descriptor, 32, 0).decode(errors="replace").strip() or "unknown"
+            os.close(descriptor)
+            raise OutputBusyError(
+                f"{flag} {path}: another process (pid {owner}) is writing that file: wait for "
+                "it to finish or stop it, or choose another name; two writers of one file "
+                "would lose one's results"
+            ) from None
+        # The previous holder removes the file as it lets go: a lock taken on the removed
+        # file guards nothing, so open the new one and lock again.
+        try:
+            current = os.stat(lock)
+            held = os.fstat(descriptor)
+            if (current.st_dev, current.st_ino) == (held.st_dev, held.st_ino):
+                os.ftruncate(descriptor, 0)
+                os.pwrite(descriptor, f"{os.getpid()}\n".encode(), 0)
+                return descriptor
+        except FileNotFoundError:
+            pass
+        os.close(descriptor)
+
+
 def read_json_file(path: str | os.PathLike, max_bytes: int = MAX_TEXT_FILE_BYTES) -> Any:
     """The JSON value in the regular file ``path`` (:func:`read_text_file`); JSON nested
     too deeply to parse is a ValueError (json.JSONDecodeError is one too), not a
@@ -248,12 +336,16 @@ def make_dirs(path: Path) -> None:
         ) from error
 
 
-def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], None]) -> Path:
+def atomic_write(
+    path: str | os.PathLike, write: Callable[[IO[bytes]], None], replace: bool = True
+) -> Path:
     """Write a file atomically: ``write(handle)`` fills a temporary file, which is then
     renamed over ``path``. Returns ``path``.
 
     On any failure the temporary file is removed and the previous ``path`` (if any) is
-    left untouched; file-system failures raise :class:`FileWriteError`.
+    left untouched; file-system failures raise :class:`FileWriteError`. ``replace=False``:
+    an existing ``path`` is never replaced, even one made while ``write`` ran (the new
+    file is linked into place, which fails if the name is taken): FileWriteError.
     """
     path = Path(path)
     make_dirs(path.parent)
@@ -284,7 +376,10 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], None]) ->
             write(handle)
             handle.flush()
             os.fsync(handle.fileno())
-        os.replace(temporary, path)
+        if replace:
+            os.replace(temporary, path)
+        else:
+            _link_new(temporary, path)
     except OSError as error:
         Path(temporary).unlink(missing_ok=True)
         if isinstance(error, FileWriteError):
@@ -299,6 +394,28 @@ def atomic_write(path: str | os.PathLike, write: Callable[[IO[bytes]], None]) ->
     return path
 
 
+def _link_new(temporary: str, path: Path) -> None:
+    """Put ``temporary`` at ``path`` unless ``path`` exists (FileWriteError then)."""
+    appeared = FileWriteError(
+        errno.EEXIST,
+        f"cannot write {path}: a file of that name appeared while this command ran; it is "
+        "kept (pass --overwrite to replace it)",
+    )
+    try:
+        os.link(temporary, path)
+    except FileExistsError:
+        raise appeared from None
+    except OSError as error:
+        if error.errno not in (errno.EPERM, errno.ENOTSUP, errno.EOPNOTSUPP, errno.EXDEV):
+            raise
+        # A file system without hard links: check, then rename (a narrow window remains).
+        if os.path.lexists(path):
+            raise appeared from None
+        os.replace(temporary, path)
+        return
+    Path(temporary).unlink()
+
+
 @functools.cache
 def _umask() -> int:
     mask = os.umask(0o022)  # reading the umask means setting it: put it straight back
@@ -306,14 +423,14 @@ def _umask() -> int:
     return mask
 
 
-def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
+def atomic_write_bytes(path: str | os.PathLike, data: bytes, replace: bool = True) -> Path:
     """Write ``data`` to ``path`` atomically (:func:`atomic_write`)."""
-    return atomic_write(path, lambda handle: handle.write(data))
+    return atomic_write(path, lambda handle: handle.write(data), replace)
 
 
-def atomic_write_text(path: str | os.PathLike, text: str) -> Path:
+def atomic_write_text(path: str | os.PathLike, text: str, replace: bool = True) -> Path:
     """Write UTF-8 ``text`` to ``path`` atomically (:func:`atomic_write`)."""
-    return atomic_write_bytes(path, text.encode())
+    return atomic_write_bytes(path, text.encode(), replace)
 
 
 def write_json(path: str | os.PathLike, payload: Any) -> Path:

@@ -367,3 +367,160 @@ def test_a_file_name_is_never_reported_as_a_flag():
     assert flag_message("test_contexts.npz is damaged", kinds) == "test_contexts.npz is damaged"
     assert flag_message("train_contexts/x.npz: gone", kinds) == "train_contexts/x.npz: gone"
     assert flag_message("n_test must be >= 1", kinds) == "--n-test must be >= 1"
+
+
+# Round 5 (issue 58), class "lost": an existing file is never replaced without
+# --overwrite, another input's output never lands on this one's, and two writers of one
+# file at once are refused.
+
+QUICK_OUTPUTS = [
+    ["benchmark", "do-nothing", "--task", "paper", "--out"],
+    ["benchmark", "do-nothing", "--task", "paper", "--per-network"],
+    ["realtime", "do-nothing", "--episodes", "1", "--out"],
+]
+
+
+@pytest.mark.parametrize("command", QUICK_OUTPUTS)
+def test_an_existing_output_is_kept_without_overwrite(tmp_path, command, capsys):
+    """``--out FILE`` replaced an existing ordinary file and exited 0."""
+    path = tmp_path / "mine.csv"
+    path.write_text("a file of the user\n")
+    code, _, err = cli([*command, path], capsys)
+    line = one_line(err)
+    assert code == 2 and f"{command[-1]}: {path} exists: pass --overwrite" in line
+    assert path.read_text() == "a file of the user\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["mine.csv"]  # no lock left
+
+
+def test_overwrite_replaces_the_file_and_leaves_no_lock(tmp_path, capsys):
+    path = tmp_path / "d.csv"
+    path.write_text("old\n")
+    code, out, _ = cli(["realtime", "do-nothing", "--episodes", "1", "--out", path,
+                        "--overwrite"], capsys)  # fmt: skip
+    assert code == 0 and f"wrote {path}" in out
+    assert path.read_text().startswith("episode,step,latency_ms,missed\n")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.csv"]
+
+
+def test_a_second_writer_of_one_output_is_refused_naming_the_first(tmp_path, capsys):
+    """Two benchmarks on one --out at once: the last writer's rows replaced the first's."""
+    from spikectl.files import output_lock
+
+    out = tmp_path / "new" / "o.csv"
+    with output_lock(tmp_path / "new" / "." / "o.csv", "--out"):  # the first, mid-run
+        code, _, err = cli(["benchmark", "do-nothing", "--task", "paper", "--out", out], capsys)
+        line = one_line(err)
+        assert code == 2 and f"another process (pid {os.getpid()}) is writing" in line
+        assert not out.exists()
+    assert not (tmp_path / "new").exists()  # the folder made for the lock is gone again
+
+
+def test_a_lock_left_by_a_dead_process_does_not_block(tmp_path, capsys):
+    """The lock is flock(2): the kernel drops it with its process, whatever the file says."""
+    child = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                           capture_output=True, text=True, check=True)  # fmt: skip
+    (tmp_path / ".d.csv.lock").write_text(child.stdout)  # a pid that has ended
+    code, _, err = cli(["realtime", "do-nothing", "--episodes", "1", "--out",
+                        tmp_path / "d.csv"], capsys)  # fmt: skip
+    assert code == 0, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["d.csv"]
+
+
+def test_the_lock_is_released_on_ctrl_c(tmp_path):
+    from spikectl.cli.output import claimed_outputs
+    from spikectl.files import output_lock
+
+    out = tmp_path / "o.csv"
+    with pytest.raises(KeyboardInterrupt):
+        with claimed_outputs([("--out", out)], overwrite=False):
+            raise KeyboardInterrupt
+    assert list(tmp_path.iterdir()) == []
+    with output_lock(out, "--out"):  # free again
+        pass
+
+
+def test_a_lock_held_by_another_process_refuses(tmp_path):
+    """The same, across processes: a child holds the lock while this one asks for it."""
+    from spikectl.files import OutputBusyError, output_lock
+
+    out = tmp_path / "o.csv"
+    child = subprocess.Popen(
+        [sys.executable, "-c", "import sys; from spikectl.files import output_lock\n"
+         f"with output_lock({str(out)!r}, '--out'):\n    print('held', flush=True)\n"
+         "    sys.stdin.readline()\n"],
+        stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    try:
+        assert child.stdout.readline() == "held\n"
+        with pytest.raises(OutputBusyError, match=rf"--out {out}: another process \(pid "
+                           rf"{child.pid}\) is writing that file"):  # fmt: skip
+            with output_lock(out, "--out"):
+                pass
+    finally:
+        child.communicate("\n", timeout=60)
+    with output_lock(out, "--out"):  # released with the child's block
+        pass
+
+
+def test_the_atomic_writer_without_replace_keeps_a_file_made_meanwhile(tmp_path):
+    path = tmp_path / "o.csv"
+
+    def write(handle):
+        path.write_text("made meanwhile\n")  # another program, while the rows are written
+        handle.write(b"rows\n")
+
+    from spikectl.files import atomic_write
+
+    with pytest.raises(FileWriteError, match="appeared while this command ran; it is kept"):
+        atomic_write(path, write, replace=False)
+    assert path.read_text() == "made meanwhile\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["o.csv"]
+    atomic_write(tmp_path / "new.csv", lambda handle: handle.write(b"rows\n"), replace=False)
+    assert (tmp_path / "new.csv").read_bytes() == b"rows\n"
+
+
+def test_baselines_of_another_input_never_land_on_the_default_table(tmp_path, monkeypatch,
+                                                                    capsys):  # fmt: skip
+    """``baselines --contexts OTHER.npz`` wrote over the default split's baselines.csv."""
+    from spikectl.cli.baseline_policies import BaselinesCommand, default_out
+    from spikectl.contexts import make_splits
+
+    assert default_out(BaselinesCommand()) == Path("runs/baselines/baselines.csv")
+    for changed, name in (
+        ({"contexts": Path("sets/ctx.npz")}, "baselines-ctx.csv"),
+        ({"split": "train"}, "baselines-train.csv"),
+        ({"env": "spikectl/NeuronControlNoisy-v0"}, "baselines-NeuronControlNoisy-v0.csv"),
+        ({"observation_noise_mV": 0.5}, "baselines-noise0.5mV.csv"),
+        ({"hidden_fraction": 0.25, "split": "validation"}, "baselines-validation-hidden0.25.csv"),
+    ):
+        assert default_out(BaselinesCommand(**changed)) == Path("runs/baselines") / name
+    monkeypatch.chdir(tmp_path)
+    make_splits(3, 3, 5, 20, seed=4)[1].save("ctx.npz")
+    kept = Path("runs/baselines/baselines.csv")
+    kept.parent.mkdir(parents=True)
+    kept.write_text("the default split's table\n")
+    quick = ["--random-seeds", "2", "--oracle-width", "4", "--identify-width", "2"]
+    code, out, err = cli(["baselines", "--contexts", "ctx.npz", *quick], capsys)
+    assert code == 0, err
+    assert "wrote runs/baselines/baselines-ctx.csv" in out
+    assert kept.read_text() == "the default split's table\n"
+    assert len(Path("runs/baselines/baselines-ctx.csv").read_text().splitlines()) == 4
+    code, _, err = cli(["baselines", "--contexts", "ctx.npz", *quick], capsys)
+    assert code == 2 and "--out: runs/baselines/baselines-ctx.csv exists" in one_line(err)
+
+
+def test_demo_and_plot_keep_an_earlier_run_s_files(tmp_path, capsys):
+    """The same rule for the commands that write a folder of files."""
+    demo = tmp_path / "demo"
+    demo.mkdir()
+    (demo / "results.json").write_text("kept\n")
+    code, _, err = cli(["demo", "--out-dir", demo, "--n-train", "3", "--n-test", "3"], capsys)
+    assert code == 2 and "results.json exist(s): pass --overwrite" in one_line(err)
+    assert (demo / "results.json").read_text() == "kept\n"
+    assert not (demo / "train_contexts.npz").exists()
+    figures = tmp_path / "sweep" / "figures"
+    figures.mkdir(parents=True)
+    (figures / "figure4.png").write_text("kept\n")
+    code, _, err = cli(["plot", tmp_path / "sweep"], capsys)
+    assert code == 2 and "figure4.png exist(s): pass --overwrite" in one_line(err)
+    assert (figures / "figure4.png").read_text() == "kept\n"

@@ -20,8 +20,13 @@ class BaselinesCommand:
     """A saved ContextSet (.npz) to play instead of a generated split."""
     env: str = "spikectl/NeuronControl-v0"
     """A registered environment id: its n_neurons and extensions apply."""
-    out: Path = Path("runs/baselines/baselines.csv")
-    """Where the per-context CSV is written."""
+    out: Path | None = None
+    """Where the per-context CSV is written (default: runs/baselines/baselines.csv for the
+    generated test set; for any other input a name that says which, such as
+    runs/baselines/baselines-ctx.csv for --contexts ctx.npz or baselines-train.csv for
+    --split train)."""
+    overwrite: bool = False
+    """Replace an existing CSV (otherwise refused before any work)."""
     random_seeds: int = 10
     """Seeds of the random policy (the table shows mean +- sd over them)."""
     oracle_width: int = 256
@@ -35,6 +40,26 @@ class BaselinesCommand:
 
 
 ENTRY_POINT = "spikectl.envs.env:NeuronControlEnv"
+BASELINES_DIR = Path("runs/baselines")
+
+
+def default_out(command: BaselinesCommand) -> Path:
+    """Where the CSV goes without --out: ``baselines.csv`` for the generated test set of
+    the default environment, and a name carrying every other input (the contexts file,
+    the split, the environment, a changed setting), so that the table of one input never
+    lands on another's."""
+    parts = []
+    if command.contexts is not None:
+        parts.append(command.contexts.stem)
+    elif command.split != "test":
+        parts.append(command.split)
+    if command.env != BaselinesCommand.env:  # the default
+        parts.append(command.env.rpartition("/")[2])
+    if command.observation_noise_mV is not None:
+        parts.append(f"noise{command.observation_noise_mV:g}mV")
+    if command.hidden_fraction is not None:
+        parts.append(f"hidden{command.hidden_fraction:g}")
+    return BASELINES_DIR / "".join(["baselines", *(f"-{part}" for part in parts), ".csv"])
 
 
 def check_contexts_fit(context_set, command: BaselinesCommand, extensions, n_neurons) -> None:
@@ -91,6 +116,7 @@ def baselines(command: BaselinesCommand) -> None:
     """Print the table of training-free controllers and write a per-context CSV."""
     from dataclasses import replace
 
+    from spikectl.cli.output import claimed_outputs
     from spikectl.planning import IdentifyAndPlan
     from spikectl.planning.baselines import run_baselines
 
@@ -114,18 +140,21 @@ def baselines(command: BaselinesCommand) -> None:
         context_set = ContextSet.load(command.contexts)
         where = str(command.contexts)
         check_contexts_fit(context_set, command, extensions, kwargs.get("n_neurons"))
-    else:
-        n_neurons = kwargs.get("n_neurons") or 8
-        context_set = generated_split(command.split, n_neurons, extensions)
-        where = f"the generated {command.split} set ({n_neurons} neurons, seed 0)"
-    policy = IdentifyAndPlan(context_set.params, width=command.identify_width,
-                             noise_mV=extensions.observation_noise_mV)  # fmt: skip
-    results = run_baselines(context_set, extensions=extensions,
-                            random_seeds=command.random_seeds,
-                            oracle_width=command.oracle_width, policy=policy)  # fmt: skip
-    changed = ", ".join(f"{key}={value}" for key, value in overrides.items()
-                        if key != "hidden_neurons")  # fmt: skip
-    print(f"{len(context_set)} contexts: {where}; environment {command.env}"
-          + (f" with {changed}" if changed else ""))  # fmt: skip
-    print(results.table())
-    print(f"wrote {results.write_csv(command.out)}")
+    out = command.out if command.out is not None else default_out(command)
+    # Claimed after the inputs are checked (their errors come first) and before the play.
+    with claimed_outputs([("--out", out)], command.overwrite):
+        if command.contexts is None:
+            n_neurons = kwargs.get("n_neurons") or 8
+            context_set = generated_split(command.split, n_neurons, extensions)
+            where = f"the generated {command.split} set ({n_neurons} neurons, seed 0)"
+        policy = IdentifyAndPlan(context_set.params, width=command.identify_width,
+                                 noise_mV=extensions.observation_noise_mV)  # fmt: skip
+        results = run_baselines(context_set, extensions=extensions,
+                                random_seeds=command.random_seeds,
+                                oracle_width=command.oracle_width, policy=policy)  # fmt: skip
+        changed = ", ".join(f"{key}={value}" for key, value in overrides.items()
+                            if key != "hidden_neurons")  # fmt: skip
+        print(f"{len(context_set)} contexts: {where}; environment {command.env}"
+              + (f" with {changed}" if changed else ""))  # fmt: skip
+        print(results.table())
+        print(f"wrote {results.write_csv(out, replace=command.overwrite)}")

@@ -40,6 +40,8 @@ class BenchmarkCommand:
     per_network: Path | None = None
     """Write one CSV row per task and network (its return) here: what a network-by-network
     comparison of two controllers reads."""
+    overwrite: bool = False
+    """Replace an existing --out or --per-network file (otherwise refused before any work)."""
 
 
 MAX_RANDOM_SEEDS = 1000
@@ -54,8 +56,7 @@ PER_NETWORK_FIELDS = ("suite_version", "task", "split", "controller", "model", "
 
 def benchmark(command: BenchmarkCommand) -> None:
     """Print the controller's mean return and normalised score on each task."""
-    from spikectl.cli.output import Printer, check_outputs
-    from spikectl.experiments import suite
+    from spikectl.cli.output import claimed_outputs
     from spikectl.training.config import MAX_TORCH_THREADS
 
     if not 1 <= command.random_seeds <= MAX_RANDOM_SEEDS:
@@ -64,8 +65,18 @@ def benchmark(command: BenchmarkCommand) -> None:
     if not 1 <= command.torch_threads <= MAX_TORCH_THREADS:
         raise ValueError(f"--torch-threads must be an integer in 1..{MAX_TORCH_THREADS}, "
                          f"got {command.torch_threads}")  # fmt: skip
-    # Refused before the episodes, not after: nothing is overwritten that should not be.
-    check_outputs((("--out", command.out), ("--per-network", command.per_network)))
+    # Refused before the episodes, not after: nothing is overwritten that should not be,
+    # and a second benchmark writing the same file meanwhile is refused.
+    outputs = (("--out", command.out), ("--per-network", command.per_network))
+    with claimed_outputs(outputs, command.overwrite):
+        score_and_write(command)
+
+
+def score_and_write(command: BenchmarkCommand) -> None:
+    """Play the suite, print the table and write the output files (claimed by the caller)."""
+    from spikectl.cli.output import Printer
+    from spikectl.experiments import suite
+
     if not Path(command.controller).is_dir():
         for flag, given in (("--model", command.model != "final"),
                             ("--compiled", command.compiled)):  # fmt: skip
@@ -117,9 +128,10 @@ def benchmark(command: BenchmarkCommand) -> None:
               f"{suite.mean_normalised(normalised):.3f}")  # fmt: skip
     written = []
     if command.out is not None:
-        written.append(write_rows(rows, command.out))
+        written.append(write_rows(rows, command.out, replace=command.overwrite))
     if command.per_network is not None:
-        written.append(write_rows(per_network, command.per_network, PER_NETWORK_FIELDS))
+        written.append(write_rows(per_network, command.per_network, PER_NETWORK_FIELDS,
+                                  replace=command.overwrite))  # fmt: skip
     for path in written:
         print(f"wrote {path}")
     print.finish()
@@ -200,12 +212,14 @@ def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
     return lambda name: lambda seed: controller
 
 
-def write_rows(rows: list[dict], path: Path, fields: tuple[str, ...] = CSV_FIELDS) -> Path:
-    """The rows as CSV, atomically."""
+def write_rows(
+    rows: list[dict], path: Path, fields: tuple[str, ...] = CSV_FIELDS, replace: bool = True
+) -> Path:
+    """The rows as CSV, atomically (``replace=False``: never over an existing file)."""
     from spikectl.files import atomic_write_text
 
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=fields, lineterminator="\n")
     writer.writeheader()
     writer.writerows(rows)
-    return atomic_write_text(path, buffer.getvalue())
+    return atomic_write_text(path, buffer.getvalue(), replace)

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Literal
@@ -28,10 +29,36 @@ class DemoConfig:
     """Steps (ms) per episode."""
     seed: int = 0
     """Seed of the context generation and of the random policy."""
+    overwrite: bool = False
+    """Replace the files of an earlier demo in --out-dir."""
+
+
+DEMO_FILES = ("train_contexts.npz", "test_contexts.npz", "raster.png", "results.json")
+"""What ``spikectl demo`` writes in --out-dir."""
+
+
+def refuse_existing(out_dir: Path, names: tuple[str, ...], overwrite: bool) -> None:
+    """Refuse, unless ``overwrite``, to write ``names`` in ``out_dir`` where any exists
+    (called under the folder's lock, so no other spikectl command is midway)."""
+    existing = [str(out_dir / name) for name in names if os.path.lexists(out_dir / name)]
+    if existing and not overwrite:
+        raise ValueError(
+            f"--out-dir: {' and '.join(existing)} exist(s): pass --overwrite to replace, "
+            "or choose another --out-dir"
+        )
 
 
 def demo(config: DemoConfig) -> dict[str, dict[str, float]]:
     """A 3-second tour: score do-nothing, random and witness policies; save an episode raster."""
+    if config.out_dir.exists() and not config.out_dir.is_dir():
+        raise ValueError(f"--out-dir: {config.out_dir} is a file, not a folder")
+    with folder_lock(config.out_dir, "writing a demo"):
+        refuse_existing(config.out_dir, DEMO_FILES, config.overwrite)
+        return play_demo(config)
+
+
+def play_demo(config: DemoConfig) -> dict[str, dict[str, float]]:
+    """Generate the sets, score the policies and write the demo's files in --out-dir."""
     from spikectl.envs.controller import DoNothing, RandomLegal, Witness
     from spikectl.envs.rollout import evaluate_policy
     from spikectl.experiments.figures import plot_episode_raster
@@ -121,12 +148,8 @@ def contexts(config: ContextsConfig) -> None:
     # Under the folder's lock, so that a second `spikectl contexts` at once is refused
     # instead of overwriting the first one's sets past the --overwrite guard.
     with folder_lock(config.out_dir, "writing context sets"):
-        existing = [str(path) for path in paths.values() if path.exists()]
-        if existing and not config.overwrite:
-            raise ValueError(
-                f"--out-dir: {' and '.join(existing)} exist(s): pass --overwrite to replace, "
-                "or choose another --out-dir"
-            )
+        refuse_existing(config.out_dir, tuple(path.name for path in paths.values()),
+                        config.overwrite)  # fmt: skip
         train, test = make_splits(
             config.n_train, config.n_test, config.n_neurons, config.episode_length, config.seed
         )

@@ -6,17 +6,20 @@ the pipe; printing then raises BrokenPipeError. :class:`Printer` swallows it, se
 rest of the printing to ``/dev/null``, lets the command finish and write its files, and
 :meth:`Printer.finish` then raises BrokenPipeError so that ``spikectl`` exits quietly
 (status 141) as a shell tool does. Output paths are checked before any work by
-:func:`check_outputs`.
+:func:`check_outputs`, and claimed for the whole command by :func:`claimed_outputs`: an
+existing file is never replaced without ``--overwrite`` and a second command writing the
+same file at the same time is refused.
 """
 
 from __future__ import annotations
 
 import os
 import sys
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
+from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from spikectl.files import check_distinct_outputs, check_output_path
+from spikectl.files import check_distinct_outputs, check_output_path, output_lock
 
 
 class Printer:
@@ -53,3 +56,26 @@ def check_outputs(outputs: Iterable[tuple[str, Path | None]]) -> None:
         if path is not None:
             check_output_path(path, flag, RUN_FILE_NAMES)
     check_distinct_outputs(outputs)
+
+
+@contextmanager
+def claimed_outputs(outputs: Iterable[tuple[str, Path | None]], overwrite: bool) -> Iterator[None]:
+    """For the block, hold the output files of a command, checked before any work
+    (:func:`check_outputs`): each file's lock (``files.output_lock``: a second writer of
+    the same file meanwhile is refused, naming this process), and, without
+    ``overwrite``, a refusal of any that exists, as ``spikectl contexts`` refuses
+    existing sets. Write them with ``replace=overwrite`` so that a file made meanwhile
+    by anything else is not replaced either."""
+    outputs = list(outputs)
+    check_outputs(outputs)
+    with ExitStack() as locks:
+        for flag, path in outputs:
+            if path is None:
+                continue
+            locks.enter_context(output_lock(path, flag))
+            if not overwrite and os.path.lexists(path):  # under the lock: no writer is midway
+                raise ValueError(
+                    f"{flag}: {path} exists: pass --overwrite to replace it, or choose "
+                    f"another {flag}"
+                )
+        yield

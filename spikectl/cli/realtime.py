@@ -53,16 +53,14 @@ class RealtimeCommand:
     """PyTorch threads of a PyTorch controller (1: one core, like the rig)."""
     out: Path | None = None
     """Write every decision (episode, step, latency_ms, missed) to this CSV."""
+    overwrite: bool = False
+    """Replace an existing --out file (otherwise refused before any work)."""
 
 
 def realtime(command: RealtimeCommand) -> None:
     """Print the median, p99 and max decision time, the misses and the mean return."""
-    from spikectl.cli.output import Printer, check_outputs
-    from spikectl.contexts import ContextSet
-    from spikectl.envs.env import NeuronControlEnv
-    from spikectl.envs.realtime import run_realtime
+    from spikectl.cli.output import claimed_outputs
     from spikectl.training.config import MAX_TORCH_THREADS
-    from spikectl.training.controllers import load_controller
 
     for flag, value, least, most in (("--episodes", command.episodes, 1, None),
                                      ("--n-neurons", command.n_neurons, 2, None),
@@ -76,7 +74,18 @@ def realtime(command: RealtimeCommand) -> None:
         raise ValueError(
             f"--rate-hz must be a number in (0, {MAX_RATE_HZ:g}], got {command.rate_hz}"
         )
-    check_outputs([("--out", command.out)])
+    with claimed_outputs([("--out", command.out)], command.overwrite):
+        play_and_write(command)
+
+
+def play_and_write(command: RealtimeCommand) -> None:
+    """Play the rig, print its summary and write --out (claimed by the caller)."""
+    from spikectl.cli.output import Printer
+    from spikectl.contexts import ContextSet
+    from spikectl.envs.env import NeuronControlEnv
+    from spikectl.envs.realtime import run_realtime
+    from spikectl.training.controllers import load_controller
+
     print = Printer()  # the decisions are written even if the reader of stdout goes away
     if command.cpu is not None:
         allowed = sorted(os.sched_getaffinity(0))
@@ -133,12 +142,13 @@ def realtime(command: RealtimeCommand) -> None:
           f"({100 * summary['miss_fraction']:.2f}%); mean return {summary['mean_return']:.3f} "
           f"(misses {late})")  # fmt: skip
     if command.out is not None:
-        print(f"wrote {write_decisions(report, command.out)}")
+        print(f"wrote {write_decisions(report, command.out, replace=command.overwrite)}")
     print.finish()
 
 
-def write_decisions(report, path: Path) -> Path:
-    """Every decision of a rig run as CSV (episode, step, latency_ms, missed), atomically."""
+def write_decisions(report, path: Path, replace: bool = True) -> Path:
+    """Every decision of a rig run as CSV (episode, step, latency_ms, missed), atomically
+    (``replace=False``: never over an existing file)."""
     from spikectl.files import atomic_write_text
 
     steps = report.latencies_s.size // report.returns.size
@@ -147,4 +157,4 @@ def write_decisions(report, path: Path) -> Path:
     for index, (latency, missed) in enumerate(zip(report.latencies_s, report.missed,
                                                   strict=True)):  # fmt: skip
         buffer.write(f"{index // steps},{index % steps},{latency * 1e3:.6f},{int(missed)}\n")
-    return atomic_write_text(path, buffer.getvalue())
+    return atomic_write_text(path, buffer.getvalue(), replace)

@@ -125,11 +125,27 @@ class PlotCommand:
     """The sweep directory (as given to spikectl sweep)."""
     out_dir: Path | None = None
     """Where to write them (default SWEEP_DIR/figures)."""
+    overwrite: bool = False
+    """Replace the figures and tables of an earlier plot in --out-dir."""
+
+
+PLOT_FILES = (
+    "figure3.png", "figure4.png", "figure5.png", "raster.png", "results.md", "results.csv",
+    "by_training_set_size/results.md", "by_training_set_size/results.csv",
+)  # fmt: skip
+"""Every file ``experiments.plot.plot_sweep`` may write in its folder."""
 
 
 def plot(command: PlotCommand) -> None:
     """Write the figures and tables of a sweep from its saved runs."""
+    from spikectl.cli.context_sets import refuse_existing
     from spikectl.experiments.plot import plot_sweep
+    from spikectl.files import folder_lock
 
-    for path in plot_sweep(command.sweep_dir, command.out_dir):
-        print(f"wrote {path}")
+    out_dir = command.out_dir if command.out_dir is not None else command.sweep_dir / "figures"
+    if out_dir.exists() and not out_dir.is_dir():
+        raise ValueError(f"--out-dir: {out_dir} is a file, not a folder")
+    with folder_lock(out_dir, "plotting"):
+        refuse_existing(out_dir, PLOT_FILES, command.overwrite)
+        for path in plot_sweep(command.sweep_dir, out_dir):
+            print(f"wrote {path}")

@@ -62,8 +62,9 @@ class BaselineResults:
         )
         return "\n".join(lines)
 
-    def write_csv(self, path: str | os.PathLike) -> Path:
-        """One row per context, one column per controller; written atomically."""
+    def write_csv(self, path: str | os.PathLike, replace: bool = True) -> Path:
+        """One row per context, one column per controller; written atomically
+        (``replace=False``: never over an existing file)."""
         names = [name for name in CONTROLLERS if name in self.returns]
         buffer = io.StringIO()
         writer = csv.writer(buffer, lineterminator="\n")
@@ -71,7 +72,7 @@ class BaselineResults:
         size = next(iter(self.returns.values())).shape[0]
         for index in range(size):
             writer.writerow([index, *(f"{self.returns[name][index]:.6f}" for name in names)])
-        return atomic_write_text(path, buffer.getvalue())
+        return atomic_write_text(path, buffer.getvalue(), replace)
 
 
 def run_baselines(
