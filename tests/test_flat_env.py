@@ -221,8 +221,11 @@ def test_flat_batched_env_equals_the_paper_batched_env_shifted():
 def test_batched_actions_outside_the_space_raise_one_line():
     envs = gym.make_vec(FLAT_ENV_ID, 2, **SMALL)
     envs.reset(seed=0)
-    with pytest.raises(ValueError, match=r"actions must be integers in 0\.\.8 of shape \(2,\)"):
+    with pytest.raises(ValueError, match=r"1 of 2 actions are out of range \(env 1: action 9\): "
+                       r"actions must be integers in 0\.\.8"):  # fmt: skip
         envs.step(np.array([0, 9]))
+    with pytest.raises(ValueError, match=r"actions must be integers in 0\.\.8 .*of shape \(2,\)"):
+        envs.step(np.array([0.0, 1.0]))
     strict = gym.make_vec(FLAT_ENV_ID, 2, illegal_action="raise", **SMALL)
     _, infos = strict.reset(seed=0)
     actions = np.argmin(infos["action_mask"], axis=1)  # each environment's target
@@ -256,3 +259,43 @@ def test_autoreset_disabled_leaves_resets_to_the_caller():
     assert first[0, 3 * 8 + 1] == 1.0  # step 0
     with pytest.raises(ValueError, match="autoreset_mode must be"):
         gym.make_vec(FLAT_ENV_ID, 2, autoreset_mode="SameStep", **SMALL)
+
+
+def test_bad_actions_among_many_flat_environments_make_a_short_message():
+    envs = gym.make_vec(FLAT_ENV_ID, 20_000, **SMALL)
+    envs.reset(seed=0)
+    actions = np.zeros(20_000, dtype=np.int64)
+    actions[[3, 12_345]] = [99, -4]
+    with pytest.raises(ValueError) as caught:
+        envs.step(actions)
+    message = str(caught.value)
+    assert message.startswith(
+        "2 of 20,000 actions are out of range (env 3: action 99, env 12345: action -4): "
+        "actions must be integers in 0..8"
+    ), message
+    assert len(message) < 300, message
+    with pytest.raises(ValueError, match=r"got float64 \(20000,\)$"):
+        envs.step(np.zeros(20_000))
+    strict = gym.make_vec(FLAT_ENV_ID, 20_000, illegal_action="raise", **SMALL)
+    _, infos = strict.reset(seed=0)
+    with pytest.raises(ValueError) as caught:
+        strict.step(np.argmin(infos["action_mask"], axis=1))  # every environment's target
+    message = str(caught.value)
+    assert message.startswith("20,000 of 20,000 actions are illegal (env 0: action ")
+    assert "19,995 more" in message and len(message) < 400, message
+
+
+@pytest.mark.parametrize("env_id", [ENV_ID, FLAT_ENV_ID])
+def test_single_environment_seeds_follow_the_one_rule(env_id):
+    from spikectl.envs.env_arguments import SeedError
+
+    env = gym.make(env_id, **SMALL)
+    first = env.reset(seed=3)[1]["context_index"]
+    for seed in (np.int64(3), np.uint16(3)):
+        assert env.reset(seed=seed)[1]["context_index"] == first
+    for seed, given in ((0.5, r"got 0\.5 \(float\)$"), (True, r"got True \(bool\)$"),
+                        (-1, "got -1$"), ([1, 2], r"got \[1, 2\] \(list\)$"),
+                        ("x" * 10**6, r"got 'x{10,}\.\.\.x+' \(str\)$")):  # fmt: skip
+        with pytest.raises(SeedError, match=given) as caught:
+            env.reset(seed=seed)
+        assert str(caught.value).startswith("seed must be") and len(str(caught.value)) < 200

@@ -136,6 +136,36 @@ def test_seed_lists():
         envs.reset(seed=[1, 2])
 
 
+BAD_SEEDS = [  # (seed, a regular expression its message must match)
+    (0.5, r"got 0\.5 \(float\)"), (True, r"got True \(bool\)"), ("x", r"got 'x' \(str\)"),
+    (-1, "got -1$"), ([0.5, 1.7, 2.9], r"^seed\[0\] .* got 0\.5 \(float\)"),
+    ({0: 1, 1: 2, 2: 3}, r"got \{0: 1, 1: 2, 2: 3\} \(dict\)"), ([1, 2], "got a list of 2$"),
+    ([1, None, -3], r"^seed\[2\] .* got -3$"), (np.zeros(3), r"got array\(.*\(ndarray\)"),
+    (list(range(10**6)), "got a list of 1000000$"),
+]  # fmt: skip
+
+
+@pytest.mark.parametrize("env_id", [ENV_ID, "spikectl/NeuronControlFlat-v0"])
+def test_a_bad_seed_is_one_named_error_naming_it(env_id):
+    from spikectl.envs.env_arguments import SeedError
+
+    envs = gym.make_vec(env_id, 3, **SMALL)
+    for seed, given in BAD_SEEDS:
+        with pytest.raises(SeedError, match=given) as caught:
+            envs.reset(seed=seed)
+        assert str(caught.value).startswith("seed") and len(str(caught.value)) < 300
+        assert isinstance(caught.value, ValueError) and isinstance(caught.value, TypeError)
+
+
+def test_numpy_integer_seeds_give_what_python_ones_give():
+    envs = gym.make_vec(ENV_ID, 3, **SMALL)
+    drawn = envs.reset(seed=3)[1]["context_index"]
+    for seed in (np.int64(3), np.uint8(3), [3, np.int32(4), 5], (3, 4, 5), np.arange(3, 6)):
+        np.testing.assert_array_equal(envs.reset(seed=seed)[1]["context_index"], drawn)
+    mixed = envs.reset(seed=[np.int64(3), None, 5])[1]["context_index"]
+    assert mixed[0] == drawn[0] and mixed[2] == drawn[2]
+
+
 def test_make_vec_builds_the_batched_env():
     for mode in (None, "vector_entry_point"):
         envs = gym.make_vec(ENV_ID, num_envs=2, vectorization_mode=mode, n_neurons=5, **SMALL)
@@ -203,14 +233,35 @@ def test_illegal_actions_name_the_env():
     obs, _ = envs.reset(seed=0)
     actions = np.full(3, -1)
     actions[1] = obs["target"][1]
-    with pytest.raises(ValueError, match=rf"env 1: action {actions[1]} stimulates the target"):
+    with pytest.raises(ValueError, match=rf"1 of 3 actions are illegal \(env 1: action "
+                       rf"{actions[1]}\): an action that stimulates the target"):  # fmt: skip
         envs.step(actions)
-    with pytest.raises(ValueError, match=r"env 2: action 8 is out of range"):
+    with pytest.raises(ValueError, match=r"1 of 3 actions are out of range \(env 2: action 8\)"):
         envs.step(np.array([-1, -1, 8]))
     for bad in (np.full(2, -1), np.full(3, -1.0), -1):
         with pytest.raises(ValueError, match=r"integers of shape \(3,\)"):
             envs.step(bad)
     np.testing.assert_array_equal(envs.step([-1, -1, -1])[0]["step"], [1, 1, 1])
+
+
+def test_bad_actions_among_many_environments_make_a_short_message():
+    envs = NeuronControlVectorEnv(num_envs=20_000, **SMALL)
+    obs, _ = envs.reset(seed=0)
+    actions = np.full(20_000, -1)
+    actions[[7, 12_345]] = 99
+    with pytest.raises(ValueError) as caught:
+        envs.step(actions)
+    message = str(caught.value)
+    assert message.startswith("2 of 20,000 actions are out of range (env 7: action 99, env 12345:")
+    assert "0..7" in message and len(message) < 300, message
+    actions = obs["target"].copy()  # every environment's target: all illegal
+    with pytest.raises(ValueError) as caught:
+        envs.step(actions)
+    message = str(caught.value)
+    assert message.startswith("20,000 of 20,000 actions are illegal (env 0: action ")
+    assert "19,995 more" in message and len(message) < 400, message
+    with pytest.raises(ValueError, match=r"got float64 \(20000,\)$"):
+        envs.step(np.zeros(20_000))
 
 
 def test_allow_target_action():
@@ -264,3 +315,26 @@ def test_pickled_vector_env_continues_identically():
         assert_observations_equal(obs, clone_obs)
         np.testing.assert_array_equal(rewards, clone_rewards)
         np.testing.assert_array_equal(terminated, clone_terminated)
+
+
+def test_the_sb3_adapter_s_bad_actions_make_a_short_message():
+    pytest.importorskip("stable_baselines3")
+    from spikectl.wrappers import sb3_vec_env
+
+    for illegal_action in ("do_nothing", "raise"):
+        venv = sb3_vec_env(gym.make_vec(ENV_ID, 20_000, **SMALL), illegal_action=illegal_action)
+        venv.reset()
+        actions = np.zeros(20_000, dtype=np.int64)
+        actions[[4, 15_000]] = [9, -1]
+        with pytest.raises(ValueError) as caught:
+            venv.step(actions)
+        message = str(caught.value)
+        assert message.startswith("2 of 20,000 actions are out of range (env 4: action 9, "
+                                  "env 15000: action -1): actions must be integers in 0..8")
+        assert len(message) < 300, message
+    targets = np.argmin(venv.action_masks(), axis=1)  # every environment's target: illegal
+    with pytest.raises(ValueError) as caught:
+        venv.step(targets)
+    message = str(caught.value)
+    assert message.startswith("20,000 of 20,000 actions are illegal (env 0: action ")
+    assert "19,995 more" in message and len(message) < 400, message

@@ -17,6 +17,7 @@ from gymnasium.error import ResetNeeded
 
 from spikectl.contexts import Context, ContextSet
 from spikectl.envs import render as rendering
+from spikectl.envs.env_arguments import check_seed
 from spikectl.envs.env_support import (
     RENDER_FPS,
     RENDER_MODES,
@@ -192,9 +193,10 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         """Start an episode: a context drawn from the set by the seeded generator, or the one
         ``options`` names (``{"context": index}`` or a :class:`~spikectl.contexts.Context`).
 
-        Returns ``(observation, info)``; the neurons start at rest.
+        Returns ``(observation, info)``; the neurons start at rest. ``seed``: None or an
+        integer >= 0 (Python or NumPy); anything else is a ``SeedError``.
         """
-        super().reset(seed=seed)
+        super().reset(seed=check_seed(seed))
         context = None if options is None else _context_option(options)
         if isinstance(context, Context):
             check_context(context, self.n_neurons, self.episode_length, self.n_observed)

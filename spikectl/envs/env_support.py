@@ -278,12 +278,14 @@ def check_context_index(index: Any, size: int) -> int:
 
 def as_action(action: Any) -> int:
     """An action as a Python int: ints, NumPy integer scalars and 0-d integer arrays."""
+    from spikectl.envs.env_arguments import short_repr
+
     if isinstance(action, (bool, np.bool_)):
         raise ValueError(f"action must be an integer, got the boolean {action!r}")
     try:
         return operator.index(action)
     except TypeError:
-        raise ValueError(f"action must be an integer, got {action!r}") from None
+        raise ValueError(f"action must be an integer, got {short_repr(action)}") from None
 
 
 def observation_space(n_neurons: int, episode_length: int) -> spaces.Dict:

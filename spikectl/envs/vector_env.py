@@ -23,6 +23,12 @@ from gymnasium.vector.utils import batch_space
 from spikectl.contexts import Context, ContextSet
 from spikectl.contexts.generation import is_int
 from spikectl.envs import render as rendering
+from spikectl.envs.env_arguments import (
+    TARGET_RULE,
+    bad_actions_message,
+    bad_shape_message,
+    seed_list,
+)
 from spikectl.envs.env_support import (
     RENDER_FPS,
     RENDER_MODES,
@@ -155,9 +161,10 @@ class NeuronControlVectorEnv(VectorEnv):
         options: dict[str, Any] | None = None,
     ) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
         """Reset every sub-environment (``seed``: one seed, or one per sub-environment) and
-        return the batched ``(observations, infos)``.
+        return the batched ``(observations, infos)``. A seed that is not None, an integer
+        >= 0 or a list of num_envs of them is a ``SeedError``.
         """
-        seeds = self._seed_list(seed)
+        seeds = seed_list(seed, self.num_envs)
         if is_int(seed):
             super().reset(seed=int(seed))
         if options is not None and not isinstance(options, Mapping):
@@ -267,10 +274,7 @@ class NeuronControlVectorEnv(VectorEnv):
         """Copy valid actions into the simulator's input; autoresetting envs do nothing."""
         array = np.asarray(actions)
         if array.shape != (self.num_envs,) or array.dtype.kind not in "iu":
-            raise ValueError(
-                f"actions must be integers of shape ({self.num_envs},), got {array.dtype} "
-                f"{array.shape}"
-            )
+            raise ValueError(bad_shape_message(array, self.num_envs, "integers"))
         # The agent's actions: without hidden neurons the simulator's input itself.
         checked = self._actions[:, 0] if self._observable is None else self._agent_actions
         checked[:] = array
@@ -278,19 +282,16 @@ class NeuronControlVectorEnv(VectorEnv):
             checked[self._needs_reset] = DO_NOTHING
         k = self.n_observed
         if checked.min() < DO_NOTHING or checked.max() >= k:
-            i = int(np.argmax((checked < DO_NOTHING) | (checked >= k)))
-            raise ValueError(
-                f"env {i}: action {array[i]} is out of range: actions are -1 (do nothing) or "
-                f"a neuron in 0..{k - 1} other than the target {self._observed_targets[i]}"
-            )
+            raise ValueError(bad_actions_message(
+                array, (checked < DO_NOTHING) | (checked >= k), "are out of range",
+                f"actions are -1 (do nothing) or a neuron in 0..{k - 1} other than the target",
+            ))  # fmt: skip
         legal = self._legal.reshape(-1).take(self._first_legal + checked + 1)
         if not legal.all():
-            i = int(np.argmin(legal))
-            raise ValueError(
-                f"env {i}: action {array[i]} stimulates the target neuron "
-                f"{self._observed_targets[i]}, which is not a legal action (pass "
-                "allow_target_action=True to allow it)"
-            )
+            raise ValueError(bad_actions_message(
+                array, ~legal, "are illegal", f'{TARGET_RULE} (see info["action_mask"]; pass '
+                "allow_target_action=True to allow it)",
+            ))  # fmt: skip
         return checked
 
     def _draw_inputs(self, envs: np.ndarray) -> None:
@@ -321,18 +322,6 @@ class NeuronControlVectorEnv(VectorEnv):
             "step": self._next_step.copy(),
             "last_action": self._last_action.copy(),
         }
-
-    def _seed_list(self, seed: Any) -> list[int | None]:
-        if seed is None:
-            return [None] * self.num_envs
-        if is_int(seed):
-            return [int(seed) + i for i in range(self.num_envs)]
-        seeds = [None if s is None else int(s) for s in seed]
-        if len(seeds) != self.num_envs:
-            raise ValueError(
-                f"a list of seeds must have num_envs={self.num_envs} entries, got {len(seeds)}"
-            )
-        return seeds
 
     def _context_choices(self, choice: Any, envs: np.ndarray) -> list[int | Context | None]:
         """The context option for each env in ``envs``: None (draw), an index or a Context."""

@@ -28,6 +28,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 
+from spikectl.envs.env_arguments import TARGET_RULE, bad_actions_message
 from spikectl.neuron.params import NEVER_RELEASES, NeuronParams
 
 DO_NOTHING = 0
@@ -249,20 +250,19 @@ def legal_or_nothing(
     """Apply the illegal-action rule to zero-based ``actions`` [B] under masks ``legal`` [B, k+1].
 
     Returns (the actions with every illegal one replaced by :data:`DO_NOTHING`, bool [B]
-    marking them); with ``illegal_action="raise"`` an illegal action raises ValueError
-    naming the first environment that sent one. (The flat batched environment applies
-    the same rule in one compiled pass.)
+    marking them); with ``illegal_action="raise"`` illegal actions raise one ValueError
+    naming how many and the first environments that sent one. (The flat batched
+    environment applies the same rule in one compiled pass.)
     """
     row_offsets = np.arange(0, legal.size, legal.shape[1])
     illegal = legal.reshape(-1).take(row_offsets + actions) == 0
     if not illegal.any():
         return actions, illegal
     if illegal_action == "raise":
-        i = int(np.argmax(illegal))
-        raise ValueError(
-            f"env {i}: action {actions[i]} stimulates the target neuron, which is not a legal "
-            'action (see info["action_mask"]; illegal_action="do_nothing" makes it do nothing)'
-        )
+        raise ValueError(bad_actions_message(
+            actions, illegal, "are illegal", f'{TARGET_RULE} (see info["action_mask"]; '
+            'illegal_action="do_nothing" makes it do nothing)',
+        ))  # fmt: skip
     return np.where(illegal, DO_NOTHING, actions), illegal
 
 

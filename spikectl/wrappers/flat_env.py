@@ -17,6 +17,7 @@ import numpy as np
 from gymnasium import spaces
 
 from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.env_arguments import short_repr
 from spikectl.wrappers.conventions import (
     DO_NOTHING,
     check_illegal_action,
@@ -90,7 +91,7 @@ class FlatEnv(gym.Env):
     ) -> tuple[np.ndarray | dict[str, Any], float, bool, bool, dict[str, Any]]:
         if not self.action_space.contains(action):
             raise ValueError(
-                f"action {action!r} is not in {self.action_space}: 0 does nothing, "
+                f"action {short_repr(action)} is not in {self.action_space}: 0 does nothing, "
                 f"a in 1..{self.action_space.n - 1} stimulates neuron a - 1"
             )
         action = int(action)

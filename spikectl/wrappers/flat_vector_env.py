@@ -20,6 +20,7 @@ from gymnasium.error import ResetNeeded
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
+from spikectl.envs.env_arguments import TARGET_RULE, bad_actions_message, bad_shape_message
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.simulator import DO_NOTHING as PAPER_DO_NOTHING
 from spikectl.wrappers.conventions import (
@@ -104,7 +105,7 @@ class FlatNeuronControlVectorEnv(NeuronControlVectorEnv):
         """Zero-based actions -> the paper's, with the illegal-action rule applied."""
         array = np.asarray(actions)
         if array.shape != (self.num_envs,) or array.dtype.kind not in "iu":
-            raise ValueError(self._bad_actions_message(array))
+            raise ValueError(bad_shape_message(array, self.num_envs, self._action_rule()))
         # The paper's actions: without hidden neurons the simulator's input itself.
         checked = self._actions[:, 0] if self._observable is None else self._agent_actions
         first_illegal = _translate_actions(
@@ -112,20 +113,20 @@ class FlatNeuronControlVectorEnv(NeuronControlVectorEnv):
             self.illegal_action == "raise", checked, self._illegal, self._illegal_actions,
         )  # fmt: skip
         if first_illegal == _OUT_OF_RANGE:
-            raise ValueError(self._bad_actions_message(array))
-        if first_illegal >= 0:
-            raise ValueError(
-                f"env {first_illegal}: action {array[first_illegal]} stimulates the target "
-                'neuron, which is not a legal action (see info["action_mask"]; '
-                'illegal_action="do_nothing" makes it do nothing)'
-            )
+            raise ValueError(bad_actions_message(
+                array, (array < 0) | (array > self.n_observed), "are out of range",
+                f"actions must be {self._action_rule()}",
+            ))  # fmt: skip
+        if first_illegal >= 0:  # nothing was written: every illegal one is still there
+            legal = self._legal[self._envs, array]
+            raise ValueError(bad_actions_message(
+                array, ~legal & ~self._needs_reset, "are illegal", f"{TARGET_RULE} "
+                '(see info["action_mask"]; illegal_action="do_nothing" makes it do nothing)',
+            ))  # fmt: skip
         return checked
 
-    def _bad_actions_message(self, array: np.ndarray) -> str:
-        return (
-            f"actions must be integers in 0..{self.n_observed} of shape ({self.num_envs},), "
-            f"got {array.dtype} {array.shape}: {array.tolist()}"
-        )
+    def _action_rule(self) -> str:
+        return f"integers in 0..{self.n_observed} (0 does nothing)"
 
     def _observation(self, voltage: np.ndarray) -> np.ndarray:
         return self.observation_codec.write(

@@ -22,6 +22,7 @@ from gymnasium import spaces
 from stable_baselines3.common.vec_env import VecEnv
 from stable_baselines3.common.vec_env.base_vec_env import VecEnvIndices
 
+from spikectl.envs.env_arguments import bad_actions_message, bad_shape_message
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.wrappers.conventions import (
     check_illegal_action,
@@ -104,16 +105,14 @@ class SB3VecEnv(VecEnv):
             raise RuntimeError("step_wait() without step_async(): call step(actions)")
         actions, self._actions = self._actions, None
         n_actions = self.action_space.n
-        if (
-            actions.shape != (self.num_envs,)
-            or actions.dtype.kind not in "iu"
-            or actions.min() < 0
-            or actions.max() >= n_actions
-        ):
-            raise ValueError(
-                f"actions must be integers in 0..{n_actions - 1} of shape ({self.num_envs},), "
-                f"got {actions.dtype} {actions.shape}: {actions.tolist()}"
-            )
+        rule = f"integers in 0..{n_actions - 1} (0 does nothing)"
+        if actions.shape != (self.num_envs,) or actions.dtype.kind not in "iu":
+            raise ValueError(bad_shape_message(actions, self.num_envs, rule))
+        if actions.min() < 0 or actions.max() >= n_actions:
+            raise ValueError(bad_actions_message(
+                actions, (actions < 0) | (actions >= n_actions), "are out of range",
+                f"actions must be {rule}",
+            ))  # fmt: skip
         actions, illegal = legal_or_nothing(actions, self._masks, self.illegal_action)
         env_actions = to_env_action(actions)
         observation, rewards, terminated, truncated, infos = self.vector_env.step(env_actions)

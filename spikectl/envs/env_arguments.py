@@ -1,0 +1,106 @@
+"""What a caller hands ``reset`` and ``step``, checked the same way at every entry point.
+
+Seeds: :func:`check_seed` (one environment) and :func:`seed_list` (a batch) are the one
+rule of the single, batched and flat environments and the Stable-Baselines3 adapter; a
+seed outside it is a :class:`SeedError` naming ``seed`` and what was given, never a
+float silently truncated or a dict's keys taken for seeds. Actions: the batched
+environments report bad actions with :func:`bad_actions_message`, whose length does not
+grow with the number of environments (one bad action among 200 000 is one short line).
+"""
+
+from __future__ import annotations
+
+import reprlib
+from typing import Any
+
+import numpy as np
+
+from spikectl.contexts.generation import is_int
+
+SEED_RULE = "None or an integer >= 0 (Python or NumPy)"
+
+
+class SeedError(ValueError, TypeError):
+    """A seed given to ``reset`` that is not :data:`SEED_RULE` (for a batch: that, or a
+    list, tuple or array of one per environment). A ValueError and a TypeError, so code
+    catching either of Gymnasium's seed errors catches it."""
+
+
+_SHORT = reprlib.Repr()
+_SHORT.maxstring, _SHORT.maxother, _SHORT.maxlist, _SHORT.maxtuple = 40, 60, 6, 6
+_SHORT.maxdict = 4
+
+
+def short_repr(value: Any) -> str:
+    """``repr(value)`` cut to a few dozen characters (a huge list or array stays short)."""
+    if isinstance(value, np.ndarray) and value.size > 6:
+        return f"array of shape {value.shape} and dtype {value.dtype}"
+    return _SHORT.repr(value)
+
+
+def _is_seed(value: Any) -> bool:
+    return is_int(value) and value >= 0
+
+
+def check_seed(seed: Any) -> int | None:
+    """The seed of one environment as a Python int (None stays None), or SeedError."""
+    if seed is None:
+        return None
+    if not _is_seed(seed):
+        raise SeedError(f"seed must be {SEED_RULE}, got {_described(seed)}")
+    return int(seed)
+
+
+def seed_list(seed: Any, num_envs: int) -> list[int | None]:
+    """One seed per environment, as Gymnasium's vector environments take them: None (all
+    unseeded), one integer ``s`` (environment i gets ``s + i``) or a list, tuple or 1-d
+    array of ``num_envs`` seeds (each an integer >= 0 or None); anything else SeedError."""
+    if seed is None:
+        return [None] * num_envs
+    if _is_seed(seed):
+        return [int(seed) + i for i in range(num_envs)]
+    rule = (f"{SEED_RULE}, or a list of num_envs={num_envs} of them (one per environment, "
+            "None for unseeded)")  # fmt: skip
+    if isinstance(seed, np.ndarray) and seed.ndim == 1 and seed.dtype.kind in "iuO":
+        seed = list(seed)
+    if not isinstance(seed, (list, tuple)):
+        raise SeedError(f"seed must be {rule}, got {_described(seed)}")
+    if len(seed) != num_envs:
+        raise SeedError(f"seed must be {rule}, got a {type(seed).__name__} of {len(seed)}")
+    for i, value in enumerate(seed):
+        if value is not None and not _is_seed(value):
+            raise SeedError(f"seed[{i}] must be {SEED_RULE}, got {_described(value)}")
+    return [None if value is None else int(value) for value in seed]
+
+
+def _described(value: Any) -> str:
+    return short_repr(value) if is_int(value) else f"{short_repr(value)} ({type(value).__name__})"
+
+
+MAX_LISTED = 5
+"""The most bad actions a message lists (it gives the count of all)."""
+TARGET_RULE = "an action that stimulates the target neuron is not legal"
+
+
+def bad_actions_message(actions: np.ndarray, bad: np.ndarray, problem: str, rule: str) -> str:
+    """One line for the bad entries (the bool mask ``bad``) of a batch of ``actions``:
+    their count, the first :data:`MAX_LISTED` environments and values, and ``rule`` (what
+    an action may be). Its length does not depend on the batch size."""
+    where = np.flatnonzero(bad)
+    listed = ", ".join(f"env {i}: action {actions[i]}" for i in where[:MAX_LISTED])
+    if where.size > MAX_LISTED:
+        listed += f", ... {where.size - MAX_LISTED:,} more"
+    return f"{where.size:,} of {bad.size:,} actions {problem} ({listed}): {rule}"
+
+
+def bad_shape_message(actions: Any, num_envs: int, rule: str) -> str:
+    """One line for a batch of actions of the wrong shape or type (its values unlisted)."""
+    array = np.asarray(actions)
+    return (f"actions must be {rule} of shape ({num_envs},), got {array.dtype} "
+            f"{array.shape}")  # fmt: skip
+
+
+__all__ = [
+    "MAX_LISTED", "SEED_RULE", "TARGET_RULE", "SeedError", "bad_actions_message",
+    "bad_shape_message", "check_seed", "seed_list", "short_repr",
+]  # fmt: skip
