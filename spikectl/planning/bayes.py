@@ -34,6 +34,7 @@ import numpy as np
 
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
+from spikectl.planning import portable
 from spikectl.planning.discrete import (
     _OUTLIER_RANGE,
     MIN_RESIDUAL_SD,
@@ -91,7 +92,7 @@ def release_chances(spiked: np.ndarray, steps_since_release: np.ndarray,
     ``steps_since_release`` steps after its last release (stochastic release):
     p_r (1 - exp(-k dt / tau_R)), 0 where it did not spike."""
     k = np.asarray(steps_since_release, dtype=np.float64)
-    chance = params.release_scale * -np.expm1(-k * params.recovery_per_step)
+    chance = params.release_scale * -portable.expm1(-k * params.recovery_per_step)
     return np.where(spiked, np.clip(chance, 0.0, 1.0), 0.0)
 
 
@@ -115,10 +116,10 @@ class BayesConnectivityEstimate(DiscreteConnectivityEstimate):
         by batched matrix products; kept until the weights change)."""
         if self._marginal_cache is not None:
             return self._marginal_cache
-        weights = np.exp(self.log_weights - self.log_weights.max(axis=1, keepdims=True))
+        weights = portable.exp(self.log_weights - self.log_weights.max(axis=1, keepdims=True))
         weights /= weights.sum(axis=1, keepdims=True)  # [post, M]
-        plus = np.matmul(weights[:, None, :], self._plus)[:, 0, :].T
-        minus = np.matmul(weights[:, None, :], self._minus)[:, 0, :].T
+        plus = portable.matmul(weights[:, None, :], self._plus)[:, 0, :].T
+        minus = portable.matmul(weights[:, None, :], self._minus)[:, 0, :].T
         self._marginal_cache = (plus, minus)
         return plus, minus
 
@@ -137,12 +138,13 @@ class BayesConnectivityEstimate(DiscreteConnectivityEstimate):
         sure = released.copy()
         sure[uncertain] = 0.0
         hypotheses = self._values[observed]  # [k, M, n]
-        base = hypotheses @ sure  # [k, M]
+        base = portable.matmul(hypotheses, sure)  # [k, M]
         parts = hypotheses[:, :, uncertain]  # [k, M, u]
         spread = self.model.synaptic_spread
         if spread > 0:
             magnitudes = self._magnitudes[observed]
-            base_synapses, part_synapses = magnitudes @ sure, magnitudes[:, :, uncertain]
+            base_synapses = portable.matmul(magnitudes, sure)
+            part_synapses = magnitudes[:, :, uncertain]
         r = np.asarray(residual, dtype=np.float64)[observed, None]  # [k, 1]
         rho = self.model.background_probability
         q = released[uncertain]
@@ -150,20 +152,20 @@ class BayesConnectivityEstimate(DiscreteConnectivityEstimate):
         for subset in itertools.product((0.0, 1.0), repeat=uncertain.shape[0]):
             chosen = np.array(subset)
             probability = float(np.prod(np.where(chosen > 0, q, 1.0 - q)))
-            mean = base + parts @ chosen if uncertain.size else base
+            mean = base + portable.matmul(parts, chosen) if uncertain.size else base
             sd = self.residual_sd
             if spread > 0:
                 # Each released nonzero synapse adds the variance of its strength, a
                 # factor uniform in [1 - s, 1 + s] (variance s^2 / 3).
-                synapses = base_synapses + part_synapses @ chosen if uncertain.size else (
-                    base_synapses)  # fmt: skip
+                synapses = (base_synapses + portable.matmul(part_synapses, chosen)
+                            if uncertain.size else base_synapses)  # fmt: skip
                 sd = np.sqrt(self.residual_sd**2 + synapses * spread**2 / 3.0)
             part = _normal(r, mean, sd)
             if rho > 0:
                 part = (1.0 - rho) * part + rho * _normal(r, mean + self.model.background_step, sd)
             density += probability * part
         outlier = OUTLIER_PROBABILITY / _OUTLIER_RANGE
-        return np.log((1.0 - OUTLIER_PROBABILITY) * density + outlier)
+        return portable.log((1.0 - OUTLIER_PROBABILITY) * density + outlier)
 
     def add(self, released: np.ndarray, residual: np.ndarray, observed: np.ndarray) -> None:
         """One step's evidence: ``released`` [n] release probabilities of the previous
@@ -180,4 +182,4 @@ class BayesConnectivityEstimate(DiscreteConnectivityEstimate):
 
 
 def _normal(x: np.ndarray, mean: np.ndarray, sd: np.ndarray | float) -> np.ndarray:
-    return np.exp(-0.5 * ((x - mean) / sd) ** 2) / (sd * math.sqrt(2.0 * math.pi))
+    return portable.exp(-0.5 * ((x - mean) / sd) ** 2) / (sd * math.sqrt(2.0 * math.pi))

@@ -22,10 +22,12 @@ The number of hypotheses grows as 3^(n-1): n = 8 keeps 2,187 per column;
 from __future__ import annotations
 
 import itertools
+import math
 
 import numpy as np
 
 from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
+from spikectl.planning import portable
 
 MAX_COLUMN_HYPOTHESES = 3**10
 """Largest number of hypotheses per column (n <= 11 neurons)."""
@@ -43,9 +45,10 @@ def residual_log_likelihood(error: np.ndarray, residual_sd: float) -> np.ndarray
     """log p(residual | hypothesis) for each standardised ``error`` (residual minus the
     hypothesis's prediction, over ``residual_sd``): Gaussian, mixed with the outlier part."""
     gaussian = (
-        np.log1p(-OUTLIER_PROBABILITY) - 0.5 * error**2 - np.log(residual_sd * np.sqrt(2 * np.pi))
-    )
-    return np.logaddexp(gaussian, np.log(OUTLIER_PROBABILITY / _OUTLIER_RANGE))
+        math.log1p(-OUTLIER_PROBABILITY) - 0.5 * error**2
+        - math.log(residual_sd * math.sqrt(2 * math.pi))
+    )  # fmt: skip
+    return portable.logaddexp(gaussian, math.log(OUTLIER_PROBABILITY / _OUTLIER_RANGE))
 
 
 def column_hypotheses_fit(n_neurons: int) -> bool:
@@ -126,8 +129,8 @@ class DiscreteConnectivityEstimate(SignMarginals):
             self.hypotheses[j][:, pre] = values
             p = probability[pre, j]  # [n - 1]
             log_prior = np.stack(
-                [np.log(p * (1 - EXCITATORY_PROBABILITY)), np.log1p(-p),
-                 np.log(p * EXCITATORY_PROBABILITY)]
+                [portable.log(p * (1 - EXCITATORY_PROBABILITY)), portable.log1p(-p),
+                 portable.log(p * EXCITATORY_PROBABILITY)]
             )  # [3 (value -1, 0, +1), n - 1]  # fmt: skip
             self.log_weights[j] = log_prior[values + 1, np.arange(n - 1)].sum(axis=1)
         self.residual_sd = max(float(residual_sd), MIN_RESIDUAL_SD)
@@ -141,7 +144,7 @@ class DiscreteConnectivityEstimate(SignMarginals):
         """One step's evidence (as :meth:`ConnectivityEstimate.add`)."""
         if not observed.any() or not np.any(released):
             return
-        predicted = self.hypotheses[observed] @ np.asarray(released, dtype=np.float64)  # [k, M]
+        predicted = portable.matmul(self.hypotheses[observed], released)  # [k, M]
         error = (residual[observed, None] - predicted) / self.residual_sd
         self.log_weights[observed] += residual_log_likelihood(error, self.residual_sd)
         self.log_weights[observed] -= self.log_weights[observed].max(axis=1, keepdims=True)
@@ -152,10 +155,10 @@ class DiscreteConnectivityEstimate(SignMarginals):
 
     def _marginals(self) -> tuple[np.ndarray, np.ndarray]:
         """(P(G = +1), P(G = -1)), both [n (pre), n (post)]."""
-        weights = np.exp(self.log_weights - self.log_weights.max(axis=1, keepdims=True))
+        weights = portable.exp(self.log_weights - self.log_weights.max(axis=1, keepdims=True))
         weights /= weights.sum(axis=1, keepdims=True)  # [post, M]
-        plus = np.einsum("jm,jmi->ij", weights, self.hypotheses == 1)
-        minus = np.einsum("jm,jmi->ij", weights, self.hypotheses == -1)
+        plus = portable.matmul(weights[:, None, :], self.hypotheses == 1)[:, 0, :].T
+        minus = portable.matmul(weights[:, None, :], self.hypotheses == -1)[:, 0, :].T
         return plus, minus
 
     def _apply_dale(self) -> None:
@@ -170,7 +173,7 @@ class DiscreteConnectivityEstimate(SignMarginals):
         """K hypotheses int8 [K, n, n], column j of hypothesis k drawn from its posterior
         by the uniform ``connection_uniforms[k, 0, j]`` (``sign_uniforms`` is unused:
         signs are part of each column's hypotheses)."""
-        weights = np.exp(self.log_weights - self.log_weights.max(axis=1, keepdims=True))
+        weights = portable.exp(self.log_weights - self.log_weights.max(axis=1, keepdims=True))
         cumulative = np.cumsum(weights, axis=1)
         cumulative /= cumulative[:, -1:]  # [post, M]
         uniforms = connection_uniforms[:, 0, :]  # [K, post]

@@ -28,6 +28,7 @@ from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.kernel import integrate
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import neuron_parameters
+from spikectl.planning import portable
 from spikectl.planning.identify import ObservedState
 
 MODEL_VARIANCE_MV2 = 0.25
@@ -104,8 +105,8 @@ class FilteredState(ObservedState):
         input_variance = np.zeros_like(before)
         if weights is not None:
             mean, sd = weights
-            drive = params.synaptic_step_mV * (released @ mean)
-            input_variance = params.synaptic_step_mV**2 * (released @ sd**2)
+            drive = params.synaptic_step_mV * portable.matmul(released, mean)
+            input_variance = params.synaptic_step_mV**2 * portable.matmul(released, sd**2)
         if action >= 0:
             drive[action] += params.stimulus_step_mV
         predicted = integrate(before, params.v_rest_mV, params.leak_per_step, drive)

@@ -31,6 +31,7 @@ from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_prob
 from spikectl.neuron.kernel import SINCE_RELEASE_CAP, integrate
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, SimulatorState
+from spikectl.planning import portable
 
 erfc = np.vectorize(_erfc, otypes=[np.float64])
 
@@ -111,8 +112,8 @@ class ConnectivityEstimate:
     def posterior(self) -> tuple[np.ndarray, np.ndarray]:
         """(mean, standard deviation) of G, both [n (pre), n (post)]."""
         if self._cache is None:
-            covariance = np.linalg.inv(self.precision)  # [post, pre, pre]
-            mean = np.einsum("jab,jb->ja", covariance, self.moment)  # [post, pre]
+            covariance = portable.spd_inverse(self.precision)  # [post, pre, pre]
+            mean = portable.matmul(covariance, self.moment[:, :, None])[:, :, 0]  # [post, pre]
             sd = np.sqrt(np.diagonal(covariance, axis1=1, axis2=2))  # [post, pre]
             self._cache = (mean.T.copy(), sd.T.copy())
         return self._cache
@@ -123,8 +124,9 @@ class ConnectivityEstimate:
         if self._cache is not None:
             mean, sd = self._cache
             return mean[:, post].copy(), sd[:, post].copy()
-        covariance = np.linalg.inv(self.precision[post])  # [pre, pre]
-        return covariance @ self.moment[post], np.sqrt(np.diagonal(covariance)).copy()
+        covariance = portable.spd_inverse(self.precision[post])  # [pre, pre]
+        mean = portable.matmul(covariance, self.moment[post])
+        return mean, np.sqrt(np.diagonal(covariance)).copy()
 
     def weights(self, known_sd: float) -> tuple[np.ndarray, np.ndarray]:
         """(signed weights [n, n] in {-1, 0, +1} to plan with, known [n, n] bool).

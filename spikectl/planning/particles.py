@@ -22,6 +22,7 @@ from __future__ import annotations
 import numpy as np
 
 from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
+from spikectl.planning import portable
 from spikectl.planning.discrete import (
     _AGAINST_DALE,
     MIN_RESIDUAL_SD,
@@ -64,7 +65,7 @@ class ParticleConnectivityEstimate(SignMarginals):
              probability * EXCITATORY_PROBABILITY]
         )  # [3 (value -1, 0, +1), n (pre), n (post)]  # fmt: skip
         with np.errstate(divide="ignore"):
-            self._log_prior = np.log(prior)  # Dale's law added once a row's sign is known
+            self._log_prior = portable.log(prior)  # Dale's law added once a row's sign is known
         self.residual_sd = max(float(residual_sd), MIN_RESIDUAL_SD)
         self.touched = np.zeros((n, n), dtype=bool)  # [post, pre]: entries enumerated
         self.hypotheses = [np.zeros((1, n), dtype=np.int8) for _ in range(n)]  # [M_j, pre]
@@ -85,7 +86,7 @@ class ParticleConnectivityEstimate(SignMarginals):
         for j in np.flatnonzero(observed):
             for pre in active[(active != j) & ~self.touched[j, active]]:
                 self._split(j, pre)
-            predicted = self.hypotheses[j][:, active] @ released[active]  # [M_j]
+            predicted = portable.matmul(self.hypotheses[j][:, active], released[active])  # [M_j]
             error = (residual[j] - predicted) / self.residual_sd
             self.log_weights[j] = self.log_weights[j] + residual_log_likelihood(
                 error, self.residual_sd
@@ -119,14 +120,16 @@ class ParticleConnectivityEstimate(SignMarginals):
             return
         if count > keep:
             kept = np.zeros_like(kept)
-            kept[np.argpartition(-log_weights, keep - 1)[:keep]] = True
+            # A stable sort, not argpartition: among equal weights the lowest indices stay,
+            # whatever sorting kernel the CPU runs.
+            kept[np.argsort(-log_weights, kind="stable")[:keep]] = True
         self.hypotheses[post] = self.hypotheses[post][kept]
         self.log_weights[post] = log_weights[kept]
 
     def _prior_marginals(self) -> tuple[np.ndarray, np.ndarray]:
         """(P(G = +1), P(G = -1)) [pre, post] of the untouched entries under the prior,
         with Dale's law where a row's sign is known."""
-        prior = np.exp(self._log_prior)  # [3, pre, post]
+        prior = portable.exp(self._log_prior)  # [3, pre, post]
         prior /= prior.sum(axis=0, keepdims=True)
         return prior[2], prior[0]
 
@@ -141,11 +144,11 @@ class ParticleConnectivityEstimate(SignMarginals):
         for j in range(self.n_neurons):
             if not self.touched[j].any():
                 continue
-            weights = np.exp(self.log_weights[j] - self.log_weights[j].max())
+            weights = portable.exp(self.log_weights[j] - self.log_weights[j].max())
             weights /= weights.sum()  # [M_j]
             touched = self.touched[j]
-            plus[touched, j] = weights @ (self.hypotheses[j][:, touched] == 1)
-            minus[touched, j] = weights @ (self.hypotheses[j][:, touched] == -1)
+            plus[touched, j] = portable.matmul(weights, self.hypotheses[j][:, touched] == 1)
+            minus[touched, j] = portable.matmul(weights, self.hypotheses[j][:, touched] == -1)
         return plus, minus
 
     def _apply_dale(self) -> None:
@@ -174,7 +177,7 @@ class ParticleConnectivityEstimate(SignMarginals):
             touched = self.touched[j]
             if not touched.any():
                 continue
-            weights = np.exp(self.log_weights[j] - self.log_weights[j].max())
+            weights = portable.exp(self.log_weights[j] - self.log_weights[j].max())
             cumulative = np.cumsum(weights)
             cumulative /= cumulative[-1]
             choice = np.minimum(

@@ -32,6 +32,7 @@ from spikectl.envs.env_support import step_rewards
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.prediction import one_step
 from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance
+from spikectl.planning import portable
 from spikectl.planning.beam import state_signature_rows, take_states
 
 # Weight of the target's depolarisation (mV) in the ranking: breaks ties only (as in beam).
@@ -98,7 +99,8 @@ def best_returns(
         # Problem-major, best first; then the first of each (problem, state) and at
         # most ``width`` per problem.
         order = np.lexsort((-ranking, child_problem))
-        hashed = (state_signature_rows(children, interval, 1, rows.shape[0]) @ projection)[order]
+        signatures = state_signature_rows(children, interval, 1, rows.shape[0])
+        hashed = portable.matmul(signatures, projection)[order]
         ordered_problem = child_problem[order]
         by_state = np.lexsort((np.arange(order.shape[0]), hashed, ordered_problem))
         first = np.ones(by_state.shape[0], dtype=bool)
@@ -158,7 +160,7 @@ def expected_returns(
     values = values + best_returns(
         weights, start, pattern, step + 1, horizon - 1, width, actions, target, params
     )
-    return (network_weights / total) @ values.reshape(k, n_candidates)  # [A0]
+    return portable.matmul(network_weights / total, values.reshape(k, n_candidates))  # [A0]
 
 
 def context_likelihood(networks: np.ndarray, target: int, pattern: np.ndarray,
@@ -190,8 +192,8 @@ def synapse_entropy(columns: np.ndarray, network_weights: np.ndarray) -> np.ndar
     share_of = network_weights / np.sum(network_weights)  # [K]
     entropy = np.zeros(columns.shape[1])
     for value in (-1, 0, 1):
-        share = share_of @ (columns == value)  # [n]
-        entropy -= share * np.log(np.where(share > 0, share, 1.0))
+        share = portable.matmul(share_of, columns == value)  # [n]
+        entropy -= share * portable.log(np.where(share > 0, share, 1.0))
     return entropy
 
 

@@ -32,6 +32,7 @@ import numpy as np
 from spikectl.neuron.kernel import SINCE_RELEASE_CAP
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import SimulatorState
+from spikectl.planning import portable
 from spikectl.planning.identify import ConnectivityEstimate
 
 RELAY_PRIOR_VARIANCE = 0.02
@@ -83,8 +84,8 @@ class RelayConnectivityEstimate(ConnectivityEstimate):
 
     def _solve(self) -> None:
         n = self.n_neurons
-        covariance = np.linalg.inv(self.precision)  # [post, 2n, 2n]
-        mean = np.einsum("jab,jb->ja", covariance, self.moment)  # [post, 2n]
+        covariance = portable.spd_inverse(self.precision)  # [post, 2n, 2n]
+        mean = portable.matmul(covariance, self.moment[:, :, None])[:, :, 0]  # [post, 2n]
         sd = np.sqrt(np.diagonal(covariance, axis1=1, axis2=2))  # [post, 2n]
         self._cache = (mean[:, :n].T.copy(), sd[:, :n].T.copy())  # G: [pre, post]
         self._relays = (mean[:, n:].T.copy(), sd[:, n:].T.copy())  # L: [pre, post]

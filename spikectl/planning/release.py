@@ -30,6 +30,7 @@ import itertools
 import numpy as np
 
 from spikectl.neuron.extensions import Extensions
+from spikectl.planning import portable
 
 MAX_UNCERTAIN = 8
 """Above this many spikes of unknown release in one step (2^m combinations) the
@@ -84,7 +85,7 @@ def release_posterior(
         return chances.copy()
     combos = _combinations(m)  # [C, m]
     chance = np.clip(chances[uncertain], 1e-12, 1.0 - 1e-12)
-    log_weight = np.where(combos, np.log(chance), np.log1p(-chance)).sum(axis=1)  # [C]
+    log_weight = np.where(combos, portable.log(chance), portable.log1p(-chance)).sum(axis=1)  # [C]
     columns = np.flatnonzero(observed)
     value = residual[columns]
     level = np.rint(value)
@@ -103,10 +104,10 @@ def release_posterior(
             added += np.roll(sums, -1, axis=2) * minus
             sums = np.where(combos[:, k, None, None], added, sums)
         likelihood = sums[:, np.arange(columns.size), level + m]  # [C, cols]
-        log_weight = log_weight + np.log(np.maximum(likelihood, FLOOR)).sum(axis=1)
-    weight = np.exp(log_weight - log_weight.max())
+        log_weight = log_weight + portable.log(np.maximum(likelihood, FLOOR)).sum(axis=1)
+    weight = portable.exp(log_weight - log_weight.max())
     posterior = chances.copy()
-    posterior[uncertain] = (weight / weight.sum()) @ combos
+    posterior[uncertain] = portable.matmul(weight / weight.sum(), combos)
     return posterior
 
 
