@@ -287,7 +287,7 @@ def test_bad_actions_among_many_flat_environments_make_a_short_message():
 
 @pytest.mark.parametrize("env_id", [ENV_ID, FLAT_ENV_ID])
 def test_single_environment_seeds_follow_the_one_rule(env_id):
-    from spikectl.envs.env_arguments import SeedError
+    from spikectl.envs import SeedError
 
     env = gym.make(env_id, **SMALL)
     first = env.reset(seed=3)[1]["context_index"]
