@@ -184,6 +184,42 @@ def test_load_invalid_contents(tmp_path):
     assert zipfile.is_zipfile(path)
 
 
+EXTENDED = {"hidden_neurons": 1, "threshold_spread": 0.1, "time_constant_spread": 0.1,
+            "synaptic_spread": 0.1}  # fmt: skip
+CHANGED_ARRAYS = {
+    "short targets": ("targets", lambda a: a[:2], "(3,)"),
+    "targets of floats": ("targets", lambda a: a.astype(float), "(3,) (integer)"),
+    "float patterns": ("patterns", lambda a: a * 0.5, "(3, 20) (bool)"),
+    "a pattern too few": ("patterns", lambda a: a[:2], "(3, 20)"),
+    "short witnesses": ("witnesses", lambda a: a[:, :5], "(3, 20)"),
+    "flat weights": ("weights", lambda a: a.reshape(-1), "(3, 6, 6)"),
+    "weights of another n": ("weights", lambda a: a[:, :5, :5], "(3, 6, 6)"),
+    "hidden of another length": ("hidden", lambda a: a[:2], "(3, 1)"),
+    "thresholds of another n": ("thresholds_mV", lambda a: a[:, :4], "(3, 6) (float)"),
+    "integer time constants": ("time_constants_ms", lambda a: a.astype(int), "(3, 6) (float)"),
+    "synaptic scale of another n": ("synaptic_scale", lambda a: a[:, :2], "(3, 6, 6)"),
+}
+
+
+@pytest.mark.parametrize("change", CHANGED_ARRAYS)
+def test_each_array_of_a_set_file_is_checked_and_named(tmp_path, change):
+    """An array of the wrong length, shape or dtype is one ContextFileError naming the
+    array and the shape it must have (a short targets array once said "zip() argument 2
+    is shorter than argument 1")."""
+    name, damage, expected = CHANGED_ARRAYS[change]
+    path = ContextSet.generate(3, 6, 20, seed=0, extensions=EXTENDED).save(tmp_path / "set.npz")
+    assert ContextSet.load(path) is not None
+    with np.load(path) as data:
+        array = data[name]
+    rewrite(path, **{name: damage(array)})
+    with pytest.raises(ContextFileError) as caught:
+        ContextSet.load(path)
+    message = str(caught.value)
+    assert message.startswith(f"{path} is damaged: its array {name} is "), message
+    assert f"has {name} of shape {expected}" in message, message
+    assert "zip()" not in message
+
+
 def test_bring_your_own_connectome():
     weights = np.array([[0, 1, 0], [0, 0, 1], [-1, 0, 0]])
     context = make_context(weights, seed=4, episode_length=30)

@@ -122,3 +122,62 @@ def test_a_resume_takes_the_checkpoints_weights_and_does_not_read_the_source_aga
 def same_weights_files(a, b) -> bool:
     first, second = load_model_weights(a), load_model_weights(b)
     return first.keys() == second.keys() and all(torch.equal(first[k], second[k]) for k in first)
+
+
+def test_weights_of_another_run_name_the_setting_and_both_values(trained):
+    """The source run's config says why its weights do not fit: another episode length is
+    named as such, not blamed on the architecture or the number of neurons."""
+    cases = {
+        "episode length 20 (this run: 30)": {"episode_length": 30},
+        "arch tdrqn (this run: ddrqn)": {"arch": "ddrqn"},
+        "sizes.lstm_hidden 16 (this run: 8)": {"agent.sizes.lstm_hidden": 8},
+    }
+    for expected, change in cases.items():
+        for source in (trained, trained / "model.pt"):
+            with pytest.raises(ConfigError) as caught:
+                build_network(SHORT.with_changes(change).with_changes({"agent.init_from": source}))
+            assert f"holds a network of {expected}" in str(caught.value), caught.value
+            assert "architecture" not in str(caught.value)
+
+
+def test_weights_copied_out_of_their_run_name_the_episode_length(trained, tmp_path):
+    import shutil
+
+    shutil.copy(trained / "model.pt", tmp_path / "model.pt")  # no config.json beside it
+    with pytest.raises(ConfigError, match=r"an episode length of 20 steps \(this run: 30\)"):
+        build_network(starting_from(tmp_path / "model.pt", episode_length=30))
+
+
+def test_every_other_kind_of_file_is_named_with_what_init_from_takes(trained, tmp_path):
+    from spikectl.agents import export_policy, make_agent
+    from spikectl.contexts import make_splits
+
+    export_policy(make_agent("tdrqn", 5, 20), tmp_path / "pol.npz")
+    make_splits(3, 3, 5, 20, seed=4)[1].save(tmp_path / "ctx.npz")
+    (tmp_path / "notes.txt").write_text("hello")
+    takes = "it takes a run directory (its best_model.pt), or a model.pt or best_model.pt"
+    for name, kind in (
+        ("pol.npz", "a compiled policy file"), ("ctx.npz", "a context set file"),
+        ("checkpoint.pt", "a training checkpoint (checkpoint.pt)"),
+    ):  # fmt: skip
+        path = trained / name if name == "checkpoint.pt" else tmp_path / name
+        with pytest.raises(ConfigError) as caught:
+            build_network(starting_from(path))
+        message = str(caught.value)
+        assert f"names {kind}" in message and str(path) in message and takes in message
+        assert "enforce fail" not in message and "before checksums" not in message
+    with pytest.raises(ConfigError, match=r"notes.txt is not a readable spikectl model: .*takes"):
+        build_network(starting_from(tmp_path / "notes.txt"))
+
+
+def test_the_cli_names_another_episode_length_in_one_line(trained, tmp_path, run_cli):
+    result = run_cli(
+        "train", "smoke", "--episode-length", "30", "--init-from", str(trained),
+        "--run-dir", str(tmp_path / "run"), check=False,
+    )  # fmt: skip
+    assert result.returncode == 2, result.stderr
+    assert result.stderr.strip().splitlines() == [
+        f"spikectl: error: --init-from names weights that do not fit this network: "
+        f"{trained / 'best_model.pt'} holds a network of episode length 20 (this run: 30)"
+    ]
+    assert not (tmp_path / "run").exists()

@@ -25,6 +25,7 @@ LAYERS = (
         "spikectl.version",
         "spikectl.environment",
     ),
+    ("spikectl.file_kinds",),
     ("spikectl.neuron",),
     ("spikectl.contexts",),
     ("spikectl.envs",),

@@ -43,6 +43,7 @@ from spikectl.agents.policy_file import (
 )
 from spikectl.agents.policy_kernel import _decide, _layout
 from spikectl.envs.controller import ControllerInputError, check_controller_input
+from spikectl.file_kinds import FileKind, refuse_other_kinds
 from spikectl.files import NotARegularFileError, npz_size_problem, open_regular_file
 
 
@@ -82,6 +83,8 @@ class CompiledPolicy:
             raise FileNotFoundError(f"compiled policy file not found: {path}")
         if path.is_dir():
             raise PolicyFileError(f"{path} is a folder, not a compiled policy file")
+        refuse_other_kinds(path, (FileKind.POLICY,), "a compiled policy is an .npz written by "
+                           "export_policy", PolicyFileError)  # fmt: skip
         try:
             # One guarded open: a FIFO or a device would block or never end.
             with open_regular_file(path) as handle:

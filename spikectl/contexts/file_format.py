@@ -18,6 +18,7 @@ from typing import Any
 
 import numpy as np
 
+from spikectl.file_kinds import FileKind, refuse_other_kinds
 from spikectl.files import atomic_write, check_regular_file, npz_size_problem
 
 FORMAT_NAME = "spikectl.ContextSet"
@@ -71,6 +72,8 @@ def read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
         check_regular_file(path)
     except OSError as error:
         raise ContextFileError(f"{path} is not a context set file: {error.strerror}") from None
+    refuse_other_kinds(path, (FileKind.CONTEXT_SET,), "a context set is an .npz written by "
+                       "ContextSet.save or spikectl contexts", ContextFileError)  # fmt: skip
     try:
         _check_array_sizes(path)
         with np.load(path, allow_pickle=False) as data:
@@ -97,7 +100,51 @@ def read_npz(path: Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
             f"{path} is not a spikectl context set of version {metadata['format_version']} "
             f"(unexpected arrays {unexpected})"
         )
+    _check_array_shapes(path, arrays, metadata)
     return arrays, metadata
+
+
+_ARRAY_LAYOUTS = {
+    "weights": (("S", "n", "n"), "iu", "integer"),
+    "targets": (("S",), "iu", "integer"),
+    "patterns": (("S", "N"), "biu", "bool"),
+    "witnesses": (("S", "N"), "iu", "integer"),
+    "hidden": (("S", "h"), "iu", "integer"),
+    "thresholds_mV": (("S", "n"), "f", "float"),
+    "time_constants_ms": (("S", "n"), "f", "float"),
+    "synaptic_scale": (("S", "n", "n"), "f", "float"),
+}
+"""Each array's shape (S contexts, n neurons, N steps, h hidden neurons), the dtype kinds
+it may have and how a message names them."""
+_DIMENSION_NAMES = {"S": "contexts", "n": "neurons", "N": "steps", "h": "hidden neurons"}
+
+
+def _check_array_shapes(path: Path, arrays: dict[str, np.ndarray], metadata: dict) -> None:
+    """Refuse, in one line naming the array and the shape it must have, an array whose
+    shape or dtype does not fit the set the header describes (its size, n and episode
+    length; where the header lacks one, the first array that has it)."""
+    sizes: dict[str, int] = {}
+    for key, header_key in (("S", "size"), ("n", "n_neurons"), ("N", "episode_length")):
+        value = metadata.get(header_key)
+        if type(value) is int and value >= 1:
+            sizes[key] = value
+    for name, (dimensions, kinds, dtype_name) in _ARRAY_LAYOUTS.items():
+        if name not in arrays:
+            continue
+        array = arrays[name]
+        if array.ndim == len(dimensions):
+            for dimension, length in zip(dimensions, array.shape, strict=True):
+                sizes.setdefault(dimension, length)
+        expected = tuple(sizes.get(dimension, -1) for dimension in dimensions)
+        if array.shape != expected or array.dtype.kind not in kinds:
+            described = ", ".join(
+                f"{sizes[d]} {_DIMENSION_NAMES[d]}" for d in dict.fromkeys(dimensions) if d in sizes
+            )
+            shown = str(expected).replace("-1", "?")
+            raise ContextFileError(
+                f"{path} is damaged: its array {name} is {array.dtype} of shape {array.shape}; "
+                f"a set of {described} has {name} of shape {shown} ({dtype_name})"
+            )
 
 
 def _check_array_sizes(path: Path) -> None:

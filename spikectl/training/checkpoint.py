@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from spikectl.file_kinds import FileKind, refuse_other_kinds
 from spikectl.files import atomic_write_bytes, write_json
 from spikectl.training.best_model import LEGACY, check_kept, fitting_weights
 from spikectl.training.checkpoint_checks import (
@@ -162,6 +163,8 @@ def read_checkpoint(path: Path, map_location: str = "cpu") -> dict[str, Any]:
             f"{' and '.join(map(str, READABLE_VERSIONS))}: resume it with the version that "
             "wrote it, or start the run again"
         )
+    refuse_other_kinds(path, (FileKind.CHECKPOINT,), "a checkpoint is a run's "
+                       "checkpoint.pt", RunDirError)  # fmt: skip
     payload = load_torch_file(path, "spikectl checkpoint", map_location)
     if not isinstance(payload, dict) or payload.get("format") != CHECKPOINT_FORMAT:
         raise RunDirError(f"{path} is not a spikectl checkpoint")

@@ -22,6 +22,7 @@ from typing import Any
 
 from spikectl.contexts import ContextSet
 from spikectl.envs.controller import Controller, DoNothing, RandomLegal, Witness
+from spikectl.file_kinds import FileKind, refuse_other_kinds
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
 from spikectl.planning.policy import IdentifyAndPlan, environment_settings
@@ -31,6 +32,11 @@ NAMED_CONTROLLERS = ("do-nothing", "random", "identify-and-plan", "oracle", "wit
 privileged references that read the played context from ``info["context_index"]``."""
 
 PRIVILEGED = ("oracle", "witness")
+
+CONTROLLER_SOURCES = (
+    "a controller is a run directory, a compiled policy file (.npz from export_policy) or "
+    f"one of {', '.join(NAMED_CONTROLLERS)}"
+)
 
 MODEL_CHOICES = ("final", "best")
 """Which weights of a run to load: ``final`` (model.pt, else the last checkpoint) or
@@ -139,6 +145,7 @@ def load_controller(
             f"no controller {name!r}: not a run directory, not a compiled policy file, and "
             f"not one of {', '.join(NAMED_CONTROLLERS)}"
         )
+    refuse_other_kinds(path, (FileKind.RUN_DIR, FileKind.POLICY), CONTROLLER_SOURCES)
     if path.is_dir():
         network = load_agent(path, model=model)
         if not compiled:

@@ -21,6 +21,7 @@ from typing import Any
 
 import torch
 
+from spikectl.file_kinds import FileKind, refuse_other_kinds
 from spikectl.files import (
     MAX_TEXT_FILE_BYTES,
     NotARegularFileError,
@@ -196,6 +197,10 @@ def model_episode(path: Path) -> int | None:
 def load_model_weights(path: Path) -> dict[str, torch.Tensor]:
     """The verified state dict of a model.pt: weights-only loaded, checksum checked,
     finite. Damage, foreign files and pickled objects are RunDirErrors."""
+    refuse_other_kinds(
+        path, (FileKind.MODEL, FileKind.BEST_MODEL),
+        "a model file is a run's model.pt or best_model.pt", RunDirError,
+    )  # fmt: skip
     weights = load_torch_file(path, "spikectl model", "cpu")
     metadata = getattr(weights, "_metadata", None) or {}
     header = metadata.get("spikectl") if isinstance(metadata, Mapping) else None

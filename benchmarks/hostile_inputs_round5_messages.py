@@ -1,0 +1,373 @@
+"""The hostile-input probes of round 5's class "messages that mislead" (issue 58), kept so
+they can be rerun.
+
+Built on round 4's machinery (``benchmarks/hostile_inputs_round4.py``: the fresh folder
+with a copy of a small finished run ``RUN``, a compiled policy ``pol.npz`` and a context
+set ``ctx.npz``; the same outcomes), with three more outcomes:
+
+- ``misleading``: refused in one line, but the line does not name what it must (the
+  kind of file found, the setting that differs and both its values, the array that is
+  wrong);
+- ``half-made``: refused, but something the command made is left behind (a run
+  directory, one file of a pair);
+- ``silent`` also covers a probe's own check failing (an API probe's AssertionError):
+  SIGTERM that ends without a word, a progress line showing an old evaluation.
+
+Run: ``python benchmarks/hostile_inputs_round5_messages.py [--python PYTHON] [--only WORD]``
+(PYTHON: the interpreter of the spikectl to probe; default this one). Prints one line per
+probe and the counts; exits 1 if any probe is not ``ok``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import functools
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+import types
+from dataclasses import dataclass
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+import hostile_inputs_round4 as round4  # noqa: E402
+from hostile_inputs_round4 import REFUSE, RUN, Probe, classify, prepare  # noqa: E402
+
+# A probe's output may hold a name that is not UTF-8 (the run directory it was given):
+# round 4's reader decodes it with escapes instead of failing.
+round4.subprocess = types.SimpleNamespace(
+    **{**vars(subprocess), "Popen": functools.partial(subprocess.Popen, errors="backslashreplace")}
+)
+
+
+@dataclass(frozen=True)
+class MessageProbe(Probe):
+    words: tuple[str, ...] = ()
+    """What the refusal must say: each entry is one or more alternatives split by ``|``
+    (case-insensitive)."""
+    absent: tuple[str, ...] = ()
+    """Paths (relative to the folder) that must not exist afterwards."""
+
+
+SMOKE = ["train", "smoke", "--run-dir", "new"]
+WHAT_INIT_FROM_TAKES = "run directory"
+SHORT_ARRAY = (
+    "python - <<'EOF'\n"
+    "import numpy as np\n"
+    "d = np.load('ctx.npz'); a = {k: d[k] for k in d.files}\n"
+    "CHANGE\n"
+    "np.savez('bad.npz', **a)\n"
+    "EOF"
+)
+LOAD_BAD = "from spikectl.contexts import ContextSet\nContextSet.load('bad.npz')\n"
+REHEADED_POLICY = (
+    "import json, numpy as np\n"
+    "from spikectl.agents.compiled import CompiledPolicy\n"
+    "from spikectl.agents.policy_file import policy_checksum, _parse_header\n"
+    "d = np.load('pol.npz'); a = {k: d[k] for k in d.files}\n"
+    "h = json.loads(str(a['metadata'])); h.update(CHANGE)\n"
+    "weights = {k: v for k, v in a.items() if k != 'metadata'}\n"
+    "h['checksum'] = policy_checksum(_parse_header('x', np.array(json.dumps(h))), weights)\n"
+    "a['metadata'] = np.array(json.dumps(h)); np.savez('bad.npz', **a)\n"
+    "try:\n"
+    "    CompiledPolicy.load('bad.npz')\n"
+    "except ValueError as error:\n"
+    "    assert len(str(error)) < 400, f'{len(str(error))} characters: {str(error)[:200]}'\n"
+    "    raise\n"
+)
+SIGTERM_DURING_TRAIN = """
+import os, signal, subprocess, sys, time
+from pathlib import Path
+process = subprocess.Popen(
+    [sys.executable, '-m', '_spikectl_launcher', 'train', 'smoke', '--run-dir', 'new',
+     '--total-env-steps', '64000', '--checkpoint-every-episodes', '100000'],
+    stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+deadline = time.monotonic() + 120
+while not Path('new/metrics.csv').exists() and time.monotonic() < deadline:
+    time.sleep(0.2)
+time.sleep(3)
+process.send_signal(signal.SIGTERM)
+out, err = process.communicate(timeout=120)
+lines = [line for line in err.splitlines() if line.strip()]
+assert process.returncode == 143, f'exit {process.returncode}, stderr {err[-200:]!r}'
+assert len(lines) == 1 and 'resume' in lines[0], f'stderr {err[-300:]!r}'
+assert Path('new/checkpoint.pt').is_file(), 'no checkpoint written at SIGTERM'
+print(lines[0])
+"""
+PROGRESS_LINE = """
+import csv, subprocess, sys
+done = subprocess.run(
+    [sys.executable, '-m', '_spikectl_launcher', 'train', 'smoke', '--run-dir', 'new',
+     '--progress', '--eval-every-episodes', '96'],
+    capture_output=True, text=True, timeout=170)
+assert done.returncode == 0, done.stderr[-300:]
+rows = list(csv.DictReader(open('new/metrics.csv')))
+last = f"{float(rows[-1]['test_return']):.3f}"
+bar = done.stderr.replace('\\r', '\\n').strip().splitlines()[-1]
+assert f'test={last}' in bar, f'the last progress line {bar!r} lacks the last test {last}'
+wrote = [line for line in done.stdout.splitlines() if line.startswith('wrote')][-1]
+assert 'best_model.pt' in wrote, f'{wrote!r} omits best_model.pt'
+print(bar[-80:], '|', wrote)
+"""
+
+PROBES = [
+    # --init-from: every kind of file named, and the setting that differs with both values
+    MessageProbe(
+        "train --init-from a run of another episode length",
+        1,
+        "",
+        [*SMOKE, "--init-from", "RUN", "--episode-length", "30"],
+        words=("episode length|episode_length", "20", "30"),
+        absent=("new",),
+    ),  # fmt: skip
+    MessageProbe(
+        "train --init-from a run of another architecture",
+        1,
+        "",
+        [*SMOKE, "--init-from", "RUN", "--arch", "ddrqn"],
+        words=("tdrqn", "ddrqn"),
+        absent=("new",),
+    ),  # fmt: skip
+    MessageProbe(
+        "train --init-from a compiled policy",
+        1,
+        "",
+        [*SMOKE, "--init-from", "pol.npz"],
+        words=("compiled policy", WHAT_INIT_FROM_TAKES),
+        absent=("new",),
+    ),  # fmt: skip
+    MessageProbe(
+        "train --init-from a context set",
+        1,
+        "",
+        [*SMOKE, "--init-from", "ctx.npz"],
+        words=("context set", WHAT_INIT_FROM_TAKES),
+        absent=("new",),
+    ),  # fmt: skip
+    MessageProbe(
+        "train --init-from a checkpoint.pt",
+        1,
+        "",
+        [*SMOKE, "--init-from", "RUN/checkpoint.pt"],
+        words=("checkpoint", WHAT_INIT_FROM_TAKES),
+        absent=("new",),
+    ),  # fmt: skip
+    MessageProbe(
+        "train --init-from a text file",
+        1,
+        "echo hello > notes.txt",
+        [*SMOKE, "--init-from", "notes.txt"],
+        words=("notes.txt", WHAT_INIT_FROM_TAKES),
+        absent=("new",),
+    ),  # fmt: skip
+    MessageProbe(
+        "realtime on a context set",
+        1,
+        "",
+        ["realtime", "ctx.npz"],
+        words=("context set", "compiled policy"),
+    ),  # fmt: skip
+    MessageProbe(
+        "realtime on a best_model.pt",
+        1,
+        "",
+        ["realtime", "RUN/best_model.pt"],
+        words=("model", "run directory"),
+    ),  # fmt: skip
+    MessageProbe(
+        "evaluate --contexts a compiled policy",
+        1,
+        "",
+        ["evaluate", "RUN", "--contexts", "pol.npz"],
+        words=("compiled policy", "context set"),
+    ),  # fmt: skip
+    MessageProbe(
+        "load_controller on a checkpoint.pt",
+        1,
+        "",
+        "import spikectl\nspikectl.load_controller('RUN/checkpoint.pt')\n",
+        words=("checkpoint", "run directory"),
+    ),  # fmt: skip
+    # run paths checked before anything is made
+    MessageProbe(
+        "train --run-dir a non-UTF-8 name",
+        2,
+        "",
+        ["train", "smoke", "--run-dir", "r\udcff"],
+        words=("UTF-8",),
+        absent=("r\udcff",),
+    ),  # fmt: skip
+    MessageProbe(
+        "train --run-dir under a file",
+        2,
+        "",
+        ["train", "smoke", "--run-dir", "pol.npz/run"],
+        words=("pol.npz",),
+    ),
+    # context-set arrays, each checked and named
+    MessageProbe(
+        "context set with a short targets array (API)",
+        3,
+        SHORT_ARRAY.replace("CHANGE", "a['targets'] = a['targets'][:2]"),
+        LOAD_BAD,
+        words=("targets", "(3,)"),
+    ),  # fmt: skip
+    MessageProbe(
+        "context set with a short targets array (evaluate)",
+        3,
+        SHORT_ARRAY.replace("CHANGE", "a['targets'] = a['targets'][:2]"),
+        ["evaluate", "RUN", "--contexts", "bad.npz"],
+        words=("targets",),
+    ),
+    MessageProbe(
+        "context set with float patterns",
+        3,
+        SHORT_ARRAY.replace("CHANGE", "a['patterns'] = a['patterns'] * 0.5"),
+        LOAD_BAD,
+        words=("patterns", "bool"),
+    ),  # fmt: skip
+    MessageProbe(
+        "context set with witnesses of another length",
+        3,
+        SHORT_ARRAY.replace("CHANGE", "a['witnesses'] = a['witnesses'][:, :5]"),
+        LOAD_BAD,
+        words=("witnesses", "(3, 20)"),
+    ),  # fmt: skip
+    MessageProbe(
+        "context set with 1-D weights",
+        3,
+        SHORT_ARRAY.replace("CHANGE", "a['weights'] = a['weights'].reshape(-1)"),
+        LOAD_BAD,
+        words=("weights", "(3, 5, 5)"),
+    ),  # fmt: skip
+    # the pair of sets of spikectl contexts
+    MessageProbe(
+        "contexts --out-dir with a dangling link as the test set",
+        4,
+        "mkdir out && ln -s ../nowhere/t.npz out/test_contexts.npz",
+        [
+            "contexts",
+            "--out-dir",
+            "out",
+            "--n-train",
+            "3",
+            "--n-test",
+            "3",
+            "--n-neurons",
+            "5",
+            "--episode-length",
+            "20",
+        ],
+        words=("test_contexts.npz", "link"),
+        absent=("out/train_contexts.npz",),
+    ),  # fmt: skip
+    MessageProbe(
+        "contexts --overwrite with a link as the test set",
+        4,
+        "echo kept > kept.npz && mkdir out && ln -s ../kept.npz out/test_contexts.npz",
+        [
+            "contexts",
+            "--out-dir",
+            "out",
+            "--n-train",
+            "3",
+            "--n-test",
+            "3",
+            "--n-neurons",
+            "5",
+            "--episode-length",
+            "20",
+            "--overwrite",
+        ],
+        keep=("kept.npz",),
+        words=("test_contexts.npz", "link"),
+        absent=("out/train_contexts.npz",),
+    ),  # fmt: skip
+    # SIGTERM, what Slurm and Docker send
+    MessageProbe("SIGTERM during train", 5, "", SIGTERM_DURING_TRAIN, expect=RUN),
+    # compiled-policy headers cross-checked against their weights (checksum recomputed)
+    MessageProbe(
+        "policy header lstm_hidden 64 over 128-wide weights",
+        6,
+        "",
+        REHEADED_POLICY.replace("CHANGE", "lstm_hidden=64"),
+        words=("lstm_hidden", "64", "128"),
+    ),  # fmt: skip
+    MessageProbe(
+        "policy header attn_layers 1 over 2 layers",
+        6,
+        "",
+        REHEADED_POLICY.replace("CHANGE", "attn_layers=1"),
+        words=("attn_layers", "1", "2"),
+    ),  # fmt: skip
+    MessageProbe(
+        "policy header architecture ddrqn over a TDRQN",
+        6,
+        "",
+        REHEADED_POLICY.replace("CHANGE", "architecture='ddrqn'"),
+        words=("architecture", "tdrqn", "ddrqn"),
+    ),  # fmt: skip
+    MessageProbe(
+        "policy header head_hidden [256] over [256, 128]",
+        6,
+        "",
+        REHEADED_POLICY.replace("CHANGE", "head_hidden=[256]"),
+        words=("head_hidden",),
+    ),  # fmt: skip
+    # what a training run shows and says it wrote
+    MessageProbe(
+        "train --progress: the latest evaluation, every file written",
+        7,
+        "",
+        PROGRESS_LINE,
+        expect=RUN,
+    ),  # fmt: skip
+]
+
+
+def judge(probe: MessageProbe, folder: Path, python: str) -> tuple[str, str]:
+    outcome, detail = classify(probe, folder, python)
+    left = [name for name in probe.absent if (folder / name).exists()]
+    if left:
+        return "half-made", f"{', '.join(left)} left behind: {detail}"
+    if outcome == "ok" and probe.expect == REFUSE:
+        text = str(detail).lower()
+        missing = [w for w in probe.words if not any(a.lower() in text for a in w.split("|"))]
+        if missing:
+            return "misleading", f"names no {missing}: {detail}"
+    return outcome, detail
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--python", default=sys.executable)
+    parser.add_argument("--only", default="", help="comma-separated words of probe names")
+    args = parser.parse_args()
+    counts: dict[str, int] = {}
+    with tempfile.TemporaryDirectory(prefix="hostile5m-") as root:
+        base = Path(root) / "base"
+        base.mkdir()
+        (Path(root) / "bin").mkdir()  # round 4's shim: the probed interpreter as `python`
+        shim = Path(root) / "bin" / "python"
+        shim.write_text(f'#!/bin/sh\nexec "{args.python}" "$@"\n')
+        shim.chmod(0o755)
+        prepare(base, args.python)
+        for index, probe in enumerate(PROBES):
+            if args.only and not any(word in probe.name for word in args.only.split(",")):
+                continue
+            folder = Path(root) / f"probe{index}"
+            shutil.copytree(base, folder, symlinks=True)
+            start = time.monotonic()
+            outcome, detail = judge(probe, folder, args.python)
+            counts[outcome] = counts.get(outcome, 0) + 1
+            print(f"{outcome:10} class {probe.klass} {probe.name} ({time.monotonic() - start:.0f}"
+                  f" s): {str(detail)[:220]}", flush=True)  # fmt: skip
+            shutil.rmtree(folder, ignore_errors=True)
+    print("counts:", ", ".join(f"{key} {value}" for key, value in sorted(counts.items())))
+    sys.exit(0 if set(counts) <= {"ok"} else 1)
+
+
+if __name__ == "__main__":
+    main()
