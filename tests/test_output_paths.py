@@ -524,3 +524,30 @@ def test_demo_and_plot_keep_an_earlier_run_s_files(tmp_path, capsys):
     code, _, err = cli(["plot", tmp_path / "sweep"], capsys)
     assert code == 2 and "figure4.png exist(s): pass --overwrite" in one_line(err)
     assert (figures / "figure4.png").read_text() == "kept\n"
+
+
+def written_files(folder: Path) -> set[str]:
+    return {str(p.relative_to(folder)) for p in folder.rglob("*")
+            if p.is_file() and p.name != ".spikectl.lock"}  # fmt: skip
+
+
+def test_the_guarded_names_are_every_file_demo_and_plot_write(tmp_path, capsys):
+    """The refusal checks a list of names: it must hold everything the command writes."""
+    from spikectl.cli.context_sets import DEMO_FILES
+    from spikectl.cli.runs import PLOT_FILES
+
+    code, _, err = cli(["demo", "--out-dir", tmp_path / "demo", "--n-train", "3",
+                        "--n-test", "3"], capsys)  # fmt: skip
+    assert code == 0, err
+    assert written_files(tmp_path / "demo") == set(DEMO_FILES)
+    shutil.copytree(SMOKE_RUN, tmp_path / "sweep" / "trials" / "t0")
+    code, _, err = cli(["plot", tmp_path / "sweep"], capsys)
+    assert code == 0, err
+    figures = tmp_path / "sweep" / "figures"
+    assert written_files(figures) and written_files(figures) <= set(PLOT_FILES)
+    before = {name: (figures / name).read_bytes() for name in written_files(figures)}
+    code, _, err = cli(["plot", tmp_path / "sweep"], capsys)
+    assert code == 2 and "pass --overwrite" in one_line(err)
+    assert {name: (figures / name).read_bytes() for name in before} == before
+    code, _, err = cli(["plot", tmp_path / "sweep", "--overwrite"], capsys)
+    assert code == 0, err

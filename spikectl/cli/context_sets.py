@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import os
 from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Literal
 
 import numpy as np
 
+from spikectl.cli.output import refuse_existing
 from spikectl.contexts import ContextSet, make_splits
 from spikectl.files import folder_lock, make_dirs, write_json
 
@@ -35,17 +35,6 @@ class DemoConfig:
 
 DEMO_FILES = ("train_contexts.npz", "test_contexts.npz", "raster.png", "results.json")
 """What ``spikectl demo`` writes in --out-dir."""
-
-
-def refuse_existing(out_dir: Path, names: tuple[str, ...], overwrite: bool) -> None:
-    """Refuse, unless ``overwrite``, to write ``names`` in ``out_dir`` where any exists
-    (called under the folder's lock, so no other spikectl command is midway)."""
-    existing = [str(out_dir / name) for name in names if os.path.lexists(out_dir / name)]
-    if existing and not overwrite:
-        raise ValueError(
-            f"--out-dir: {' and '.join(existing)} exist(s): pass --overwrite to replace, "
-            "or choose another --out-dir"
-        )
 
 
 def demo(config: DemoConfig) -> dict[str, dict[str, float]]:

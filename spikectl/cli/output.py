@@ -79,3 +79,15 @@ def claimed_outputs(outputs: Iterable[tuple[str, Path | None]], overwrite: bool)
                     f"another {flag}"
                 )
         yield
+
+
+def refuse_existing(out_dir: Path, names: tuple[str, ...], overwrite: bool) -> None:
+    """Refuse, unless ``overwrite``, to write ``names`` in the folder ``out_dir`` where
+    any exists (called under the folder's lock, ``files.folder_lock``, so that no other
+    spikectl command is midway)."""
+    existing = [str(out_dir / name) for name in names if os.path.lexists(out_dir / name)]
+    if existing and not overwrite:
+        raise ValueError(
+            f"--out-dir: {' and '.join(existing)} exist(s): pass --overwrite to replace, "
+            "or choose another --out-dir"
+        )

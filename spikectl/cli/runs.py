@@ -138,7 +138,7 @@ PLOT_FILES = (
 
 def plot(command: PlotCommand) -> None:
     """Write the figures and tables of a sweep from its saved runs."""
-    from spikectl.cli.context_sets import refuse_existing
+    from spikectl.cli.output import refuse_existing
     from spikectl.experiments.plot import plot_sweep
     from spikectl.files import folder_lock
 
