@@ -288,8 +288,10 @@ def test_unreadable_files_are_refused_with_the_problem(tmp_path, policy_file):
     np.savez(foreign, weights=np.zeros(3))
     with pytest.raises(PolicyFileError, match="no 'metadata' entry"):
         CompiledPolicy.load(foreign)
-    with pytest.raises(PolicyFileError, match="not a compiled policy"):
+    with pytest.raises(PolicyFileError, match="is a context set file .*; a compiled policy is"):
         CompiledPolicy.load(rewrite(policy_file, {"format": "spikectl.ContextSet"}))
+    with pytest.raises(PolicyFileError, match="not a compiled policy"):
+        CompiledPolicy.load(rewrite(policy_file, {"format": "spikectl.Other"}))
 
 
 def test_other_versions_and_architectures_are_refused_by_name(policy_file):
@@ -316,10 +318,10 @@ def test_files_written_before_the_others_spiking_input_still_load(policy_file):
 def test_weights_that_do_not_match_the_header_are_named(policy_file):
     with pytest.raises(PolicyFileError, match=r"lack \['head.value.0.bias'\]"):
         CompiledPolicy.load(rewrite(policy_file, drop="head.value.0.bias"))
-    with pytest.raises(PolicyFileError, match="context.pattern.0.weight has shape"):
+    with pytest.raises(PolicyFileError, match=r"header does not match .* pattern_embed 4 \(the "):
         CompiledPolicy.load(rewrite(policy_file, reshape="context.pattern.0.weight"))
     # A header that says 3 layers where the weights hold 2.
-    with pytest.raises(PolicyFileError, match="mixer.encoder.layers.2"):
+    with pytest.raises(PolicyFileError, match=r"attn_layers 3 \(the weights: 2\)$"):
         CompiledPolicy.load(rewrite(policy_file, {"attn_layers": 3}))
     with pytest.raises(PolicyFileError, match=r"lacks \['lstm_hidden'\]"):
         altered = rewrite(policy_file)
@@ -330,6 +332,42 @@ def test_weights_that_do_not_match_the_header_are_named(policy_file):
         arrays["metadata"] = np.array(json.dumps(header))
         np.savez(altered, **arrays)
         CompiledPolicy.load(altered)
+
+
+def rechecksummed(path: Path, changes: dict) -> Path:
+    """A copy of a policy file with its header changed and its checksum made again, as a
+    hand edit that knows the format would: only the header's agreement with the weights
+    can then tell."""
+    from spikectl.agents.policy_file import _parse_header, policy_checksum
+
+    with np.load(path, allow_pickle=False) as data:
+        arrays = {name: data[name] for name in data.files}
+    header = {**json.loads(str(arrays.pop("metadata"))), **changes}
+    header["checksum"] = policy_checksum(_parse_header("x", np.array(json.dumps(header))), arrays)
+    out = path.with_name("rechecksummed.npz")
+    np.savez(out, metadata=np.array(json.dumps(header)), **arrays)
+    return out
+
+
+@pytest.mark.parametrize("changes, named", [
+    ({"lstm_hidden": 8}, "lstm_hidden 8 (the weights: 16)"),
+    ({"attn_layers": 1}, "attn_layers 1 (the weights: 2)"),
+    ({"attn_width": 32, "attn_heads": 1}, "attn_width 32 (the weights: 16)"),
+    ({"architecture": "ddrqn"}, "architecture ddrqn (the weights: tdrqn)"),
+    ({"head_hidden": [32, 32]}, "head_hidden [32, 32] (the weights: [32])"),
+    ({"value_hidden": [8]}, "value_hidden [8] (the weights: [16])"),
+    ({"episode_length": 30}, "episode_length 30 (the weights: 20)"),
+    ({"target_in_input": False}, "input features 2 (the weights: 3)"),
+])  # fmt: skip
+def test_a_header_is_cross_checked_against_its_weights_in_one_line(policy_file, changes, named):
+    """Every header field the weights' shapes imply is compared with them, even where the
+    checksum was made again: one line naming the field and both values, not a list of
+    every weight's shape."""
+    with pytest.raises(PolicyFileError) as caught:
+        CompiledPolicy.load(rechecksummed(policy_file, changes))
+    message = str(caught.value)
+    assert message.endswith(f"its header does not match its weights: {named}"), message
+    assert len(message) < 300 and "\n" not in message
 
 
 def test_header_values_and_weights_are_checked(policy_file):

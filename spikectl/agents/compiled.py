@@ -40,6 +40,7 @@ from spikectl.agents.policy_file import (
     _policy_bytes,
     check_policy_checksum,
     export_policy,
+    header_differences,
 )
 from spikectl.agents.policy_kernel import _decide, _layout
 from spikectl.envs.controller import ControllerInputError, check_controller_input
@@ -62,6 +63,11 @@ class CompiledPolicy:
         shapes = {name: tuple(array.shape) for name, array in weights.items()}
         expected = spec.weight_shapes()
         if shapes != expected:
+            differences = header_differences(spec, shapes)
+            if differences:
+                raise PolicyFileError(
+                    f"{where}: its header does not match its weights: {'; '.join(differences)}"
+                )
             raise PolicyFileError(f"{where}: the weights {_mismatch(expected, shapes)}")
         self.spec = spec
         self._params, self._rows, self._ints, self._floats = _layout(spec, weights)

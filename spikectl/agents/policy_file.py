@@ -248,21 +248,83 @@ def export_policy(network: Any, path: str | Path) -> Path:
     return atomic_write_bytes(path, _policy_bytes(network))
 
 
+def header_differences(spec: PolicySpec, shapes: Mapping[str, tuple[int, ...]]) -> list[str]:
+    """Each header field the weights' shapes imply and that differs from the header, as
+    'FIELD HEADER (the weights: VALUE)': the architecture first (alone: the rest then
+    means other things), then the widths, depths and lengths."""
+    implied = implied_by_weights(shapes)
+    if implied.get("architecture", spec.architecture) != spec.architecture:
+        names = ["architecture"]
+    else:
+        names = [name for name in implied if name != "architecture"]
+    header = {**asdict(spec), "input features": spec.input_features}
+    return [
+        f"{name} {_shown(header[name])} (the weights: {_shown(implied[name])})"
+        for name in names
+        if name in implied and _shown(header[name]) != _shown(implied[name])
+    ]
+
+
+def implied_by_weights(shapes: Mapping[str, tuple[int, ...]]) -> dict[str, Any]:
+    """The header fields a policy file's weight shapes determine (those it holds)."""
+
+    def dimension(name: str, axis: int) -> int | None:
+        shape = shapes.get(name)
+        return shape[axis] if shape is not None and len(shape) > axis else None
+
+    layers = {name.split(".")[3] for name in shapes if name.startswith("mixer.encoder.layers.")}
+    implied: dict[str, Any] = {
+        "architecture": "tdrqn" if layers else "ddrqn" if "ff.0.weight" in shapes else None,
+        "lstm_hidden": dimension("lstm.lstm.weight_hh_l0", 1),
+        "input features": dimension("lstm.lstm.weight_ih_l0", 1),
+        "episode_length": dimension("context.pattern.0.weight", 1),
+        "pattern_embed": dimension("context.pattern.0.weight", 0),
+        "target_embed": dimension("context.target.0.weight", 0),
+        "mix_hidden": dimension("ff.0.weight", 0),
+        "attn_layers": len(layers) or None,
+        "attn_width": dimension("mixer.encoder.layers.0.norm1.weight", 0),
+        "attn_ff": dimension("mixer.encoder.layers.0.linear1.weight", 0),
+    }
+    for head, field_name in (("advantage", "head_hidden"), ("value", "value_hidden")):
+        outs = []
+        while f"head.{head}.{2 * len(outs)}.weight" in shapes:
+            outs.append(dimension(f"head.{head}.{2 * len(outs)}.weight", 0))
+        if outs:
+            implied[field_name] = tuple(outs[:-1])  # the last layer is the output
+    return {name: value for name, value in implied.items() if value is not None}
+
+
+def _shown(value: Any) -> str:
+    return str(list(value)) if isinstance(value, (list, tuple)) else str(value)
+
+
+MAX_LISTED = 3
+"""The most weights a shape mismatch lists by name (the rest are counted)."""
+
+
 def _mismatch(expected: Mapping[str, tuple], actual: Mapping[str, tuple]) -> str:
     """What differs between two {name: shape} tables, in one line."""
     problems = []
     missing = sorted(set(expected) - set(actual))
     extra = sorted(set(actual) - set(expected))
     if missing:
-        problems.append(f"lack {missing}")
+        problems.append(f"lack {_listed(missing)}")
     if extra:
-        problems.append(f"have unexpected {extra}")
+        problems.append(f"have unexpected {_listed(extra)}")
     for name in sorted(set(expected) & set(actual)):
         if tuple(expected[name]) != tuple(actual[name]):
             problems.append(
                 f"{name} has shape {tuple(actual[name])}, the header says {tuple(expected[name])}"
             )
+    if len(problems) > MAX_LISTED:
+        problems = [*problems[:MAX_LISTED], f"and {len(problems) - MAX_LISTED} more"]
     return "; ".join(problems)
+
+
+def _listed(names: list[str]) -> str:
+    if len(names) <= MAX_LISTED:
+        return str(names)
+    return f"{names[:MAX_LISTED]} and {len(names) - MAX_LISTED} more"
 
 
 # The flat layout the kernel reads: every linear layer's W^T [in, out] and bias in one
