@@ -75,3 +75,32 @@ def test_a_disabled_bar_still_counts_episodes(tmp_path):
     logger.progress(10, 0.5, {})
     assert logger.done == 20 and logger.eta(logger.done) == "00:08"
     logger.close()
+
+
+def test_an_evaluation_shows_at_once_with_its_episode(tmp_path, capsys):
+    """The line shows the latest evaluation as soon as it is made, with the episode it is
+    from: a short run once showed the step-0 evaluation until its end."""
+    clock = FakeClock()
+    logger = make_logger(tmp_path, clock, total=320, show=True)
+    logger.log({"episode": 0, "train_return": 0.5, "test_return": 0.501, "loss": float("nan"),
+                "epsilon": 1.0})  # fmt: skip
+    logger.progress(160, 0.4, {"eps": "0.50"})
+    capsys.readouterr()
+    logger.log({"episode": 160, "train_return": 0.61, "test_return": 0.532, "loss": 0.1,
+                "epsilon": 0.5})  # fmt: skip
+    line = capsys.readouterr().err.split("\r")[-1]  # no further round needed
+    assert "eval ep=160, train=0.610, test=0.532" in line and "0.501" not in line
+    assert "eps=0.50" in line and "collect=0.400" in line  # the round's values stay
+    logger.close()
+
+
+def test_the_last_line_of_a_run_names_every_file_it_wrote(tmp_path):
+    from spikectl.cli.training import written_files
+
+    names = ("config.json", "model.pt", "best_model.pt", "checkpoint.pt", "metrics.csv",
+             "learning_curve.png", "baselines.json", "machine.json", "train_contexts.npz",
+             "test_contexts.npz", "val_contexts.npz", "tensorboard")  # fmt: skip
+    for name in names:
+        (tmp_path / name).touch()
+    listed = written_files(tmp_path, tmp_path / "learning_curve.png").split(", ")
+    assert listed[:2] == ["model.pt", "best_model.pt"] and sorted(listed) == sorted(names)

@@ -166,6 +166,23 @@ def _core_minutes(final: dict) -> str:
     return f"{final['cpu_time_s'] / 60:.1f} core minutes{of_which}"
 
 
+SHOWN_RUN_FILES = (
+    "model.pt", "best_model.pt", "checkpoint.pt", "metrics.csv", "learning_curve.png",
+    "baselines.json", "config.json", "machine.json", "train_contexts.npz", "test_contexts.npz",
+    "val_contexts.npz", "tensorboard",
+)  # fmt: skip
+"""What a run directory holds at the end of a run, in the order the last line names it."""
+
+
+def written_files(run_dir: Path, curve: Path) -> str:
+    """The files of a finished run (``curve`` among them), the ones read most first."""
+    present = {path.name for path in run_dir.iterdir()}
+    shown = [name for name in SHOWN_RUN_FILES if name in present]
+    if curve.parent != run_dir:  # drawn elsewhere: named in full
+        shown.append(str(curve))
+    return ", ".join(shown)
+
+
 def _print_run(config: Experiment, run_dir: Path, metrics: list[dict]) -> None:
     """A single run's final returns, its baselines and its best network on validation."""
     from spikectl.experiments.figures import plot_learning_curve
@@ -203,7 +220,7 @@ def _print_run(config: Experiment, run_dir: Path, metrics: list[dict]) -> None:
         f"{final['wall_time_s'] / 60:.1f} wall minutes ({_core_minutes(final)}) on "
         f"{config.train.torch_threads or torch_threads()} thread(s)"
     )
-    print(f"wrote {run_dir / 'model.pt'}, {run_dir / 'metrics.csv'} and {curve}")
+    print(f"wrote in {run_dir}: {written_files(run_dir, curve)}")
 
 
 def _print_group(configs: list[Experiment], run_dirs: list[Path], metrics: list[list[dict]]):
@@ -228,7 +245,9 @@ def _print_group(configs: list[Experiment], run_dirs: list[Path], metrics: list[
         f"updates each, {final['wall_time_s'] / 60:.1f} wall minutes "
         f"({_core_minutes(final)}) for the whole group"
     )
-    print(f"wrote model.pt and metrics.csv in {', '.join(str(d) for d in run_dirs)}")
+    names = {path.name for run_dir in run_dirs for path in run_dir.iterdir()}
+    listed = ", ".join(name for name in SHOWN_RUN_FILES if name in names)
+    print(f"wrote in each of {', '.join(str(d) for d in run_dirs)}: {listed}")
 
 
 TRAIN_HELP = """Train an agent: spikectl train [PRESET] [FLAGS]. The defaults shown are

@@ -54,7 +54,8 @@ class RunLogger:
             total=total_episodes, initial=episodes, unit="ep", disable=not show_progress,
             dynamic_ncols=True, desc=desc, mininterval=1.0, bar_format=BAR_FORMAT,
         )  # fmt: skip
-        self.last: dict[str, str] = {}
+        self.round: dict[str, str] = {}  # what the last round showed (time left, ...)
+        self.last: dict[str, str] = {}  # the last evaluation: its episode and returns
         self.total_episodes, self.clock, self.done = total_episodes, clock, episodes
         # (clock, episodes) at the end of this process's first round; None before it.
         self.paced_from: tuple[float, int] | None = None
@@ -92,10 +93,8 @@ class RunLogger:
         # The postfix first, then the count: the redraw that update() may make shows this
         # round's estimate, not the previous round's. refresh=False: the bar redraws at
         # most every mininterval, not on every round.
-        self.bar.set_postfix(
-            eta=self.eta(self.done), **learner, collect=f"{collect_return:.3f}", **self.last,
-            refresh=False,
-        )  # fmt: skip
+        self.round = {"eta": self.eta(self.done), **learner, "collect": f"{collect_return:.3f}"}
+        self.bar.set_postfix({**self.round, **self.last}, refresh=False)
         self.bar.update(episodes)
 
     def log(self, row: dict) -> None:
@@ -104,7 +103,11 @@ class RunLogger:
                 if key in row and not math.isnan(row[key]):
                     self.writer.add_scalar(key, row[key], row["episode"])
             self.writer.flush()
-        self.last = {"train": f"{row['train_return']:.3f}", "test": f"{row['test_return']:.3f}"}
+        # The evaluation's episode beside its returns, and on the line at once: the next
+        # round's redraw may be a whole evaluation period away (or never come: the last).
+        self.last = {"eval ep": f"{row['episode']}", "train": f"{row['train_return']:.3f}",
+                     "test": f"{row['test_return']:.3f}"}  # fmt: skip
+        self.bar.set_postfix({**self.round, **self.last}, refresh=True)
 
     def close(self) -> None:
         self.bar.close()
