@@ -101,6 +101,15 @@ def test_normalisation_on_hand_values():
         suite.normalise(0.5, 0.5, 0.5)
 
 
+def test_standard_error_on_hand_values():
+    # sd of (0, 1, 2, 3) with ddof 1 is sqrt(5/3); over sqrt(4).
+    assert suite.standard_error([0.0, 1.0, 2.0, 3.0]) == pytest.approx(np.sqrt(5 / 3) / 2)
+    assert suite.standard_error(np.full(100, 0.5)) == 0.0
+    assert np.isnan(suite.standard_error([0.7]))
+    score = suite.Score("paper", "test", np.array([0.5, 1.0]), np.array([0.75]), 0.0)
+    assert score.standard_error == pytest.approx(0.25)
+
+
 def run_main(argv: list[str], capsys) -> tuple[int, str, str]:
     try:
         cli.main(argv)
@@ -143,6 +152,9 @@ def test_benchmark_writes_each_networks_return(capsys, tmp_path):
     with open(out, newline="") as file:
         (summary,) = csv.DictReader(file)
     assert float(summary["mean_return"]) == pytest.approx(returns.mean(), abs=1e-6)
+    # The row carries the standard error over the networks, from the per-network returns.
+    expected_error = returns.std(ddof=1) / np.sqrt(suite.SET_SIZE)
+    assert float(summary["standard_error"]) == pytest.approx(expected_error, abs=1e-6)
     assert 0.0 <= returns.min() < returns.max() <= 1.0
 
 @pytest.mark.parametrize(

@@ -48,8 +48,8 @@ MAX_RANDOM_SEEDS = 1000
 """The most seeds of the random controller (each plays the whole suite once more)."""
 CSV_FIELDS = (
     "suite_version", "task", "split", "controller", "model", "seeds", "mean_return",
-    "sd_over_seeds", "normalised", "do_nothing", "oracle", "cpu_seconds", "contexts",
-    "trained_on",
+    "standard_error", "sd_over_seeds", "normalised", "do_nothing", "oracle", "cpu_seconds",
+    "contexts", "trained_on",
 )  # fmt: skip
 PER_NETWORK_FIELDS = ("suite_version", "task", "split", "controller", "model", "context", "return")
 
@@ -118,6 +118,7 @@ def score_and_write(command: BenchmarkCommand) -> None:
             "suite_version": suite.SUITE_VERSION, "task": name, "split": command.split,
             "controller": command.controller, "model": model_label(command), "seeds": seeds,
             "mean_return": f"{result.mean_return:.6f}",
+            "standard_error": f"{result.standard_error:.6f}",
             "sd_over_seeds": "" if seeds == 1 else f"{sd:.6f}",
             "normalised": f"{normalised[name]:.6f}", "do_nothing": f"{nothing:.6f}",
             "oracle": f"{oracle:.6f}", "cpu_seconds": f"{result.cpu_seconds:.3f}",

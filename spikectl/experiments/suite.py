@@ -20,6 +20,7 @@ is 1, both played under the same protocol on the same split.
 from __future__ import annotations
 
 import functools
+import math
 import time
 from dataclasses import dataclass
 from typing import Any
@@ -258,6 +259,25 @@ class Score:
     @property
     def mean_return(self) -> float:
         return float(self.seed_means.mean())
+
+    @property
+    def standard_error(self) -> float:
+        """The standard error of :attr:`mean_return` over the set's networks: the sample
+        standard deviation of the per-context returns over sqrt(S) (NaN for one context).
+        What a score on another draw of networks would move by, the scale any difference
+        between two controllers on the suite is read against."""
+        return standard_error(self.returns)
+
+
+def standard_error(returns) -> float:
+    """sd(returns) / sqrt(S) with the sample standard deviation (ddof 1), summed in a
+    fixed order (math.fsum); NaN for fewer than two returns."""
+    values = [float(value) for value in np.asarray(returns, dtype=np.float64).reshape(-1)]
+    if len(values) < 2:
+        return float("nan")
+    mean = math.fsum(values) / len(values)
+    variance = math.fsum((value - mean) ** 2 for value in values) / (len(values) - 1)
+    return math.sqrt(variance / len(values))
 
 
 def play(name: str, split: str, controller: Controller) -> tuple[np.ndarray, float]:

@@ -141,7 +141,7 @@ def matmul(a, b) -> np.ndarray:
         out = out[..., 0, :]
     if vector_right:
         out = out[..., 0]
-    return out
+    return out[()] if out.ndim == 0 else out  # two vectors: a NumPy scalar, as np.matmul
 
 
 @numba.njit(**_JIT)

@@ -1,0 +1,201 @@
+"""The training-free controllers decide the same on every CPU kind (issue 58).
+
+One machine stands in for the others: NumPy's SIMD dispatch is narrowed with
+``NPY_DISABLE_CPU_FEATURES``, Numba compiles for another CPU with ``NUMBA_CPU_NAME`` and
+OpenBLAS runs another CPU's kernels with ``OPENBLAS_CORETYPE``. Each test plays the
+planners in a subprocess under each emulation the machine can run and compares every
+action and every posterior the planner computed with the native run's. The planners'
+floats go through :mod:`spikectl.planning.portable`, whose results do not depend on the
+CPU's kernels, so the comparison is exact by design (not two kernels compared bit for
+bit): a NumPy ``np.exp`` or a BLAS product back in a decision path makes it fail on any
+machine where an emulation changes that kernel (AVX-512 machines: NumPy's exp and log;
+every machine: OpenBLAS's Nehalem kernels sum in another order than its native ones).
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from spikectl.planning import portable
+
+# Plays identify-and-plan (each case's settings) on the first networks of a suite task's
+# test set and prints, per network, its actions and a digest of every posterior its
+# estimate gave (mean and sd, every step).
+PLAY = r"""
+import hashlib, json, sys
+import numpy as np
+from spikectl.envs.rollout import evaluate_policy
+from spikectl.experiments import suite
+from spikectl.planning import policy
+
+cases = json.loads(sys.argv[1])
+act = policy.IdentifyAndPlan.act
+seen = {}
+
+def recording_act(self, observation, info):
+    action = act(self, observation, info)
+    mean, sd = self.estimate.posterior()
+    digest = hashlib.sha256(np.ascontiguousarray(mean).tobytes() + sd.tobytes()).hexdigest()
+    seen.setdefault(self.seed, []).append([action, digest[:16]])
+    return action
+
+policy.IdentifyAndPlan.act = recording_act
+result = {}
+for name, task, count, settings in cases:
+    spec = suite.task(task)
+    contexts = suite.load_split(task, "test")[:count]
+    # As load_controller builds the named controller, with the case's settings on top.
+    named = policy.environment_settings(spec.extensions, spec.n_observed)
+    controller = policy.IdentifyAndPlan(
+        contexts.params, noise_mV=spec.extensions.observation_noise_mV, **{**named, **settings}
+    )
+    seen.clear()
+    returns = evaluate_policy(contexts, controller, extensions=spec.extensions, seed=0).returns
+    result[name] = {"returns": returns.tolist(), "steps": {str(k): v for k, v in seen.items()}}
+print("RESULT" + json.dumps(result))
+"""
+
+CASES = [
+    # name, suite task, networks, settings beyond the named controller's
+    ("bayes-filtered", "noise2", 4, {}),
+    ("gaussian", "paper", 4, {}),
+    ("particles-qmdp", "paper", 3, {"identification": "particles", "gamble_networks": 4}),
+    ("stochastic-release", "stochastic", 4, {}),
+    ("relays", "hidden25", 4, {}),
+]
+
+
+def _numpy_dispatch(wider_than_avx2: bool) -> list[str]:
+    """The SIMD targets NumPy dispatches to on this CPU: those beyond AVX2 (AVX-512), or
+    every one from AVX2 on; [] where the CPU has none of them."""
+    from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+
+    avx512 = [name for name in __cpu_dispatch__ if "AVX512" in name or name == "X86_V4"]
+    avx2 = [name for name in __cpu_dispatch__ if name in ("X86_V3", "AVX2", "FMA3", "F16C")]
+    chosen = avx512 if wider_than_avx2 else avx512 + avx2
+    return [name for name in chosen if __cpu_features__.get(name)]
+
+
+def _emulations() -> dict[str, dict[str, str]]:
+    """The CPU kinds this machine can stand in for: name -> environment variables."""
+    kinds: dict[str, dict[str, str]] = {}
+    avx512 = _numpy_dispatch(wider_than_avx2=True)
+    if avx512:
+        kinds["numpy-without-avx512"] = {"NPY_DISABLE_CPU_FEATURES": " ".join(avx512)}
+    up_to_avx2 = _numpy_dispatch(wider_than_avx2=False)
+    if up_to_avx2 and up_to_avx2 != avx512:
+        kinds["numpy-without-avx2"] = {"NPY_DISABLE_CPU_FEATURES": " ".join(up_to_avx2)}
+    kinds["numba-haswell"] = {"NUMBA_CPU_NAME": "haswell"}
+    kinds["openblas-nehalem"] = {"OPENBLAS_CORETYPE": "Nehalem"}
+    kinds["openblas-haswell"] = {"OPENBLAS_CORETYPE": "Haswell"}
+    if avx512:
+        kinds["avx2-machine"] = {
+            "NPY_DISABLE_CPU_FEATURES": " ".join(avx512),
+            "NUMBA_CPU_NAME": "haswell",
+            "OPENBLAS_CORETYPE": "Zen",
+        }
+    return kinds
+
+
+def _play(extra_environment: dict[str, str]) -> dict:
+    environment = {**os.environ, "OMP_NUM_THREADS": "1", **extra_environment}
+    for name in ("NPY_DISABLE_CPU_FEATURES", "NUMBA_CPU_NAME", "OPENBLAS_CORETYPE"):
+        if name not in extra_environment:
+            environment.pop(name, None)
+    completed = subprocess.run(
+        [sys.executable, "-c", PLAY, json.dumps(CASES)],
+        env=environment, capture_output=True, text=True, timeout=900,
+    )  # fmt: skip
+    assert completed.returncode == 0, completed.stderr[-3000:]
+    line = next(row for row in completed.stdout.splitlines() if row.startswith("RESULT"))
+    return json.loads(line[len("RESULT") :])
+
+
+@pytest.fixture(scope="module")
+def native() -> dict:
+    return _play({})
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("kind", sorted(_emulations()))
+def test_planner_decides_the_same_under_every_cpu_kind(native, kind):
+    emulated = _play(_emulations()[kind])
+    for name, _, count, _ in CASES:
+        mine, theirs = native[name], emulated[name]
+        for network in range(count):
+            ours, other = mine["steps"][str(network)], theirs["steps"][str(network)]
+            pairs = enumerate(zip(ours, other, strict=False))
+            first = next((step for step, (mine_now, theirs_now) in pairs
+                          if mine_now != theirs_now), None)  # fmt: skip
+            assert first is None and len(ours) == len(other), (
+                f"{name}, network {network}, under {kind}: the planner's posterior or action "
+                f"first differs from the native run's at step {first} "
+                f"(native {ours[first] if first is not None else ours[-1]}, "
+                f"{kind} {other[first] if first is not None else other[-1]})"
+            )
+        assert mine["returns"] == theirs["returns"], (name, kind)
+
+
+# The portable operations themselves, on inputs where NumPy's own kernels differ across
+# CPUs in the last bit; compared with NumPy to the rounding of one operation.
+
+
+def test_portable_elementwise_functions_match_numpy_to_rounding():
+    values = np.random.default_rng(0).normal(size=(7, 300)) * 20
+    positive = np.abs(values) + 1e-3
+    for mine, numpy_function, argument in (
+        (portable.exp, np.exp, values), (portable.expm1, np.expm1, values),
+        (portable.log, np.log, positive), (portable.log1p, np.log1p, positive),
+    ):  # fmt: skip
+        result = mine(argument)
+        assert result.shape == argument.shape and result.dtype == np.float64
+        np.testing.assert_allclose(result, numpy_function(argument), rtol=4e-16, atol=0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        edges = np.array([0.0, -1.0, np.inf, -np.inf, np.nan])
+        np.testing.assert_array_equal(portable.log(edges), np.log(edges))
+        np.testing.assert_array_equal(portable.log1p(edges - 1.0), np.log1p(edges - 1.0))
+        np.testing.assert_array_equal(portable.exp(edges * 800), np.exp(edges * 800))
+        pairs = np.array([[0.0, 1.0], [-np.inf, -np.inf], [np.inf, np.inf], [3.0, -50.0]])
+        np.testing.assert_allclose(portable.logaddexp(pairs[:, 0], pairs[:, 1]),
+                                   np.logaddexp(pairs[:, 0], pairs[:, 1]), rtol=1e-15)  # fmt: skip
+    assert portable.exp(0.0) == 1.0  # a scalar gives a float
+
+
+def test_portable_matmul_follows_numpy_shapes_and_sums_in_index_order():
+    rng = np.random.default_rng(1)
+    stack, matrix, vector = rng.normal(size=(4, 3, 5)), rng.normal(size=(5, 2)), rng.normal(size=5)
+    pairs = (
+        (stack, matrix),
+        (stack, vector),
+        (vector, matrix),
+        (vector, vector),
+        (matrix.T, stack.transpose(0, 2, 1)),
+        (stack[:, None], np.stack([matrix, 2 * matrix])[None]),
+    )
+    for left, right in pairs:
+        np.testing.assert_allclose(portable.matmul(left, right), np.matmul(left, right),
+                                   rtol=1e-12, atol=1e-12)  # fmt: skip
+    # The order is the index order: 1e16 + 1 - 1e16 is 0 summed left to right.
+    assert portable.matmul(np.array([1e16, 1.0, -1e16]), np.ones(3)) == 0.0
+    assert portable.matmul(np.array([1e16, -1e16, 1.0]), np.ones(3)) == 1.0
+    with pytest.raises(ValueError, match="do not align"):
+        portable.matmul(stack, stack)
+
+
+def test_portable_spd_inverse_inverts_and_refuses_an_indefinite_matrix():
+    rng = np.random.default_rng(2)
+    factors = rng.normal(size=(6, 9, 9))
+    precision = factors @ factors.transpose(0, 2, 1) + 9 * np.eye(9)
+    inverse = portable.spd_inverse(precision)
+    np.testing.assert_allclose(inverse, np.linalg.inv(precision), rtol=1e-10, atol=1e-14)
+    np.testing.assert_array_equal(inverse, inverse.transpose(0, 2, 1))  # exactly symmetric
+    with pytest.raises(ValueError, match="not symmetric positive definite"):
+        portable.spd_inverse(np.diag([1.0, -1.0]))
+    with pytest.raises(ValueError, match="square"):
+        portable.spd_inverse(np.ones((2, 3)))
