@@ -243,3 +243,45 @@ def test_a_wrong_witness_under_a_recomputed_checksum_is_refused(tmp_path):
         ContextSet.load(tmp_path / "altered.npz")
     test.save(tmp_path / "intact.npz")
     assert ContextSet.load(tmp_path / "intact.npz") == test
+
+
+# --- Round 5 (issue 58): run paths checked before anything is made ---------------------
+
+
+def test_a_run_directory_name_that_is_not_utf8_is_one_line_and_makes_nothing(tmp_path, capsys):
+    """Its files (TensorBoard's among them) record the name as UTF-8: refused at once,
+    not a codec message after a half-made run."""
+    name = tmp_path / "r\udcff"  # the byte 0xff, as Python reads it from a command line
+    code, err = cli(["train", "smoke", "--run-dir", name], capsys)
+    assert code == 2 and "is not valid UTF-8" in one_line(err) and "r\\xff" in err
+    assert list(tmp_path.iterdir()) == []
+    from spikectl.training.presets import SMOKE
+    from spikectl.training.run import train
+
+    with pytest.raises(ValueError, match="is not valid UTF-8"):
+        train(SMOKE, name)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_run_path_through_a_file_is_named(tmp_path, capsys):
+    (tmp_path / "notes.txt").write_text("kept")
+    code, err = cli(["train", "smoke", "--run-dir", tmp_path / "notes.txt" / "run"], capsys)
+    assert code == 2 and f"lies in {tmp_path / 'notes.txt'}, a file" in one_line(err)
+
+
+@pytest.mark.parametrize("seeds", [None, (0, 1)])
+def test_a_refusal_while_a_run_sets_up_leaves_no_directory(tmp_path, seeds):
+    """A context file refused after the run directory was made (a seed group's too):
+    what was made goes again, so nothing half-made stays."""
+    from spikectl.training.presets import SMOKE
+    from spikectl.training.run import train, train_seeds
+
+    bad = tmp_path / "bad.npz"
+    bad.write_text("not a context set")
+    config = SMOKE.with_changes(train_contexts=bad)
+    with pytest.raises(ContextFileError, match="bad.npz"):
+        if seeds is None:
+            train(config, tmp_path / "run")
+        else:
+            train_seeds(config, list(seeds), tmp_path / "run")
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["bad.npz"]

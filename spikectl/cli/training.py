@@ -82,7 +82,7 @@ def train(command: TrainCommand) -> None:
     baselines (for a group, each seed's)."""
     from spikectl.training.group import GROUP_FILE, group_configs, group_is_stacked, seed_dirs
     from spikectl.training.run import train_runs
-    from spikectl.training.run_files import read_config
+    from spikectl.training.run_files import check_run_path, read_config
 
     resume, stacked = command.resume is not None, command.stacked
     if resume:
@@ -119,6 +119,8 @@ def train(command: TrainCommand) -> None:
         run_dirs = [command.run_dir or Path(
             f"runs/{config.agent.arch}-{command.preset}-seed{config.train.seed}"
         )]  # fmt: skip
+    if not resume:  # before the directory is named: a name that cannot be printed
+        check_run_path(group_dir or run_dirs[0])
     if group_dir is None:
         print(f"run directory: {run_dirs[0]}")
     else:

@@ -22,6 +22,7 @@ from __future__ import annotations
 import contextlib
 import dataclasses
 import math
+import os
 import time
 import warnings
 from dataclasses import fields
@@ -57,7 +58,9 @@ from spikectl.training.run_files import (
     BEST_MODEL_FILE,
     RunDirError,
     check_device,
+    check_run_path,
     prepare_run_dir,
+    remove_unstarted,
     run_lock,
     write_metrics,
 )
@@ -120,6 +123,10 @@ def train_runs(
     (all locked while they train), as a seed group when ``group_dir`` is given (whose
     directory then holds the checkpoint of all K)."""
     run_dirs = [Path(d) for d in run_dirs]
+    # The group's directory first: its seed directories lie in it.
+    directories = run_dirs if group_dir is None else [Path(group_dir), *run_dirs]
+    for path in directories:
+        check_run_path(path)
     check_group(configs, run_dirs)
     if stacked:
         check_stacked(configs)  # before any directory is made
@@ -130,18 +137,26 @@ def train_runs(
     check_device(configs[0].train.device)
     if group_dir is None and len(configs) > 1:
         raise ValueError("several runs in one process are a seed group: give group_dir")
-    with contextlib.ExitStack() as locks:
-        if group_dir is not None:
-            locks.enter_context(run_lock(Path(group_dir)))
-        for run_dir in run_dirs:
-            locks.enter_context(run_lock(run_dir))
-        if group_dir is None:
-            where = run_dirs[0]
-            resume = prepare_run_dir(configs[0], where, resume)
-        else:
-            where = Path(group_dir)
-            resume = prepare_group(configs, run_dirs, where, resume, stacked)
-        return Loop(configs, run_dirs, where, stacked).run(resume)
+    made = [path for path in directories if not os.path.lexists(path)]
+    try:
+        with contextlib.ExitStack() as locks:
+            if group_dir is not None:
+                locks.enter_context(run_lock(Path(group_dir)))
+            for run_dir in run_dirs:
+                locks.enter_context(run_lock(run_dir))
+            if group_dir is None:
+                where = run_dirs[0]
+                resume = prepare_run_dir(configs[0], where, resume)
+            else:
+                where = Path(group_dir)
+                resume = prepare_group(configs, run_dirs, where, resume, stacked)
+            return Loop(configs, run_dirs, where, stacked).run(resume)
+    except Exception:
+        # A refusal before the run's first evaluation (a bad context file, an
+        # impossible task): the directories this call made go again, nothing half-made
+        # stays. A Ctrl-C or SIGTERM keeps them (a restart takes them over).
+        remove_unstarted(made)
+        raise
 
 
 class Loop:

@@ -15,6 +15,7 @@ import contextlib
 import csv
 import io
 import math
+import os
 import shutil
 from collections.abc import Iterator
 from pathlib import Path
@@ -96,6 +97,29 @@ def run_lock(run_dir: Path) -> Iterator[None]:
         yield
 
 
+def check_run_path(run_dir: Path, flag: str = "--run-dir") -> None:
+    """Refuse, before anything is made, a run directory that could not be completed: a
+    name that is not UTF-8 (its files, TensorBoard's among them, record it as UTF-8
+    text), a path through a file, or a folder this process may not write in. ValueError
+    naming ``flag``."""
+    try:
+        str(run_dir).encode("utf-8")
+    except UnicodeEncodeError:
+        shown = os.fsencode(run_dir).decode("ascii", "backslashreplace")
+        raise ValueError(
+            f"{flag} {shown}: the name is not valid UTF-8 (a run records its directory in "
+            "UTF-8 files): choose a name in UTF-8"
+        ) from None
+    existing = Path(run_dir)
+    while not os.path.lexists(existing) and existing != existing.parent:
+        existing = existing.parent
+    if existing.exists() and not existing.is_dir():
+        what = "is a file" if existing == Path(run_dir) else f"lies in {existing}, a file"
+        raise ValueError(f"{flag} {run_dir}: it {what}, not a folder")
+    if existing.is_dir() and not os.access(existing, os.W_OK | os.X_OK):
+        raise ValueError(f"{flag} {run_dir}: {existing} is not writable by this user")
+
+
 def prepare_run_dir(config: Experiment, run_dir: Path, resume: bool) -> bool:
     """Create a new run directory, or check that ``run_dir`` holds this run to resume.
 
@@ -142,6 +166,20 @@ def prepare_run_dir(config: Experiment, run_dir: Path, resume: bool) -> bool:
     make_dirs(run_dir)
     write_json(config_path, config.to_dict())
     return False
+
+
+def remove_unstarted(made: list[Path]) -> None:
+    """Remove the run directories in ``made`` (made by this process) that hold no
+    evaluation and no checkpoint yet: what a run refused while it set up leaves. Seed
+    directories first, the group's last (it holds them)."""
+    for path in reversed(made):
+        if not path.is_dir() or any(
+            (run_dir / name).exists()
+            for run_dir in (path, *path.glob("seed=*"))
+            for name in (METRICS_FILE, CHECKPOINT_FILE)
+        ):
+            continue
+        shutil.rmtree(path, ignore_errors=True)
 
 
 def _holds_only_a_config(run_dir: Path) -> bool:
