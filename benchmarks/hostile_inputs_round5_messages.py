@@ -260,7 +260,7 @@ PROBES = [
             "--episode-length",
             "20",
         ],
-        words=("test_contexts.npz", "link"),
+        words=("test_contexts.npz",),
         absent=("out/train_contexts.npz",),
     ),  # fmt: skip
     MessageProbe(

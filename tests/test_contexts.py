@@ -301,3 +301,48 @@ def test_context_equality():
     assert a == Context(a.weights, a.target, a.pattern, a.witness)
     assert a != b
     assert a != Context(a.weights, a.target, a.pattern)
+
+
+def test_a_pair_of_sets_is_written_whole_or_not_at_all(tmp_path, monkeypatch):
+    from spikectl.contexts.context_set import save_sets
+
+    train, test = make_splits(2, 2, 5, 20, seed=1)
+    (tmp_path / "kept.npz").write_text("kept")
+    (tmp_path / "test.npz").symlink_to(tmp_path / "kept.npz")
+    pair = {tmp_path / "train.npz": train, tmp_path / "test.npz": test}
+    with pytest.raises(ValueError, match=r"test.npz is a symbolic link; refusing to replace"):
+        save_sets(pair)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.npz", "test.npz"]
+    assert (tmp_path / "kept.npz").read_text() == "kept"
+    (tmp_path / "test.npz").unlink()
+    real_save = ContextSet.save
+
+    def full_disk_on_the_second(self, path):
+        if self is test:
+            raise OSError(28, "No space left on device")
+        return real_save(self, path)
+
+    monkeypatch.setattr(ContextSet, "save", full_disk_on_the_second)
+    with pytest.raises(OSError):
+        save_sets(pair)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["kept.npz"]  # no temporaries
+    monkeypatch.undo()
+    assert save_sets(pair) == [tmp_path / "train.npz", tmp_path / "test.npz"]
+    assert ContextSet.load(tmp_path / "test.npz") == test
+
+
+def test_spikectl_contexts_leaves_no_half_pair_beside_a_link(tmp_path, capsys):
+    from spikectl.cli import main
+
+    out = tmp_path / "out"
+    out.mkdir()
+    (tmp_path / "kept.npz").write_text("kept")
+    (out / "test_contexts.npz").symlink_to(tmp_path / "kept.npz")
+    with pytest.raises(SystemExit) as exit:
+        main(["contexts", "--out-dir", str(out), "--n-train", "2", "--n-test", "2",
+              "--n-neurons", "5", "--episode-length", "20", "--overwrite"])  # fmt: skip
+    assert exit.value.code == 2
+    (line,) = capsys.readouterr().err.strip().splitlines()
+    assert line.startswith(f"spikectl: error: {out / 'test_contexts.npz'} is a symbolic link")
+    assert not (out / "train_contexts.npz").exists()
+    assert (tmp_path / "kept.npz").read_text() == "kept"

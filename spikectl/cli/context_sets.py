@@ -10,6 +10,7 @@ import numpy as np
 
 from spikectl.cli.output import refuse_existing
 from spikectl.contexts import ContextSet, make_splits
+from spikectl.contexts.context_set import check_set_outputs, save_sets
 from spikectl.files import folder_lock, make_dirs, write_json
 
 
@@ -139,9 +140,13 @@ def contexts(config: ContextsConfig) -> None:
     with folder_lock(config.out_dir, "writing context sets"):
         refuse_existing(config.out_dir, tuple(path.name for path in paths.values()),
                         config.overwrite)  # fmt: skip
+        check_set_outputs(paths.values())  # before the sets are made
         train, test = make_splits(
             config.n_train, config.n_test, config.n_neurons, config.episode_length, config.seed
         )
-        for name, contexts_set in (("train", train), ("test", test)):
-            path = contexts_set.save(paths[name])
+        # Both checked before either is written, and renamed into place together: a
+        # refused or failed write leaves no half pair (a link as the test set once left
+        # a new training set beside it).
+        written = save_sets({paths["train"]: train, paths["test"]: test})
+        for path, contexts_set in zip(written, (train, test), strict=True):
             print(f"wrote {path}: {contexts_set!r}")

@@ -12,7 +12,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-from collections.abc import Iterator, Mapping, Sequence
+import stat
+from collections.abc import Iterable, Iterator, Mapping, Sequence
 from itertools import accumulate
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Literal, overload
@@ -340,6 +341,48 @@ class ContextSet(Sequence[Context]):
                     "its pattern in the target neuron"
                 )
         return loaded
+
+
+def save_sets(sets: Mapping[str | os.PathLike, ContextSet]) -> list[Path]:
+    """Write several sets as one (a training and a test set): every output is checked
+    before any is written (a folder, a symbolic link, a FIFO or a device is refused,
+    ValueError naming it), each set goes to a temporary file beside its output, and only
+    when all are written are they renamed into place. A refusal or a failed write leaves
+    none of them written. Returns the paths (``.npz`` added as :meth:`ContextSet.save`
+    adds it)."""
+    paths = check_set_outputs(sets)
+    pending = [path.with_name(f".{path.name}.{os.getpid()}.pending.npz") for path in paths]
+    try:
+        for contexts, temporary in zip(sets.values(), pending, strict=True):
+            contexts.save(temporary)
+        for temporary, path in zip(pending, paths, strict=True):
+            os.replace(temporary, path)
+    finally:
+        for temporary in pending:
+            temporary.unlink(missing_ok=True)
+    return paths
+
+
+def check_set_outputs(outputs: Iterable[str | os.PathLike]) -> list[Path]:
+    """The paths :func:`save_sets` writes, each checked: an existing folder, symbolic
+    link, FIFO or device is refused (ValueError naming it) before any set is made."""
+    paths = []
+    for given in outputs:
+        path = Path(given)
+        paths.append(path if path.suffix == ".npz" else path.with_suffix(path.suffix + ".npz"))
+    for path in paths:
+        try:
+            mode = os.lstat(path).st_mode
+        except FileNotFoundError:
+            continue
+        if not stat.S_ISREG(mode):
+            kind = "a symbolic link" if stat.S_ISLNK(mode) else "not a regular file"
+            kind = "a folder" if stat.S_ISDIR(mode) else kind
+            raise ValueError(
+                f"{path} is {kind}; refusing to replace it (nothing was written: remove it, "
+                "or write the sets elsewhere)"
+            )
+    return paths
 
 
 @overload
