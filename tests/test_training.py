@@ -338,6 +338,78 @@ def test_resume_after_sigkill_is_exact(
     assert_same_weights(killed / "best_model.pt", reference / "best_model.pt")
 
 
+def test_sigterm_checkpoints_says_so_and_the_resume_is_exact(
+    tmp_path, comparable, assert_same_weights, run_cli, wait_until
+):
+    """SIGTERM (what Slurm and Docker send) during ``spikectl train``, a real process
+    started as the installed command is: the round under way finishes, a checkpoint of
+    it is written, one line says where, the exit status is 143 (128 + 15); ``--resume``
+    then gives the rows and weights of a run never stopped. Its only mid-run checkpoint
+    is SIGTERM's (the scheduled one is at the end)."""
+    import re
+    import signal
+    import subprocess
+    import sys
+
+    flags = ("--checkpoint-every-episodes", "320")
+    reference = tmp_path / "reference"
+    run_cli("train", "smoke", *flags, "--run-dir", str(reference))
+    stopped = tmp_path / "stopped"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "_spikectl_launcher", "train", "smoke", *flags,
+         "--run-dir", str(stopped)],
+        stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+    )  # fmt: skip
+    metrics = stopped / "metrics.csv"
+    wait_until(
+        lambda: metrics.exists() and len(metrics.read_text().splitlines()) >= 3,
+        "the evaluation at episode 80", timeout_s=120, process=process,
+    )  # fmt: skip
+    process.send_signal(signal.SIGTERM)
+    _, err = process.communicate(timeout=120)
+    assert process.returncode == 143, err
+    (line,) = err.strip().splitlines()
+    found = re.fullmatch(
+        rf"spikectl: terminated \(SIGTERM\): checkpoint written at episode (\d+) in "
+        rf"{re.escape(str(stopped))}; continue with spikectl train --resume "
+        rf"{re.escape(str(stopped))}", line,
+    )  # fmt: skip
+    assert found, line
+    assert 80 < int(found.group(1)) < 320, "stopped too late to test anything"
+    assert (stopped / "checkpoint.pt").exists() and not (stopped / "model.pt").exists()
+    run_cli("train", "--resume", str(stopped))
+    assert comparable(read_metrics(stopped)) == comparable(read_metrics(reference))
+    assert_same_weights(stopped / "model.pt", reference / "model.pt")
+    assert_same_weights(stopped / "best_model.pt", reference / "best_model.pt")
+
+
+def test_sigterm_outside_training_ends_a_command_in_one_line(monkeypatch, capsys):
+    """Any other command ends on SIGTERM as on a Ctrl-C: one line, exit 143 (it was the
+    signal's silent kill, -15). In this process: the command sends itself SIGTERM."""
+    import os
+    import signal
+    import time
+
+    import spikectl.cli as cli
+
+    def terminated_while_running(command):
+        # Without spikectl's handler SIGTERM would end the test run itself: fail instead.
+        assert signal.getsignal(signal.SIGTERM) is not signal.SIG_DFL, "SIGTERM not handled"
+        os.kill(os.getpid(), signal.SIGTERM)
+        time.sleep(10)
+        raise AssertionError("SIGTERM did not end the command")
+
+    monkeypatch.setitem(cli.COMMANDS, "demo", (terminated_while_running, cli.DemoConfig))
+    with pytest.raises(SystemExit) as exit:
+        cli.main(["demo"])
+    assert exit.value.code == 143
+    assert capsys.readouterr().err.strip().splitlines() == [
+        "spikectl: terminated (SIGTERM) (a training run or sweep continues from its last "
+        "checkpoint: spikectl train --resume RUN_DIR, or the same sweep command)"
+    ]
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL  # restored after the command
+
+
 def test_evaluate_reproduces_the_last_evaluation_exactly(tmp_path):
     """evaluate_run scores as training did: the same networks, the same greedy episodes,
     on the run's own thread count whatever the caller's (then restored)."""
@@ -374,3 +446,20 @@ def test_cli_train_then_evaluate(tmp_path, run_cli):
     )
     again = run_cli("train", "smoke", "--run-dir", str(run), check=False)
     assert again.returncode == 2 and "already holds a run" in again.stderr
+
+
+def test_a_second_sigterm_while_the_round_finishes_stops_at_once():
+    import os
+    import signal
+
+    from spikectl.training.termination import Terminated, deferred_termination
+
+    with deferred_termination() as requested:
+        assert not requested()
+        os.kill(os.getpid(), signal.SIGTERM)  # recorded, nothing raised
+        assert requested()
+        with pytest.raises(Terminated):
+            os.kill(os.getpid(), signal.SIGTERM)
+            for _ in range(1000):  # the handler runs between bytecodes
+                pass
+    assert signal.getsignal(signal.SIGTERM) is signal.SIG_DFL

@@ -29,9 +29,12 @@ from spikectl.cli.errors import (
 )
 from spikectl.cli.interrupts import (
     INTERRUPTED,
+    TERMINATED,
+    TERMINATED_EXIT_STATUS,
     caused_by_interrupt,
     ignore_interrupts_at_exit,
     interrupts_delivered,
+    terminated_by,
 )
 from spikectl.cli.realtime import RealtimeCommand, realtime
 from spikectl.cli.runs import EvaluateCommand, PlotCommand, SweepCommand, evaluate, plot, sweep
@@ -89,6 +92,10 @@ def main(argv: list[str] | None = None) -> None:
         if not caused_by_interrupt(error):
             raise
         ignore_interrupts_at_exit()
+        terminated = terminated_by(error)
+        if terminated is not None:  # SIGTERM: a run says what it kept
+            print(f"spikectl: {terminated}" if str(terminated) else TERMINATED, file=sys.stderr)
+            raise SystemExit(TERMINATED_EXIT_STATUS) from None
         print(INTERRUPTED, file=sys.stderr)
         raise SystemExit(130) from None
     except OSError as error:

@@ -1,4 +1,5 @@
-"""How a Ctrl-C ends a ``spikectl`` command: one line, exit 130, whatever it interrupted.
+"""How a Ctrl-C (or SIGTERM) ends a ``spikectl`` command: one line, exit 130 (143),
+whatever it interrupted.
 
 Python loses or garbles a Ctrl-C in four places, and each has its owner here:
 
@@ -19,6 +20,12 @@ Python loses or garbles a Ctrl-C in four places, and each has its owner here:
   press would end it by the signal instead of 130, or interrupt a module half-way through
   its teardown; ``ignore_interrupts_at_exit`` lets it pass.
 
+SIGTERM (what Slurm and Docker send before they kill) ends a command the same way, with
+its own line and exit 143 (128 + 15): ``interrupts_delivered`` raises
+:class:`~spikectl.training.termination.Terminated`, a KeyboardInterrupt, held back inside
+llvmlite as a Ctrl-C is. A training run takes SIGTERM itself while it trains: it finishes
+the round, writes a checkpoint and then stops (``spikectl.training.termination``).
+
 The installed ``spikectl`` script's launcher (``_spikectl_launcher``) covers the imports
 before this package has loaded, with the standard library only.
 """
@@ -35,10 +42,18 @@ from collections.abc import Callable, Iterator
 from types import FrameType
 from typing import Any
 
+from spikectl.training.termination import Terminated
+
 INTERRUPTED = (
     "spikectl: interrupted (a training run or sweep continues from its last checkpoint: "
     "spikectl train --resume RUN_DIR, or the same sweep command)"
 )
+TERMINATED = (
+    "spikectl: terminated (SIGTERM) (a training run or sweep continues from its last "
+    "checkpoint: spikectl train --resume RUN_DIR, or the same sweep command)"
+)
+TERMINATED_EXIT_STATUS = 128 + signal.SIGTERM
+"""143, as a shell reports a process SIGTERM ended (Slurm and Docker read it so)."""
 REDELIVERY_DELAY_S = 0.05
 """Seconds between a Ctrl-C held back (or lost in a callback) and raising it again: time
 for a callback to return to its C caller (microseconds); inside llvmlite it is checked
@@ -50,9 +65,11 @@ passes, which can run for many seconds, may be interrupted)."""
 
 
 class _Redelivery:
-    """At most one timer that simulates SIGINT again (``_thread.interrupt_main``)."""
+    """At most one timer that simulates ``signum`` (SIGINT, or SIGTERM) again
+    (``_thread.interrupt_main``)."""
 
-    def __init__(self) -> None:
+    def __init__(self, signum: int = signal.SIGINT) -> None:
+        self.signum = signum
         self.timer: threading.Timer | None = None  # the redelivery not yet fired
         self.lost_in_a_callback = False
 
@@ -64,7 +81,7 @@ class _Redelivery:
 
     def _fire(self) -> None:
         self.timer = None  # first, so that a second hold or loss re-arms
-        _thread.interrupt_main()
+        _thread.interrupt_main(self.signum)
 
     def cancel(self) -> bool:
         """Cancel a redelivery not yet fired; whether there was one."""
@@ -87,30 +104,34 @@ def interrupts_delivered() -> Iterator[None]:
     when the block finishes is raised at its end: the user pressed it. Any other
     unraisable exception goes to the hook that was there before.
     """
-    redelivery = _Redelivery()
+    redelivery, termination = _Redelivery(), _Redelivery(signal.SIGTERM)
     previous_hook = sys.unraisablehook
     previous_handler = signal.getsignal(signal.SIGINT)
+    main_thread = threading.current_thread() is threading.main_thread()
     # Only where a Python handler would raise (a job started in the background ignores
     # SIGINT), and only in the main thread, the one Python's signal handlers run in.
-    wrapped = (
-        previous_handler
-        if callable(previous_handler) and threading.current_thread() is threading.main_thread()
-        else None
-    )
+    wrapped = previous_handler if callable(previous_handler) and main_thread else None
+    # SIGTERM only where it would kill the process (never where it is ignored or handled).
+    terminates = main_thread and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
 
     def unraisable(report: sys.UnraisableHookArgs) -> None:
         if not isinstance(report.exc_value, KeyboardInterrupt):
             previous_hook(report)
             return
-        redelivery.lost_in_a_callback = True
-        redelivery.arm()
+        lost = termination if isinstance(report.exc_value, Terminated) else redelivery
+        lost.lost_in_a_callback = True
+        lost.arm()
 
     sys.unraisablehook = unraisable
     if wrapped is not None:
         signal.signal(signal.SIGINT, _held_inside(wrapped, redelivery))
+    if terminates:
+        signal.signal(signal.SIGTERM, _held_inside(_terminate, termination))
     try:
         yield
     except BaseException as error:  # noqa: B036 - only re-labelled, always re-raised
+        if termination.lost_in_a_callback and not caused_by_interrupt(error):
+            raise Terminated from error
         if redelivery.lost_in_a_callback and not caused_by_interrupt(error):
             raise KeyboardInterrupt from error
         raise
@@ -118,9 +139,30 @@ def interrupts_delivered() -> Iterator[None]:
         sys.unraisablehook = previous_hook
         if wrapped is not None:
             signal.signal(signal.SIGINT, wrapped)
-        held = redelivery.cancel()
-    if held:  # only reached when the block itself raised nothing
+        if terminates:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        held, held_termination = redelivery.cancel(), termination.cancel()
+    if held_termination:  # only reached when the block itself raised nothing
+        raise Terminated
+    if held:
         raise KeyboardInterrupt
+
+
+def _terminate(signum: int, frame: FrameType | None) -> None:
+    """SIGTERM's handler: end the command as a Ctrl-C would, with its own line and exit
+    status (a training run takes SIGTERM itself: it checkpoints first)."""
+    raise Terminated
+
+
+def terminated_by(error: BaseException | None) -> Terminated | None:
+    """The :class:`Terminated` that ``error`` is or was caused by (SIGTERM), or None."""
+    seen = set()
+    while error is not None and id(error) not in seen:
+        if isinstance(error, Terminated):
+            return error
+        seen.add(id(error))
+        error = error.__cause__ or error.__context__
+    return None
 
 
 def _held_inside(
@@ -160,7 +202,7 @@ def caused_by_interrupt(error: BaseException | None) -> bool:
 
 
 def ignore_interrupts_at_exit() -> None:
-    """Let a further Ctrl-C pass while the process shuts down (an exit handler).
+    """Let a further Ctrl-C or SIGTERM pass while the process shuts down (an exit handler).
 
     Only at exit: a caller that catches the SystemExit (a notebook, a docs build) keeps
     its Ctrl-C. The ``spikectl`` command's launcher does the same around ``main``.
@@ -172,3 +214,4 @@ def ignore_interrupts_at_exit() -> None:
 def _ignore_interrupts() -> None:
     with contextlib.suppress(ValueError):  # not the main thread
         signal.signal(signal.SIGINT, signal.SIG_IGN)
+        signal.signal(signal.SIGTERM, signal.SIG_IGN)  # a second one, after the first

@@ -65,6 +65,7 @@ from spikectl.training.run_files import (
     write_metrics,
 )
 from spikectl.training.run_logger import RunLogger
+from spikectl.training.termination import TrainingTerminated, deferred_termination
 from spikectl.training.torch_files import save_model
 
 METRIC_FIELDS = (
@@ -168,6 +169,7 @@ class Loop:
         self.configs, self.run_dirs, self.where, self.stacked = configs, run_dirs, where, stacked
         self.config = configs[0]  # the settings every seed shares
         self.K, self.E = len(configs), self.config.train.num_envs
+        self.checkpointed = -1  # the episode count of this process's last checkpoint
 
     def run(self, resume: bool) -> list[list[dict]]:
         config, K = self.config, self.K
@@ -221,10 +223,16 @@ class Loop:
             time.perf_counter() - self.states[0].wall_time_s,
             time.process_time() - self.states[0].cpu_time_s,
         )
-        if not self.states[0].metrics:
-            self.evaluate()
-        while self.states[0].episodes < config.total_episodes:
-            self.round()
+        with deferred_termination() as termination_requested:
+            if not self.states[0].metrics:
+                self.evaluate()
+            while self.states[0].episodes < config.total_episodes:
+                self.round()
+                if termination_requested() and self.states[0].episodes < config.total_episodes:
+                    # SIGTERM (Slurm, Docker): this round's end is a point to resume from.
+                    if self.checkpointed != self.states[0].episodes:
+                        self.checkpoint()
+                    raise TrainingTerminated(self.where, self.states[0].episodes)
         for k, (run_dir, logger) in enumerate(zip(self.run_dirs, self.loggers, strict=True)):
             save_model(run_dir, self.learners.network(k))
             logger.close()  # TensorBoard last: its failure must cost no run file
@@ -274,11 +282,16 @@ class Loop:
         if finished or crossed_multiple(before, after, config.train.eval_every_episodes):
             self.evaluate()
         if finished or crossed_multiple(before, after, config.train.checkpoint_every_episodes):
-            self.clock()
-            save_checkpoint(
-                self.where, self.configs, states, self.learners.state_dict(), self.run_dirs,
-                self.stacked,
-            )  # fmt: skip
+            self.checkpoint()
+
+    def checkpoint(self) -> None:
+        """Save the whole state of every seed at this round's end, the clocks first."""
+        self.clock()
+        save_checkpoint(
+            self.where, self.configs, self.states, self.learners.state_dict(), self.run_dirs,
+            self.stacked,
+        )  # fmt: skip
+        self.checkpointed = self.states[0].episodes
 
     def _seed_label(self, run_dir: Path) -> str:
         return "" if self.K == 1 else f", seed {run_dir.name}"
