@@ -71,6 +71,7 @@ READERS = {
     "CompiledPolicy.load": ((FileKind.POLICY,), "a compiled policy is"),
     "load_model_weights": ((FileKind.MODEL, FileKind.BEST_MODEL), "a model file is"),
     "read_checkpoint": ((FileKind.CHECKPOINT,), "a checkpoint is"),
+    "read_config": ((FileKind.RUN_DIR,), "a run directory is a folder spikectl train wrote"),
 }
 OTHERS = (FileKind.MODEL, FileKind.BEST_MODEL, FileKind.CHECKPOINT, FileKind.POLICY,
           FileKind.CONTEXT_SET)  # fmt: skip
@@ -81,12 +82,13 @@ def read(reader: str, path: Path):
     from spikectl.contexts import ContextSet
     from spikectl.training.checkpoint import read_checkpoint
     from spikectl.training.controllers import load_controller
+    from spikectl.training.run_files import read_config
     from spikectl.training.torch_files import load_model_weights
 
     return {
         "load_controller": load_controller, "ContextSet.load": ContextSet.load,
         "CompiledPolicy.load": CompiledPolicy.load, "load_model_weights": load_model_weights,
-        "read_checkpoint": read_checkpoint,
+        "read_checkpoint": read_checkpoint, "read_config": read_config,
     }[reader](path)  # fmt: skip
 
 

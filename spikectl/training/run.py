@@ -152,10 +152,11 @@ def train_runs(
                 where = Path(group_dir)
                 resume = prepare_group(configs, run_dirs, where, resume, stacked)
             return Loop(configs, run_dirs, where, stacked).run(resume)
-    except Exception:
+    except (ValueError, RunDirError, FileNotFoundError):
         # A refusal before the run's first evaluation (a bad context file, an
         # impossible task): the directories this call made go again, nothing half-made
-        # stays. A Ctrl-C or SIGTERM keeps them (a restart takes them over).
+        # stays. A Ctrl-C, SIGTERM or a failing disk keeps them: their message says to
+        # resume, which restarts the run from step 0.
         remove_unstarted(made)
         raise
 

@@ -23,6 +23,7 @@ from typing import Any
 
 import torch
 
+from spikectl.file_kinds import FileKind, describe, identify
 from spikectl.files import (
     LOCK_FILE,
     atomic_write_text,
@@ -212,6 +213,12 @@ def remove_temporaries(run_dir: Path) -> None:
 
 def read_config(run_dir: Path) -> Experiment:
     """The resolved config saved in a run directory."""
+    kind = identify(run_dir)
+    if kind not in (FileKind.RUN_DIR, FileKind.FOLDER, FileKind.MISSING):
+        raise RunDirError(
+            f"{describe(run_dir, kind)}; a run directory is a folder spikectl train wrote "
+            "(its config.json and the run's files)"
+        )
     path = Path(run_dir) / CONFIG_FILE
     try:
         values = read_json_file(path)
