@@ -271,17 +271,16 @@ def test_a_run_path_through_a_file_is_named(tmp_path, capsys):
 
 @pytest.mark.parametrize("seeds", [None, (0, 1)])
 def test_a_refusal_while_a_run_sets_up_leaves_no_directory(tmp_path, seeds):
-    """A context file refused after the run directory was made (a seed group's too):
-    what was made goes again, so nothing half-made stays."""
+    """A test set refused after the run directory was made (its episodes are longer than
+    the run's), a seed group's too: what was made goes again, nothing half-made stays."""
     from spikectl.training.presets import SMOKE
     from spikectl.training.run import train, train_seeds
 
-    bad = tmp_path / "bad.npz"
-    bad.write_text("not a context set")
-    config = SMOKE.with_changes(train_contexts=bad)
-    with pytest.raises(ContextFileError, match="bad.npz"):
+    make_splits(3, 3, 5, 30, seed=4)[1].save(tmp_path / "long.npz")
+    config = SMOKE.with_changes(test_contexts=tmp_path / "long.npz")
+    with pytest.raises(ValueError, match="episodes of 30 steps; the config says 5 and 20"):
         if seeds is None:
             train(config, tmp_path / "run")
         else:
             train_seeds(config, list(seeds), tmp_path / "run")
-    assert sorted(path.name for path in tmp_path.iterdir()) == ["bad.npz"]
+    assert sorted(path.name for path in tmp_path.iterdir()) == ["long.npz"]
