@@ -1,16 +1,19 @@
 #!/usr/bin/env bash
 # The commands that produced the CSVs of docs/benchmark.md (suite v1, test sets), run from
-# the repository root with the package installed. One BLAS / PyTorch thread each.
+# the repository root with the package installed. One BLAS / PyTorch thread each. The
+# training-free controllers' rows are the same on every CPU kind (their floats do not go
+# through NumPy's SIMD maths or BLAS: spikectl/planning/portable.py, tests/test_cpu_kinds.py);
+# --overwrite replaces the committed CSVs.
 set -euo pipefail
 out=docs/results/suite
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
 for controller in do-nothing random oracle; do
-    spikectl benchmark "$controller" --task all --out "$out/$controller.csv"
+    spikectl benchmark "$controller" --task all --out "$out/$controller.csv" --overwrite
 done
 # Identify-and-plan's rows and its return on every test network (the per-network file the
 # result tables compare learners with: docs/results/result_tables.py's PLANNER_TEST).
 spikectl benchmark identify-and-plan --task all --out "$out/identify-and-plan.csv" \
-    --per-network "$out/identify-and-plan-per-network.csv"
+    --per-network "$out/identify-and-plan-per-network.csv" --overwrite
 # Identify-and-plan's CPU seconds per episode and per-decision CPU-time percentiles.
 python docs/results/bayes-identify/sweep.py --split test --settings '{"named": true}' \
     --tasks paper noise1 noise2 noise4 hidden25 stochastic heterogeneous background n16 n32 \
