@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import enum
 import json
+import math
 import os
 import pickletools
 import stat
@@ -140,15 +141,27 @@ def _zip_kind(archive: zipfile.ZipFile) -> FileKind:
 
 
 def _npz_header(archive: zipfile.ZipFile, info: zipfile.ZipInfo) -> str | None:
-    """The ``format`` of a ``.npz`` file's JSON header (its ``metadata`` array), or None."""
+    """The ``format`` of a ``.npz`` file's JSON header (its ``metadata`` array), or None.
+    The array's own header is read first and its size bounded before any data is: a
+    crafted header claiming gigabytes allocates nothing."""
     if info.file_size > MAX_HEADER_BYTES:
         return None
     import numpy as np
 
     with archive.open(info) as member:
         try:
-            text = str(np.lib.format.read_array(member, allow_pickle=False))
-        except ValueError:
+            version = np.lib.format.read_magic(member)
+            read_header = (
+                np.lib.format.read_array_header_1_0
+                if version == (1, 0)
+                else np.lib.format.read_array_header_2_0
+            )
+            shape, _, dtype = read_header(member)
+            count = math.prod(shape)
+            if dtype.kind != "U" or count != 1 or dtype.itemsize > MAX_HEADER_BYTES:
+                return None
+            text = str(np.frombuffer(member.read(dtype.itemsize), dtype=dtype, count=1)[0])
+        except (ValueError, TypeError, EOFError):
             return None
     try:
         header = json.loads(text)

@@ -117,3 +117,26 @@ def test_the_cli_names_the_kind_in_one_line(files, run_cli):
         "controller is a run directory, a compiled policy file (.npz from export_policy) or "
         "one of do-nothing, random, identify-and-plan, oracle, witness"
     ]
+
+
+def test_a_header_claiming_gigabytes_allocates_nothing(tmp_path):
+    """The kind of an .npz is read from its metadata array's own header first: a header
+    claiming a 2 GB string is no context set or policy, and nothing of that size is made."""
+    import io
+    import tracemalloc
+    import zipfile
+
+    import numpy as np
+
+    header = io.BytesIO()
+    np.lib.format.write_array_header_1_0(
+        header, {"descr": "<U500000000", "fortran_order": False, "shape": ()}
+    )
+    with zipfile.ZipFile(tmp_path / "bomb.npz", "w") as archive:
+        archive.writestr("metadata.npy", header.getvalue() + b"{}" * 50)
+    tracemalloc.start()
+    try:
+        assert identify(tmp_path / "bomb.npz") is FileKind.NPZ_FILE
+        assert tracemalloc.get_traced_memory()[1] < 2**24
+    finally:
+        tracemalloc.stop()
