@@ -241,6 +241,9 @@ def test_identify_and_plan_replays_the_committed_suite_returns(task, count):
 
 
 @pytest.mark.slow
-def test_identify_and_plan_replays_the_committed_n16_returns():
-    np.testing.assert_allclose(_replay("n16", 3), _committed_returns("n16")[:3],
+@pytest.mark.parametrize(("task", "count"), [("n16", 3), ("n32", 1)])
+def test_identify_and_plan_replays_the_committed_returns_of_larger_networks(task, count):
+    # n32's first network is one of the 23 of 100 whose committed return changed when the
+    # planners' floats stopped depending on the CPU (0.659 -> 0.690).
+    np.testing.assert_allclose(_replay(task, count), _committed_returns(task)[:count],
                                rtol=0, atol=1e-9)  # fmt: skip
