@@ -186,7 +186,9 @@ def trained_and_scored_again(changes: dict, run_dir) -> GreedyController:
     from spikectl.training.run import train
     from spikectl.training.run_files import read_metrics
 
-    train(SMOKE.with_changes(changes, n_val=3), run_dir)
+    # Four rounds, evaluated at episodes 0, 16 and 32: the last evaluation follows updates.
+    train(SMOKE.with_changes(changes, n_val=3, total_env_steps=4 * 20 * 8,
+                             eval_every_episodes=16), run_dir)  # fmt: skip
     final = read_metrics(run_dir)[-1]
     results = {result.name: result.mean for result in evaluate_run(run_dir)}
     assert results == {"train": final["train_return"], "test": final["test_return"],

@@ -97,7 +97,7 @@ def test_each_seed_of_a_group_keeps_its_own_best_model(tmp_path):
 
 def test_cli_prints_and_evaluates_the_selected_network(tmp_path, run_cli):
     run = tmp_path / "run"
-    out = run_cli("train", "smoke", "--total-env-steps", "3200", "--run-dir", str(run)).stdout
+    out = run_cli("train", "smoke", "--total-env-steps", "1600", "--run-dir", str(run)).stdout
     best = best_on_validation(read_metrics(run))
     assert f"best on val.     {best['train_return']:.3f}   {best['test_return']:.3f}" in out
     assert f"validation {best['val_return']:.3f}, episode {int(best['episode']):,}" in out

@@ -44,7 +44,7 @@ def test_errors_are_one_line_messages(tmp_path, capsys):
 def test_resume_refuses_the_flags_it_would_ignore(tmp_path, run_cli):
     """`train --resume RUN` continues the saved config; other settings are refused in one
     line naming them, and the run is left as it was."""
-    run_cli("train", "smoke", "--run-dir", str(tmp_path / "run"))
+    run_cli("train", "smoke", "--total-env-steps", "320", "--run-dir", str(tmp_path / "run"))
     before = (tmp_path / "run" / "metrics.csv").read_text()
     refused = run_cli("train", "--resume", str(tmp_path / "run"), "--total-env-steps", "9600",
                       "--learning-rate", "0.1", "--run-dir", "x", check=False)  # fmt: skip

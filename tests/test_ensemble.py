@@ -317,6 +317,8 @@ def test_ray_runs_seed_groups_like_the_local_pool(tmp_path):
         )
 
 
+@pytest.mark.slow  # 10 CPU s; a group's seed is the seed trained alone (test above), and
+# alone it learns this network (test_training's learnability test)
 def test_every_seed_of_a_group_learns_one_easy_network(tmp_path, easy_network_config):
     """test_training's easy network: both seeds of a group learn it, as single runs of
     these seeds do (measured: single runs of seeds 1 and 2 give the group's train returns
@@ -332,7 +334,8 @@ def test_a_stacked_group_resumes_exactly_and_keeps_its_kind(tmp_path, monkeypatc
     an uninterrupted stacked group's; resuming it as a looped group is refused."""
     from spikectl.training import run as run_module
 
-    config = TINY.with_changes(checkpoint_every_episodes=16, n_step=3, aux_voltage_weight=1.0)
+    config = TINY.with_changes(total_env_steps=8 * 20 * 8, checkpoint_every_episodes=16,
+                               n_step=3, aux_voltage_weight=1.0)  # fmt: skip
     whole = train_seeds(config, [0, 1], tmp_path / "whole", stacked=True)
     real_round, calls = run_module.Loop.round, {"n": 0}
 

@@ -132,7 +132,8 @@ def test_validation_split_is_disjoint_and_leaves_train_and_test_unchanged():
 
 
 def test_trainer_evaluates_on_the_validation_set(tmp_path):
-    config = SMOKE.with_changes(n_step=3, aux_voltage_weight=0.5)
+    config = SMOKE.with_changes(n_step=3, aux_voltage_weight=0.5, total_env_steps=4 * 20 * 8,
+                                eval_every_episodes=16)  # fmt: skip
     metrics = train(config, tmp_path / "run")
     validation = ContextSet.load(tmp_path / "run" / "val_contexts.npz")
     assert len(validation) == config.env.n_val
@@ -140,7 +141,7 @@ def test_trainer_evaluates_on_the_validation_set(tmp_path):
     assert all(0.0 <= row["val_return"] <= 1.0 for row in rows)
     assert np.isnan(rows[0]["aux_loss"]) and rows[-1]["aux_loss"] > 0
     assert [row["val_return"] for row in metrics] == [row["val_return"] for row in rows]
-    no_val = train(SMOKE.with_changes(n_val=0), tmp_path / "no-val")
+    no_val = train(SMOKE.with_changes(n_val=0, total_env_steps=2 * 20 * 8), tmp_path / "no-val")
     assert np.isnan(no_val[-1]["val_return"])
     assert not (tmp_path / "no-val" / "val_contexts.npz").exists()
 
@@ -228,7 +229,8 @@ def test_do_nothing_biased_exploration(do_nothing):
 def test_learning_rate_decays_linearly_and_needs_no_scheduler_state(tmp_path):
     from spikectl.training.checkpoint import read_checkpoint
 
-    config = SMOKE.with_changes(learning_rate=1e-3, learning_rate_end_fraction=0.25)
+    config = SMOKE.with_changes(learning_rate=1e-3, learning_rate_end_fraction=0.25,
+                                total_env_steps=4 * 20 * 8)  # fmt: skip
     episodes = config.total_episodes
 
     def rate(config, episode):

@@ -162,7 +162,7 @@ def test_a_missing_extra_names_the_pip_extra(tmp_path, monkeypatch, capsys):
 
     monkeypatch.setattr(builtins, "__import__", no_ray)
     sweep = tmp_path / "sweep.json"
-    sweep.write_text('{"base": "smoke", "overrides": {"total_env_steps": 1600}, '
+    sweep.write_text('{"base": "smoke", "overrides": {"total_env_steps": 320}, '
                      '"grid": {"seed": [0]}}')  # fmt: skip
     with pytest.raises(SystemExit) as exit_info:
         main(["sweep", "--config", str(sweep), "--sweep-dir", str(tmp_path / "s"),

@@ -293,9 +293,12 @@ LEARN_FAST_FLAGS = ("--n-step", "3", "--aux-voltage-weight", "1.0", "--explore-d
                     "--sizes.target-voltage-in-input")  # fmt: skip
 
 
+# Slow tier (26 and 38 CPU s): three smoke runs each. An exact resume from a checkpoint
+# stays in the default tier (test_learner_protocol, test_ensemble's stacked group).
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "flags",
-    [(), pytest.param(LEARN_FAST_FLAGS, marks=pytest.mark.slow)],  # 38 s and 42 s
+    [(), LEARN_FAST_FLAGS],
     ids=["paper", "learn-fast"],
 )
 def test_resume_after_sigkill_is_exact(
