@@ -39,6 +39,8 @@ from golden_runs import (  # noqa: E402
     record_file,
 )
 
+pytestmark = pytest.mark.golden  # its own tier (pyproject.toml's markers; CONTRIBUTING.md)
+
 RECORD = load_record(machine())
 exact = pytest.mark.skipif(
     RECORD is None,
