@@ -60,6 +60,12 @@ for name, task, count, settings in cases:
     seen.clear()
     returns = evaluate_policy(contexts, controller, extensions=spec.extensions, seed=0).returns
     result[name] = {"returns": returns.tolist(), "steps": {str(k): v for k, v in seen.items()}}
+# The environment's own float tables: bleaching's decay over an episode.
+from spikectl.neuron.extensions import EnvironmentEffects, Extensions
+from spikectl.neuron.params import NeuronParams
+for tau in (30.0, 77.0, 400.0):
+    effects = EnvironmentEffects(Extensions(bleaching_time_constant_steps=tau), NeuronParams(), 60)
+    result[f"bleaching-{tau}"] = hashlib.sha256(effects.bleaching.tobytes()).hexdigest()
 print("RESULT" + json.dumps(result))
 """
 
@@ -142,6 +148,10 @@ def test_planner_decides_the_same_under_every_cpu_kind(native, kind):
                 f"{kind} {other[first] if first is not None else other[-1]})"
             )
         assert mine["returns"] == theirs["returns"], (name, kind)
+    bleaching = [key for key in native if key.startswith("bleaching-")]
+    assert bleaching and all(native[key] == emulated[key] for key in bleaching), (
+        f"the bleaching decay differs under {kind}"
+    )
 
 
 # The portable operations themselves, on inputs where NumPy's own kernels differ across

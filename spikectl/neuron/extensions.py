@@ -326,9 +326,12 @@ class EnvironmentEffects:
         self.background_rate = extensions.background_rate
         self.background_step_mV = params.voltage_step_mV(extensions.background_current_pA)
         tau = extensions.bleaching_time_constant_steps
+        # The C library's scalar exp, not np.exp: NumPy's SIMD kernels (AVX-512, AVX2, the
+        # baseline) differ in the last bit, and the observations would with them.
         self.bleaching = (
-            None if tau is None else np.exp(-np.arange(episode_length + 1, dtype=np.float64) / tau)
-        )
+            None if tau is None
+            else np.array([math.exp(-step / tau) for step in range(episode_length + 1)])
+        )  # fmt: skip
         self.plain = not extensions.transforms_observation
         self.random_dynamics = extensions.random_dynamics
 
