@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 import signal
 import subprocess
 import sys
@@ -12,6 +13,27 @@ from pathlib import Path
 
 import pytest
 import torch
+
+
+@pytest.hookimpl(tryfirst=True)  # before pytest-xdist's own, which reads these options
+def pytest_cmdline_main(config: pytest.Config) -> None:
+    """The whole suite (`pytest`, `pytest -m slow`: no file named) runs on every core, up
+    to 4, when pytest-xdist is installed (the dev extra): one test file per worker, so a
+    module's fixtures are built once. A named file or test, `-n N` or `-p no:xdist` runs
+    as asked; so does a run without pytest-xdist, in one process."""
+    if (
+        config.pluginmanager.hasplugin("xdist")
+        and not hasattr(config, "workerinput")  # a worker: the suite is already shared out
+        and config.option.numprocesses is None
+        and config.args_source == pytest.Config.ArgsSource.TESTPATHS
+    ):
+        config.option.numprocesses = "auto"
+        config.option.maxprocesses = config.option.maxprocesses or 4
+        if config.option.dist == "no":
+            config.option.dist = "loadfile"
+        # One PyTorch/BLAS thread per worker (the workers inherit it): workers of two
+        # threads each on as many cores spin against each other and take longer.
+        os.environ.setdefault("OMP_NUM_THREADS", "1")
 
 
 def _comparable(rows: list[dict]) -> list[dict]:
