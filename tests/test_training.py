@@ -341,6 +341,7 @@ def test_resume_after_sigkill_is_exact(
     assert_same_weights(killed / "best_model.pt", reference / "best_model.pt")
 
 
+@pytest.mark.slow  # three smoke trainings (about 28 CPU s); the other SIGTERM tests stay fast
 def test_sigterm_checkpoints_says_so_and_the_resume_is_exact(
     tmp_path, comparable, assert_same_weights, run_cli, wait_until
 ):
@@ -378,7 +379,9 @@ def test_sigterm_checkpoints_says_so_and_the_resume_is_exact(
         rf"{re.escape(str(stopped))}", line,
     )  # fmt: skip
     assert found, line
-    assert 80 < int(found.group(1)) < 320, "stopped too late to test anything"
+    # The round under way when the signal lands: the one ending at episode 80 itself when
+    # SIGTERM arrives between that evaluation's row and the round's end.
+    assert 80 <= int(found.group(1)) < 320, "stopped too late to test anything"
     assert (stopped / "checkpoint.pt").exists() and not (stopped / "model.pt").exists()
     run_cli("train", "--resume", str(stopped))
     assert comparable(read_metrics(stopped)) == comparable(read_metrics(reference))
