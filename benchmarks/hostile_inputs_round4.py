@@ -349,13 +349,19 @@ def classify(probe: Probe, folder: Path, python: str) -> tuple[str, str]:
     return "ok", last or out.strip().splitlines()[-1:]
 
 
-def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+def run_probes(probes, judge=None, prefix: str = "hostile4-") -> None:
+    """Parse ``--python`` and ``--only``, run each probe in a fresh copy of the prepared
+    folder, print one line per probe and the counts; exit 1 unless every one is ``ok``.
+    ``judge(probe, folder, python)`` classifies (``classify`` by default); the later
+    rounds' scripts call this with their own probes and judges."""
+    judge = judge or classify
+    parser = argparse.ArgumentParser(description=(sys.modules["__main__"].__doc__ or "")
+                                     .splitlines()[0])  # fmt: skip
     parser.add_argument("--python", default=sys.executable)
     parser.add_argument("--only", default="", help="comma-separated words of probe names")
     args = parser.parse_args()
     counts: dict[str, int] = {}
-    with tempfile.TemporaryDirectory(prefix="hostile4-") as root:
+    with tempfile.TemporaryDirectory(prefix=prefix) as root:
         base = Path(root) / "base"
         base.mkdir()
         (Path(root) / "bin").mkdir()  # a script, not a link: a venv's python finds its
@@ -363,19 +369,24 @@ def main() -> None:
         shim.write_text(f'#!/bin/sh\nexec "{args.python}" "$@"\n')
         shim.chmod(0o755)
         prepare(base, args.python)
-        for index, probe in enumerate(PROBES):
+        for index, probe in enumerate(probes):
             if args.only and not any(word in probe.name for word in args.only.split(",")):
                 continue
             folder = Path(root) / f"probe{index}"
             shutil.copytree(base, folder, symlinks=True)
             start = time.monotonic()
-            outcome, detail = classify(probe, folder, args.python)
+            outcome, detail = judge(probe, folder, args.python)
             counts[outcome] = counts.get(outcome, 0) + 1
-            print(f"{outcome:9} class {probe.klass:2} {probe.name} ({time.monotonic() - start:.0f}"
-                  f" s): {str(detail)[:200]}", flush=True)  # fmt: skip
+            seconds = time.monotonic() - start
+            print(f"{outcome:10} class {probe.klass!s:2} {probe.name} ({seconds:.0f} s): "
+                  f"{str(detail)[:220]}", flush=True)  # fmt: skip
             shutil.rmtree(folder, ignore_errors=True)
     print("counts:", ", ".join(f"{key} {value}" for key, value in sorted(counts.items())))
     sys.exit(0 if set(counts) <= {"ok"} else 1)
+
+
+def main() -> None:
+    run_probes(PROBES)
 
 
 if __name__ == "__main__":

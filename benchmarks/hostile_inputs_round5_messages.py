@@ -20,20 +20,16 @@ probe and the counts; exits 1 if any probe is not ``ok``.
 
 from __future__ import annotations
 
-import argparse
 import functools
-import shutil
 import subprocess
 import sys
-import tempfile
-import time
 import types
 from dataclasses import dataclass
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import hostile_inputs_round4 as round4  # noqa: E402
-from hostile_inputs_round4 import REFUSE, RUN, Probe, classify, prepare  # noqa: E402
+from hostile_inputs_round4 import REFUSE, RUN, Probe, classify, run_probes  # noqa: E402
 
 # A probe's output may hold a name that is not UTF-8 (the run directory it was given):
 # round 4's reader decodes it with escapes instead of failing.
@@ -341,32 +337,7 @@ def judge(probe: MessageProbe, folder: Path, python: str) -> tuple[str, str]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--python", default=sys.executable)
-    parser.add_argument("--only", default="", help="comma-separated words of probe names")
-    args = parser.parse_args()
-    counts: dict[str, int] = {}
-    with tempfile.TemporaryDirectory(prefix="hostile5m-") as root:
-        base = Path(root) / "base"
-        base.mkdir()
-        (Path(root) / "bin").mkdir()  # round 4's shim: the probed interpreter as `python`
-        shim = Path(root) / "bin" / "python"
-        shim.write_text(f'#!/bin/sh\nexec "{args.python}" "$@"\n')
-        shim.chmod(0o755)
-        prepare(base, args.python)
-        for index, probe in enumerate(PROBES):
-            if args.only and not any(word in probe.name for word in args.only.split(",")):
-                continue
-            folder = Path(root) / f"probe{index}"
-            shutil.copytree(base, folder, symlinks=True)
-            start = time.monotonic()
-            outcome, detail = judge(probe, folder, args.python)
-            counts[outcome] = counts.get(outcome, 0) + 1
-            print(f"{outcome:10} class {probe.klass} {probe.name} ({time.monotonic() - start:.0f}"
-                  f" s): {str(detail)[:220]}", flush=True)  # fmt: skip
-            shutil.rmtree(folder, ignore_errors=True)
-    print("counts:", ", ".join(f"{key} {value}" for key, value in sorted(counts.items())))
-    sys.exit(0 if set(counts) <= {"ok"} else 1)
+    run_probes(PROBES, judge, prefix="hostile5m-")
 
 
 if __name__ == "__main__":

@@ -14,14 +14,7 @@ Prints one line per probe and the counts; exits 1 if any probe is not ``ok``.
 
 from __future__ import annotations
 
-import argparse
-import shutil
-import sys
-import tempfile
-import time
-from pathlib import Path
-
-from hostile_inputs_round4 import REFUSE, RUN, Probe, classify, prepare
+from hostile_inputs_round4 import REFUSE, RUN, Probe, classify, run_probes
 
 BENCHMARK = ["benchmark", "do-nothing", "--task", "paper"]
 REALTIME = ["realtime", "do-nothing", "--episodes", "1"]
@@ -135,32 +128,7 @@ PROBES = [
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--python", default=sys.executable)
-    parser.add_argument("--only", default="", help="comma-separated words of probe names")
-    args = parser.parse_args()
-    counts: dict[str, int] = {}
-    with tempfile.TemporaryDirectory(prefix="hostile5-") as root:
-        base = Path(root) / "base"
-        base.mkdir()
-        (Path(root) / "bin").mkdir()  # the probed interpreter as `python` for the setups
-        shim = Path(root) / "bin" / "python"
-        shim.write_text(f'#!/bin/sh\nexec "{args.python}" "$@"\n')
-        shim.chmod(0o755)
-        prepare(base, args.python)
-        for index, probe in enumerate(PROBES):
-            if args.only and not any(word in probe.name for word in args.only.split(",")):
-                continue
-            folder = Path(root) / f"probe{index}"
-            shutil.copytree(base, folder, symlinks=True)
-            start = time.monotonic()
-            outcome, detail = classify(probe, folder, args.python)
-            counts[outcome] = counts.get(outcome, 0) + 1
-            print(f"{outcome:9} class {probe.klass} {probe.name} ({time.monotonic() - start:.0f}"
-                  f" s): {str(detail)[:200]}", flush=True)  # fmt: skip
-            shutil.rmtree(folder, ignore_errors=True)
-    print("counts:", ", ".join(f"{key} {value}" for key, value in sorted(counts.items())))
-    sys.exit(0 if set(counts) <= {"ok"} else 1)
+    run_probes(PROBES, classify, prefix="hostile5-")
 
 
 if __name__ == "__main__":
