@@ -526,6 +526,20 @@ def test_demo_and_plot_keep_an_earlier_run_s_files(tmp_path, capsys):
     assert (figures / "figure4.png").read_text() == "kept\n"
 
 
+def test_plot_of_a_file_names_what_the_file_is(tmp_path, capsys):
+    """`spikectl plot ctx.npz` said "cannot create the folder ctx.npz/figures"."""
+    from spikectl.contexts import ContextSet
+
+    ContextSet.generate(2, n_neurons=4, episode_length=10, seed=0).save(tmp_path / "ctx.npz")
+    code, _, err = cli(["plot", tmp_path / "ctx.npz"], capsys)
+    line = one_line(err)
+    assert code == 2 and "context set" in line and "takes a sweep directory" in line, line
+    (tmp_path / "notes.txt").write_text("a user's notes\n")
+    code, _, err = cli(["plot", tmp_path / "notes.txt"], capsys)
+    assert code == 2 and "notes.txt is a file; spikectl plot takes" in one_line(err)
+    assert (tmp_path / "notes.txt").read_text() == "a user's notes\n"
+
+
 def written_files(folder: Path) -> set[str]:
     return {str(p.relative_to(folder)) for p in folder.rglob("*")
             if p.is_file() and p.name != ".spikectl.lock"}  # fmt: skip

@@ -140,8 +140,15 @@ def plot(command: PlotCommand) -> None:
     """Write the figures and tables of a sweep from its saved runs."""
     from spikectl.cli.output import refuse_existing
     from spikectl.experiments.plot import plot_sweep
+    from spikectl.file_kinds import refuse_other_kinds
     from spikectl.files import folder_lock
 
+    if command.sweep_dir.exists() and not command.sweep_dir.is_dir():
+        # A file where the sweep's folder belongs (a context set, a model): name what it
+        # is before any figure folder is attempted inside it.
+        expected = "spikectl plot takes a sweep directory (as given to spikectl sweep)"
+        refuse_other_kinds(command.sweep_dir, (), expected)
+        raise ValueError(f"{command.sweep_dir} is a file; {expected}")
     out_dir = command.out_dir if command.out_dir is not None else command.sweep_dir / "figures"
     if out_dir.exists() and not out_dir.is_dir():
         raise ValueError(f"--out-dir: {out_dir} is a file, not a folder")
