@@ -49,6 +49,16 @@ class MessageProbe(Probe):
 
 SMOKE = ["train", "smoke", "--run-dir", "new"]
 WHAT_INIT_FROM_TAKES = "run directory"
+
+
+def init_from_probe(what: str, source: str, words: tuple[str, ...], *flags: str,
+                    setup: str = "") -> MessageProbe:  # fmt: skip
+    """``train smoke --init-from SOURCE [FLAGS]``: refused in one line saying ``words``,
+    with no run directory left behind."""
+    command = [*SMOKE, "--init-from", source, *flags]
+    return MessageProbe(f"train --init-from {what}", 1, setup, command, words=words,
+                        absent=("new",))  # fmt: skip
+
 SHORT_ARRAY = (
     "python - <<'EOF'\n"
     "import numpy as np\n"
@@ -110,54 +120,14 @@ print(bar[-80:], '|', wrote)
 
 PROBES = [
     # --init-from: every kind of file named, and the setting that differs with both values
-    MessageProbe(
-        "train --init-from a run of another episode length",
-        1,
-        "",
-        [*SMOKE, "--init-from", "RUN", "--episode-length", "30"],
-        words=("episode length|episode_length", "20", "30"),
-        absent=("new",),
-    ),  # fmt: skip
-    MessageProbe(
-        "train --init-from a run of another architecture",
-        1,
-        "",
-        [*SMOKE, "--init-from", "RUN", "--arch", "ddrqn"],
-        words=("tdrqn", "ddrqn"),
-        absent=("new",),
-    ),  # fmt: skip
-    MessageProbe(
-        "train --init-from a compiled policy",
-        1,
-        "",
-        [*SMOKE, "--init-from", "pol.npz"],
-        words=("compiled policy", WHAT_INIT_FROM_TAKES),
-        absent=("new",),
-    ),  # fmt: skip
-    MessageProbe(
-        "train --init-from a context set",
-        1,
-        "",
-        [*SMOKE, "--init-from", "ctx.npz"],
-        words=("context set", WHAT_INIT_FROM_TAKES),
-        absent=("new",),
-    ),  # fmt: skip
-    MessageProbe(
-        "train --init-from a checkpoint.pt",
-        1,
-        "",
-        [*SMOKE, "--init-from", "RUN/checkpoint.pt"],
-        words=("checkpoint", WHAT_INIT_FROM_TAKES),
-        absent=("new",),
-    ),  # fmt: skip
-    MessageProbe(
-        "train --init-from a text file",
-        1,
-        "echo hello > notes.txt",
-        [*SMOKE, "--init-from", "notes.txt"],
-        words=("notes.txt", WHAT_INIT_FROM_TAKES),
-        absent=("new",),
-    ),  # fmt: skip
+    init_from_probe("a run of another episode length", "RUN", ("episode length|episode_length",
+                    "20", "30"), "--episode-length", "30"),  # fmt: skip
+    init_from_probe("a run of another architecture", "RUN", ("tdrqn", "ddrqn"), "--arch", "ddrqn"),
+    init_from_probe("a compiled policy", "pol.npz", ("compiled policy", WHAT_INIT_FROM_TAKES)),
+    init_from_probe("a context set", "ctx.npz", ("context set", WHAT_INIT_FROM_TAKES)),
+    init_from_probe("a checkpoint.pt", "RUN/checkpoint.pt", ("checkpoint", WHAT_INIT_FROM_TAKES)),
+    init_from_probe("a text file", "notes.txt", ("notes.txt", WHAT_INIT_FROM_TAKES),
+                    setup="echo hello > notes.txt"),  # fmt: skip
     MessageProbe(
         "realtime on a context set",
         1,
