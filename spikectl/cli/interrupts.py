@@ -156,13 +156,8 @@ def _terminate(signum: int, frame: FrameType | None) -> None:
 
 def terminated_by(error: BaseException | None) -> Terminated | None:
     """The :class:`Terminated` that ``error`` is or was caused by (SIGTERM), or None."""
-    seen = set()
-    while error is not None and id(error) not in seen:
-        if isinstance(error, Terminated):
-            return error
-        seen.add(id(error))
-        error = error.__cause__ or error.__context__
-    return None
+    found = _in_chain(error, Terminated)
+    return found if isinstance(found, Terminated) else None
 
 
 def _held_inside(
@@ -192,13 +187,19 @@ def _inside(frame: FrameType | None, packages: tuple[str, ...]) -> bool:
 def caused_by_interrupt(error: BaseException | None) -> bool:
     """Whether ``error`` is, or was caused by, a KeyboardInterrupt (Numba returns one
     raised inside a kernel as a SystemError caused by it)."""
+    return _in_chain(error, KeyboardInterrupt) is not None
+
+
+def _in_chain(error: BaseException | None, kind: type[BaseException]) -> BaseException | None:
+    """The first exception of ``kind`` in ``error``'s chain of causes (``__cause__``, else
+    ``__context__``; a cycle ends the walk), or None."""
     seen = set()
     while error is not None and id(error) not in seen:
-        if isinstance(error, KeyboardInterrupt):
-            return True
+        if isinstance(error, kind):
+            return error
         seen.add(id(error))
         error = error.__cause__ or error.__context__
-    return False
+    return None
 
 
 def ignore_interrupts_at_exit() -> None:
