@@ -24,6 +24,7 @@ LAYERS = (
         "spikectl.seeds",
         "spikectl.version",
         "spikectl.environment",
+        "spikectl.registry",
     ),
     ("spikectl.file_kinds",),
     ("spikectl.neuron",),
