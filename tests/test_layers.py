@@ -26,7 +26,7 @@ LAYERS = (
         "spikectl.environment",
         "spikectl.registry",
     ),
-    ("spikectl.file_kinds",),
+    ("spikectl.file_kinds", "spikectl.locks"),
     ("spikectl.neuron",),
     ("spikectl.contexts",),
     ("spikectl.envs",),

@@ -404,7 +404,7 @@ def test_overwrite_replaces_the_file_and_leaves_no_lock(tmp_path, capsys):
 
 def test_a_second_writer_of_one_output_is_refused_naming_the_first(tmp_path, capsys):
     """Two benchmarks on one --out at once: the last writer's rows replaced the first's."""
-    from spikectl.files import output_lock
+    from spikectl.locks import output_lock
 
     out = tmp_path / "new" / "o.csv"
     with output_lock(tmp_path / "new" / "." / "o.csv", "--out"):  # the first, mid-run
@@ -428,7 +428,7 @@ def test_a_lock_left_by_a_dead_process_does_not_block(tmp_path, capsys):
 
 def test_the_lock_is_released_on_ctrl_c(tmp_path):
     from spikectl.cli.output import claimed_outputs
-    from spikectl.files import output_lock
+    from spikectl.locks import output_lock
 
     out = tmp_path / "o.csv"
     with pytest.raises(KeyboardInterrupt):
@@ -441,11 +441,11 @@ def test_the_lock_is_released_on_ctrl_c(tmp_path):
 
 def test_a_lock_held_by_another_process_refuses(tmp_path):
     """The same, across processes: a child holds the lock while this one asks for it."""
-    from spikectl.files import OutputBusyError, output_lock
+    from spikectl.locks import OutputBusyError, output_lock
 
     out = tmp_path / "o.csv"
     child = subprocess.Popen(
-        [sys.executable, "-c", "import sys; from spikectl.files import output_lock\n"
+        [sys.executable, "-c", "import sys; from spikectl.locks import output_lock\n"
          f"with output_lock({str(out)!r}, '--out'):\n    print('held', flush=True)\n"
          "    sys.stdin.readline()\n"],
         stdin=subprocess.PIPE, stdout=subprocess.PIPE, text=True,

@@ -18,7 +18,7 @@ import pytest
 from spikectl.config_errors import MissingExtraError
 from spikectl.experiments.slurm import SlurmSettings, TrialJob
 from spikectl.experiments.sweep import Sweep, SweepError, run_sweep, run_trial
-from spikectl.files import LOCK_FILE
+from spikectl.locks import LOCK_FILE
 from spikectl.training.presets import SMOKE
 
 TINY = SMOKE.with_changes(total_env_steps=8 * 20 * 4, eval_every_episodes=16,

@@ -180,7 +180,7 @@ def test_a_missing_extra_names_the_pip_extra(tmp_path, monkeypatch, capsys):
 def test_two_context_commands_at_once_never_lose_a_result(tmp_path):
     """Class 4: while one ``spikectl contexts --out-dir D`` writes, a second is refused
     naming the first (it used to report success, and one result was lost)."""
-    from spikectl.files import FolderBusyError, folder_lock
+    from spikectl.locks import FolderBusyError, folder_lock
 
     out = tmp_path / "sets"
     with folder_lock(out, "writing context sets"):  # the first command, mid-write

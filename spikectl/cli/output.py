@@ -19,7 +19,8 @@ from collections.abc import Iterable, Iterator
 from contextlib import ExitStack, contextmanager
 from pathlib import Path
 
-from spikectl.files import check_distinct_outputs, check_output_path, output_lock
+from spikectl.files import check_distinct_outputs, check_output_path
+from spikectl.locks import output_lock
 
 
 class Printer:
@@ -61,7 +62,7 @@ def check_outputs(outputs: Iterable[tuple[str, Path | None]]) -> None:
 @contextmanager
 def claimed_outputs(outputs: Iterable[tuple[str, Path | None]], overwrite: bool) -> Iterator[None]:
     """For the block, hold the output files of a command, checked before any work
-    (:func:`check_outputs`): each file's lock (``files.output_lock``: a second writer of
+    (:func:`check_outputs`): each file's lock (``locks.output_lock``: a second writer of
     the same file meanwhile is refused, naming this process), and, without
     ``overwrite``, a refusal of any that exists, as ``spikectl contexts`` refuses
     existing sets. Write them with ``replace=overwrite`` so that a file made meanwhile
@@ -83,7 +84,7 @@ def claimed_outputs(outputs: Iterable[tuple[str, Path | None]], overwrite: bool)
 
 def refuse_existing(out_dir: Path, names: tuple[str, ...], overwrite: bool) -> None:
     """Refuse, unless ``overwrite``, to write ``names`` in the folder ``out_dir`` where
-    any exists (called under the folder's lock, ``files.folder_lock``, so that no other
+    any exists (called under the folder's lock, ``locks.folder_lock``, so that no other
     spikectl command is midway)."""
     existing = [str(out_dir / name) for name in names if os.path.lexists(out_dir / name)]
     if existing and not overwrite:

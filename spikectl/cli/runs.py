@@ -141,7 +141,7 @@ def plot(command: PlotCommand) -> None:
     from spikectl.cli.output import refuse_existing
     from spikectl.experiments.plot import plot_sweep
     from spikectl.file_kinds import refuse_other_kinds
-    from spikectl.files import folder_lock
+    from spikectl.locks import folder_lock
 
     if command.sweep_dir.exists() and not command.sweep_dir.is_dir():
         # A file where the sweep's folder belongs (a context set, a model): name what it

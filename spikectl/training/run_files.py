@@ -25,15 +25,14 @@ import torch
 
 from spikectl.file_kinds import FileKind, describe, identify
 from spikectl.files import (
-    LOCK_FILE,
     atomic_write_text,
     describe_os_error,
-    folder_lock,
     make_dirs,
     read_json_file,
     read_text_file,
     write_json,
 )
+from spikectl.locks import LOCK_FILE, folder_lock
 from spikectl.training.config import Experiment
 
 CONFIG_FILE = "config.json"
