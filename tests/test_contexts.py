@@ -304,7 +304,7 @@ def test_context_equality():
 
 
 def test_a_pair_of_sets_is_written_whole_or_not_at_all(tmp_path, monkeypatch):
-    from spikectl.contexts.context_set import save_sets
+    from spikectl.contexts.splits import save_sets
 
     train, test = make_splits(2, 2, 5, 20, seed=1)
     (tmp_path / "kept.npz").write_text("kept")

@@ -10,7 +10,7 @@ import numpy as np
 
 from spikectl.cli.output import refuse_existing
 from spikectl.contexts import ContextSet, make_splits
-from spikectl.contexts.context_set import check_set_outputs, save_sets
+from spikectl.contexts.splits import check_set_outputs, save_sets
 from spikectl.files import make_dirs, write_json
 from spikectl.locks import folder_lock
 

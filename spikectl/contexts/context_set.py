@@ -1,10 +1,9 @@
-"""Context sets (docs/model.md): sequences of contexts, their splits, files and checksums.
+"""Context sets (docs/model.md): sequences of contexts, their files and checksums.
 
 :class:`ContextSet` holds contexts of one shape with the parameters (and context-level
 extensions) they were made with, and saves to / loads from one ``.npz`` file
-(``spikectl.contexts.file_format``). :func:`make_splits` draws the paper's training and
-test sets with no topology shared within or across them. Both are also importable from
-``spikectl.contexts`` and from ``spikectl``.
+(``spikectl.contexts.file_format``); :mod:`spikectl.contexts.splits` draws the paper's
+splits from it. Also importable from ``spikectl.contexts`` and from ``spikectl``.
 """
 
 from __future__ import annotations
@@ -12,28 +11,25 @@ from __future__ import annotations
 import hashlib
 import json
 import os
-import stat
-from collections.abc import Iterable, Iterator, Mapping, Sequence
+from collections.abc import Iterator, Mapping, Sequence
 from itertools import accumulate
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Literal, overload
+from typing import TYPE_CHECKING, Any, overload
 
 import numpy as np
 
 from spikectl.contexts.context import Context
 from spikectl.contexts.file_format import ContextFileError, read_npz, write_npz
 from spikectl.contexts.generation import (
-    MAX_TOPOLOGY_ATTEMPTS,
     check_episode_length,
     check_n_neurons,
     check_seed,
     check_size,
-    generate_context,
+    generate_distinct,
 )
 from spikectl.files import check_fits_in_memory
 from spikectl.neuron.extensions import Extensions, Heterogeneity
 from spikectl.neuron.params import NeuronParams
-from spikectl.seeds import VALIDATION_STREAM
 
 if TYPE_CHECKING:  # typing.Self is Python 3.11+; annotations are never evaluated here
     from typing_extensions import Self
@@ -99,10 +95,10 @@ class ContextSet(Sequence[Context]):
         heterogeneous neurons) are drawn with each context.
         """
         size = check_size(size)
-        return cls._draw([size], n_neurons, episode_length, seed, params, extensions)[0]
+        return cls.draw([size], n_neurons, episode_length, seed, params, extensions)[0]
 
     @classmethod
-    def _draw(
+    def draw(
         cls,
         sizes: Sequence[int],
         n_neurons: int,
@@ -128,7 +124,7 @@ class ContextSet(Sequence[Context]):
             f"{sum(sizes):,} contexts of {n_neurons} neurons", "generate fewer contexts",
         )  # fmt: skip
         taken = {context.weights.tobytes() for contexts in exclude for context in contexts}
-        contexts = _generate_unique(
+        contexts = generate_distinct(
             sum(sizes), n_neurons, episode_length, seed if stream is None else [seed, stream],
             params, extensions, exclude=taken,
         )  # fmt: skip
@@ -341,168 +337,6 @@ class ContextSet(Sequence[Context]):
                     "its pattern in the target neuron"
                 )
         return loaded
-
-
-def save_sets(sets: Mapping[str | os.PathLike, ContextSet]) -> list[Path]:
-    """Write several sets as one (a training and a test set): every output is checked
-    before any is written (a folder, a symbolic link, a FIFO or a device is refused,
-    ValueError naming it), each set goes to a temporary file beside its output, and only
-    when all are written are they renamed into place. A refusal or a failed write leaves
-    none of them written. Returns the paths (``.npz`` added as :meth:`ContextSet.save`
-    adds it)."""
-    paths = check_set_outputs(sets)
-    pending = [path.with_name(f".{path.name}.{os.getpid()}.pending.npz") for path in paths]
-    try:
-        for contexts, temporary in zip(sets.values(), pending, strict=True):
-            contexts.save(temporary)
-        for temporary, path in zip(pending, paths, strict=True):
-            os.replace(temporary, path)
-    finally:
-        for temporary in pending:
-            temporary.unlink(missing_ok=True)
-    return paths
-
-
-def check_set_outputs(outputs: Iterable[str | os.PathLike]) -> list[Path]:
-    """The paths :func:`save_sets` writes, each checked: an existing folder, symbolic
-    link, FIFO or device is refused (ValueError naming it) before any set is made."""
-    paths = []
-    for given in outputs:
-        path = Path(given)
-        paths.append(path if path.suffix == ".npz" else path.with_suffix(path.suffix + ".npz"))
-    for path in paths:
-        try:
-            mode = os.lstat(path).st_mode
-        except FileNotFoundError:
-            continue
-        if not stat.S_ISREG(mode):
-            kind = "a symbolic link" if stat.S_ISLNK(mode) else "not a regular file"
-            kind = "a folder" if stat.S_ISDIR(mode) else kind
-            raise ValueError(
-                f"{path} is {kind}; refusing to replace it (nothing was written: remove it, "
-                "or write the sets elsewhere)"
-            )
-    return paths
-
-
-@overload
-def make_splits(
-    n_train: int = ...,
-    n_test: int = ...,
-    n_neurons: int = ...,
-    episode_length: int = ...,
-    seed: int = ...,
-    params: NeuronParams | None = ...,
-    extensions: Extensions | Mapping[str, Any] | None = ...,
-    n_val: Literal[0] = ...,
-) -> tuple[ContextSet, ContextSet]: ...
-
-
-@overload
-def make_splits(
-    n_train: int = ...,
-    n_test: int = ...,
-    n_neurons: int = ...,
-    episode_length: int = ...,
-    seed: int = ...,
-    params: NeuronParams | None = ...,
-    extensions: Extensions | Mapping[str, Any] | None = ...,
-    n_val: int = ...,
-) -> tuple[ContextSet, ...]: ...
-
-
-# The overloads let a type checker unpack ``train, test = make_splits(...)``.
-def make_splits(
-    n_train: int = 100,
-    n_test: int = 100,
-    n_neurons: int = 8,
-    episode_length: int = 60,
-    seed: int = 0,
-    params: NeuronParams | None = None,
-    extensions: Extensions | Mapping[str, Any] | None = None,
-    n_val: int = 0,
-) -> tuple[ContextSet, ...]:
-    """A training and a test set (and, with ``n_val > 0``, a validation set) with no
-    topology shared within or across them.
-
-    The test set is drawn first and the training set continues the same stream, so
-    for one seed the test set does not depend on ``n_train`` and smaller training
-    sets are prefixes of larger ones (the paper's Figure 5 compares sizes on one
-    test set). Context-level ``extensions`` are drawn with each context.
-
-    ``n_val > 0`` returns ``(train, test, validation)``: the validation set, for
-    choosing settings without looking at the test set, comes from a stream of its
-    own (``VALIDATION_STREAM``), so adding it changes neither of the other two and
-    it does not depend on ``n_train`` (beyond skipping, with vanishing probability,
-    a topology the training set already holds).
-    """
-    n_train = check_size(n_train, "n_train")
-    n_test = check_size(n_test, "n_test")
-    seed = check_seed(seed)
-    if isinstance(n_val, bool) or not isinstance(n_val, int | np.integer) or n_val < 0:
-        raise ValueError(f"n_val must be a non-negative integer, got {n_val!r}")
-    test, train = ContextSet._draw(
-        [n_test, n_train], n_neurons, episode_length, seed, params, extensions
-    )
-    if not n_val:
-        return train, test
-    validation = make_validation_set(
-        int(n_val), (train, test), n_neurons, episode_length, seed, params, extensions
-    )
-    return train, test, validation
-
-
-def make_validation_set(
-    n_val: int,
-    exclude: Sequence[ContextSet],
-    n_neurons: int = 8,
-    episode_length: int = 60,
-    seed: int = 0,
-    params: NeuronParams | None = None,
-    extensions: Extensions | Mapping[str, Any] | None = None,
-) -> ContextSet:
-    """A validation set with no topology shared with itself or with any set in ``exclude``
-    (the training and test sets), from a generator stream of its own (``VALIDATION_STREAM``)."""
-    n_val = check_size(n_val, "n_val")
-    (validation,) = ContextSet._draw(
-        [n_val], n_neurons, episode_length, seed, params, extensions,
-        stream=VALIDATION_STREAM, exclude=exclude,
-    )  # fmt: skip
-    return validation
-
-
-def _generate_unique(
-    size: int,
-    n_neurons: int,
-    episode_length: int,
-    seed: int | list[int],
-    params: NeuronParams | None,
-    extensions: Extensions | None = None,
-    exclude: set[bytes] = frozenset(),
-) -> list[Context]:
-    n_neurons = check_n_neurons(n_neurons)
-    episode_length = check_episode_length(episode_length)
-    if params is not None and not isinstance(params, NeuronParams):
-        raise TypeError(f"params must be a NeuronParams or None, got {type(params).__name__}")
-    rng = np.random.default_rng(seed)
-    contexts: list[Context] = []
-    seen: set[bytes] = set(exclude)
-    rejected_in_a_row = 0
-    while len(contexts) < size:
-        context = generate_context(rng, n_neurons, episode_length, params, extensions)
-        key = context.weights.tobytes()
-        if key in seen:
-            rejected_in_a_row += 1
-            if rejected_in_a_row > MAX_TOPOLOGY_ATTEMPTS:
-                raise ValueError(
-                    f"could not find {size} distinct topologies of {n_neurons} neurons: "
-                    "ask for fewer contexts or larger networks"
-                )
-            continue
-        rejected_in_a_row = 0
-        seen.add(key)
-        contexts.append(context)
-    return contexts
 
 
 def _shape(context: Context) -> tuple[int, int, int, bool]:

@@ -281,3 +281,40 @@ def check_seed(seed: Any, name: str = "seed") -> int:
     if not is_int(seed) or seed < 0:
         raise ValueError(f"{name} must be a non-negative integer, got {seed!r}")
     return int(seed)
+
+
+def generate_distinct(
+    size: int,
+    n_neurons: int,
+    episode_length: int,
+    seed: int | list[int],
+    params: NeuronParams | None,
+    extensions: Extensions | None = None,
+    exclude: set[bytes] = frozenset(),
+) -> list[Context]:
+    """``size`` contexts with pairwise distinct topologies (none in ``exclude``, the
+    weight matrices' bytes) drawn from ``default_rng(seed)``; a ValueError when
+    :data:`MAX_TOPOLOGY_ATTEMPTS` draws in a row repeat a topology."""
+    n_neurons = check_n_neurons(n_neurons)
+    episode_length = check_episode_length(episode_length)
+    if params is not None and not isinstance(params, NeuronParams):
+        raise TypeError(f"params must be a NeuronParams or None, got {type(params).__name__}")
+    rng = np.random.default_rng(seed)
+    contexts: list[Context] = []
+    seen: set[bytes] = set(exclude)
+    rejected_in_a_row = 0
+    while len(contexts) < size:
+        context = generate_context(rng, n_neurons, episode_length, params, extensions)
+        key = context.weights.tobytes()
+        if key in seen:
+            rejected_in_a_row += 1
+            if rejected_in_a_row > MAX_TOPOLOGY_ATTEMPTS:
+                raise ValueError(
+                    f"could not find {size} distinct topologies of {n_neurons} neurons: "
+                    "ask for fewer contexts or larger networks"
+                )
+            continue
+        rejected_in_a_row = 0
+        seen.add(key)
+        contexts.append(context)
+    return contexts

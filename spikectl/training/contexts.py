@@ -7,7 +7,7 @@ import dataclasses
 from pathlib import Path
 
 from spikectl.contexts import ContextSet, make_splits
-from spikectl.contexts.context_set import make_validation_set
+from spikectl.contexts.splits import make_validation_set
 from spikectl.envs.rollout import EpisodeBatch, evaluate_policy
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.seeds import EVAL_STREAM, environment_seed
