@@ -281,11 +281,12 @@ def test_group_trains_on_cuda_and_matches_the_cpu_group_at_the_start(tmp_path):
 
 @pytest.mark.slow  # 27 s
 def test_sweep_groups_trials_that_differ_only_in_seed(tmp_path):
+    from spikectl.experiments.backends import Backend
     from spikectl.experiments.sweep import Sweep, run_sweep, trial_dirs
 
     short = TINY.with_changes(total_env_steps=4 * 20 * 8, eval_every_episodes=16)
     sweep = Sweep(short, {"arch": ["drqn", "tdrqn"], "seed": [0, 1]})
-    results = run_sweep(sweep, tmp_path / "s", workers=2, echo=lambda line: None,
+    results = run_sweep(sweep, tmp_path / "s", Backend(workers=2), echo=lambda line: None,
                         group_seeds=True)  # fmt: skip
     assert [r["status"] for r in results] == ["trained in a group of 2"] * 4
     assert len(trial_dirs(tmp_path / "s")) == 4
@@ -295,7 +296,7 @@ def test_sweep_groups_trials_that_differ_only_in_seed(tmp_path):
     direct = train_group(configs, [tmp_path / "d0", tmp_path / "d1"], tmp_path / "d")
     pooled = read_metrics(tmp_path / "s/trials/arch=tdrqn-seed=1")
     assert comparable(pooled) == comparable(direct[1])
-    again = run_sweep(sweep, tmp_path / "s", workers=2, echo=lambda line: None,
+    again = run_sweep(sweep, tmp_path / "s", Backend(workers=2), echo=lambda line: None,
                       group_seeds=True)  # fmt: skip
     assert [r["status"] for r in again] == ["skipped (done)"] * 4
 
@@ -303,12 +304,14 @@ def test_sweep_groups_trials_that_differ_only_in_seed(tmp_path):
 @pytest.mark.slow
 def test_ray_runs_seed_groups_like_the_local_pool(tmp_path):
     pytest.importorskip("ray")
+    from spikectl.experiments.backends import Backend
     from spikectl.experiments.sweep import Sweep, run_sweep
 
     short = TINY.with_changes(total_env_steps=4 * 20 * 8, eval_every_episodes=16)
     sweep = Sweep(short, {"seed": [0, 1]})
-    run_sweep(sweep, tmp_path / "local", workers=1, echo=lambda line: None, group_seeds=True)
-    results = run_sweep(sweep, tmp_path / "ray", workers=1, backend="ray",
+    run_sweep(sweep, tmp_path / "local", Backend(workers=1), echo=lambda line: None,
+              group_seeds=True)  # fmt: skip
+    results = run_sweep(sweep, tmp_path / "ray", Backend("ray", workers=1),
                         echo=lambda line: None, group_seeds=True)  # fmt: skip
     assert [r["status"] for r in results] == ["trained in a group of 2"] * 2
     for name in ("seed=0", "seed=1"):

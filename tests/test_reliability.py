@@ -32,6 +32,7 @@ from spikectl.cli import main
 from spikectl.contexts.file_format import ContextFileError
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.vector_env import NeuronControlVectorEnv
+from spikectl.experiments.backends import Backend
 from spikectl.experiments.sweep import Sweep, SweepError, run_sweep, run_trial
 from spikectl.files import FileWriteError
 from spikectl.training.checkpoint import read_checkpoint
@@ -188,7 +189,7 @@ def test_a_sweep_reports_a_damaged_trial_in_one_line(finished_run, tmp_path, cap
     shutil.copytree(finished_run, trial)
     flip_tensor_byte(trial / "model.pt")
     with pytest.raises(Exception, match="1 of 1 trial.*model.pt is damaged"):
-        run_sweep(sweep, tmp_path / "sweep", workers=1, echo=lambda line: None)
+        run_sweep(sweep, tmp_path / "sweep", Backend(workers=1), echo=lambda line: None)
 
 
 @pytest.mark.slow
@@ -199,7 +200,7 @@ def test_a_ray_sweep_reports_a_damaged_trial_in_one_line(finished_run, tmp_path,
     shutil.copytree(finished_run, trial)
     flip_tensor_byte(trial / "model.pt")
     with pytest.raises(SweepError, match=r"1 of 2 trial.*seed=0.*model.pt is damaged"):
-        run_sweep(sweep, tmp_path / "sweep", workers=2, backend="ray", echo=lambda line: None)
+        run_sweep(sweep, tmp_path / "sweep", Backend("ray", workers=2), echo=lambda line: None)
     # The healthy trial finished and is usable.
     assert load_model_weights(tmp_path / "sweep" / "trials" / "seed=1" / "model.pt")
     with pytest.raises(SystemExit) as exit_info:  # and on the command line: one line, exit 2

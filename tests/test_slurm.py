@@ -16,6 +16,7 @@ from pathlib import Path
 import pytest
 
 from spikectl.config_errors import MissingExtraError
+from spikectl.experiments.backends import Backend
 from spikectl.experiments.slurm import SlurmSettings, TrialJob
 from spikectl.experiments.sweep import Sweep, SweepError, run_sweep, run_trial
 from spikectl.locks import LOCK_FILE
@@ -34,7 +35,7 @@ def test_without_submitit_the_slurm_backend_is_one_line_naming_the_extra(
 
     monkeypatch.setitem(sys.modules, "submitit", None)  # import submitit: ImportError
     with pytest.raises(MissingExtraError, match=r"pip install 'spikectl\[slurm\]'"):
-        run_sweep(Sweep(TINY, {"seed": [0]}), tmp_path / "s", backend="slurm", slurm=LOCAL)
+        run_sweep(Sweep(TINY, {"seed": [0]}), tmp_path / "s", Backend("slurm", slurm=LOCAL))
     assert not (tmp_path / "s").exists(), "refused before anything was written"
     with pytest.raises(SystemExit):
         main(["sweep", "--preset", "fig4", "--backend", "slurm", "--sweep-dir",
@@ -104,9 +105,9 @@ def test_the_slurm_backend_gives_the_local_backends_results(tmp_path, assert_sam
     training each trial alone: the same metrics and bit-identical weights."""
     pytest.importorskip("submitit")
     sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "seed": [0, 1]})
-    run_sweep(sweep, tmp_path / "local", workers=2, echo=quiet)
+    run_sweep(sweep, tmp_path / "local", Backend(workers=2), echo=quiet)
     lines = []
-    results = run_sweep(sweep, tmp_path / "slurm", backend="slurm", slurm=LOCAL,
+    results = run_sweep(sweep, tmp_path / "slurm", Backend("slurm", slurm=LOCAL),
                         group_seeds=True, echo=lines.append)  # fmt: skip
     assert [r["status"] for r in results] == ["trained in a group of 2"] * 4
     assert lines[1].startswith("submitted 2 job(s)")
@@ -149,14 +150,14 @@ def test_a_preempted_job_resumes_exactly_and_a_killed_one_with_the_same_command(
     config = SMOKE.with_changes(total_env_steps=160 * 20, eval_every_episodes=40,
                                 checkpoint_every_episodes=40)  # 160 episodes
     sweep = Sweep(config, {"seed": [0, 1]})
-    run_sweep(sweep, tmp_path / "local", workers=2, echo=quiet)
+    run_sweep(sweep, tmp_path / "local", Backend(workers=2), echo=quiet)
     trials = tmp_path / "slurm" / "trials"
     sent: list[str] = []
     threads = [_interrupt_when_checkpointed(trials / "seed=0", signal.SIGUSR2, sent),
                _interrupt_when_checkpointed(trials / "seed=1", signal.SIGKILL, sent)]  # fmt: skip
     lines: list[str] = []
     with pytest.raises(SweepError, match=r"1 of 2 trial\(s\) failed \(first: seed=1: job "):
-        run_sweep(sweep, tmp_path / "slurm", backend="slurm", slurm=LOCAL, echo=lines.append)
+        run_sweep(sweep, tmp_path / "slurm", Backend("slurm", slurm=LOCAL), echo=lines.append)
     for thread in threads:
         thread.join()
     assert len(sent) == 2, "a trial ended before it could be interrupted"
@@ -165,6 +166,6 @@ def test_a_preempted_job_resumes_exactly_and_a_killed_one_with_the_same_command(
                for line in lines), lines  # fmt: skip
     logs = "".join(path.read_text() for path in (tmp_path / "slurm/slurm").glob("*_log.*"))
     assert "this job is preempted" in logs and "Requeued job" in logs
-    again = run_sweep(sweep, tmp_path / "slurm", backend="slurm", slurm=LOCAL, echo=quiet)
+    again = run_sweep(sweep, tmp_path / "slurm", Backend("slurm", slurm=LOCAL), echo=quiet)
     assert [r["status"] for r in again] == ["skipped (done)", "resumed"]
     assert_same_trials(tmp_path / "local", tmp_path / "slurm")

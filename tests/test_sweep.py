@@ -8,6 +8,7 @@ from pathlib import Path
 
 import pytest
 
+from spikectl.experiments.backends import Backend
 from spikectl.experiments.sweep import (
     PAPER_SWEEPS,
     Sweep,
@@ -94,7 +95,7 @@ def test_sweep_files_name_fields_flat_dotted_or_nested():
 @pytest.mark.slow  # 30 s; the sweep command line stays in the default run
 def test_sweep_runs_skips_and_resumes(tmp_path):
     sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "seed": [0, 1]})
-    results = run_sweep(sweep, tmp_path, workers=2, echo=lambda line: None)
+    results = run_sweep(sweep, tmp_path, Backend(workers=2), echo=lambda line: None)
     assert [r["status"] for r in results] == ["trained"] * 4
     dirs = trial_dirs(tmp_path)
     assert len(dirs) == 4
@@ -104,11 +105,11 @@ def test_sweep_runs_skips_and_resumes(tmp_path):
     pooled = read_metrics(tmp_path / "trials" / name)
     assert [r["test_return"] for r in pooled] == [r["test_return"] for r in direct]
     # Again: everything is done, nothing runs.
-    again = run_sweep(sweep, tmp_path, workers=2, echo=lambda line: None)
+    again = run_sweep(sweep, tmp_path, Backend(workers=2), echo=lambda line: None)
     assert [r["status"] for r in again] == ["skipped (done)"] * 4
     # An interrupted trial (final weights missing, checkpoint present) resumes.
     (dirs[0] / "model.pt").unlink()
-    resumed = run_sweep(sweep, tmp_path, workers=1, echo=lambda line: None)
+    resumed = run_sweep(sweep, tmp_path, Backend(workers=1), echo=lambda line: None)
     assert sorted(r["status"] for r in resumed) == ["resumed"] + ["skipped (done)"] * 3
     with pytest.raises(ValueError, match="another sweep"):
         run_sweep(Sweep(TINY, {"seed": [5]}), tmp_path, echo=lambda line: None)
@@ -159,7 +160,7 @@ def test_plot_a_sweep(tmp_path, capsys):
     from spikectl.cli import main
 
     sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "n_train": [3, 6], "seed": [0]})
-    run_sweep(sweep, tmp_path, workers=2, echo=lambda line: None)
+    run_sweep(sweep, tmp_path, Backend(workers=2), echo=lambda line: None)
     main(["plot", str(tmp_path)])
     out = capsys.readouterr().out
     for name in ("figure3.png", "figure4.png", "figure5.png", "results.md", "raster.png"):
@@ -187,12 +188,12 @@ def test_figure3_contexts_are_regenerated_when_a_trial_kept_only_its_metrics(tmp
 def test_ray_backend_gives_the_same_results_as_the_local_pool(tmp_path, assert_same_trials):
     pytest.importorskip("ray")
     sweep = Sweep(TINY, {"arch": ["drqn", "tdrqn"], "seed": [0]})
-    run_sweep(sweep, tmp_path / "local", workers=2, echo=lambda line: None)
-    results = run_sweep(sweep, tmp_path / "ray", workers=2, backend="ray", echo=lambda line: None)
+    run_sweep(sweep, tmp_path / "local", Backend(workers=2), echo=lambda line: None)
+    results = run_sweep(sweep, tmp_path / "ray", Backend("ray", workers=2), echo=lambda line: None)
     assert [r["status"] for r in results] == ["trained", "trained"]
     assert_same_trials(tmp_path / "local", tmp_path / "ray")
 
 
 def test_unknown_backend():
     with pytest.raises(ValueError, match="backend must be 'local', 'ray' or 'slurm', got 'dask'"):
-        run_sweep(Sweep(TINY, {"seed": [0]}), "unused", backend="dask")
+        run_sweep(Sweep(TINY, {"seed": [0]}), "unused", Backend("dask"))

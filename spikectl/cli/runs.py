@@ -8,6 +8,7 @@ from typing import Annotated, Literal
 
 import tyro
 
+from spikectl.experiments.backends import Backend
 from spikectl.experiments.slurm import SlurmSettings
 from spikectl.training.presets import PRESETS
 
@@ -109,11 +110,13 @@ def sweep(command: SweepCommand) -> None:
         description["overrides"] = {
             **description.get("overrides", {}), "train.total_env_steps": command.total_env_steps,
         }  # fmt: skip
+    backend = Backend(
+        command.backend, command.workers or None, command.address,
+        command.slurm if command.backend == "slurm" else None,
+    )  # fmt: skip
     run_sweep(
-        Sweep.from_dict(description), command.sweep_dir, command.workers or None,
-        backend=command.backend, address=command.address, group_seeds=command.group_seeds,
-        stacked=command.stacked,
-        slurm=command.slurm if command.backend == "slurm" else None,
+        Sweep.from_dict(description), command.sweep_dir, backend,
+        group_seeds=command.group_seeds, stacked=command.stacked,
     )  # fmt: skip
 
 

@@ -16,8 +16,8 @@ does not depend on how many ran beside it. With ``group_seeds`` the trials that 
 only in seed and training-set size run as one seed group per process
 (``spikectl.training.group``), each still in its own trial directory and bit-identical
 to the trial trained alone; the group's description lives in ``SWEEP_DIR/groups/``.
-The same tasks can run as Ray tasks (``backend="ray"``) or as Slurm jobs through
-submitit (``backend="slurm"``, ``spikectl.experiments.slurm``), each trial ending the same.
+The same tasks can run as Ray tasks or as Slurm jobs through submitit
+(:mod:`spikectl.experiments.backends`), each trial ending the same.
 """
 
 from __future__ import annotations
@@ -25,24 +25,14 @@ from __future__ import annotations
 import itertools
 import json
 import os
-import threading
-import time
-from collections.abc import Mapping, Sequence
-from concurrent.futures import ProcessPoolExecutor, as_completed
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from multiprocessing import get_context
 from pathlib import Path
 from typing import Any
 
 from spikectl.agents import ARCHITECTURES
-from spikectl.config_errors import MissingExtraError
-from spikectl.experiments.slurm import (
-    SLURM_DIR,
-    JobLostError,
-    SlurmSettings,
-    check_slurm_backend,
-    run_with_slurm,
-)
+from spikectl.experiments.backends import Backend
+from spikectl.experiments.slurm import JobLostError
 from spikectl.files import FileWriteError, make_dirs, read_json_file, write_json
 from spikectl.training.config import Experiment, field_value
 from spikectl.training.group import GROUP_FILE, group_key
@@ -61,8 +51,6 @@ PAPER_SWEEPS: dict[str, dict[str, Any]] = {
                                        "seed": list(range(10))}},
 }  # fmt: skip
 """The paper's two experiments: Figure 4 (architectures) and Figure 5 (training-set size)."""
-PARENT_POLL_S = 0.2
-"""How often a worker checks that the sweep's process is still alive."""
 TRIAL_ERRORS = (ValueError, FileNotFoundError, FileWriteError, RunDirError, JobLostError)
 """Failures of a trial that are about its inputs or files, or a Slurm job lost (reported
 in one line each); anything else is a bug and keeps its traceback."""
@@ -264,41 +252,25 @@ def seed_group_tasks(
 def run_sweep(
     sweep: Sweep,
     sweep_dir: str | os.PathLike,
-    workers: int | None = None,
-    echo=print,
-    backend: str = "local",
-    address: str | None = None,
+    backend: Backend | None = None,
+    *,
     group_seeds: bool = False,
     stacked: bool = False,
-    slurm: SlurmSettings | None = None,
+    echo: Callable[[str], Any] = print,
 ) -> list[dict[str, Any]]:
-    """Run every trial of ``sweep`` under ``sweep_dir``.
-
-    ``backend="local"``: a process pool of ``workers`` (default: one per core).
-    ``backend="ray"``: Ray tasks of one CPU each on the cluster at ``address`` (a local
-    Ray instance when None); ``sweep_dir`` must then be on storage every node sees.
-    ``backend="slurm"``: one Slurm job per task, submitted as one job array with the
-    ``slurm`` settings (default ``SlurmSettings()``), at most ``workers`` running at once
-    (None: Slurm's limits), requeued and resumed on preemption or time limit; its logs
-    in ``SWEEP_DIR/slurm``, ``sweep_dir`` on storage every node sees.
+    """Run every trial of ``sweep`` under ``sweep_dir`` on ``backend`` (default: a local
+    process pool of one worker per core, :class:`~spikectl.experiments.backends.Backend`).
     Each trial's result is the same whichever backend ran it. ``group_seeds``: trials
     that differ only in seed and n_train train as one seed group per process
     (``run_trials``), each trial exactly as alone; with ``stacked`` as one stacked
-    computation (for GPUs; equal up to rounding).
+    computation (for GPUs; equal up to rounding). ``echo`` takes each progress line.
     """
     if stacked and not group_seeds:
         raise ValueError("stacked: stacking computes seed groups; ask for group_seeds too")
-    if backend not in ("local", "ray", "slurm"):
-        raise ValueError(f"backend must be 'local', 'ray' or 'slurm', got {backend!r}")
-    if workers is not None and (
-        isinstance(workers, bool) or not isinstance(workers, int) or workers < 1
-    ):
-        raise ValueError(f"workers must be a positive integer or None, got {workers!r}")
-    if slurm is not None and backend != "slurm":
-        raise ValueError(f"Slurm settings apply to the slurm backend, not {backend!r}")
-    if backend == "slurm":
-        slurm = slurm or SlurmSettings()
-        check_slurm_backend(slurm)
+    backend = Backend() if backend is None else backend
+    if not isinstance(backend, Backend):
+        raise TypeError(f"backend must be a Backend, got {type(backend).__name__}")
+    backend.check()
     sweep_dir = Path(sweep_dir).resolve()
     if sweep_dir.exists() and not sweep_dir.is_dir():
         raise ValueError(f"{sweep_dir} is a file, not a sweep directory")
@@ -311,10 +283,7 @@ def run_sweep(
     make_dirs(sweep_dir)
     write_json(saved, sweep.to_dict())
     trials = sweep.trials()
-    parallelism = workers  # the slurm backend's: None leaves it to Slurm
-    workers = max(1, min(workers or os.cpu_count() or 1, len(trials)))
-    where = (f"Slurm jobs (logs in {sweep_dir / SLURM_DIR})" if backend == "slurm"
-             else f"{workers} worker(s)")  # fmt: skip
+    where = backend.describe(sweep_dir, len(trials))
     echo(f"{len(trials)} trials in {sweep_dir / TRIALS_DIR}, {where}")
     results = []
     # torch_threads=1: one core per trial, and results independent of the pool size.
@@ -327,12 +296,7 @@ def run_sweep(
     else:
         tasks = [(run_trial, (config, run_dir), run_dir) for config, run_dir in jobs]
     failures: list[tuple[str, BaseException]] = []
-    if backend == "slurm":
-        outcomes = run_with_slurm(tasks, sweep_dir, slurm, parallelism, TRIAL_ERRORS, echo)
-    elif backend == "ray":
-        outcomes = _run_with_ray(tasks, address, workers)
-    else:
-        outcomes = _run_locally(tasks, workers)
+    outcomes = backend.run(tasks, sweep_dir, len(trials), TRIAL_ERRORS, echo)
     for outcome in outcomes:
         if isinstance(outcome, BaseException):
             name = Path(outcome.run_dir).name
@@ -359,64 +323,6 @@ def run_sweep(
             "the same command again"
         )
     return sorted(results, key=lambda result: result["run_dir"])
-
-
-def _exit_with_parent(parent_pid: int) -> None:
-    """Worker initializer: end this worker as soon as the sweep's process is gone
-    (killed, even by SIGKILL), so that no trial outlives it holding its pipes."""
-
-    def watch() -> None:
-        while os.getppid() == parent_pid:
-            time.sleep(PARENT_POLL_S)
-        os._exit(1)
-
-    threading.Thread(target=watch, name="spikectl-parent-watch", daemon=True).start()
-
-
-def _run_locally(tasks: list[tuple], workers: int):
-    """Yield task results (or a task's exception, with ``run_dir`` set on it) as a local
-    process pool finishes them."""
-    with ProcessPoolExecutor(
-        max_workers=workers, mp_context=get_context("spawn"),
-        initializer=_exit_with_parent, initargs=(os.getpid(),),
-    ) as pool:  # fmt: skip
-        futures = {pool.submit(function, *args): run_dir for function, args, run_dir in tasks}
-        for future in as_completed(futures):
-            error = future.exception()
-            if error is None:
-                yield future.result()
-            else:
-                error.run_dir = str(futures[future])
-                yield error
-
-
-def _run_with_ray(tasks: list[tuple], address: str | None, workers: int):
-    """Yield task results as Ray tasks (one CPU each) finish them."""
-    try:
-        import ray
-    except ImportError:
-        raise MissingExtraError(
-            "--backend ray needs Ray, which is not installed: pip install 'spikectl[ray]'"
-        ) from None
-    started_here = not ray.is_initialized()
-    if started_here:
-        local = {"num_cpus": workers, "include_dashboard": False} if address is None else {}
-        ray.init(address=address, log_to_driver=False, **local)
-    try:
-        remote = {function: ray.remote(num_cpus=1)(function) for function, _, _ in tasks}
-        pending = {remote[function].remote(*args): run_dir for function, args, run_dir in tasks}
-        while pending:
-            done, _ = ray.wait(list(pending), num_returns=1)
-            run_dir = pending.pop(done[0])
-            try:
-                yield ray.get(done[0])
-            except ray.exceptions.RayTaskError as wrapped:
-                error = wrapped.as_instanceof_cause()
-                error.run_dir = str(run_dir)
-                yield error
-    finally:
-        if started_here:
-            ray.shutdown()
 
 
 def trial_dirs(sweep_dir: str | os.PathLike) -> list[Path]:
