@@ -6,7 +6,7 @@ and the command then loads PyTorch and its options (a second or more). A Ctrl-C 
 time, or an environment variable Numba cannot use (``NUMBA_NUM_THREADS=0``), would
 otherwise be a Python traceback from inside an import. Here both are caught around the
 import of the command: a Ctrl-C is one line and exit 130, a bad environment variable one
-line and exit 2 (``spikectl.environment``). This module imports only the standard
+line and exit 2 (``spikectl.environment_variables``). This module imports only the standard
 library, and nothing imports it: it is a process's entry, not a library.
 
 A Ctrl-C is recognised by the signal, not only by the error it leaves: an extension
@@ -48,7 +48,7 @@ def main() -> None:
         _ignore_interrupts()
         if _interrupted(error):
             _exit_now(INTERRUPTED_STARTING, 130)
-        environment_error = sys.modules.get("spikectl.environment")
+        environment_error = sys.modules.get("spikectl.environment_variables")
         if environment_error is not None and isinstance(
             error, environment_error.EnvironmentVariableError
         ):

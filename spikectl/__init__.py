@@ -2,14 +2,14 @@
 
 The public API is re-exported here; importing the package registers the Gymnasium
 environment ids (a cheap dictionary entry) and does no other work. It first checks the
-environment variables Numba reads (``spikectl.environment``): one it cannot use raises
-:class:`~spikectl.environment.EnvironmentVariableError` (a ValueError) naming it.
+environment variables Numba reads (``spikectl.environment_variables``): one it cannot use raises
+:class:`~spikectl.environment_variables.EnvironmentVariableError` (a ValueError) naming it.
 ``load_controller`` (which needs PyTorch) loads its module on first use.
 """
 
 from typing import Any
 
-from spikectl.environment import EnvironmentVariableError, check_environment, import_numba
+from spikectl.environment_variables import EnvironmentVariableError, check_environment, import_numba
 
 # Before Numba reads the environment: a value it cannot use is one EnvironmentVariableError
 # (a ValueError) naming the variable, not a traceback from inside Numba.

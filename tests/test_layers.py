@@ -23,7 +23,7 @@ LAYERS = (
         "spikectl.config_errors",
         "spikectl.seeds",
         "spikectl.version",
-        "spikectl.environment",
+        "spikectl.environment_variables",
         "spikectl.registry",
     ),
     ("spikectl.file_kinds", "spikectl.locks"),

@@ -5,7 +5,7 @@ Ctrl-C while the ``spikectl`` command is still loading.
 ``import numba``, and a Ctrl-C while the command imported Numba or PyTorch a
 KeyboardInterrupt traceback. The command's entry point (``_spikectl_launcher``) now
 catches both around the import: one line, exit 2 or 130. ``import spikectl`` raises one
-named error (``spikectl.environment.EnvironmentVariableError``, a ValueError).
+named error (``spikectl.environment_variables.EnvironmentVariableError``, a ValueError).
 """
 
 from __future__ import annotations
@@ -21,7 +21,7 @@ from pathlib import Path
 
 import pytest
 
-from spikectl.environment import (
+from spikectl.environment_variables import (
     MAX_NUMBA_THREADS,
     EnvironmentVariableError,
     check_environment,
@@ -119,7 +119,7 @@ def test_import_spikectl_with_a_bad_numba_variable_raises_one_named_error():
     )  # fmt: skip
     assert process.returncode == 0 and process.stderr == "", process.stderr
     assert process.stdout.startswith(
-        "spikectl.environment EnvironmentVariableError the environment variable "
+        "spikectl.environment_variables EnvironmentVariableError the environment variable "
         "NUMBA_NUM_THREADS='0'"
     )
 

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from spikectl.environment import threading_layer_error
+from spikectl.environment_variables import threading_layer_error
 from spikectl.files import TooLargeError, check_fits_in_memory
 from spikectl.neuron.kernel import (
     PARALLEL_MIN_BATCH,

@@ -63,7 +63,7 @@ def controllers(env: NeuronControlEnv) -> float:
 
 def a_bad_environment_variable() -> str:
     try:
-        spikectl.environment.check_environment({"NUMBA_NUM_THREADS": "0"})
+        spikectl.environment_variables.check_environment({"NUMBA_NUM_THREADS": "0"})
     except spikectl.EnvironmentVariableError as error:
         return f"{error.name}={error.value}"
     return ""
