@@ -21,7 +21,7 @@ from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from spikectl import simulate
-from spikectl.contexts import ContextSet, make_context, make_splits
+from spikectl.contexts import ContextSet, NeuronSetup, make_context, make_splits
 from spikectl.contexts.generation import generate_topology
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.registration import VARIANTS
@@ -116,9 +116,10 @@ def test_bad_uses_raise_clear_errors(tmp_path):
         NeuronControlEnv(contexts=plain, extensions={"hidden_neurons": 2})
     weights = np.array([[0, 1, 0], [0, 0, 1], [0, 0, 0]])
     with pytest.raises(ValueError, match="cannot be hidden"):
-        make_context(weights, target=2, hidden=[2])
+        make_context(weights, target=2, neurons=NeuronSetup(hidden=[2]))
     with pytest.raises(ValueError, match="hidden neurons"):
-        make_context(weights, target=1, pattern=[0, 1, 0], witness=[2, -1, -1], hidden=[2])
+        make_context(weights, target=1, pattern=[0, 1, 0], witness=[2, -1, -1],
+                     neurons=NeuronSetup(hidden=[2]))  # fmt: skip
     with pytest.raises(ValueError, match="synaptic_scale must have shape"):
         simulate(weights, [0], synaptic_scale=np.ones((2, 2)))
     with pytest.raises(ValueError, match="release_uniforms must lie in"):

@@ -12,6 +12,7 @@ from conftest import play_legally, spike_pattern
 import spikectl
 from spikectl import IdentifyAndPlan, NeuronParams, make_context, plan_episode
 from spikectl.cli import main
+from spikectl.contexts import NeuronSetup
 from spikectl.envs.controller import batched
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.planning import ConnectivityEstimate, DiscreteConnectivityEstimate, ObservedState
@@ -38,7 +39,7 @@ def test_planner_uses_a_two_synapse_chain_and_a_second_input():
     weights = np.zeros((4, 4), dtype=int)
     weights[0, 1] = weights[1, 2] = weights[3, 2] = 1
     context = make_context(weights, target=2, pattern=spike_pattern(12, [2, 4]),
-                           hidden=np.array([1]))  # fmt: skip
+                           neurons=NeuronSetup(hidden=np.array([1])))  # fmt: skip
     actions, ret = plan_episode(context, width=16)
     assert ret == pytest.approx(1.0, abs=1e-12)
     assert 0 in actions and 3 in actions and 1 not in actions

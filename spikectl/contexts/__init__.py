@@ -8,7 +8,12 @@ sequences of them, ``splits`` the paper's splits, ``file_format`` reads and writ
 from spikectl.contexts.context import Context
 from spikectl.contexts.context_set import ContextSet
 from spikectl.contexts.file_format import ContextFileError
-from spikectl.contexts.generation import MAX_EPISODE_LENGTH, MAX_N_NEURONS, make_context
+from spikectl.contexts.generation import (
+    MAX_EPISODE_LENGTH,
+    MAX_N_NEURONS,
+    NeuronSetup,
+    make_context,
+)
 from spikectl.contexts.splits import make_splits, make_validation_set
 
 __all__ = [
@@ -17,6 +22,7 @@ __all__ = [
     "Context",
     "ContextFileError",
     "ContextSet",
+    "NeuronSetup",
     "make_context",
     "make_splits",
     "make_validation_set",

@@ -15,7 +15,8 @@ them to ``.npz`` files; this module does not import them.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -197,6 +198,17 @@ def generate_context(
     )
 
 
+@dataclass(frozen=True)
+class NeuronSetup:
+    """What one network's neurons are beyond the shared neuron model, for
+    :func:`make_context`: the indices of the ``hidden`` neurons (simulated, never
+    observed nor stimulated) and each neuron's own parameters (``heterogeneity``, a
+    :class:`~spikectl.neuron.extensions.Heterogeneity`); None: all observed, all alike."""
+
+    hidden: Sequence[int] | np.ndarray | None = None
+    heterogeneity: Heterogeneity | None = None
+
+
 def make_context(
     weights: np.ndarray,
     target: int | None = None,
@@ -206,19 +218,24 @@ def make_context(
     episode_length: int = 60,
     seed: int | None = 0,
     params: NeuronParams | None = None,
-    hidden: np.ndarray | None = None,
-    heterogeneity: Heterogeneity | None = None,
+    neurons: NeuronSetup | None = None,
 ) -> Context:
     """Bring your own connectome: build a validated context from a connectivity matrix.
 
     Whatever is not given is generated as in docs/model.md from ``seed``: the target
     (uniform among neurons with an excitatory input) and the pattern with its
-    witness (random legal actions from rest, never a ``hidden`` neuron). A given
-    witness must reproduce the given pattern under ``params`` and ``heterogeneity``;
+    witness (random legal actions from rest, never a hidden neuron). ``neurons`` says
+    which neurons are hidden and each neuron's own parameters (:class:`NeuronSetup`;
+    None: all observed, all alike). A given
+    witness must reproduce the given pattern under ``params`` and the neurons' own ones;
     a given pattern without a witness is accepted as is (its reachability is then
     unknown and ``witness`` is None).
     """
     weight_matrix = as_weight_batch(weights)[0].astype(np.int8)
+    neurons = NeuronSetup() if neurons is None else neurons
+    if not isinstance(neurons, NeuronSetup):
+        raise TypeError(f"neurons must be a NeuronSetup or None, got {type(neurons).__name__}")
+    hidden, heterogeneity = neurons.hidden, neurons.heterogeneity
     rng = np.random.default_rng(seed)
     if target is None:
         candidates = target_candidates(weight_matrix)
