@@ -16,11 +16,10 @@ from spikectl.locks import folder_lock
 
 
 @dataclass(frozen=True)
-class DemoConfig:
-    """Generate contexts, score the reference policies on them and save an episode raster."""
+class GeneratedSets:
+    """The sets a command generates (``make_splits``'s arguments), shared by ``demo`` and
+    ``contexts generate``."""
 
-    out_dir: Path = Path("runs/demo")
-    """Where the context sets, results.json and raster.png are written."""
     n_train: int = 100
     """Training contexts."""
     n_test: int = 100
@@ -30,7 +29,15 @@ class DemoConfig:
     episode_length: int = 60
     """Steps (ms) per episode."""
     seed: int = 0
-    """Seed of the context generation and of the random policy."""
+    """Seed of the context generation (and of demo's random policy)."""
+
+
+@dataclass(frozen=True)
+class DemoConfig(GeneratedSets):
+    """Generate contexts, score the reference policies on them and save an episode raster."""
+
+    out_dir: Path = Path("runs/demo")
+    """Where the context sets, results.json and raster.png are written."""
     overwrite: bool = False
     """Replace the files of an earlier demo in --out-dir."""
 
@@ -96,7 +103,7 @@ def play_demo(config: DemoConfig) -> dict[str, dict[str, float]]:
 
 
 @dataclass(frozen=True)
-class ContextsConfig:
+class ContextsConfig(GeneratedSets):
     """Generate a training and a test context set and save them, or describe a saved set."""
 
     action: Literal["generate", "show"] = "generate"
@@ -105,16 +112,6 @@ class ContextsConfig:
     """Where generate writes train_contexts.npz and test_contexts.npz."""
     path: Path | None = None
     """The set file that show describes."""
-    n_train: int = 100
-    """Training contexts."""
-    n_test: int = 100
-    """Test contexts."""
-    n_neurons: int = 8
-    """Neurons per network."""
-    episode_length: int = 60
-    """Steps per episode."""
-    seed: int = 0
-    """Generation seed."""
     overwrite: bool = False
     """Replace existing train_contexts.npz / test_contexts.npz in --out-dir."""
 
