@@ -11,7 +11,7 @@ import os
 import stat
 from collections.abc import Iterable, Mapping, Sequence
 from pathlib import Path
-from typing import Any, Literal, overload
+from typing import Any
 
 import numpy as np
 
@@ -64,33 +64,6 @@ def check_set_outputs(outputs: Iterable[str | os.PathLike]) -> list[Path]:
     return paths
 
 
-@overload
-def make_splits(
-    n_train: int = ...,
-    n_test: int = ...,
-    n_neurons: int = ...,
-    episode_length: int = ...,
-    seed: int = ...,
-    params: NeuronParams | None = ...,
-    extensions: Extensions | Mapping[str, Any] | None = ...,
-    n_val: Literal[0] = ...,
-) -> tuple[ContextSet, ContextSet]: ...
-
-
-@overload
-def make_splits(
-    n_train: int = ...,
-    n_test: int = ...,
-    n_neurons: int = ...,
-    episode_length: int = ...,
-    seed: int = ...,
-    params: NeuronParams | None = ...,
-    extensions: Extensions | Mapping[str, Any] | None = ...,
-    n_val: int = ...,
-) -> tuple[ContextSet, ...]: ...
-
-
-# The overloads let a type checker unpack ``train, test = make_splits(...)``.
 def make_splits(
     n_train: int = 100,
     n_test: int = 100,
