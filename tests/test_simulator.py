@@ -17,6 +17,7 @@ from spikectl.neuron.prediction import one_step
 from spikectl.neuron.simulator import (
     PARALLEL_MIN_BATCH,
     PARALLEL_MIN_WORK,
+    DrawnInputs,
     SimulatorState,
     advance,
     as_weight_batch,
@@ -284,7 +285,8 @@ def test_one_step_prediction_equals_the_simulator_step_exactly(variant):
             state, weights, actions[:, t], params, neurons, one_input, neuron=t % n
         )
         step_actions = np.ascontiguousarray(actions[:, t : t + 1])
-        advance(state, weights, step_actions, params, out_v, out_s, neurons, None, step_input)
+        advance(state, weights, step_actions, params, out_v, out_s, neurons,
+                DrawnInputs(None, step_input))  # fmt: skip
         np.testing.assert_array_equal(predicted_v, out_v[:, 0])
         np.testing.assert_array_equal(predicted_s, out_s[:, 0])
         np.testing.assert_array_equal(target_v, out_v[:, 0, t % n])

@@ -31,7 +31,7 @@ from spikectl.envs.env_support import (
 )
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance
+from spikectl.neuron.simulator import DO_NOTHING, DrawnInputs, SimulatorState, advance
 
 __all__ = ["NeuronControlEnv"]
 
@@ -259,7 +259,7 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         if self._random_dynamics:
             self._effects.draw_inputs(self.np_random, self._release_uniforms, self._input_mV)
         advance(self._state, self._weights, actions, self.params, voltage, spikes,
-                self._neurons, self._release_uniforms, self._input_mV)  # fmt: skip
+                self._neurons, DrawnInputs(self._release_uniforms, self._input_mV))  # fmt: skip
         spikes = self._spike_history[t]
         target_spiked = bool(spikes[self._target])
         reward = self._reward_if_spike[t] if target_spiked else self._reward_if_silent[t]

@@ -42,7 +42,13 @@ from spikectl.envs.env_support import (
 from spikectl.files import check_fits_in_memory
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.neuron.simulator import DO_NOTHING, SimulatorState, advance, uniform_neuron_parameters
+from spikectl.neuron.simulator import (
+    DO_NOTHING,
+    DrawnInputs,
+    SimulatorState,
+    advance,
+    uniform_neuron_parameters,
+)
 
 
 class NeuronControlVectorEnv(VectorEnv):
@@ -218,8 +224,8 @@ class NeuronControlVectorEnv(VectorEnv):
         if effects.random_dynamics:
             self._draw_inputs(np.flatnonzero(~autoreset))
         advance(self._state, self._weights, self._actions, self.params, self._out_voltage,
-                self._out_spikes, self._neurons, self._release_uniforms,
-                self._input_mV)  # fmt: skip
+                self._out_spikes, self._neurons,
+                DrawnInputs(self._release_uniforms, self._input_mV))  # fmt: skip
         length = self.episode_length
         # Flat index of each env's current step into its [num_envs * N] tables; an env
         # about to autoreset points at its last step, which its reset then clears.

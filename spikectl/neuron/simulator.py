@@ -22,6 +22,7 @@ Order inside step t, given action a_t (docs/model.md):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numba
 import numpy as np
@@ -124,6 +125,17 @@ def uniform_neuron_parameters(params: NeuronParams, batch: int, n_neurons: int) 
     )
 
 
+class DrawnInputs(NamedTuple):
+    """The random inputs the extensions draw for each step, for :func:`advance` (either
+    may be None: that extension is off)."""
+
+    release_uniforms: np.ndarray | None = None
+    """float64 [B, T, n] in [0, 1): makes release stochastic (a spike releases iff
+    u < p_r (1 - exp(-(t - t_r) / tau_R)))."""
+    input_mV: np.ndarray | None = None
+    """float64 [B, T, n]: extra input added to the drive of non-refractory neurons."""
+
+
 def advance(
     state: SimulatorState,
     weights: np.ndarray,
@@ -132,8 +144,7 @@ def advance(
     out_voltage: np.ndarray,
     out_spikes: np.ndarray,
     neurons: np.ndarray | None = None,
-    release_uniforms: np.ndarray | None = None,
-    input_mV: np.ndarray | None = None,
+    drawn: DrawnInputs | None = None,
 ) -> None:
     """Advance ``state`` in place by ``actions.shape[1]`` steps, with no input checks.
 
@@ -142,11 +153,10 @@ def advance(
     is the hot path of the environments; :func:`simulate` is the checked entry point.
 
     The optional inputs are the extensions (None: the paper's model): ``neurons``
-    per-neuron parameters [1 or B, 2, n] from :func:`neuron_parameters`;
-    ``release_uniforms`` float64 [B, T, n] in [0, 1) makes release stochastic (a spike
-    releases iff u < p_r (1 - exp(-(t - t_r) / tau_R))); ``input_mV`` float64 [B, T, n]
-    is extra input added to the drive of non-refractory neurons.
+    per-neuron parameters [1 or B, 2, n] from :func:`neuron_parameters`; ``drawn`` the
+    step's random inputs (:class:`DrawnInputs`).
     """
+    release_uniforms, input_mV = (None, None) if drawn is None else drawn
     batch, steps = actions.shape
     work = batch * steps * weights.shape[-1]
     threaded = batch >= PARALLEL_MIN_BATCH and work >= PARALLEL_MIN_WORK
@@ -310,7 +320,7 @@ def simulate(
     spikes = np.empty((batch, horizon, n), dtype=np.bool_)
     state = SimulatorState.at_rest(batch, n, params)
     advance(state, weight_batch, action_array, params, voltages, spikes, neurons,
-            release_uniforms, input_mV)  # fmt: skip
+            DrawnInputs(release_uniforms, input_mV))  # fmt: skip
     if single:
         return voltages[0], spikes[0]
     return voltages, spikes
