@@ -175,7 +175,7 @@ def test_committed_sweeps_rerun_their_trials_exactly():
 
 
 def test_guided_runs_script_reruns_its_trials_exactly():
-    """docs/results/guided_runs.sh FOLDER SEED gives the config of every committed
+    """lab/results/guided_runs.sh FOLDER SEED gives the config of every committed
     docs/results/FOLDER/trials/seed=SEED it names, with today's presets: a preset that
     changes must be pinned back in the rows made before it."""
     import json
@@ -210,7 +210,7 @@ def test_guided_runs_script_reruns_its_trials_exactly():
 
 
 def test_suite_train_script_reruns_its_trials_exactly():
-    """docs/results/suite/train.sh TASK SEED [PRESET FOLDER FLAGS] gives the config of
+    """lab/results/suite/train.sh TASK SEED [PRESET FOLDER FLAGS] gives the config of
     every committed run trained on a suite task: `quick` under trained/quick, the main
     job under trained/guided-upr24 with the teacher it had (the progress bar aside:
     `paper`'s quick seeds are a sweep's, which draws none)."""

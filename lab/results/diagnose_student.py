@@ -1,11 +1,11 @@
 """Where a trained student loses to identify-and-plan: measured on the validation networks.
 
-    python docs/results/diagnose_student.py RUN_DIR [RUN_DIR ...] [--model final|best]
+    python lab/results/diagnose_student.py RUN_DIR [RUN_DIR ...] [--model final|best]
 
 Plays identify-and-plan and each run's greedy network on the 100 validation networks of
 make_splits(100, 100, seed=0, n_val=100) (never the test set), splits each controller's
 loss (1 - return) into missed wanted spikes and unwanted spikes by episode step (as
-docs/results/baselines/diagnose_identify.py does for the planner), and, with the planner
+lab/results/baselines/diagnose_identify.py does for the planner), and, with the planner
 played beside the student's own episodes, counts by step how often the two agree and how
 often the student does nothing where the planner acts.
 """

@@ -4,7 +4,7 @@
 # thread each, two at a time. Each run's config.json and metrics.csv are committed under
 # docs/results/<folder>/trials/seed=S (the weights are not):
 #
-#     bash docs/results/guided_runs.sh FOLDER SEED
+#     bash lab/results/guided_runs.sh FOLDER SEED
 #
 # then copy RUN/{config.json,metrics.csv,baselines.json,machine.json} into
 # docs/results/FOLDER/trials/seed=SEED and redraw with guided_table.py / plot_guided.py.

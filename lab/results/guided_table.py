@@ -1,6 +1,6 @@
 """The table of docs/training.md's "Learners that beat the planner?", from committed runs.
 
-    python docs/results/guided_table.py docs/results
+    python lab/results/guided_table.py docs/results
 
 Per group (every trial on one Torch thread, on the project's 2-core AMD EPYC machine,
 without AVX-512 but for the groups that say so): final validation and test return

@@ -1,6 +1,6 @@
 """Tables of docs/training.md's "Learning fast" section, from committed run directories.
 
-    python docs/results/learn_fast_table.py docs/results
+    python lab/results/learn_fast_table.py docs/results
 
 Prints the pilots' table and three markdown tables: the before/after table
 (environment steps, gradient updates and wall minutes until the unseen-test return

@@ -1,7 +1,7 @@
 """Tables and Figure 5 of docs/reproduction.md's "The paper's claims at the quick
 preset" section, from committed run directories and baseline CSVs.
 
-    python docs/results/paper_claims_table.py docs/results [docs/images/fig5_quick.png]
+    python lab/results/paper_claims_table.py docs/results [docs/images/fig5_quick.png]
 
 Prints three markdown tables, each with the baselines of the same 100 unseen test
 networks (doing nothing; a random legal policy, mean ± sd over its 10 seeds; the

@@ -1,7 +1,7 @@
 """Learning curves against core-minutes: the quick preset and the guided learners
 (the rows of guided_table.py), from committed results only.
 
-    python docs/results/plot_guided.py docs/results docs/images/guided_core_minutes.png
+    python lab/results/plot_guided.py docs/results docs/images/guided_core_minutes.png
 
 Each curve is the mean over seeds of the greedy return on the validation networks
 (left) and the unseen test networks (right) against the process CPU time of the run
@@ -16,7 +16,7 @@ import sys
 from pathlib import Path
 
 import numpy as np
-from guided_table import GROUPS, runs_of  # docs/results/guided_table.py, beside this script
+from guided_table import GROUPS, runs_of  # lab/results/guided_table.py, beside this script
 from matplotlib import colormaps
 
 from spikectl.experiments.figures import save_figure, subplots

@@ -1,6 +1,6 @@
 """Redraw the update-ratio comparison of docs/reproduction.md from committed results.
 
-    python docs/results/plot_update_ratio.py docs/results docs/images/update_ratio.png
+    python lab/results/plot_update_ratio.py docs/results docs/images/update_ratio.png
 """
 
 import sys

@@ -2,7 +2,7 @@
 holds and the git log: its claim (the subject of the commit that added it), the command
 that reruns it, the day it was added and the CPU its runs recorded.
 
-    python docs/results/research_index.py > /tmp/table.md   # then paste into the index
+    python lab/results/research_index.py > /tmp/table.md   # then paste into the index
 
 Run from the repository root of a full clone (the dates and claims come from git).
 """
@@ -13,8 +13,11 @@ import json
 import subprocess
 from pathlib import Path
 
-RESULTS = Path(__file__).resolve().parent
-ROOT = RESULTS.parent.parent
+LAB_RESULTS = Path(__file__).resolve().parent
+"""The scripts of the research record (lab/results/FOLDER/ beside each data folder)."""
+ROOT = LAB_RESULTS.parent.parent
+RESULTS = ROOT / "docs" / "results"
+"""The committed data: configs, metrics, CSVs, figures (docs/results/FOLDER/)."""
 CLAIM_CHARS = 220
 # Folders whose first commits' subjects name something else (a folder committed beside
 # another change): their claim as the commit that reported the result stated it.
@@ -154,13 +157,13 @@ def command(folder: Path) -> str:
                 f"--sweep-dir runs/{name}`")  # fmt: skip
     if (folder / "sweep.json").exists():
         return f"`spikectl sweep --config docs/results/{name}/sweep.json --sweep-dir runs/{name}`"
-    runs_script = (RESULTS / "guided_runs.sh").read_text()
+    runs_script = (LAB_RESULTS / "guided_runs.sh").read_text()
     if f"    {name})" in runs_script:
-        return f"`bash docs/results/guided_runs.sh {name} SEED`"
+        return f"`bash lab/results/guided_runs.sh {name} SEED`"
     if (folder / "README.md").exists():
         return f"in [its README](../results/{name}/README.md)"
-    if (folder / "train.sh").exists():
-        return f"`bash docs/results/{name}/train.sh TASK SEED`"
+    if (LAB_RESULTS / name / "train.sh").exists():
+        return f"`bash lab/results/{name}/train.sh TASK SEED`"
     return "in the page that cites it"
 
 
@@ -179,13 +182,19 @@ def cpus(folder: Path) -> str:
     return ", ".join(sorted(kinds)) or "not recorded"
 
 
+def scripts(folder: Path) -> str:
+    """Where the folder's scripts live: lab/results/FOLDER/, or none."""
+    lab = LAB_RESULTS / folder.name
+    return f"`lab/results/{folder.name}/`" if lab.is_dir() else "none"
+
+
 def seeds(folder: Path) -> int:
     return len(list(folder.glob("trials/*seed=*"))) + len(list(folder.glob("trials/seed=*")))
 
 
 def main() -> None:
-    print("| folder | claim (from the commit that added it) | command | added | CPU |")
-    print("|---|---|---|---|---|")
+    print("| folder | claim (from the commit that added it) | command | scripts | added | CPU |")
+    print("|---|---|---|---|---|---|")
     for folder in sorted(path for path in RESULTS.iterdir() if path.is_dir()):
         if folder.name.startswith(("_", ".")):
             continue
@@ -194,7 +203,7 @@ def main() -> None:
         claim = subject if len(subject) <= CLAIM_CHARS else subject[:CLAIM_CHARS] + " …"
         claim = claim.replace("|", "/")
         print(f"| [{folder.name}](../results/{folder.name}/) | {claim} | {command(folder)} "
-              f"| {date} | {cpus(folder)} |")  # fmt: skip
+              f"| {scripts(folder)} | {date} | {cpus(folder)} |")  # fmt: skip
 
 
 if __name__ == "__main__":

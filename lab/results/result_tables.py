@@ -1,6 +1,6 @@
 """Readers shared by the result folders' table scripts: a run's metrics.csv, its best
 evaluation, and one task's returns in a per-network CSV (``spikectl benchmark
---per-network``). A script in a folder of docs/results imports them with
+--per-network``). A script in a folder of lab/results imports them with
 
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
     from result_tables import best, metrics, per_network
@@ -13,7 +13,8 @@ from pathlib import Path
 
 import numpy as np
 
-RESULTS = Path(__file__).parent
+RESULTS = Path(__file__).resolve().parents[2] / "docs" / "results"
+"""The committed data the scripts read (docs/results/FOLDER/)."""
 PLANNER_TEST = RESULTS / "suite" / "identify-and-plan-per-network.csv"
 """Identify-and-plan (the named controller of the suite's leaderboard) on every task's
 test networks, one row per network: what ``spikectl benchmark identify-and-plan --task

@@ -2,7 +2,7 @@
 played on the first COUNT validation networks of a suite task, its action against the
 advised one at every step (the advice is read from the controller's own inputs).
 
-    python docs/results/advice-input/agreement.py --task n16 --run RUN [--count 25]
+    python lab/results/advice-input/agreement.py --task n16 --run RUN [--count 25]
 """
 
 from __future__ import annotations

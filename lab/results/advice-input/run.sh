@@ -31,7 +31,7 @@ for seed in 1 2; do
     bench "advice-s$seed" "$runs/n8-seed$seed" paper n16 noise1 noise2 noise4 hidden25 \
         stochastic heterogeneous background
 done
-python docs/results/belief-input/compare.py \
+python lab/results/belief-input/compare.py \
     --old docs/results/belief-input/validation/identify-and-plan-val.csv \
     --new $here/validation/advice-s{0,1,2}-val.csv \
     --names "identify-and-plan" "with advice" > $here/validation.md

@@ -15,7 +15,7 @@ weights, or a choice the features cannot represent) the student is left to rewar
 The TD loss is kept at every step (DQfD's form; ADVISOR's (1 - w) weighting of the RL
 loss would leave Q-learning without its bootstraps where w is near 1).
 
-    python docs/results/advisor/advisor.py RUN_DIR SEED ALPHA TEACHER IMITATION_END
+    python lab/results/advisor/advisor.py RUN_DIR SEED ALPHA TEACHER IMITATION_END
 
 runs the README's main job (``spikectl train guided``) with this learner, the teacher
 ``identify`` or ``told-weights`` and the imitation weight annealed from 1 to

@@ -3,7 +3,7 @@ network, as ``spikectl benchmark RUN --model best --task paper --per-network OUT
 for a library learner (the command refuses a config naming ``guided-advisor`` until the
 learner is registered, which this script does first).
 
-    python docs/results/advisor/benchmark.py RUN_DIR OUT_CSV
+    python lab/results/advisor/benchmark.py RUN_DIR OUT_CSV
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ teacher, which reads the deviation in its next observation and replans). The bes
 action's return minus the teacher's is what an AggreVaTe-style learner could gain at that
 state if it knew the network: an upper bound, since a learner sees only the history.
 
-    python docs/results/advisor/deviation.py TASK SPLIT FIRST COUNT STEPS
+    python lab/results/advisor/deviation.py TASK SPLIT FIRST COUNT STEPS
 
 plays networks FIRST .. FIRST+COUNT-1 of the task's SPLIT (never ``test``), steps
 0 .. STEPS-1, and prints the share of states where some action beats the teacher's and

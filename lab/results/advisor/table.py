@@ -3,7 +3,7 @@ teacher agreement and mean ADVISOR weight, against the README's main job (the sa
 preset with DQfD's imitation alone, ``guided-ntrain1000``) and, for the teacher told the
 weights, against that teacher's plain pilot (``guided-told-weights-pilot``).
 
-    python docs/results/advisor/table.py
+    python lab/results/advisor/table.py
 
 With three seeds of ``identify-a4-end1``, also their mean against the main job's and,
 network by network on the test set, their best models (``trials/NAME/per_network.csv``,
@@ -23,7 +23,8 @@ from spikectl.experiments.stats import paired_difference_cells
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from result_tables import PLANNER_TEST, best, metrics, per_network  # noqa: E402
 
-HERE = Path(__file__).parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "advisor"
 RESULTS = HERE.parent
 MAIN_JOB = sorted((RESULTS / "guided-ntrain1000" / "trials").glob("seed=*"))
 TOLD_WEIGHTS = sorted((RESULTS / "guided-told-weights-pilot" / "trials").glob("seed=*"))

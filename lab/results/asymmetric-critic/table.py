@@ -1,6 +1,6 @@
 """The tables of docs/results/asymmetric-critic/README.md, from committed files only.
 
-    python docs/results/asymmetric-critic/table.py > docs/results/asymmetric-critic/table.md
+    python lab/results/asymmetric-critic/table.py > docs/results/asymmetric-critic/table.md
 
 The README's main job with the privileged critic (trials/seed=S) against the main job's
 committed seeds on the same CPU kind (../cleo-sim-to-sim/tdrqn-seedS, the same preset
@@ -25,13 +25,14 @@ from spikectl.experiments.stats import paired_difference_cells
 from spikectl.training.run import best_on_validation
 from spikectl.training.run_files import read_metrics
 
-HERE = Path(__file__).resolve().parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "asymmetric-critic"
 RESULTS = HERE.parent
 GROUPS = {
     "with the critic": sorted((HERE / "trials").glob("seed=*")),
     "the main job": sorted((RESULTS / "cleo-sim-to-sim").glob("tdrqn-seed*")),
 }
-sys.path.insert(0, str(RESULTS))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # result_tables
 from result_tables import PLANNER_TEST, PLANNER_VALIDATION  # noqa: E402
 
 

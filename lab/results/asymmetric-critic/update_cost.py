@@ -1,7 +1,7 @@
 """CPU time of one update of the guided learner (the main job's preset) with and without
 the privileged critic, measured alternately in one process on one thread.
 
-    python docs/results/asymmetric-critic/update_cost.py
+    python lab/results/asymmetric-critic/update_cost.py
 
 Each learner's buffer holds the same 40 random-action episodes; an update is one
 batch's loss, its gradient step and the soft update of the pairs the learner moves. The

@@ -1,6 +1,6 @@
 """Why identify-and-plan loses to the oracle: measured on the validation networks.
 
-    python docs/results/baselines/diagnose_identify.py [--n-neurons 8] [--size 100]
+    python lab/results/baselines/diagnose_identify.py [--n-neurons 8] [--size 100]
         [--skip-first-action]
 
 Plays identify-and-plan on the validation set of make_splits(100, 100, seed=0,
@@ -20,9 +20,9 @@ import numpy as np
 
 import spikectl.planning.policy as policy_module
 from spikectl import IdentifyAndPlan, make_splits
-from spikectl.planning.identify import KnownConnectivity
 from spikectl.envs.env_support import step_rewards
 from spikectl.envs.rollout import evaluate_policy
+from spikectl.planning.identify import KnownConnectivity
 
 STEP_BINS = (0, 5, 10, 20, 30, 60)
 

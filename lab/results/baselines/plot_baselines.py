@@ -1,6 +1,6 @@
 """Draw the figure and tables of docs/baselines.md from the committed per-context CSVs.
 
-    python docs/results/baselines/plot_baselines.py docs/results/baselines \
+    python lab/results/baselines/plot_baselines.py docs/results/baselines \
         docs/images/baselines.png
 
 Reads ``curve_noise{sigma}_hidden{fraction}.csv`` (measurement noise x hidden

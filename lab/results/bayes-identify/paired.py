@@ -1,6 +1,6 @@
 """The new identify-and-plan against the old, network by network, from sweep.py's CSVs.
 
-    python docs/results/bayes-identify/paired.py ROWS.csv PER_NETWORK.csv [--old '{}'] \
+    python lab/results/bayes-identify/paired.py ROWS.csv PER_NETWORK.csv [--old '{}'] \
         [--new '{"named": true}'] [--out paired.csv]
 
 For each task: both settings' mean return and normalised score, CPU s per episode,

@@ -2,7 +2,7 @@
 network: the mean difference (new - old) with a 95% bootstrap interval over the networks
 (10 000 resamples, seed 0) and how many networks each way.
 
-    python docs/results/bayes-identify/paired_benchmark.py OLD.csv NEW.csv [--task T ...]
+    python lab/results/bayes-identify/paired_benchmark.py OLD.csv NEW.csv [--task T ...]
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 controller played before (sweep 7's ``{"gamble_networks": 16}``), network by network:
 mean difference with a 95% bootstrap interval (10 000 resamples, seed 0).
 
-    python docs/results/bayes-identify/paired_validation.py
+    python lab/results/bayes-identify/paired_validation.py
 """
 
 from __future__ import annotations
@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 from paired_benchmark import paired_cells  # beside this script
 
-HERE = Path(__file__).resolve().parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "bayes-identify"
 BEFORE = '{"gamble_networks": 16}'
 
 

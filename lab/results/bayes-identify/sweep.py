@@ -1,7 +1,7 @@
 """Identify-and-plan settings on a suite task's split: mean return, normalised score,
 CPU s per episode and per-decision CPU-time percentiles, one line per (task, setting).
 
-    python docs/results/bayes-identify/sweep.py --tasks paper noise2 --split validation \
+    python lab/results/bayes-identify/sweep.py --tasks paper noise2 --split validation \
         --settings '{}' '{"identification": "bayes", "extensions": true}' [--size 30] \
         [--out rows.csv] [--per-network out.csv]
 

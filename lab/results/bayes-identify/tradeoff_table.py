@@ -3,7 +3,7 @@ and `n32` validation networks, from the committed sweeps (this folder's and
 ../particles/), one row per configuration: mean return, normalised score, CPU seconds
 per episode and each decision's thread CPU time at the median and 99th percentile.
 
-    python docs/results/bayes-identify/tradeoff_table.py
+    python lab/results/bayes-identify/tradeoff_table.py
 
 The rows were timed in different runs on the project's 2-core AMD EPYC (AVX2), one
 thread, beside one or two other jobs: compare orders of magnitude, not percent.
@@ -15,7 +15,8 @@ import csv
 import json
 from pathlib import Path
 
-HERE = Path(__file__).resolve().parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "bayes-identify"
 PARTICLES = HERE.parent / "particles"
 ROWS = (  # (task, configuration, its settings as swept, the sweep's summary CSV)
     ("paper", "the constructor's defaults (named; real time)", {}, HERE / "validation-sweep12.csv"),

@@ -3,7 +3,7 @@ setting from the validation sweeps, and each setting's paired difference from th
 default: mean over the 100 networks, 95% bootstrap interval (10 000 resamples, seed 0).
 Settings that change nothing on a task are left out.
 
-    python docs/results/bayes-identify/validation_table.py
+    python lab/results/bayes-identify/validation_table.py
 """
 
 from __future__ import annotations
@@ -16,7 +16,8 @@ import numpy as np
 from spikectl.experiments import suite
 from spikectl.experiments.stats import bootstrap_ci
 
-HERE = Path(__file__).resolve().parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "bayes-identify"
 SWEEPS = sorted(HERE.glob("validation-sweep[0-9].csv"))
 NAMES = {
     "{}": "old default",

@@ -6,7 +6,7 @@ bootstrap interval over the networks (10 000 resamples, seed 0) and how many net
 each way (``spikectl.experiments.stats.paired_difference_cells``). A reference
 controller's run may be given with --reference (one column).
 
-    python docs/results/belief-input/compare.py --old A.csv B.csv --new C.csv D.csv \
+    python lab/results/belief-input/compare.py --old A.csv B.csv --new C.csv D.csv \
         [--reference R.csv] [--names old new reference]
 """
 

@@ -2,7 +2,7 @@
 task's validation networks with their do-nothing Q-value lowered by delta before the
 greedy choice (no retraining), and print the mean return for each delta.
 
-    python docs/results/belief-input/do_nothing_bias.py --task paper --run RUN ... \
+    python lab/results/belief-input/do_nothing_bias.py --task paper --run RUN ... \
         [--delta 0 0.005 0.01 0.02 0.05]
 
 A run may name another size as RUN:32 (per-neuron networks). Validation only.

@@ -38,9 +38,9 @@ spikectl train guided "${ft[@]}" --imitation-weight 0 --imitation-weight-end 0 \
     --run-dir "$runs/n32-rl-seed0"
 
 # 4. Where the student with the belief loses to its teacher (the planner beside it).
-python docs/results/student-n32-diagnosis/diagnose.py --task paper \
+python lab/results/student-n32-diagnosis/diagnose.py --task paper \
     --run "$runs/n8-seed1" --run "$runs/n8-seed2" > $here/diagnose-paper.txt
-python docs/results/student-n32-diagnosis/diagnose.py --task n32 \
+python lab/results/student-n32-diagnosis/diagnose.py --task n32 \
     --run "$runs/n8-seed1:32" --run "$runs/n32-ft-seed0" > $here/diagnose-n32.txt
 
 # 5. The do-nothing value lowered by delta at play time (no retraining); RUN_N8_SEEDS are

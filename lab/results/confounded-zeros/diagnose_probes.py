@@ -6,7 +6,7 @@ synapses onto the target are unknown released with it (confounded). The named
 controller on the first N validation networks of a task (a diagnosis; it changes
 nothing).
 
-    python docs/results/confounded-zeros/diagnose_probes.py TASK N
+    python lab/results/confounded-zeros/diagnose_probes.py TASK N
 """
 
 from __future__ import annotations

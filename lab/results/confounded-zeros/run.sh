@@ -12,6 +12,6 @@ for task in paper n16 n32; do
 done
 # The n16 candidate played once on the test set, against the named controller's row.
 (cd $here && python test.py .)
-python docs/results/bayes-identify/paired_benchmark.py \
+python lab/results/bayes-identify/paired_benchmark.py \
     docs/results/bayes-identify/test-benchmark-known-sd-per-network.csv \
     $here/test-n16-per-network.csv --task n16 > $here/test-paired.md

@@ -2,7 +2,7 @@
 sd 0.2, validation.py), played once on the ``n16`` test set: writes
 ``test-n16-per-network.csv`` in the format of ``spikectl benchmark --per-network``.
 
-    python docs/results/confounded-zeros/test.py docs/results/confounded-zeros
+    python lab/results/confounded-zeros/test.py docs/results/confounded-zeros
 """
 
 from __future__ import annotations

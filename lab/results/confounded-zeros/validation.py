@@ -4,7 +4,7 @@ the ``n16`` train and validation sets and the first 70
 ``n32`` validation networks (never the test sets), network by network; and on the
 ``paper`` train and validation sets, where it is not taken.
 
-    python docs/results/confounded-zeros/validation.py docs/results/confounded-zeros TASK
+    python lab/results/confounded-zeros/validation.py docs/results/confounded-zeros TASK
 
 Writes ``validation-TASK-per-network.csv`` and prints the table of
 ``validation-TASK.txt``.

@@ -2,7 +2,7 @@
 n32) against the n = 8 network played at the larger size without training (zero-shot),
 against training there from scratch and against identify-and-plan.
 
-    python docs/results/curriculum/table.py   # also draws curves.png
+    python lab/results/curriculum/table.py   # also draws curves.png
 
 Every comparison is chosen or read on validation first; the test return is the best
 model's (the evaluation with the highest validation return, which may be episode 0:
@@ -25,7 +25,8 @@ from spikectl.experiments.stats import paired_difference_cells
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from result_tables import PLANNER_TEST, PLANNER_VALIDATION, best, metrics, per_network  # noqa: E402
 
-HERE = Path(__file__).parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "curriculum"
 RESULTS = HERE.parent
 SEEDS = (0, 1, 2)
 STAGES = {"n16": "n16-imit", "n32": "n32-imit"}

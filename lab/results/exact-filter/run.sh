@@ -8,6 +8,6 @@ python $here/validation.py $here > $here/validation-table.txt
 # Test sets, played once after the choice; against the named controller's rows before.
 spikectl benchmark identify-and-plan --task noise1 noise2 noise4 --split test \
     --out $here/test.csv --per-network $here/test-per-network.csv
-python docs/results/bayes-identify/paired_benchmark.py \
+python lab/results/bayes-identify/paired_benchmark.py \
     docs/results/bayes-identify/test-benchmark-per-network.csv $here/test-per-network.csv \
     --task noise1 noise2 noise4 > $here/test-paired.md

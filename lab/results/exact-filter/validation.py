@@ -3,7 +3,7 @@ paper's deterministic step exactly: the named controller and the same loop told 
 weights, on the validation sets of ``noise1``, ``noise2`` and ``noise4`` (never the
 test sets), network by network.
 
-    python docs/results/exact-filter/validation.py docs/results/exact-filter
+    python lab/results/exact-filter/validation.py docs/results/exact-filter
 
 "before" is the filter with its constant 0.25 mV^2 per step (``MODEL_VARIANCE_MV2``, what
 every environment got), "after" the filter as the package builds it now

@@ -3,7 +3,7 @@ train and validation sets (never the test sets), network by network: the paper's
 threshold (before), the filter's read margin, spike_margin_sd x the noise (the named
 controller now: 2, 4 and 8 mV at 1, 2 and 4 mV of noise), and fixed margins.
 
-    python docs/results/filter-margin/validation.py docs/results/filter-margin
+    python lab/results/filter-margin/validation.py docs/results/filter-margin
 
 Writes ``validation-per-network.csv`` and prints the table of ``validation-table.txt``.
 """

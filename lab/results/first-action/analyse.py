@@ -1,7 +1,7 @@
 """The best first action given the target and the pattern, estimated from returns.csv
 (generate.py) and scored on held-out contexts.
 
-    python docs/results/first-action/analyse.py [--mlp]
+    python lab/results/first-action/analyse.py [--mlp]
 
 A quarter of the contexts (permutation seed 0) is held out. The rule learned on the
 rest: for each key (the target and the pattern's steps 1..k, the spikes wanted
@@ -21,7 +21,8 @@ from pathlib import Path
 import numpy as np
 from generate import context  # beside this script
 
-HERE = Path(__file__).resolve().parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "first-action"
 
 
 def load() -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:

@@ -3,7 +3,7 @@ step 0 (the target and the pattern)? Plays the planner on generator contexts (ne
 suite's sets) with its first action replaced by each legal action in turn, the rest of
 the episode its own, and writes every return.
 
-    python docs/results/first-action/generate.py START COUNT OUT.csv
+    python lab/results/first-action/generate.py START COUNT OUT.csv
 
 Context i is ``generate_context(np.random.default_rng([4344, i]), 8, 60)``; the
 committed ``returns.csv`` holds contexts 0-11 999 (two processes of 6 000).

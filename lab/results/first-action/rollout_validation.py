@@ -3,7 +3,7 @@ only): each legal first action valued by the return of identify-and-plan played 
 K drawn networks after it (weighted by what the target and the pattern's second step
 say, qmdp.context_likelihood), the planner's own action on ties.
 
-    python docs/results/first-action/rollout_validation.py K STEPS validation OUT.txt
+    python lab/results/first-action/rollout_validation.py K STEPS validation OUT.txt
 """
 
 import copy

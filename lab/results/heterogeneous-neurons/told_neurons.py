@@ -3,7 +3,7 @@ diagnostic, never the test set): identify-and-plan told each neuron's threshold 
 constant (its spike reads and its planner use them), with its own identification and
 known synapses planned at their estimated strength, and told the weights' strengths too.
 
-    python docs/results/heterogeneous-neurons/told_neurons.py
+    python lab/results/heterogeneous-neurons/told_neurons.py
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@ network by network: the constructor's defaults (what the named controller played
 before), the named controller now (each neuron's threshold and leak learned, known
 synapses planned at their estimated strength) and each half alone.
 
-    python docs/results/heterogeneous-neurons/validation.py docs/results/heterogeneous-neurons
+    python lab/results/heterogeneous-neurons/validation.py docs/results/heterogeneous-neurons
 
 Writes ``validation-per-network.csv`` and prints the table of ``validation-table.txt``.
 """

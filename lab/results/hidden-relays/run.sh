@@ -9,6 +9,6 @@ python $here/validation.py $here > $here/validation-table.txt
 # (test-per-network-before.csv: the same command at commit 10fde1b).
 spikectl benchmark identify-and-plan --task hidden25 --split test \
     --out $here/test.csv --per-network $here/test-per-network.csv
-python docs/results/bayes-identify/paired_benchmark.py \
+python lab/results/bayes-identify/paired_benchmark.py \
     $here/test-per-network-before.csv \
     $here/test-per-network.csv --task hidden25 > $here/test-paired.md

@@ -3,7 +3,7 @@ on ``hidden25`` now) against the controller before (``relays=False``), with othe
 variances of the relay weights and the other ideas tried, on the ``hidden25`` task's
 train and validation sets (never the test set), network by network.
 
-    python docs/results/hidden-relays/validation.py docs/results/hidden-relays
+    python lab/results/hidden-relays/validation.py docs/results/hidden-relays
 
 Writes ``validation-per-network.csv`` and prints the table of ``validation-table.txt``.
 """

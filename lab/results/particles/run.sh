@@ -9,7 +9,7 @@
 set -euo pipefail
 export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1 NUMBA_NUM_THREADS=1
 here=docs/results/particles
-sweep=docs/results/bayes-identify/sweep.py
+sweep=lab/results/bayes-identify/sweep.py
 P='"identification": "particles"'
 python $sweep --tasks n16 --split validation \
     --settings "{$P, \"known_sd\": 0.4}" "{$P}" "{$P, \"known_sd\": 0.3}" \

@@ -4,7 +4,7 @@ constructor's defaults, the fast form (``known_sd`` 0.4, the guided learner's te
 and the named controller (QMDP where it would probe, ``known_sd`` 0.35). Mean difference
 with a 95% bootstrap interval over the 100 networks (10 000 resamples, seed 0).
 
-    python docs/results/particles/table.py > docs/results/particles/table.md
+    python lab/results/particles/table.py > docs/results/particles/table.md
 """
 
 from __future__ import annotations
@@ -17,7 +17,8 @@ import numpy as np
 
 from spikectl.experiments.stats import paired_difference_cells
 
-HERE = Path(__file__).resolve().parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "particles"
 GAUSSIAN = HERE.parent / "bayes-identify"
 FORMS = (  # (form, Gaussian setting, the sweep it was in at n16 and n32, particle setting)
     ("constructor's defaults", {}, ("validation-sweep12",) * 2, {}),

@@ -1,6 +1,6 @@
 """When and whom identify-and-plan probes: three rules against the named controller.
 
-    python docs/results/probing-rules/probing_rules.py TASK SPLIT SIZE RULE [RULE ...]
+    python lab/results/probing-rules/probing_rules.py TASK SPLIT SIZE RULE [RULE ...]
 
 RULE is one of
   idle-quiet-Q  also probe where the plan would do nothing and misses no wanted spike,

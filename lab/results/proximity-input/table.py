@@ -3,7 +3,7 @@
 return its metrics.csv records during training and the test return recorded at its best
 validation return (its best model).
 
-    python docs/results/proximity-input/table.py   # also draws curves.png
+    python lab/results/proximity-input/table.py   # also draws curves.png
 
 The runs without it are the committed main job (``guided-ntrain1000``, n = 8) and the
 suite's learned rows (``suite/trained/guided-upr24/n16``, ``n32``): the same preset and
@@ -27,7 +27,8 @@ from spikectl.experiments.stats import paired_difference_cells
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 from result_tables import PLANNER_TEST, PLANNER_VALIDATION, best, metrics, per_network  # noqa: E402
 
-HERE = Path(__file__).parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "proximity-input"
 RESULTS = HERE.parent
 WITHOUT = {
     "n8": RESULTS / "guided-ntrain1000" / "trials",

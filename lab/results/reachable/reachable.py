@@ -4,7 +4,7 @@ target's column of G (its inputs) from step k on (k = 1: every step but the firs
 action; k = 5), and told every weight. Normalised against do nothing and the oracle
 planner on the same validation networks.
 
-    python docs/results/reachable/reachable.py docs/results/reachable
+    python lab/results/reachable/reachable.py docs/results/reachable
 
 Writes ``reachable-per-network.csv`` and prints the table of ``reachable.md``.
 """

@@ -8,6 +8,6 @@ python $here/validation.py $here > $here/validation-table.txt
 # The test set, played once after the choice; against the named controller's row before.
 spikectl benchmark identify-and-plan --task stochastic --split test \
     --out $here/test.csv --per-network $here/test-per-network.csv
-python docs/results/bayes-identify/paired_benchmark.py \
+python lab/results/bayes-identify/paired_benchmark.py \
     docs/results/bayes-identify/test-benchmark-known-sd-per-network.csv \
     $here/test-per-network.csv --task stochastic > $here/test-paired.md

@@ -4,7 +4,7 @@ the Gaussian estimate's evidence (``settle_releases=False``, what it played befo
 with each release settled from the next step's residuals (the named controller now), at
 the ``known_sd`` of each; and how right the known weights are at steps 10, 30 and 59.
 
-    python docs/results/release-settling/validation.py docs/results/release-settling
+    python lab/results/release-settling/validation.py docs/results/release-settling
 
 Writes ``validation-per-network.csv`` and prints the tables of ``validation-table.txt``.
 """

@@ -7,7 +7,8 @@ so the value of what a probe teaches is counted, not assumed. Tasks with the pap
 deterministic, fully observed dynamics only (`paper`, `n16`, `n32`): there the tracked
 state is the true one and a drawn network is all that is uncertain.
 
-    python docs/results/rollout-improvement/rollout.py TASK SPLIT N|FIRST:LAST K H C [MARGIN] [--base]
+    python lab/results/rollout-improvement/rollout.py \
+        TASK SPLIT N|FIRST:LAST K H C [MARGIN] [--base]
 
 (a research script: it changes nothing in the library).
 """
@@ -106,8 +107,9 @@ class RolloutImprovement(IdentifyAndPlan):
                 total += reward_if_spike[t] if spikes[0, 0, target] else reward_if_silent[t]
                 if t + 1 == end:
                     break
-                observation = {"voltage": voltage[0, 0].astype(np.float32), "target": target,
-                               "pattern": pattern, "step": t + 1, "last_action": action}  # fmt: skip
+                observation = {"voltage": voltage[0, 0].astype(np.float32),
+                               "target": target, "pattern": pattern, "step": t + 1,
+                               "last_action": action}  # fmt: skip
                 action = clone.act(observation, info)
         return total / len(drawn)
 
@@ -124,8 +126,9 @@ def main() -> None:
     if base:
         controller = IdentifyAndPlan(contexts.params, **settings)
     else:
-        controller = RolloutImprovement(contexts.params, networks=networks, horizon=horizon,
-                                        candidates=candidates, margin=margin, **settings)  # fmt: skip
+        controller = RolloutImprovement(contexts.params, networks=networks,
+                                        horizon=horizon, candidates=candidates, margin=margin,
+                                        **settings)  # fmt: skip
     from spikectl.envs.rollout import evaluate_policy
 
     started = time.process_time()

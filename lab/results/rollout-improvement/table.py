@@ -1,7 +1,7 @@
 """The table of README.md from per-network.csv: each variant against the named
 controller on the same networks, network by network.
 
-    python docs/results/rollout-improvement/table.py
+    python lab/results/rollout-improvement/table.py
 """
 
 from __future__ import annotations
@@ -19,7 +19,8 @@ BASE = "named controller (base)"
 
 def main() -> None:
     returns: dict = defaultdict(dict)
-    with open(Path(__file__).with_name("per-network.csv"), newline="") as handle:
+    data = Path(__file__).resolve().parents[3] / "docs" / "results" / "rollout-improvement"
+    with open(data / "per-network.csv", newline="") as handle:
         for row in csv.DictReader(handle):
             returns[row["variant"]][(row["split"], int(row["context"]))] = float(row["return"])
     print("| variant | networks | mean | named controller | − named [95% CI] | better / worse |")

@@ -1,6 +1,6 @@
 """Why the student does not follow its teacher at 32 neurons: measured on validation.
 
-    python docs/results/student-n32-diagnosis/diagnose.py --task n32 \
+    python lab/results/student-n32-diagnosis/diagnose.py --task n32 \
         --run RUN_DIR[:N_NEURONS] [--run ...] [--model final|best]
 
 Plays identify-and-plan (the guided learner's teacher, its constructor's settings) beside

@@ -4,7 +4,7 @@ planner told only the mean connection probability (every pair alike, as a
 permutation-equivariant network without positions sees them), on a task's validation
 networks (never the test set).
 
-    python docs/results/student-n32-diagnosis/planner_without_geometry.py --task n32
+    python lab/results/student-n32-diagnosis/planner_without_geometry.py --task n32
 """
 
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """The learned rows of docs/research/benchmark-suite.md (docs/benchmark.md quotes them),
 from the committed results of train.sh:
 
-    python docs/results/suite/learned_table.py
+    python lab/results/suite/learned_table.py
 
 For every task with trained seeds (trained/PRESET/TASK/seed=S/benchmark.csv, the run's
 best_model.pt chosen on the task's validation set and scored on its test set): the mean
@@ -20,7 +20,8 @@ import numpy as np
 
 from spikectl.experiments.stats import bootstrap_ci, iqm
 
-HERE = Path(__file__).resolve().parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "suite"
 TASKS = ("paper", "n16", "n32", "noise1", "noise2", "noise4", "hidden25", "stochastic",
          "heterogeneous", "background")  # fmt: skip
 

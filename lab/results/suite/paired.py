@@ -1,10 +1,10 @@
 """Learned against planned, network by network: is a trained TDRQN (seeds 0-2) above
 identify-and-plan on a task beyond the networks' sampling noise?
 
-    python docs/results/suite/paired.py [TASK ...]       # needs runs/suite/guided/paper
-    python docs/results/suite/paired.py --trained-on-task stochastic noise2 hidden25
-    python docs/results/suite/paired.py --connectivity [TASK ...]  # runs/suite/guided-conn/paper
-    python docs/results/suite/paired.py --preset guided-upr24 [--trained-on-task] [TASK ...]
+    python lab/results/suite/paired.py [TASK ...]       # needs runs/suite/guided/paper
+    python lab/results/suite/paired.py --trained-on-task stochastic noise2 hidden25
+    python lab/results/suite/paired.py --connectivity [TASK ...]  # runs/suite/guided-conn/paper
+    python lab/results/suite/paired.py --preset guided-upr24 [--trained-on-task] [TASK ...]
 
 For each task it plays identify-and-plan and each seed's best_model.pt on the task's 100
 test networks under the suite's protocol, takes the per-network difference (the seeds'
@@ -37,7 +37,8 @@ from spikectl.files import atomic_write_text
 from spikectl.training.controllers import load_agent, load_controller
 from spikectl.training.greedy import greedy_controller
 
-HERE = Path(__file__).resolve().parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "suite"
 SEEDS = (0, 1, 2)
 PER_NETWORK = "per_network.csv"
 

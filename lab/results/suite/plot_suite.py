@@ -5,7 +5,7 @@ and the main job trained on the task itself (where trained) against measurement 
 noise1, noise2, noise4) and against the hidden fraction (paper, hidden25). Reads only
 saved results; run from the repository root:
 
-    python docs/results/suite/plot_suite.py
+    python lab/results/suite/plot_suite.py
 """
 
 from __future__ import annotations
@@ -19,7 +19,8 @@ import numpy as np
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 
-HERE = Path(__file__).resolve().parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "suite"
 OUT = HERE.parents[2] / "docs" / "images" / "suite_realism.png"
 CONTROLLERS = {"oracle": "oracle planner", "identify-and-plan": "identify-and-plan",
                "random": "random (10 seeds)", "do-nothing": "do nothing"}  # fmt: skip

@@ -11,11 +11,11 @@ for controller in do-nothing random oracle; do
     spikectl benchmark "$controller" --task all --out "$out/$controller.csv" --overwrite
 done
 # Identify-and-plan's rows and its return on every test network (the per-network file the
-# result tables compare learners with: docs/results/result_tables.py's PLANNER_TEST).
+# result tables compare learners with: lab/results/result_tables.py's PLANNER_TEST).
 spikectl benchmark identify-and-plan --task all --out "$out/identify-and-plan.csv" \
     --per-network "$out/identify-and-plan-per-network.csv" --overwrite
 # Identify-and-plan's CPU seconds per episode and per-decision CPU-time percentiles.
-python docs/results/bayes-identify/sweep.py --split test --settings '{"named": true}' \
+python lab/results/bayes-identify/sweep.py --split test --settings '{"named": true}' \
     --tasks paper noise1 noise2 noise4 hidden25 stochastic heterogeneous background n16 n32 \
     --out "$out/identify-and-plan-decision-times.csv"
 # Size transfer: the quick preset's TDRQN (trained at n = 8 on the paper's task, runs not
@@ -32,14 +32,14 @@ for seed in 0 1 2; do
 done
 # The main job's TDRQNs (`spikectl train guided`, seeds 0-2, trained on `paper`:
 # runs/suite/guided/paper/seed=S links to runs/guided-floor20/seed=S, made by
-# docs/results/guided_runs.sh guided-floor20 S) on every task.
+# lab/results/guided_runs.sh guided-floor20 S) on every task.
 for seed in 0 1 2; do
-    bash docs/results/suite/train.sh paper "$seed" guided
+    bash lab/results/suite/train.sh paper "$seed" guided
     spikectl benchmark "runs/suite/guided/paper/seed=$seed" --model best --task all \
         --out "$out/trained/guided/paper/seed=$seed/transfer.csv"
 done
 # A preset's seeds trained on `paper` (runs/suite/PRESET/paper/seed=S, links to the runs of
-# docs/results/guided_runs.sh) played on every task: their config, metrics and transfer.csv.
+# lab/results/guided_runs.sh) played on every task: their config, metrics and transfer.csv.
 transfer_from_paper() {
     local preset=$1 seed run kept
     for seed in 0 1 2; do
@@ -53,11 +53,11 @@ transfer_from_paper() {
 # with the connectivity loss, 32 updates a round; links to runs/guided-conn01/seed=S) on
 # every task, and network by network against identify-and-plan (paired-guided-conn.csv).
 transfer_from_paper guided-conn
-python docs/results/suite/paired.py --connectivity
+python lab/results/suite/paired.py --connectivity
 # The main job since the fourth stop (the same with 24 updates a round; links to
-# runs/guided-upr24/seed=S, made by docs/results/guided_runs.sh guided-upr24 S), and
+# runs/guided-upr24/seed=S, made by lab/results/guided_runs.sh guided-upr24 S), and
 # network by network (paired-guided-upr24.csv). Its seeds trained on a task itself are
-# train.sh's: `bash docs/results/suite/train.sh TASK SEED guided guided-upr24
+# train.sh's: `bash lab/results/suite/train.sh TASK SEED guided guided-upr24
 # --teacher-settings defaults` (the teacher they had; not needed on `paper`).
 transfer_from_paper guided-upr24
-python docs/results/suite/paired.py --preset guided-upr24
+python lab/results/suite/paired.py --preset guided-upr24

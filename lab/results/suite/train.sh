@@ -5,15 +5,15 @@
 # per_network.csv), and the run's config.json / metrics.csv kept here (the weights are
 # not committed). Run from the repository root, one Torch thread per run:
 #
-#     bash docs/results/suite/train.sh TASK SEED [LEARNER-PRESET [FOLDER [FLAGS...]]]
+#     bash lab/results/suite/train.sh TASK SEED [LEARNER-PRESET [FOLDER [FLAGS...]]]
 #
-# e.g. `bash docs/results/suite/train.sh stochastic 0`; two at a time on the 2-core machine.
+# e.g. `bash lab/results/suite/train.sh stochastic 0`; two at a time on the 2-core machine.
 # FOLDER (the preset's name by default) names the folder under runs/suite and trained/:
 # the guided preset since the fourth stop of 2026-11-24 (connectivity loss, 24 updates a
 # round) is kept under `guided-upr24`, since trained/guided and trained/guided-conn hold
 # the runs of the guided presets before it:
 #
-#     bash docs/results/suite/train.sh hidden25 0 guided guided-upr24 --teacher-settings defaults
+#     bash lab/results/suite/train.sh hidden25 0 guided guided-upr24 --teacher-settings defaults
 #
 # (its teacher was the constructor's identify-and-plan on every task: FLAGS, passed on to
 # `spikectl train`, say so on every task but `paper`, where the preset's teacher, which

@@ -1,6 +1,6 @@
 """The tables of docs/results/task-teacher/README.md, from committed files only.
 
-    python docs/results/task-teacher/table.py > docs/results/task-teacher/table.md
+    python lab/results/task-teacher/table.py > docs/results/task-teacher/table.md
 
 Per task, the main job trained on it with the teacher playing the task's settings
 (trials/TASK/seed=S) against the same runs with the constructor's teacher
@@ -23,10 +23,11 @@ import numpy as np
 
 from spikectl.experiments.stats import paired_difference_cells
 
-HERE = Path(__file__).resolve().parent
+# The committed data this script reads (its script lives in lab/results/, its data here).
+HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "task-teacher"
 RESULTS = HERE.parent
 OLD = RESULTS / "suite" / "trained" / "guided-upr24"
-sys.path.insert(0, str(RESULTS))
+sys.path.insert(0, str(Path(__file__).resolve().parent.parent))  # result_tables
 from result_tables import PLANNER_TEST  # noqa: E402  (each task's named identify-and-plan)
 
 TASKS = ("heterogeneous", "n16")

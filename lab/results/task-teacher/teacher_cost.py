@@ -3,7 +3,7 @@ identify teacher labels the same episodes with the task's settings (``teacher_se
 "task"``, ``environment_settings(..., fast=True)``) and with the constructor's
 (``"defaults"``).
 
-    python docs/results/task-teacher/teacher_cost.py > docs/results/task-teacher/teacher-cost.md
+    python lab/results/task-teacher/teacher_cost.py > docs/results/task-teacher/teacher-cost.md
 
 On each task, EPISODES episodes of a uniformly random legal policy on the first networks
 of the task's training split (the states a student visits early in training), under the

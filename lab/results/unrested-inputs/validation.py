@@ -4,7 +4,7 @@ the named controller now), against the plan's action (``unrested_inputs=False``)
 the other rules tried, on the ``stochastic`` task's train and validation sets (never
 the test set), network by network.
 
-    python docs/results/unrested-inputs/validation.py docs/results/unrested-inputs
+    python lab/results/unrested-inputs/validation.py docs/results/unrested-inputs
 
 Writes ``validation-per-network.csv`` and prints the table of ``validation-table.txt``.
 """
