@@ -126,20 +126,6 @@ def test_committed_results_table_is_what_its_trials_say():
         assert (sweep_dir / "results.md").read_text() == markdown, sweep_dir.name
 
 
-def test_benchmark_learned_tables_are_what_the_committed_csvs_say(capsys):
-    """The research record's learned rows (docs/research/benchmark-suite.md) are
-    learned_table.py's output, not edited by hand."""
-    import runpy
-
-    runpy.run_path(str(ROOT / "docs" / "results" / "suite" / "learned_table.py"),
-                   run_name="__main__")  # fmt: skip
-    page = (ROOT / "docs" / "research" / "benchmark-suite.md").read_text().splitlines()
-    printed = [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]
-    assert len(printed) > 20
-    missing = [line for line in printed if line not in page]
-    assert not missing, f"benchmark-suite.md lacks {len(missing)} printed rows: {missing[:3]}"
-
-
 MADE_WITH_AN_EARLIER_QUICK_PRESET = {
     "ddrqn-paper-update-ratio", "fig4-quick", "tdrqn-paper-update-ratio"
 }  # fmt: skip
@@ -184,7 +170,7 @@ def test_guided_runs_script_reruns_its_trials_exactly():
     from spikectl.cli.training import parse_train
     from spikectl.training.config import Experiment
 
-    script = (ROOT / "docs" / "results" / "guided_runs.sh").read_text()
+    script = (ROOT / "lab" / "results" / "guided_runs.sh").read_text()
     # The script's arrays of pinned flags (u32=(...), n100=(...)), spliced where used.
     pinned = dict(re.findall(r"^(\w+)=\((.*?)\)$", script, flags=re.MULTILINE))
     assert {"u32", "n100"} <= pinned.keys(), "guided_runs.sh's pinned flags were not read"

@@ -5,7 +5,8 @@
 Plays identify-and-plan and each run's greedy network on the 100 validation networks of
 make_splits(100, 100, seed=0, n_val=100) (never the test set), splits each controller's
 loss (1 - return) into missed wanted spikes and unwanted spikes by episode step (as
-lab/results/baselines/diagnose_identify.py does for the planner), and, with the planner
+docs/results/baselines/diagnose_identify.py, at commit 6a705d8, does for the planner),
+and, with the planner
 played beside the student's own episodes, counts by step how often the two agree and how
 often the student does nothing where the planner acts.
 """

@@ -1,4 +1,6 @@
 #!/usr/bin/env bash
+# agreement.py is retired from the lab (it reads the library's internals; lab/README.md):
+#   git show 6a705d8:docs/results/advice-input/agreement.py > agreement.py
 # The runs behind docs/results/advice-input/README.md, from the repository root on the
 # project's 2-core AMD EPYC (AVX2), one Torch thread each, at most three at a time.
 # Each run's config.json and metrics.csv are copied to trials/<name>/ (weights are not

@@ -20,9 +20,9 @@ import time
 
 import numpy as np
 
-from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs import NeuronControlEnv
 from spikectl.experiments import suite
-from spikectl.planning.policy import IdentifyAndPlan, environment_settings
+from spikectl.planning import IdentifyAndPlan, environment_settings
 
 BANDS = ((0, 1), (1, 5), (5, 10), (10, 20), (20, 30), (30, 60))
 

@@ -1,4 +1,8 @@
 #!/usr/bin/env bash
+# advisor.py is retired from the lab (it reads the library's internals; lab/README.md):
+#   git show 6a705d8:docs/results/advisor/advisor.py > advisor.py
+# benchmark.py is retired from the lab (it reads the library's internals; lab/README.md):
+#   git show 6a705d8:docs/results/advisor/benchmark.py > benchmark.py
 # The runs behind docs/results/advisor/README.md, from the repository root on the
 # project's 2-core AMD EPYC (AVX2), one Torch thread each, two to four at a time. Each
 # run's config.json and metrics.csv are copied to trials/NAME/ (weights are not

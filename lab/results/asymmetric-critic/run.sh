@@ -1,4 +1,6 @@
 #!/usr/bin/env bash
+# update_cost.py is retired from the lab (it reads the library's internals; lab/README.md):
+#   git show 6a705d8:docs/results/asymmetric-critic/update_cost.py > update_cost.py
 # The runs behind docs/results/asymmetric-critic/README.md, from the repository root on
 # the project's 2-core AMD EPYC (AVX2), one Torch thread each, beside two or three other
 # jobs: the README's main job with the privileged critic (`--asymmetric-critic`), seeds

@@ -18,7 +18,6 @@ from pathlib import Path
 import numpy as np
 
 from spikectl.experiments.figures import subplots
-from spikectl.files import atomic_write, atomic_write_text
 
 NOISE_MV = (0, 1, 2, 4)
 HIDDEN_FRACTIONS = ("0", "0.25")
@@ -123,15 +122,14 @@ def plot(results: Path, out: Path) -> None:
     figure.legend(handles, labels, ncol=3, fontsize=8, loc="upper center")
     figure.tight_layout(rect=(0, 0, 1, 0.84))
     out.parent.mkdir(parents=True, exist_ok=True)
-    atomic_write(out, lambda handle: figure.savefig(handle, format="png", dpi=120))
+    figure.savefig(out, format="png", dpi=120)
     print(f"wrote {out}")
 
 
 if __name__ == "__main__":
     results_dir, figure_path = Path(sys.argv[1]), Path(sys.argv[2])
     table = summary_table(results_dir)
-    atomic_write_text(
-        results_dir / "summary.md",
+    (results_dir / "summary.md").write_text(
         "Mean return over 100 unseen test networks (± sd over networks), from the CSVs "
         "beside this file\n(written by plot_baselines.py).\n\n" + table + "\n",
     )

@@ -24,8 +24,7 @@ import numpy as np
 
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
-from spikectl.planning import IdentifyAndPlan
-from spikectl.planning.policy import environment_settings
+from spikectl.planning import IdentifyAndPlan, environment_settings
 
 
 class Timed:

@@ -1,4 +1,6 @@
 #!/usr/bin/env bash
+# do_nothing_bias.py is retired from the lab (it reads the library's internals; lab/README.md):
+#   git show 6a705d8:docs/results/belief-input/do_nothing_bias.py > do_nothing_bias.py
 # The runs behind docs/results/belief-input/README.md, from the repository root on the
 # project's 2-core AMD EPYC (AVX2), one Torch thread each, at most three at a time.
 # Each run's config.json and metrics.csv are copied to trials/<name>/ (weights are not

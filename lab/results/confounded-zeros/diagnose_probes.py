@@ -17,7 +17,7 @@ from collections import Counter
 
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
-from spikectl.planning.policy import IdentifyAndPlan, environment_settings
+from spikectl.planning import IdentifyAndPlan, environment_settings
 
 
 class Diagnosed(IdentifyAndPlan):

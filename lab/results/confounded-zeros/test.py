@@ -14,7 +14,7 @@ from pathlib import Path
 from validation import ConfoundedZeros
 
 from spikectl.experiments import suite
-from spikectl.planning.policy import environment_settings
+from spikectl.planning import environment_settings
 
 CHOSEN_SD = 0.2
 

@@ -22,8 +22,7 @@ import numpy as np
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
-from spikectl.planning.identify import ConnectivityEstimate
-from spikectl.planning.policy import IdentifyAndPlan, environment_settings
+from spikectl.planning import ConnectivityEstimate, IdentifyAndPlan, environment_settings
 
 SETS = {"paper": {"train": 100, "validation": 100}, "n16": {"train": 100, "validation": 100},
         "n32": {"validation": 70}}  # fmt: skip

@@ -17,7 +17,7 @@ from pathlib import Path
 
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
-from spikectl.planning.policy import IdentifyAndPlan, environment_settings
+from spikectl.planning import IdentifyAndPlan, environment_settings
 
 TASK = "heterogeneous"
 

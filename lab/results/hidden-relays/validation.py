@@ -19,9 +19,7 @@ import numpy as np
 
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
-from spikectl.planning.identify import ConnectivityEstimate
-from spikectl.planning.policy import IdentifyAndPlan
-from spikectl.planning.relays import RelayConnectivityEstimate
+from spikectl.planning import ConnectivityEstimate, IdentifyAndPlan, RelayConnectivityEstimate
 
 TASK = "hidden25"
 SPLITS = ("train", "validation")

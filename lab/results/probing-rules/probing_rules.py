@@ -28,9 +28,12 @@ from spikectl.envs.env_support import step_rewards
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
-from spikectl.neuron.simulator import DO_NOTHING
-from spikectl.planning.identify import EXCITATORY_PROBABILITY, ConnectivityEstimate
-from spikectl.planning.policy import IdentifyAndPlan, environment_settings
+from spikectl.neuron import DO_NOTHING
+from spikectl.planning import ConnectivityEstimate, IdentifyAndPlan, environment_settings
+
+EXCITATORY_PROBABILITY = 0.8
+"""A neuron of a generated network is excitatory with this probability (docs/model.md)."""
+
 
 FREE_STEPS = 5  # a neuron releases at most every 5 steps (SPEC section 1)
 

@@ -20,7 +20,7 @@ import numpy as np
 
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
-from spikectl.planning.policy import IdentifyAndPlan, environment_settings
+from spikectl.planning import IdentifyAndPlan, environment_settings
 
 TASK = "stochastic"
 SPLITS = ("train", "validation")

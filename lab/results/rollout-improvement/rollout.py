@@ -23,8 +23,8 @@ import numpy as np
 
 from spikectl.envs.env_support import step_rewards
 from spikectl.experiments import suite
-from spikectl.neuron.simulator import DO_NOTHING, advance
-from spikectl.planning.policy import IdentifyAndPlan, environment_settings
+from spikectl.neuron import DO_NOTHING, advance
+from spikectl.planning import IdentifyAndPlan, environment_settings
 
 
 class RolloutImprovement(IdentifyAndPlan):

@@ -26,10 +26,10 @@ import numpy as np
 import torch
 
 from spikectl import IdentifyAndPlan
+from spikectl.agents import GreedyController
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments.suite import load_split
 from spikectl.training.controllers import load_agent
-from spikectl.training.greedy import greedy_controller
 
 # The student beside its teacher, as the diagnosis at 8 neurons plays them.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
@@ -113,7 +113,7 @@ def main() -> None:
     for spec in args.run:
         run, _, size = spec.partition(":")
         network = load_agent(run, n_neurons=int(size) if size else None, model=args.model)
-        student = greedy_controller(network, contexts.params, contexts.extensions)  # its inputs
+        student = GreedyController(network)
         beside = BesidePlanner(student)
         episodes = evaluate_policy(contexts, beside)
         report(spec, beside, episodes.returns, inputs, second)

@@ -31,11 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from spikectl.envs.env import NeuronControlEnv
+from spikectl.agents import GreedyController
+from spikectl.envs import NeuronControlEnv
 from spikectl.experiments import suite
-from spikectl.files import atomic_write_text
 from spikectl.training.controllers import load_agent, load_controller
-from spikectl.training.greedy import greedy_controller
 
 # The committed data this script reads (its script lives in lab/results/, its data here).
 HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "suite"
@@ -68,8 +67,7 @@ def seed_returns(preset: str, trained_on: str, seed: int, task: str) -> np.ndarr
         return committed_returns(kept, task)
     run = Path(f"runs/suite/{preset}/{trained_on}/seed={seed}")
     network = load_agent(run, n_neurons=suite.task(task).n_observed, model="best")
-    extensions = suite.task(task).extensions
-    return suite.play(task, "test", greedy_controller(network, None, extensions))[0]
+    return suite.play(task, "test", GreedyController(network))[0]
 
 
 def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:
@@ -104,7 +102,7 @@ def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:
     writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
     writer.writeheader()
     writer.writerows(ordered)
-    atomic_write_text(out, buffer.getvalue())
+    out.write_text(buffer.getvalue())
 
 
 if __name__ == "__main__":

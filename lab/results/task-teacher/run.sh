@@ -1,4 +1,6 @@
 #!/usr/bin/env bash
+# teacher_cost.py is retired from the lab (it reads the library's internals; lab/README.md):
+#   git show 6a705d8:docs/results/task-teacher/teacher_cost.py > teacher_cost.py
 # The runs behind docs/results/task-teacher/README.md, from the repository root on the
 # project's 2-core AMD EPYC (AVX2), one Torch thread each, beside one other training run.
 # The main job trained on `heterogeneous` with its teacher playing the task's own settings

@@ -1,0 +1,49 @@
+"""The research record's scripts against its committed data: a table a research page
+shows is what its script prints from the committed CSVs, and the research index says
+where each folder's scripts live."""
+
+from __future__ import annotations
+
+import re
+import runpy
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+LAB = ROOT / "lab" / "results"
+DATA = ROOT / "docs" / "results"
+
+
+def printed_rows(script: Path, capsys) -> list[str]:
+    """The Markdown table rows a script prints when run as ``python SCRIPT``."""
+    runpy.run_path(str(script), run_name="__main__")
+    return [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]
+
+
+def test_benchmark_learned_tables_are_what_the_committed_csvs_say(capsys):
+    """The research record's learned rows (docs/research/benchmark-suite.md) are
+    learned_table.py's output, not edited by hand."""
+    printed = printed_rows(LAB / "suite" / "learned_table.py", capsys)
+    page = (ROOT / "docs" / "research" / "benchmark-suite.md").read_text().splitlines()
+    assert len(printed) > 20
+    missing = [line for line in printed if line not in page]
+    assert not missing, f"benchmark-suite.md lacks {len(missing)} printed rows: {missing[:3]}"
+
+
+def test_rollout_improvement_table_is_what_its_csv_says(capsys):
+    printed = printed_rows(LAB / "rollout-improvement" / "table.py", capsys)
+    readme = (DATA / "rollout-improvement" / "README.md").read_text().splitlines()
+    assert len(printed) >= 3
+    missing = [line for line in printed if line not in readme]
+    assert not missing, f"rollout-improvement/README.md lacks printed rows: {missing[:3]}"
+
+
+def test_the_research_index_names_where_each_folders_scripts_live():
+    """docs/research/index.md's scripts column is lab/results/FOLDER/ exactly where that
+    folder exists (research_index.py prints it)."""
+    index = (ROOT / "docs" / "research" / "index.md").read_text()
+    row = r"^\| \[([\w.-]+)\]\(\.\./results/\1/\) \|.*\| (`lab/results/[\w.-]+/`|none) \| [\d-]+ \|"
+    rows = re.findall(row, index, flags=re.MULTILINE)
+    assert len(rows) >= 60, "the index's rows were not read"
+    for folder, scripts in rows:
+        expected = f"`lab/results/{folder}/`" if (LAB / folder).is_dir() else "none"
+        assert scripts == expected, f"index row {folder}: {scripts}, expected {expected}"
