@@ -307,3 +307,50 @@ def test_the_docs_cite_nothing_outside_the_repository():
         text = page.read_text()
         for pattern in (r"\bSPEC\b", r"NOTES\.md", r"SPEC\.md", r"(?<![\w/])shared/(?!runs)"):
             assert not re.search(pattern, text), f"{page.name} cites {pattern}"
+
+
+@cache
+def claims_module():
+    """docs/claims.py: the user pages' numbers and the committed result each comes from."""
+    path = ROOT / "docs" / "claims.py"
+    spec = importlib.util.spec_from_file_location("spikectl_docs_claims", path)
+    claims = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(claims)
+    return claims
+
+
+def test_the_user_pages_state_what_their_committed_sources_say():
+    """One current number per claim: each number docs/claims.py lists (the suite's table
+    and leaderboard, the scores quoted on the other pages and the README) is what its
+    committed CSV gives, and no page holds the claim with other numbers as well.
+    `python docs/claims.py --write` copies a redrawn CSV to the pages."""
+    claims = claims_module()
+    assert len(list(claims.claims())) >= 40
+    assert {claim.page for claim in claims.claims()} >= {
+        "README.md", "docs/benchmark.md", "docs/baselines.md", "docs/training.md",
+        "docs/realtime.md", "docs/getting-started.md",
+    }  # fmt: skip
+    assert claims.disagreements() == []
+
+
+def test_a_page_that_disagrees_with_its_source_is_named_and_rewritten(tmp_path):
+    claims = claims_module()
+    pages = {claim.page for claim in claims.claims()}
+    for page in pages:
+        (tmp_path / page).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / page).write_text((ROOT / page).read_text())
+    benchmark = tmp_path / "docs" / "benchmark.md"
+    text = benchmark.read_text()
+    # identify-and-plan's n32 cell, and a second, stale copy of the leaderboard's row
+    benchmark.write_text(text.replace("| 0.725 ± 0.013 (0.483) |", "| 0.735 ± 0.013 (0.483) |")
+                         + "\n| identify-and-plan | `spikectl benchmark identify-and-plan "
+                         "--task all` | none | 0.649 |\n")  # fmt: skip
+    wrong = claims.disagreements(tmp_path)
+    assert len(wrong) == 2, wrong
+    assert "0.735 ± 0.013 (0.483)" in wrong[0] and "0.725 ± 0.013 (0.483)" in wrong[0]
+    assert "says '| identify-and-plan | `spikectl benchmark identify-and-plan --task all` " \
+           "| none | 0.649 |'" in wrong[1]  # fmt: skip
+    assert claims.write(tmp_path) == 2
+    assert claims.disagreements(tmp_path) == []
+    assert benchmark.read_text() == text + "\n| identify-and-plan | `spikectl benchmark " \
+        "identify-and-plan --task all` | none | 0.653 |\n"  # fmt: skip
