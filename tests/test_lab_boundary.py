@@ -1,5 +1,6 @@
-"""The core and the lab (lab/README.md): the lab imports the core's public API only, and
-the core never imports the lab. Both are read from the source, not run.
+"""The core and the lab (lab/README.md): the lab imports the core's public API only and
+reads no private (``_name``) attribute it does not define, and the core never imports the
+lab. All three are read from the source, not run.
 
 The public API, concretely: what the API reference documents. A name is public when
 
@@ -180,6 +181,41 @@ def test_the_lab_imports_the_public_api_only():
     assert lab, "lab/ has no Python files"
     bad = [line for path in lab for line in non_public_imports(path)]
     assert not bad, f"{len(bad)} imports past the public API (tests/test_lab_boundary.py): {bad}"
+
+
+def private_reads(path: Path) -> list[str]:
+    """Each ``x._name`` a file reads that it does not define itself (a private attribute
+    of a core class or module: ``_name`` is not the public API, whatever imported it)."""
+    tree = ast.parse(path.read_text())
+    defined = set()
+    for node in ast.walk(tree):
+        if isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.ClassDef)):
+            defined.add(node.name)
+        elif isinstance(node, ast.Attribute) and isinstance(node.ctx, ast.Store):
+            defined.add(node.attr)
+        elif isinstance(node, ast.Name) and isinstance(node.ctx, ast.Store):
+            defined.add(node.id)
+    return [
+        f"{shown_path(path)}:{node.lineno} reads {node.attr}"
+        for node in ast.walk(tree)
+        if isinstance(node, ast.Attribute) and node.attr.startswith("_")
+        and not node.attr.startswith("__") and node.attr not in defined
+    ]  # fmt: skip
+
+
+def test_a_private_read_is_named(tmp_path):
+    sample = tmp_path / "sample.py"
+    sample.write_text("from spikectl import IdentifyAndPlan\n"
+                      "class Mine(IdentifyAndPlan):\n"
+                      "    def act(self, observation, info):\n"
+                      "        self._seen = observation\n"
+                      "        return self._seen and self._plan(info)\n")  # fmt: skip
+    assert private_reads(sample) == ["sample.py:5 reads _plan"]
+
+
+def test_the_lab_reads_no_private_names():
+    bad = [line for path in sorted((ROOT / "lab").rglob("*.py")) for line in private_reads(path)]
+    assert not bad, f"{len(bad)} reads of private names (tests/test_lab_boundary.py): {bad}"
 
 
 def test_the_core_never_imports_the_lab():

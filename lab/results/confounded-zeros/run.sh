@@ -1,4 +1,10 @@
 #!/usr/bin/env bash
+# diagnose_probes.py is retired from the lab (it reads the library's internals; lab/README.md):
+#   git show 6a705d8:docs/results/confounded-zeros/diagnose_probes.py > diagnose_probes.py
+# validation.py is retired from the lab (it reads the library's internals; lab/README.md):
+#   git show 6a705d8:docs/results/confounded-zeros/validation.py > validation.py
+# test.py is retired from the lab (it reads the library's internals; lab/README.md):
+#   git show 6a705d8:docs/results/confounded-zeros/test.py > test.py
 # The commands of this folder, from the repository root with the package installed.
 set -euo pipefail
 here=docs/results/confounded-zeros

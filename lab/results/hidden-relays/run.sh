@@ -1,4 +1,6 @@
 #!/usr/bin/env bash
+# validation.py is retired from the lab (it reads the library's internals; lab/README.md):
+#   git show 6a705d8:docs/results/hidden-relays/validation.py > validation.py
 # The commands of this folder, from the repository root with the package installed.
 set -euo pipefail
 here=docs/results/hidden-relays

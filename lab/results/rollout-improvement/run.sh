@@ -1,4 +1,6 @@
 #!/usr/bin/env bash
+# rollout.py is retired from the lab (it reads the library's internals; lab/README.md):
+#   git show 6a705d8:docs/results/rollout-improvement/rollout.py > rollout.py
 # The commands of this folder, from the repository root with the package installed, one
 # thread a job, two at a time. Each prints a header line and one return per network
 # (collected into per-network.csv); `table.py` prints the table of README.md.
