@@ -157,12 +157,6 @@ def _spec_of(network: Any) -> PolicySpec:
             "export_policy: the compiled policy has no LayerNorm in its MLPs "
             "(AgentSizes.layer_norm); play this network with PyTorch"
         )
-    if s.reads_belief:
-        name = "belief_in_input" if s.belief_in_input else "advice_in_input"
-        raise ValueError(
-            "export_policy: the compiled policy does not compute the belief or advice inputs "
-            f"(AgentSizes.{name}); play this network with PyTorch"
-        )
     eps = 1e-5
     if architecture == "tdrqn":
         encoder = network.mixer.encoder

@@ -17,7 +17,7 @@ import torch
 from torch import nn
 
 from spikectl.agents.encoders import PerNeuronLSTM
-from spikectl.agents.features import belief_width, per_neuron_feature_count, per_neuron_features
+from spikectl.agents.features import per_neuron_feature_count, per_neuron_features
 from spikectl.agents.observation import (
     OBS_KEYS,
     OPTIONAL_KEYS,
@@ -158,24 +158,6 @@ class RecurrentQNetworkBase(nn.Module):
         return obs_seq, state
 
 
-def check_belief(obs: Observation, network: str, width: int) -> None:
-    """A network built with ``belief_in_input`` or ``advice_in_input`` needs
-    ``obs["belief"]`` [..., n, width]."""
-    belief, voltage = obs.get("belief"), obs["voltage"]
-    if belief is None:
-        raise ValueError(
-            f"{network}: this network reads obs['belief'] (AgentSizes.belief_in_input / "
-            "advice_in_input), which the observations lack; play it with "
-            "spikectl.load_controller or give GreedyController "
-            "spikectl.training.greedy.belief_input(network, ...)"
-        )
-    expected = (*voltage.shape, width)
-    if tuple(belief.shape) != expected:
-        raise ValueError(
-            f"{network}: obs['belief'] must have shape {list(expected)}, got {list(belief.shape)}"
-        )
-
-
 class PerNeuronMemory(RecurrentQNetworkBase):
     """A network whose memory is the shared per-neuron LSTM (DDRQN, DMDRQN, TDRQN):
     each neuron's features → one LSTM with a state per neuron, (h, c) each [B, n, H]."""
@@ -193,9 +175,6 @@ class PerNeuronMemory(RecurrentQNetworkBase):
         the final state."""
         obs_seq, state = self.checked_inputs(obs_seq, state)
         s = self.sizes
-        width = belief_width(s)
-        if width:
-            check_belief(obs_seq, type(self).__name__, width)
         x = per_neuron_features(
             obs_seq,
             v_rest_mV=self.v_rest_mV,
@@ -204,7 +183,6 @@ class PerNeuronMemory(RecurrentQNetworkBase):
             with_target_voltage=s.target_voltage_in_input,
             with_others_spiking=s.others_spiking_in_input,
             with_proximity=s.proximity_in_input,
-            belief_width=width,
             dtype=self.param_dtype(),
         )  # [B, T, n, F]
         return self.lstm(x, state)  # [B, T, n, H], (h, c)

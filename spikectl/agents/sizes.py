@@ -4,7 +4,7 @@ and the architectures' names."""
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Literal, get_args
+from typing import Any, ClassVar, Literal, get_args
 
 from spikectl.agents.heads import PerNeuronQHead
 from spikectl.config_errors import ConfigError
@@ -56,16 +56,20 @@ class AgentSizes:
     their distance on the line (``features.target_proximity``; positions from the
     ``position`` observation key, else the neurons' indices), also in each neuron's
     LSTM input; per-neuron networks only (not in the paper)."""
-    belief_in_input: bool = False
-    """What the observations so far say about each neuron's synapse onto the target (the
-    ``belief`` observation key: ``spikectl.planning.belief``), also in each neuron's LSTM
-    input; per-neuron networks only (not in the paper)."""
-    advice_in_input: bool = False
-    """What identify-and-plan would do now (1 on the neuron it would stimulate, and a
-    do-nothing flag: ``spikectl.planning.advice``), also in each neuron's LSTM input, after
-    the belief; per-neuron networks only (not in the paper)."""
     layer_norm: bool = False
     """LayerNorm in every hidden layer of the Q heads and FF blocks (PQN; not in the paper)."""
+
+    removed_fields: ClassVar[dict[str, tuple[Any, str]]] = {
+        "belief_in_input": (
+            False, "the planner's belief as input measured no change, docs/results/belief-input"
+        ),
+        "advice_in_input": (
+            False, "with the planner's advice as input the student copies the planner, "
+            "docs/results/advice-input",
+        ),
+    }  # fmt: skip
+    """Fields of earlier versions' configs, with the value under which a run ran as
+    today's (read by ``spikectl.training.config.Experiment.from_dict``)."""
 
     def __post_init__(self) -> None:
         for field in fields(self):
@@ -98,8 +102,6 @@ class AgentSizes:
             "target_voltage_in_input",
             "others_spiking_in_input",
             "proximity_in_input",
-            "belief_in_input",
-            "advice_in_input",
             "layer_norm",
         ):
             if not isinstance(getattr(self, name), bool):
@@ -107,17 +109,11 @@ class AgentSizes:
                                   label=f"AgentSizes.{name}")  # fmt: skip
 
     def check_architecture(self, arch: str) -> None:
-        """Refuse the settings ``arch`` does not read (``proximity_in_input``,
-        ``belief_in_input`` and ``advice_in_input``: the per-neuron networks only)."""
-        for name in ("proximity_in_input", "belief_in_input", "advice_in_input"):
+        """Refuse the settings ``arch`` does not read (``proximity_in_input``: the
+        per-neuron networks only)."""
+        for name in ("proximity_in_input",):
             if getattr(self, name) and arch == "drqn":
                 raise ConfigError(
                     name, "is read by the per-neuron networks (ddrqn, dmdrqn, tdrqn), "
                     "not by drqn", label=f"AgentSizes.{name}",
                 )  # fmt: skip
-
-    @property
-    def reads_belief(self) -> bool:
-        """Whether the network reads the ``belief`` observation key (the planner's belief,
-        its advice or both), computed beside it by ``spikectl.training.greedy``."""
-        return self.belief_in_input or self.advice_in_input

@@ -258,13 +258,6 @@ class Experiment:
                 value = getattr(self, name)
                 raise ConfigError(name, f"must be a {_kind_name(kind)}, got {value!r}")
         sizes = self.agent.sizes
-        if sizes.reads_belief and not getattr(self.learner, "stores_belief_inputs", False):
-            name = "belief_in_input" if sizes.belief_in_input else "advice_in_input"
-            raise ConfigError(
-                ("agent", "sizes", name),
-                "needs a learner that stores it with its episodes (one with a replay buffer); "
-                f"the {self.learner.name} learner does not",
-            )
         length, train = self.env.episode_length, self.train
         try:
             check_agent = getattr(self.learner, "check_agent", None)
@@ -326,6 +319,7 @@ class Experiment:
         agent = dict(nested.get("agent", {}))
         learner = dict(nested.get("learner", {}))
         learner_type = learner_config_type(learner.pop("name", DQNConfig.name))
+        drop_removed_fields(learner_type, "learner", learner)
         for kind, section, part in ((EnvConfig, "env", env), (AgentConfig, "agent", agent),
                                     (TrainConfig, "train", nested.get("train", {})),
                                     (learner_type, "learner", learner)):  # fmt: skip
@@ -342,6 +336,7 @@ class Experiment:
             agent["init_from"] = Path(agent["init_from"])
         sizes = dict(agent.get("sizes", {}))
         legacy_normalisation(sizes, env["params"])
+        drop_removed_fields(AgentSizes, "agent.sizes", sizes)
         check_fields(AgentSizes, "agent.sizes", sizes)
         try:
             agent["sizes"] = AgentSizes(
@@ -399,6 +394,19 @@ class Experiment:
 
 def _kind_name(kind: type | tuple[type, ...]) -> str:
     return " or ".join(k.__name__ for k in kind) if isinstance(kind, tuple) else kind.__name__
+
+
+def drop_removed_fields(kind: type, section: str, values: dict[str, Any]) -> None:
+    """Drop from a saved config section the fields spikectl no longer has
+    (``kind.removed_fields``: name → (the value under which a run ran as today's, why
+    the field went)) where they hold that value; any other value cannot be rebuilt and
+    is refused in one line."""
+    for name, (value_now, why) in getattr(kind, "removed_fields", {}).items():
+        if name in values and values.pop(name) != value_now:
+            raise ConfigError(
+                (*section.split("."), name),
+                f"is no longer in spikectl ({why}); a run with it cannot be rebuilt",
+            )
 
 
 def check_fields(kind: type, section: str, values: Mapping[str, Any]) -> None:
