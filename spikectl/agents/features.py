@@ -11,7 +11,6 @@ from collections.abc import Mapping
 import torch
 import torch.nn.functional as F
 
-from spikectl.agents.spikes import VISIBLE_SPIKE_LEVEL
 from spikectl.contexts.generation import (
     CONNECTION_PROBABILITY_BANDS,
     LONG_RANGE_CONNECTION_PROBABILITY,
@@ -71,52 +70,6 @@ def target_proximity(position: torch.Tensor, target: torch.Tensor) -> torch.Tens
     for max_distance, probability in reversed(CONNECTION_PROBABILITY_BANDS):
         proximity = torch.where(distance <= max_distance, probability, proximity)
     return torch.where(distance == 0, 0.0, proximity)  # [..., n]
-
-
-def per_neuron_features(
-    obs: Mapping[str, torch.Tensor],
-    *,
-    v_rest_mV: float,
-    v_threshold_mV: float,
-    with_target: bool,
-    dtype: torch.dtype,
-    with_target_voltage: bool = False,
-    with_others_spiking: bool = False,
-    with_proximity: bool = False,
-) -> torch.Tensor:
-    """Per-neuron LSTM input [..., n, F]: normalised V, stimulated at t-1, (is target),
-    (the target's normalised V), (how many other neurons show a spike), (the prior
-    probability of its synapse onto the target by their distance,
-    :func:`target_proximity`).
-
-    F = 2 + with_target + with_target_voltage + with_others_spiking + with_proximity
-    (docs/agents.md). The
-    target's voltage, the same for every neuron, keeps the input permutation equivariant
-    and lets each neuron's memory relate its own spikes to the target's response; the
-    count of the others' visible spikes tells that memory whether a response that
-    follows its own spike may have come from another neuron's.
-    """
-    voltage = normalised_voltage(obs["voltage"].to(dtype), v_rest_mV, v_threshold_mV)  # [..., n]
-    n = voltage.shape[-1]
-    columns = [voltage, neuron_indicator(obs["last_action"], n, dtype)]  # [..., n] each
-    if with_target:
-        columns.append(neuron_indicator(obs["target"], n, dtype))  # [..., n]
-    if with_target_voltage:
-        target_voltage = torch.gather(voltage, -1, obs["target"].unsqueeze(-1))  # [..., 1]
-        columns.append(target_voltage.expand_as(voltage))  # [..., n]
-    if with_others_spiking:
-        spiking = (voltage >= VISIBLE_SPIKE_LEVEL).to(dtype)  # [..., n]
-        columns.append(spiking.sum(-1, keepdim=True) - spiking)  # [..., n]
-    if with_proximity:
-        columns.append(target_proximity(neuron_positions(obs, n, dtype), obs["target"]))
-    return torch.stack(columns, dim=-1)  # [..., n, F]
-
-
-def per_neuron_feature_count(sizes) -> int:
-    """F of :func:`per_neuron_features` for an :class:`~spikectl.agents.AgentSizes`."""
-    s = sizes
-    flags = s.target_in_input + s.target_voltage_in_input + s.others_spiking_in_input
-    return 2 + flags + s.proximity_in_input
 
 
 def system_features(

@@ -17,7 +17,7 @@ import torch
 from torch import nn
 
 from spikectl.agents.encoders import PerNeuronLSTM
-from spikectl.agents.features import per_neuron_feature_count, per_neuron_features
+from spikectl.agents.inputs import input_width, per_neuron_inputs
 from spikectl.agents.observation import (
     OBS_KEYS,
     OPTIONAL_KEYS,
@@ -165,7 +165,7 @@ class PerNeuronMemory(RecurrentQNetworkBase):
     def build_lstm(self) -> PerNeuronLSTM:
         """The LSTM, for ``build`` to register as ``lstm``, first."""
         s = self.sizes
-        return PerNeuronLSTM(per_neuron_feature_count(s), s.lstm_hidden)
+        return PerNeuronLSTM(input_width(s.inputs), s.lstm_hidden)
 
     def state_shape(self, batch_size: int, n_neurons: int) -> tuple[int, ...]:
         return batch_size, n_neurons, self.sizes.lstm_hidden
@@ -175,14 +175,8 @@ class PerNeuronMemory(RecurrentQNetworkBase):
         the final state."""
         obs_seq, state = self.checked_inputs(obs_seq, state)
         s = self.sizes
-        x = per_neuron_features(
-            obs_seq,
-            v_rest_mV=self.v_rest_mV,
-            v_threshold_mV=self.v_threshold_mV,
-            with_target=s.target_in_input,
-            with_target_voltage=s.target_voltage_in_input,
-            with_others_spiking=s.others_spiking_in_input,
-            with_proximity=s.proximity_in_input,
+        x = per_neuron_inputs(
+            obs_seq, s.inputs, v_rest_mV=self.v_rest_mV, v_threshold_mV=self.v_threshold_mV,
             dtype=self.param_dtype(),
-        )  # [B, T, n, F]
+        )  # fmt: skip
         return self.lstm(x, state)  # [B, T, n, H], (h, c)

@@ -42,6 +42,7 @@ from typing import Annotated, Any
 import tyro
 
 from spikectl.agents import ARCHITECTURES, AgentSizes, Architecture
+from spikectl.agents.sizes import inputs_from_flags
 from spikectl.config_errors import ConfigError, check_field_types, check_int
 from spikectl.contexts import MAX_EPISODE_LENGTH, MAX_N_NEURONS
 from spikectl.envs.registration import ENV_ID
@@ -337,6 +338,7 @@ class Experiment:
         sizes = dict(agent.get("sizes", {}))
         legacy_normalisation(sizes, env["params"])
         drop_removed_fields(AgentSizes, "agent.sizes", sizes)
+        inputs_from_flags(sizes)
         check_fields(AgentSizes, "agent.sizes", sizes)
         try:
             agent["sizes"] = AgentSizes(

@@ -11,7 +11,7 @@ import torch
 import torch.nn.functional as F
 
 from spikectl.agents import masked_q
-from spikectl.agents.blocks import normalised_voltage
+from spikectl.agents.features import normalised_voltage
 from spikectl.training.learners.dqn_config import DQNConfig
 from spikectl.training.replay import EpisodeBatchArrays
 

@@ -1,5 +1,5 @@
-"""A trained network as a greedy controller, and its greedy evaluation during training:
-the training loop's scores."""
+"""The training loop's scores: a network's mean greedy return on every context of a set
+(its evaluations of the validation and test sets during a run)."""
 
 from __future__ import annotations
 
