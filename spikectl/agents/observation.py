@@ -24,7 +24,7 @@ OBS_KEYS = ("voltage", "target", "pattern", "step", "last_action")
 
 OPTIONAL_KEYS = ("position",)
 """Keys a network reads only when its sizes say so (``position``: float [n], each
-neuron's position on the generator's line, read by ``AgentSizes.proximity_in_input``,
+neuron's position on the generator's line, read by the ``proximity`` input feature,
 the neurons' indices where absent)."""
 
 _INDEX_KEYS = ("target", "step", "last_action")
