@@ -49,6 +49,7 @@ from spikectl.envs.registration import ENV_ID
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.training.config_migration import (
+    drop_removed_fields,
     field_value,
     leaf_paths,
     legacy_normalisation,
@@ -396,19 +397,6 @@ class Experiment:
 
 def _kind_name(kind: type | tuple[type, ...]) -> str:
     return " or ".join(k.__name__ for k in kind) if isinstance(kind, tuple) else kind.__name__
-
-
-def drop_removed_fields(kind: type, section: str, values: dict[str, Any]) -> None:
-    """Drop from a saved config section the fields spikectl no longer has
-    (``kind.removed_fields``: name → (the value under which a run ran as today's, why
-    the field went)) where they hold that value; any other value cannot be rebuilt and
-    is refused in one line."""
-    for name, (value_now, why) in getattr(kind, "removed_fields", {}).items():
-        if name in values and values.pop(name) != value_now:
-            raise ConfigError(
-                (*section.split("."), name),
-                f"is no longer in spikectl ({why}); a run with it cannot be rebuilt",
-            )
 
 
 def check_fields(kind: type, section: str, values: Mapping[str, Any]) -> None:
