@@ -28,11 +28,12 @@ import numpy as np
 import torch
 import torch.nn.functional as F
 
-from spikectl.agents.blocks import long_indices, per_neuron_features
+from spikectl.agents.inputs import per_neuron_inputs
+from spikectl.agents.observation import long_indices
 from spikectl.contexts import make_splits
 from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
-from spikectl.training.greedy import greedy_returns
+from spikectl.training.greedy_scores import greedy_returns
 from spikectl.training.learners.dqn_losses import (
     batch_tensors,
     losses_on_tensors,
@@ -129,10 +130,9 @@ def main() -> None:
     indexed = long_indices(obs)
     sizes = online.sizes
     n = config.env.n_neurons
-    features = per_neuron_features(
-        indexed, v_rest_mV=online.v_rest_mV, v_threshold_mV=online.v_threshold_mV,
-        with_target=sizes.target_in_input, dtype=torch.float32,
-        with_target_voltage=sizes.target_voltage_in_input,
+    features = per_neuron_inputs(
+        indexed, sizes.inputs, v_rest_mV=online.v_rest_mV, v_threshold_mV=online.v_threshold_mV,
+        dtype=torch.float32,
     )  # fmt: skip
     state = online.initial_state(config.learner.batch_size, n)
     lstm_out = online.lstm(features, state)[0].detach().requires_grad_()

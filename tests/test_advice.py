@@ -1,27 +1,18 @@
-"""The advice input: identify-and-plan's next action as per-neuron features of a learned
-policy (the planner's own actions, the guided teacher's labels, row independence, the
-networks that read it, every route that plays them, refusals)."""
+"""Identify-and-plan's next action as per-neuron features (``spikectl.planning.advice``):
+the planner's own actions, the guided teacher's labels, row independence, refusals."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
-import torch
-from test_agents import SMALL, permute_neurons, random_obs, small_agent
-from test_belief import trained_and_scored_again
-from test_controllers import assert_same_play
 
 import spikectl
-from spikectl.agents import export_policy, make_agent
-from spikectl.agents.features import belief_width
-from spikectl.agents.greedy import GreedyController
 from spikectl.envs.controller import RandomLegal
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.neuron.params import NeuronParams
-from spikectl.planning import BeliefInputs, PlannerAdvice, TargetInputBelief, episode_beliefs
+from spikectl.planning import BeliefInputs, PlannerAdvice, episode_beliefs
 from spikectl.planning.advice import ADVICE_FEATURES
 from spikectl.training.learners.teachers import teacher_labels
-from spikectl.training.presets import SMOKE
 
 
 def _advice(contexts, episodes) -> np.ndarray:
@@ -81,69 +72,6 @@ def test_advice_refuses_bad_inputs():
         PlannerAdvice(NeuronParams())(observations, np.ones((2, 5), bool))
     with pytest.raises(ValueError, match="at least one part"):
         BeliefInputs([])
-
-
-@pytest.mark.parametrize("belief", [False, True])
-def test_a_network_reading_the_advice_is_equivariant_and_steps_as_it_runs(belief):
-    B, T, n = 3, 6, 5
-    net = small_agent("tdrqn", n, advice_in_input=True, belief_in_input=belief).double()
-    width = belief_width(net.sizes)
-    assert width == 2 + 3 * belief
-    obs = random_obs(B, T, n, seed=2)
-    g = torch.Generator().manual_seed(3)
-    obs["belief"] = torch.rand(B, T, n, width, generator=g, dtype=torch.float64)
-    obs["voltage"] = obs["voltage"].double()
-    q, _ = net(obs)
-    perm = torch.tensor([2, 0, 4, 1, 3])
-    q_p, _ = net({**permute_neurons(obs, perm), "belief": obs["belief"][:, :, perm]})
-    torch.testing.assert_close(q_p[..., 1:], q[..., 1:][..., perm], atol=1e-10, rtol=1e-10)
-    advice_changed = obs["belief"].clone()
-    advice_changed[..., -2:] = 1.0 - advice_changed[..., -2:]
-    assert not torch.allclose(net({**obs, "belief": advice_changed})[0], q)
-    state = None
-    for t in range(T):
-        q_t, state = net.step({k: v[:, t] for k, v in obs.items()}, state)
-        torch.testing.assert_close(q_t, q[:, t], atol=1e-10, rtol=1e-10)
-    with pytest.raises(ValueError, match=rf"must have shape \[3, 6, 5, {width}\]"):
-        net({**obs, "belief": obs["belief"][..., :1]})
-
-
-def test_what_does_not_compute_the_advice_refuses_it():
-    with pytest.raises(ValueError, match="advice_in_input is read by the per-neuron"):
-        small_agent("drqn", 4, advice_in_input=True)
-    with pytest.raises(ValueError, match=r"does not compute the belief or advice.*advice_in_input"):
-        export_policy(small_agent("tdrqn", 4, advice_in_input=True), "unused.npz")
-
-
-def test_greedy_controller_with_advice_plays_each_context_as_alone(splits):
-    contexts = splits[1][:2]
-    torch.manual_seed(5)
-    net = make_agent("tdrqn", 8, contexts.episode_length, **{**SMALL, "advice_in_input": True})
-    controller = GreedyController(
-        net, per_environment=True, belief=BeliefInputs([PlannerAdvice(NeuronParams())])
-    )
-    assert_same_play(controller, evaluate_policy(contexts, controller), contexts)
-
-
-def test_training_with_advice_is_scored_again_exactly_by_evaluate(tmp_path):
-    """The replay's advice (computed again from the stored episodes) and the
-    controllers' (computed while playing) are one computation, belief beside it."""
-    changes = {"agent.sizes.advice_in_input": True, "agent.sizes.belief_in_input": True}
-    loaded = trained_and_scored_again(changes, tmp_path / "run")
-    assert [type(part) for part in loaded.belief.parts] == [TargetInputBelief, PlannerAdvice]
-
-
-def test_learners_that_cannot_store_the_advice_refuse_it(tmp_path, run_cli):
-    from test_pqn import pqn
-
-    with pytest.raises(ValueError, match="advice_in_input needs a learner that stores it"):
-        pqn(SMOKE.with_changes({"agent.sizes.advice_in_input": True}))
-    run = tmp_path / "run"
-    result = run_cli("train", "quick", "--sizes.advice-in-input", "--seeds", "0", "1",
-                     "--stacked", "--run-dir", str(run), check=False)  # fmt: skip
-    assert result.returncode == 2, result.stderr
-    assert "does not compute the belief or advice" in result.stderr.strip().splitlines()[-1]
-    assert not run.exists()
 
 
 def test_the_advice_on_a_noisy_task_is_the_named_planner_of_that_task():

@@ -1,6 +1,6 @@
-"""The target's proximity on the generator's line as a per-neuron input
-(``AgentSizes.proximity_in_input``, docs/agents.md): its values by hand, equivariance
-under a joint relabelling of neurons and positions (and not under a relabelling that
+"""The target's proximity on the generator's line as a per-neuron input (the
+``proximity`` feature of ``AgentSizes.inputs``, docs/agents.md): its values by hand,
+equivariance under a joint relabelling of neurons and positions (and not under a relabelling that
 leaves the positions behind), the ``position`` key's checks, and the compiled policy."""
 
 from __future__ import annotations
@@ -15,8 +15,12 @@ from test_agents import EQUIVARIANT, permute_neurons, random_obs, small_agent
 
 from spikectl.agents import make_agent, observation_batch
 from spikectl.agents.compiled import CompiledPolicy, PolicyFileError, export_policy
-from spikectl.agents.features import per_neuron_features, target_proximity
+from spikectl.agents.features import target_proximity
+from spikectl.agents.inputs import per_neuron_inputs
 from spikectl.training.presets import SMOKE
+
+PROXIMITY = ("target", "proximity")
+"""The default input and the proximity after it."""
 
 
 @pytest.fixture(autouse=True)
@@ -40,10 +44,10 @@ def test_proximity_by_hand() -> None:
     # Positions from the observation where it holds them: the feature follows them.
     obs = dict(voltage=torch.full((1, 3), -70.0), last_action=torch.tensor([-1]),
                target=torch.tensor([0]), position=torch.tensor([[20.0, 27.0, 5.0]]))  # fmt: skip
-    x = per_neuron_features(obs, v_rest_mV=-70.0, v_threshold_mV=-50.0, with_target=False,
-                            with_proximity=True, dtype=torch.float32)  # fmt: skip
+    x = per_neuron_inputs(obs, ("proximity",), v_rest_mV=-70.0, v_threshold_mV=-50.0,
+                          dtype=torch.float32)  # fmt: skip
     torch.testing.assert_close(x[0, :, -1], torch.tensor([0.0, 0.2, 0.01]))
-    assert small_agent("ddrqn", 4, proximity_in_input=True).lstm.lstm.input_size == 4
+    assert small_agent("ddrqn", 4, inputs=PROXIMITY).lstm.lstm.input_size == 4
 
 
 def with_positions(obs: dict, perm: torch.Tensor | None = None) -> dict:
@@ -59,7 +63,7 @@ def with_positions(obs: dict, perm: torch.Tensor | None = None) -> dict:
 @pytest.mark.parametrize("name", EQUIVARIANT)
 def test_equivariant_under_a_joint_relabelling_of_neurons_and_positions(name: str) -> None:
     B, T, n = 3, 9, 16
-    net = small_agent(name, n, proximity_in_input=True).double()
+    net = small_agent(name, n, inputs=PROXIMITY).double()
     obs = random_obs(B, T, n, seed=1)
     q, _ = net(obs)
     q_told, _ = net(with_positions(obs))  # the default positions are the indices
@@ -79,7 +83,7 @@ def test_equivariant_under_a_joint_relabelling_of_neurons_and_positions(name: st
 
 
 def test_bad_positions_and_architectures_are_refused_by_name() -> None:
-    net = small_agent("tdrqn", 5, proximity_in_input=True)
+    net = small_agent("tdrqn", 5, inputs=PROXIMITY)
     obs = random_obs(2, 3, 5)
     with pytest.raises(ValueError, match=r"obs\['position'\] must have the shape of"):
         net({**obs, "position": torch.zeros(2, 3, 4)})
@@ -87,8 +91,10 @@ def test_bad_positions_and_architectures_are_refused_by_name() -> None:
         net({**obs, "position": torch.full((2, 3, 5), float("nan"))})
     with pytest.raises(TypeError, match=r"obs\['position'\] must be a real tensor"):
         net({**obs, "position": [0, 1, 2, 3, 4]})
-    with pytest.raises(ValueError, match="proximity_in_input.*not by drqn"):
-        small_agent("drqn", 5, proximity_in_input=True)
+    with pytest.raises(ValueError, match="AgentSizes.inputs: 'proximity' is read by the "
+                                         "per-neuron networks.*not by drqn"):  # fmt: skip
+        small_agent("drqn", 5, inputs=PROXIMITY)
+    small_agent("drqn", 5, inputs=("target", "target-voltage"))  # older features: ignored
 
 
 def episode_observations(n: int, N: int, seed: int):
@@ -102,10 +108,11 @@ def episode_observations(n: int, N: int, seed: int):
 @pytest.mark.parametrize("arch", ["tdrqn", "ddrqn"])
 def test_the_compiled_policy_computes_it_as_the_network_does(arch, tmp_path) -> None:
     torch.manual_seed(0)
-    sizes = replace(SMOKE.agent.sizes, proximity_in_input=True)
+    sizes = replace(SMOKE.agent.sizes, inputs=PROXIMITY)
     net = make_agent(arch, 16, 20, sizes).eval()
     policy = CompiledPolicy.load(export_policy(net, tmp_path / "policy.npz"))
     assert policy.spec.proximity_in_input and policy.spec.input_features == 4
+    assert policy.spec.inputs == PROXIMITY
     mask = np.ones(17, dtype=bool)
     positions = np.random.default_rng(1).permutation(16).astype(np.float32)
     for given in (None, positions):

@@ -227,8 +227,8 @@ def test_masked_q_and_greedy_action() -> None:
 @pytest.mark.parametrize("do_nothing_head", ["dueling", "pooled"])
 @pytest.mark.parametrize(
     "inputs",
-    [dict(target_in_input=True), dict(target_in_input=False),
-     dict(target_voltage_in_input=True, others_spiking_in_input=True)],
+    [dict(inputs=("target",)), dict(inputs=()),
+     dict(inputs=("target", "target-voltage", "others-spiking"))],
 )  # fmt: skip
 @pytest.mark.parametrize("name", EQUIVARIANT)
 def test_permutation_equivariance(name: str, inputs: dict, do_nothing_head: str) -> None:
@@ -302,7 +302,7 @@ def test_shift_pattern_hand_example() -> None:
 
 
 def test_paper_literal_tdrqn_builds_and_runs() -> None:
-    literal = small_agent("tdrqn", 5, target_in_input=False)
+    literal = small_agent("tdrqn", 5, inputs=())
     default = small_agent("tdrqn", 5)
     assert literal.lstm.lstm.input_size == 2  # [v_norm, stimulated]
     assert default.lstm.lstm.input_size == 3  # + is-target indicator
@@ -317,7 +317,7 @@ def test_paper_literal_tdrqn_builds_and_runs() -> None:
 
 
 def test_per_neuron_input_features_on_a_hand_computed_step() -> None:
-    from spikectl.agents.features import per_neuron_features
+    from spikectl.agents.inputs import per_neuron_inputs
 
     # V_r = -70 mV, V_th = -50 mV; neurons 0 and 2 show a spike (V >= V_th, within
     # float32 rounding), 3 is 1 mV short of it; neuron 2 was stimulated, 1 is the target.
@@ -326,9 +326,8 @@ def test_per_neuron_input_features_on_a_hand_computed_step() -> None:
         last_action=torch.tensor([2]),
         target=torch.tensor([1]),
     )
-    x = per_neuron_features(obs, v_rest_mV=-70.0, v_threshold_mV=-50.0, with_target=True,
-                            with_target_voltage=True, with_others_spiking=True,
-                            dtype=torch.float32)  # fmt: skip
+    x = per_neuron_inputs(obs, ("target", "target-voltage", "others-spiking"),
+                          v_rest_mV=-70.0, v_threshold_mV=-50.0, dtype=torch.float32)  # fmt: skip
     expected = [
         # v_norm, stimulated, is target, target's v_norm, others showing a spike
         [1.0, 0.0, 0.0, 0.5, 1.0],
@@ -337,21 +336,21 @@ def test_per_neuron_input_features_on_a_hand_computed_step() -> None:
         [0.95, 0.0, 0.0, 0.5, 2.0],
     ]
     torch.testing.assert_close(x, torch.tensor([expected]), atol=1e-6, rtol=0)
-    net = small_agent("tdrqn", 4, target_voltage_in_input=True, others_spiking_in_input=True)
+    net = small_agent("tdrqn", 4, inputs=("target", "target-voltage", "others-spiking"))
     assert net.lstm.lstm.input_size == 5
+    # The features in another order: the same columns, moved.
+    moved = per_neuron_inputs(obs, ("others-spiking", "target"), v_rest_mV=-70.0,
+                              v_threshold_mV=-50.0, dtype=torch.float32)  # fmt: skip
+    torch.testing.assert_close(moved, x[..., [0, 1, 4, 2]], atol=0, rtol=0)
 
 
 def _features(net: torch.nn.Module, obs: dict[str, torch.Tensor]) -> torch.Tensor:
-    from spikectl.agents.features import per_neuron_features
+    from spikectl.agents.inputs import per_neuron_inputs
 
-    s = net.sizes
-    return per_neuron_features(
-        obs,
-        v_rest_mV=net.v_rest_mV,
-        v_threshold_mV=net.v_threshold_mV,
-        with_target=s.target_in_input,
+    return per_neuron_inputs(
+        obs, net.sizes.inputs, v_rest_mV=net.v_rest_mV, v_threshold_mV=net.v_threshold_mV,
         dtype=torch.float32,
-    )
+    )  # fmt: skip
 
 
 # ----------------------------------------------------------------------------

@@ -161,16 +161,27 @@ def test_compiled_policy_picks_the_networks_actions(
     "options",
     [
         dict(do_nothing_head="dueling"),
-        dict(target_in_input=False),
-        dict(target_voltage_in_input=False, attn_heads=2),
+        dict(inputs=()),
+        dict(inputs=("target",), attn_heads=2),
         dict(lstm_hidden=24),  # lstm_hidden != attn_width: the projection
-        dict(others_spiking_in_input=True),
-        dict(others_spiking_in_input=True, target_voltage_in_input=False, target_in_input=False),
+        dict(inputs=("target", "others-spiking")),
+        dict(inputs=("others-spiking",)),
+        dict(inputs=("target", "target-voltage", "others-spiking", "proximity")),
     ],
 )
 def test_every_option_of_the_forward_matches(options):
     sizes = replace(SMOKE_SIZES, **options)
     check(compare(network("tdrqn", 5, 20, sizes), test_set(5, 20, 6), "random"))
+
+
+def test_export_refuses_inputs_the_forward_does_not_compute():
+    # The compiled forward computes its four features in one order; another order is
+    # refused at export, naming what it computes (a feature it does not know, too:
+    # tests/test_agent_inputs.py).
+    net = network("tdrqn", 5, 20, replace(SMOKE_SIZES, inputs=("proximity", "target")))
+    with pytest.raises(ValueError, match="computes the input features target, "
+                                         "target-voltage, others-spiking, proximity"):  # fmt: skip
+        CompiledPolicy.from_network(net)
 
 
 def test_a_network_runs_on_another_n_as_the_network_does():
@@ -338,12 +349,13 @@ def rechecksummed(path: Path, changes: dict) -> Path:
     """A copy of a policy file with its header changed and its checksum made again, as a
     hand edit that knows the format would: only the header's agreement with the weights
     can then tell."""
-    from spikectl.agents.policy_file import _parse_header, policy_checksum
+    from spikectl.agents.policy_file import policy_checksum
+    from spikectl.agents.policy_header import parse_header
 
     with np.load(path, allow_pickle=False) as data:
         arrays = {name: data[name] for name in data.files}
     header = {**json.loads(str(arrays.pop("metadata"))), **changes}
-    header["checksum"] = policy_checksum(_parse_header("x", np.array(json.dumps(header))), arrays)
+    header["checksum"] = policy_checksum(parse_header("x", np.array(json.dumps(header))), arrays)
     out = path.with_name("rechecksummed.npz")
     np.savez(out, metadata=np.array(json.dumps(header)), **arrays)
     return out

@@ -10,7 +10,7 @@ import pytest
 import torch
 
 from spikectl import ContextSet, NeuronParams
-from spikectl.agents.blocks import per_neuron_features
+from spikectl.agents.inputs import per_neuron_inputs
 from spikectl.cli import main
 from spikectl.training.checkpoint import read_checkpoint
 from spikectl.training.config import Experiment
@@ -86,9 +86,9 @@ def test_contexts_with_other_params_train_normalised_by_those_params(tmp_path, c
     assert torch.all(voltage == -65.0)
     obs = {"voltage": voltage, "last_action": torch.full((voltage.shape[0],), -1),
            "target": torch.zeros(voltage.shape[0], dtype=torch.long)}  # fmt: skip
-    features = per_neuron_features(obs, v_rest_mV=online.v_rest_mV,
-                                   v_threshold_mV=online.v_threshold_mV,
-                                   with_target=False, dtype=torch.float32)  # fmt: skip
+    features = per_neuron_inputs(obs, (), v_rest_mV=online.v_rest_mV,
+                                 v_threshold_mV=online.v_threshold_mV,
+                                 dtype=torch.float32)  # fmt: skip
     assert torch.all(features[..., 0] == 0.0)
     agent = load_agent(tmp_path / "run")
     assert (agent.v_rest_mV, agent.v_threshold_mV) == (-65.0, -45.0)

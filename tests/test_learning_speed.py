@@ -163,26 +163,27 @@ def test_new_mechanisms_are_off_in_the_paper_preset_and_validated():
 
 
 def test_target_voltage_feature_is_the_targets_normalised_voltage():
-    from spikectl.agents.blocks import per_neuron_features
+    from spikectl.agents.inputs import per_neuron_inputs
 
     voltage = torch.tensor([[-70.0, -50.0, -60.0], [-80.0, -70.0, -30.0]])  # [B=2, n=3]
     obs = {"voltage": voltage, "last_action": torch.tensor([-1, 0]),
            "target": torch.tensor([1, 2])}  # fmt: skip
-    x = per_neuron_features(obs, v_rest_mV=-70.0, v_threshold_mV=-50.0, with_target=True,
-                            dtype=torch.float32, with_target_voltage=True)  # fmt: skip
+    x = per_neuron_inputs(obs, ("target", "target-voltage"), v_rest_mV=-70.0,
+                          v_threshold_mV=-50.0, dtype=torch.float32)  # fmt: skip
     assert x.shape == (2, 3, 4)
     assert x[0, :, 3].tolist() == [1.0, 1.0, 1.0]  # target 1 sits at threshold
     assert x[1, :, 3].tolist() == [2.0, 2.0, 2.0]  # target 2 at -30 mV
     assert x[..., :3].equal(
-        per_neuron_features(
-            obs, v_rest_mV=-70.0, v_threshold_mV=-50.0, with_target=True, dtype=torch.float32
+        per_neuron_inputs(
+            obs, ("target",), v_rest_mV=-70.0, v_threshold_mV=-50.0, dtype=torch.float32
         )
     )
 
 
 @pytest.mark.parametrize("arch", ["ddrqn", "tdrqn"])
 def test_target_voltage_feature_keeps_the_networks_equivariant(arch):
-    net = make_agent(arch, 6, 9, SMOKE.agent.sizes, target_voltage_in_input=True).double()
+    net = make_agent(arch, 6, 9, SMOKE.agent.sizes, inputs=("target", "target-voltage"))
+    net = net.double()
     generator = torch.Generator().manual_seed(0)
     obs = {
         "voltage": -70 + 30 * torch.rand(2, 5, 6, generator=generator, dtype=torch.float64),

@@ -37,7 +37,7 @@ case $folder in
     guided-upr24)         flags=("${n100[@]}" --updates-per-round 24) ;;
     guided-upr28)         flags=("${n100[@]}" --updates-per-round 28) ;;
     # Each neuron's memory told how many other neurons show a spike (2026-11-25).
-    guided-others)        flags=("${n100[@]}" --sizes.others-spiking-in-input) ;;
+    guided-others)        flags=("${n100[@]}" --sizes.inputs target target-voltage others-spiking) ;;
     # Ten times the training networks (2026-11-25, second session; the main job since):
     # on 100 the learner scored 0.84-0.86 on its training networks, 0.81-0.82 on validation.
     guided-ntrain1000)    flags=() ;;  # the main job since then

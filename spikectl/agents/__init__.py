@@ -21,6 +21,8 @@ _HOMES = {
     "DMDRQN": "system_networks",
     "DRQN": "system_networks",
     "GreedyController": "greedy",
+    "INPUT_FEATURES": "inputs",
+    "InputFeature": "inputs",
     "OBS_KEYS": "observation",
     "TDRQN": "per_neuron_networks",
     "AgentSizes": "sizes",

@@ -36,12 +36,10 @@ from spikectl.agents.policy_file import (
     PolicyFileError,
     PolicySpec,
     _mismatch,
-    _parse_header,
     _policy_bytes,
-    check_policy_checksum,
     export_policy,
-    header_differences,
 )
+from spikectl.agents.policy_header import check_policy_checksum, header_differences, parse_header
 from spikectl.agents.policy_kernel import _decide, _layout
 from spikectl.envs.controller import ControllerInputError, check_controller_input
 from spikectl.file_kinds import FileKind, refuse_other_kinds
@@ -126,7 +124,7 @@ class CompiledPolicy:
         if HEADER_KEY not in arrays:
             raise PolicyFileError(f"{where} is not a compiled policy (no {HEADER_KEY!r} entry)")
         raw_header = arrays.pop(HEADER_KEY)
-        spec = _parse_header(where, raw_header)
+        spec = parse_header(where, raw_header)
         bad = sorted(name for name, array in arrays.items() if array.dtype != np.float32)
         if bad:
             raise PolicyFileError(f"{where}: weights {bad} are not float32")

@@ -11,26 +11,10 @@ from collections.abc import Mapping
 import torch
 import torch.nn.functional as F
 
-from spikectl.agents.spikes import VISIBLE_SPIKE_LEVEL
 from spikectl.contexts.generation import (
     CONNECTION_PROBABILITY_BANDS,
     LONG_RANGE_CONNECTION_PROBABILITY,
 )
-
-BELIEF_WIDTH = 3
-"""Features per neuron of the planner's belief about its synapse onto the target
-(``spikectl.planning.belief``'s ``BELIEF_FEATURES``: excites, inhibits, uncertainty)."""
-
-ADVICE_WIDTH = 2
-"""Features per neuron of the planner's advice (``spikectl.planning.advice``'s
-``ADVICE_FEATURES``: advised, waits)."""
-
-
-def belief_width(sizes) -> int:
-    """Features per neuron in the ``belief`` observation key of a network with these
-    :class:`~spikectl.agents.AgentSizes`: the belief (``belief_in_input``), then the
-    advice (``advice_in_input``); 0 where it reads neither."""
-    return BELIEF_WIDTH * sizes.belief_in_input + ADVICE_WIDTH * sizes.advice_in_input
 
 
 def normalised_voltage(
@@ -86,58 +70,6 @@ def target_proximity(position: torch.Tensor, target: torch.Tensor) -> torch.Tens
     for max_distance, probability in reversed(CONNECTION_PROBABILITY_BANDS):
         proximity = torch.where(distance <= max_distance, probability, proximity)
     return torch.where(distance == 0, 0.0, proximity)  # [..., n]
-
-
-def per_neuron_features(
-    obs: Mapping[str, torch.Tensor],
-    *,
-    v_rest_mV: float,
-    v_threshold_mV: float,
-    with_target: bool,
-    dtype: torch.dtype,
-    with_target_voltage: bool = False,
-    with_others_spiking: bool = False,
-    with_proximity: bool = False,
-    belief_width: int = 0,
-) -> torch.Tensor:
-    """Per-neuron LSTM input [..., n, F]: normalised V, stimulated at t-1, (is target),
-    (the target's normalised V), (how many other neurons show a spike), (the prior
-    probability of its synapse onto the target by their distance,
-    :func:`target_proximity`), (the planner's belief about its synapse onto the target
-    and its advice: ``obs["belief"]`` [..., n, belief_width], :func:`belief_width`).
-
-    F = 2 + with_target + with_target_voltage + with_others_spiking + with_proximity
-    + belief_width (docs/agents.md). The
-    target's voltage, the same for every neuron, keeps the input permutation equivariant
-    and lets each neuron's memory relate its own spikes to the target's response; the
-    count of the others' visible spikes tells that memory whether a response that
-    follows its own spike may have come from another neuron's.
-    """
-    voltage = normalised_voltage(obs["voltage"].to(dtype), v_rest_mV, v_threshold_mV)  # [..., n]
-    n = voltage.shape[-1]
-    columns = [voltage, neuron_indicator(obs["last_action"], n, dtype)]  # [..., n] each
-    if with_target:
-        columns.append(neuron_indicator(obs["target"], n, dtype))  # [..., n]
-    if with_target_voltage:
-        target_voltage = torch.gather(voltage, -1, obs["target"].unsqueeze(-1))  # [..., 1]
-        columns.append(target_voltage.expand_as(voltage))  # [..., n]
-    if with_others_spiking:
-        spiking = (voltage >= VISIBLE_SPIKE_LEVEL).to(dtype)  # [..., n]
-        columns.append(spiking.sum(-1, keepdim=True) - spiking)  # [..., n]
-    if with_proximity:
-        columns.append(target_proximity(neuron_positions(obs, n, dtype), obs["target"]))
-    features = torch.stack(columns, dim=-1)  # [..., n, F - belief_width]
-    if belief_width:
-        belief = obs["belief"].to(dtype)  # [..., n, belief_width]
-        features = torch.cat([features, belief], dim=-1)  # [..., n, F]
-    return features
-
-
-def per_neuron_feature_count(sizes) -> int:
-    """F of :func:`per_neuron_features` for an :class:`~spikectl.agents.AgentSizes`."""
-    s = sizes
-    flags = s.target_in_input + s.target_voltage_in_input + s.others_spiking_in_input
-    return 2 + flags + s.proximity_in_input + belief_width(s)
 
 
 def system_features(

@@ -37,21 +37,16 @@ class GreedyController:
     carrying one recurrent state per episode; every episode of a batch starts at step 0
     together, and a step-0 batch starts from the zero state. ``per_environment``: play
     each sub-environment of a batch alone, each from the zero state at its step 0 (see
-    the module docstring). ``belief``: what computes the ``belief`` input of a network
-    built with ``belief_in_input`` or ``advice_in_input``
-    (``spikectl.training.greedy.belief_input``: called on every observation batch with
-    its action mask, each row its own, ``reset()`` with the controller)."""
+    the module docstring)."""
 
     def __init__(
         self,
         network: torch.nn.Module,
         device: str = "cpu",
         per_environment: bool = False,
-        belief: Any = None,
     ) -> None:
         self.network, self.device, self.state = network, device, None
         self.per_environment = per_environment
-        self.belief = belief
         self.row_states: list[Any] = []
         """The recurrent state of each sub-environment, played alone."""
 
@@ -59,15 +54,13 @@ class GreedyController:
         """Forget the episodes: the next decision starts from the zero state."""
         self.state = None
         self.row_states = []
-        if self.belief is not None:
-            self.belief.reset()
 
     @torch.no_grad()
     def __call__(self, observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
         """int64 [S]: the actions of one batched forward over every row."""
         if self.state is not None and not np.any(observations["step"]):
             self.state = None  # a new batch of episodes
-        obs = observation_batch(self._with_belief(observations, action_mask), self.device)
+        obs = observation_batch(observations, self.device)
         scores, self.state = self.network.step(obs, self.state)  # [S, n + 1]
         legal = torch.as_tensor(action_mask, device=scores.device)
         return greedy_action(scores, legal).cpu().numpy()  # [S]
@@ -78,7 +71,6 @@ class GreedyController:
         mask = np.asarray(infos["action_mask"], dtype=bool)  # [S, n + 1]
         if not self.per_environment:
             return self(dict(observations), mask)
-        observations = self._with_belief(observations, mask)  # each row its own estimate
         size = mask.shape[0]
         if len(self.row_states) != size:
             self.row_states = [None] * size
@@ -94,20 +86,8 @@ class GreedyController:
         check_controller_input(observation, info, "GreedyController")
         mask = np.asarray(info["action_mask"], dtype=bool)
         state = None if np.asarray(observation["step"]) == 0 else self.state  # a new episode
-        if self.belief is not None:  # a batch of one for the belief
-            batch = self._with_belief(
-                {key: np.asarray(v)[None] for key, v in observation.items()}, mask[None]
-            )
-            observation = {key: value[0] for key, value in batch.items()}
         action, self.state = self._alone(observation, mask, state)
         return action
-
-    def _with_belief(self, observations: Mapping[str, Any], mask: np.ndarray) -> Mapping[str, Any]:
-        """The observation batch with its ``belief`` key where the controller has one
-        (unchanged, not copied, where it has none); ``mask`` bool [S, n + 1]."""
-        if self.belief is None:
-            return observations
-        return {**observations, "belief": self.belief(observations, mask)}
 
     @torch.no_grad()
     def _alone(self, observation: Mapping[str, Any], mask: np.ndarray, state: Any):

@@ -30,7 +30,7 @@ from spikectl.agents.recurrent import Observation as Observation
 from spikectl.agents.recurrent import RecurrentQNetwork as RecurrentQNetwork
 from spikectl.agents.recurrent import State
 from spikectl.agents.recurrent import voltage_range as voltage_range
-from spikectl.agents.sizes import ARCHITECTURES, AgentSizes
+from spikectl.agents.sizes import ARCHITECTURES, INPUT_FLAGS, AgentSizes
 from spikectl.agents.sizes import Architecture as Architecture
 from spikectl.agents.system_networks import DMDRQN, DRQN
 from spikectl.neuron.params import NeuronParams
@@ -61,6 +61,11 @@ def make_agent(
         raise ValueError(f"unknown agent {name!r}; choose one of {sorted(AGENTS)}")
     valid = {f.name for f in fields(AgentSizes)}
     unknown = sorted(set(overrides) - valid)
+    flags = {name: feature for name, feature, _ in INPUT_FLAGS}
+    for name in unknown:
+        if name in flags:
+            raise TypeError(f"make_agent: {name} is now inputs=(...), the input features' "
+                            f"names in order (its feature: {flags[name]!r})")  # fmt: skip
     if unknown:
         raise TypeError(f"make_agent: unknown size fields {unknown}; valid fields: {sorted(valid)}")
     sizes = replace(sizes or AgentSizes(), **overrides)

@@ -22,12 +22,10 @@ import torch
 OBS_KEYS = ("voltage", "target", "pattern", "step", "last_action")
 """Keys every observation batch must hold (extra keys are ignored)."""
 
-OPTIONAL_KEYS = ("belief", "position")
-"""Keys a network reads only when its sizes say so (``belief``: float [n, W], the
-planner's belief about each neuron's synapse onto the target and its advice,
-``AgentSizes.belief_in_input`` / ``advice_in_input``, ``features.belief_width``;
-``position``: float [n], each neuron's position on the generator's line, read by
-``AgentSizes.proximity_in_input``, the neurons' indices where absent)."""
+OPTIONAL_KEYS = ("position",)
+"""Keys a network reads only when its sizes say so (``position``: float [n], each
+neuron's position on the generator's line, read by the ``proximity`` input feature,
+the neurons' indices where absent)."""
 
 _INDEX_KEYS = ("target", "step", "last_action")
 """The integer-valued keys (int64 once converted)."""
@@ -156,8 +154,8 @@ def observation_batch(
     Takes either a sequence of single-environment observations (stacked along a
     new batch dimension) or one already batched dict, as a vector environment
     returns it. The result is what ``network.step`` takes: voltage float32 [B, n],
-    pattern float32 [B, N], and target / step / last_action int64 [B]; ``belief``
-    float32 [B, n, 3] where the observations hold it.
+    pattern float32 [B, N], and target / step / last_action int64 [B]; ``position``
+    float32 [B, n] where the observations hold it.
     """
     if isinstance(observations, Mapping):
         missing = [key for key in OBS_KEYS if key not in observations]

@@ -22,7 +22,7 @@ from spikectl.agents.recurrent import Observation, PerNeuronMemory, State
 class PerNeuronQNetwork(PerNeuronMemory):
     """Per-neuron LSTM → mixing block → per-neuron Q-values; any n, equivariant.
 
-    per neuron: [v_norm, stimulated, (is target), (target voltage)] → LSTM (H) → mixing
+    per neuron: [v_norm, stimulated, the features of ``sizes.inputs``] → LSTM (H) → mixing
     block ([B, T, n, H] → [B, T, n, M]) ⊕ per-neuron context (C) → PerNeuronQHead
     (:meth:`head_hidden`). Subclasses name the block (:meth:`build_mix`) and the head
     widths. State (h, c), each [B, n, H].
@@ -79,7 +79,7 @@ class PerNeuronQNetwork(PerNeuronMemory):
 class DDRQN(PerNeuronQNetwork):
     """Distributed DRQN: shared per-neuron LSTM → per-neuron FF; any n, equivariant.
 
-    per neuron: [v_norm, stimulated, (is target)] → LSTM (H) → FF ff_hidden + ReLU
+    per neuron: [v_norm, stimulated, ``sizes.inputs``] → LSTM (H) → FF ff_hidden + ReLU
     ⊕ per-neuron context (C) → PerNeuronQHead (head_hidden). No mixing between
     neurons except the pooled do-nothing value. State (h, c), each [B, n, H].
     """
@@ -98,10 +98,10 @@ class DDRQN(PerNeuronQNetwork):
 class TDRQN(PerNeuronQNetwork):
     """Transformer-based DRQN: per-neuron LSTM → attention across neurons; any n.
 
-    per neuron: [v_norm, stimulated, (is target)] → LSTM (H) → transformer encoder
-    over the n neuron tokens at each step (attn_layers × attn_heads, width W, FF
-    attn_ff) ⊕ per-neuron context (C) → PerNeuronQHead (tdrqn_head_hidden).
-    ``target_in_input=False`` is the paper-literal variant, where the target
+    per neuron: [v_norm, stimulated, the features of ``sizes.inputs``] → LSTM (H) →
+    transformer encoder over the n neuron tokens at each step (attn_layers ×
+    attn_heads, width W, FF attn_ff) ⊕ per-neuron context (C) → PerNeuronQHead
+    (tdrqn_head_hidden). ``inputs=()`` is the paper-literal variant, where the target
     reaches the network only after the transformer. State (h, c), each [B, n, H].
     """
 

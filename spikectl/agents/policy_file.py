@@ -12,9 +12,8 @@ from __future__ import annotations
 import hashlib
 import io
 import json
-import math
 from collections.abc import Mapping
-from dataclasses import MISSING, asdict, dataclass, fields
+from dataclasses import asdict, dataclass
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +29,15 @@ be told from the exported one: they are refused, naming how to export again."""
 SUPPORTED_ARCHITECTURES = ("tdrqn", "ddrqn")
 """What :func:`export_policy` compiles: the per-neuron networks (any n). DRQN and DMDRQN,
 fixed-n system networks, are not supported."""
+COMPILED_INPUTS = (
+    ("target", "target_in_input"),
+    ("target-voltage", "target_voltage_in_input"),
+    ("others-spiking", "others_spiking_in_input"),
+    ("proximity", "proximity_in_input"),
+)
+"""The input features (``AgentSizes.inputs``) the compiled forward computes, in the only
+order it computes them, each with the header field that says whether the file's
+network reads it."""
 HEADER_KEY = "metadata"
 MAX_WIDTH = 4096
 """The widest layer and the most layers a header may declare (far above any preset)."""
@@ -72,17 +80,23 @@ class PolicySpec:
     do_nothing_head: str
     target_in_input: bool
     target_voltage_in_input: bool
+    """Whether the network reads each of :data:`COMPILED_INPUTS`: the header's words for
+    ``AgentSizes.inputs`` (:attr:`inputs`)."""
     # Fields added after format version 1 have a default: files written before them read
     # as that default.
     others_spiking_in_input: bool = False
     proximity_in_input: bool = False
 
     @property
+    def inputs(self) -> tuple[str, ...]:
+        """The network's ``AgentSizes.inputs``: the features of :data:`COMPILED_INPUTS`
+        its header switches on."""
+        return tuple(name for name, flag in COMPILED_INPUTS if getattr(self, flag))
+
+    @property
     def input_features(self) -> int:
-        """F: [v_norm, stimulated, (is target), (target's v_norm), (others spiking),
-        (the target's proximity)]."""
-        flags = self.target_in_input + self.target_voltage_in_input + self.others_spiking_in_input
-        return 2 + flags + self.proximity_in_input
+        """F: [v_norm, stimulated, then one column per feature of :attr:`inputs`]."""
+        return 2 + len(self.inputs)
 
     @property
     def mix_width(self) -> int:
@@ -157,12 +171,7 @@ def _spec_of(network: Any) -> PolicySpec:
             "export_policy: the compiled policy has no LayerNorm in its MLPs "
             "(AgentSizes.layer_norm); play this network with PyTorch"
         )
-    if s.reads_belief:
-        name = "belief_in_input" if s.belief_in_input else "advice_in_input"
-        raise ValueError(
-            "export_policy: the compiled policy does not compute the belief or advice inputs "
-            f"(AgentSizes.{name}); play this network with PyTorch"
-        )
+    flags = compiled_input_flags(s.inputs)
     eps = 1e-5
     if architecture == "tdrqn":
         encoder = network.mixer.encoder
@@ -193,11 +202,21 @@ def _spec_of(network: Any) -> PolicySpec:
         head_hidden=tuple(s.tdrqn_head_hidden if architecture == "tdrqn" else s.head_hidden),
         value_hidden=tuple(s.value_hidden),
         do_nothing_head=s.do_nothing_head,
-        target_in_input=s.target_in_input,
-        target_voltage_in_input=s.target_voltage_in_input,
-        others_spiking_in_input=s.others_spiking_in_input,
-        proximity_in_input=s.proximity_in_input,
+        **flags,
     )
+
+
+def compiled_input_flags(inputs: tuple[str, ...]) -> dict[str, bool]:
+    """The header's flags for a network's ``AgentSizes.inputs``; refuses features the
+    compiled forward does not compute, or in another order than it computes them."""
+    names = [name for name, _ in COMPILED_INPUTS]
+    if any(name not in names for name in inputs) or list(inputs) != sorted(inputs, key=names.index):
+        raise ValueError(
+            f"export_policy: the compiled policy computes the input features "
+            f"{', '.join(names)} (any of them, in that order); this network reads "
+            f"{', '.join(inputs)}: play it with PyTorch"
+        )
+    return {flag: name in inputs for name, flag in COMPILED_INPUTS}
 
 
 def _policy_bytes(network: Any) -> bytes:
@@ -248,56 +267,6 @@ def export_policy(network: Any, path: str | Path) -> Path:
     return atomic_write_bytes(path, _policy_bytes(network))
 
 
-def header_differences(spec: PolicySpec, shapes: Mapping[str, tuple[int, ...]]) -> list[str]:
-    """Each header field the weights' shapes imply and that differs from the header, as
-    'FIELD HEADER (the weights: VALUE)': the architecture first (alone: the rest then
-    means other things), then the widths, depths and lengths."""
-    implied = implied_by_weights(shapes)
-    if implied.get("architecture", spec.architecture) != spec.architecture:
-        names = ["architecture"]
-    else:
-        names = [name for name in implied if name != "architecture"]
-    header = {**asdict(spec), "input features": spec.input_features}
-    return [
-        f"{name} {_shown(header[name])} (the weights: {_shown(implied[name])})"
-        for name in names
-        if name in implied and _shown(header[name]) != _shown(implied[name])
-    ]
-
-
-def implied_by_weights(shapes: Mapping[str, tuple[int, ...]]) -> dict[str, Any]:
-    """The header fields a policy file's weight shapes determine (those it holds)."""
-
-    def dimension(name: str, axis: int) -> int | None:
-        shape = shapes.get(name)
-        return shape[axis] if shape is not None and len(shape) > axis else None
-
-    layers = {name.split(".")[3] for name in shapes if name.startswith("mixer.encoder.layers.")}
-    implied: dict[str, Any] = {
-        "architecture": "tdrqn" if layers else "ddrqn" if "ff.0.weight" in shapes else None,
-        "lstm_hidden": dimension("lstm.lstm.weight_hh_l0", 1),
-        "input features": dimension("lstm.lstm.weight_ih_l0", 1),
-        "episode_length": dimension("context.pattern.0.weight", 1),
-        "pattern_embed": dimension("context.pattern.0.weight", 0),
-        "target_embed": dimension("context.target.0.weight", 0),
-        "mix_hidden": dimension("ff.0.weight", 0),
-        "attn_layers": len(layers) or None,
-        "attn_width": dimension("mixer.encoder.layers.0.norm1.weight", 0),
-        "attn_ff": dimension("mixer.encoder.layers.0.linear1.weight", 0),
-    }
-    for head, field_name in (("advantage", "head_hidden"), ("value", "value_hidden")):
-        outs = []
-        while f"head.{head}.{2 * len(outs)}.weight" in shapes:
-            outs.append(dimension(f"head.{head}.{2 * len(outs)}.weight", 0))
-        if outs:
-            implied[field_name] = tuple(outs[:-1])  # the last layer is the output
-    return {name: value for name, value in implied.items() if value is not None}
-
-
-def _shown(value: Any) -> str:
-    return str(list(value)) if isinstance(value, (list, tuple)) else str(value)
-
-
 MAX_LISTED = 3
 """The most weights a shape mismatch lists by name (the rest are counted)."""
 
@@ -325,101 +294,3 @@ def _listed(names: list[str]) -> str:
     if len(names) <= MAX_LISTED:
         return str(names)
     return f"{names[:MAX_LISTED]} and {len(names) - MAX_LISTED} more"
-
-
-# The flat layout the kernel reads: every linear layer's W^T [in, out] and bias in one
-# float32 buffer, and one row (W^T offset, bias offset, in, out) per layer in the order
-
-
-def _parse_header(where: str, raw: np.ndarray) -> PolicySpec:
-    try:
-        header = json.loads(str(raw))
-    except (json.JSONDecodeError, TypeError) as error:
-        raise PolicyFileError(f"{where} has an unreadable header: {error}") from error
-    except RecursionError:
-        raise PolicyFileError(f"{where} has an unreadable header: nested too deeply") from None
-    if not isinstance(header, dict) or header.get("format") != FORMAT_NAME:
-        raise PolicyFileError(f"{where} is not a compiled policy (no {FORMAT_NAME} header)")
-    version = header.get("format_version")
-    if version != FORMAT_VERSION:
-        raise PolicyFileError(
-            f"{where} has compiled-policy format version {version}; this spikectl reads "
-            f"version {FORMAT_VERSION} (export the network again with export_policy)"
-        )
-    if header.get("architecture") not in SUPPORTED_ARCHITECTURES:
-        raise PolicyFileError(
-            f"{where} holds architecture {header.get('architecture')!r}; supported: "
-            f"{', '.join(SUPPORTED_ARCHITECTURES)}"
-        )
-    required = [field.name for field in fields(PolicySpec) if field.default is MISSING]
-    missing = [name for name in required if name not in header]
-    if missing:
-        raise PolicyFileError(f"{where}: the header lacks {missing}")
-    values = {field.name: header.get(field.name, field.default) for field in fields(PolicySpec)}
-    for field in fields(PolicySpec):
-        value = values[field.name]
-        if field.type == "int":
-            ok = type(value) is int and value >= 1
-        elif field.type == "float":
-            ok = type(value) in (int, float) and math.isfinite(value)
-        elif field.type == "bool":
-            ok = type(value) is bool
-        elif field.type == "tuple[int, ...]":
-            ok = isinstance(value, list) and all(type(v) is int and v >= 1 for v in value)
-            value = tuple(value) if ok else value
-        else:
-            ok = isinstance(value, str)
-        if not ok:
-            raise PolicyFileError(f"{where}: the header's {field.name} is {value!r}")
-        values[field.name] = value
-    if values["do_nothing_head"] not in ("dueling", "pooled"):
-        raise PolicyFileError(
-            f"{where}: do_nothing_head {values['do_nothing_head']!r} is not 'dueling' or 'pooled'"
-        )
-    if values["attn_width"] % values["attn_heads"] or values["layer_norm_eps"] <= 0:
-        raise PolicyFileError(
-            f"{where}: attn_heads {values['attn_heads']} must divide attn_width "
-            f"{values['attn_width']}, and layer_norm_eps {values['layer_norm_eps']} be > 0"
-        )
-    _check_ranges(where, values)
-    return PolicySpec(**values)
-
-
-def _check_ranges(where: str, values: dict[str, Any]) -> None:
-    """Sizes and potentials within what a network can be: checked before anything of
-    those sizes is allocated (a header claiming 10^9 neurons is one line, not 4 GB)."""
-    from spikectl.contexts.generation import MAX_EPISODE_LENGTH, MAX_N_NEURONS
-
-    limits = {"n_neurons": MAX_N_NEURONS, "episode_length": MAX_EPISODE_LENGTH,
-              "attn_layers": 64, "attn_heads": MAX_WIDTH}  # fmt: skip
-    for name, value in values.items():
-        widths = value if isinstance(value, tuple) else (value,)
-        most = limits.get(name, MAX_WIDTH)
-        if type(value) in (int, tuple) and any(width > most for width in widths):
-            raise PolicyFileError(f"{where}: the header's {name} is {value!r}, above {most}")
-    if values["n_neurons"] < 2 or values["episode_length"] < 2:
-        raise PolicyFileError(f"{where}: the header's n_neurons and episode_length must be >= 2")
-    rest, threshold = values["v_rest_mV"], values["v_threshold_mV"]
-    if not (abs(rest) <= MAX_POTENTIAL_MV and abs(threshold) <= MAX_POTENTIAL_MV):
-        raise PolicyFileError(
-            f"{where}: the header's v_rest_mV {rest!r} or v_threshold_mV {threshold!r} is "
-            f"beyond +-{MAX_POTENTIAL_MV:g} mV"
-        )
-    if not threshold > rest:
-        raise PolicyFileError(
-            f"{where}: the header's v_threshold_mV {threshold!r} must be above v_rest_mV {rest!r}"
-        )
-    if not values["layer_norm_eps"] < 1:
-        raise PolicyFileError(
-            f"{where}: the header's layer_norm_eps {values['layer_norm_eps']!r} must be < 1"
-        )
-
-
-def check_policy_checksum(where: str, header_raw: np.ndarray, spec: PolicySpec,
-                          weights: Mapping[str, np.ndarray]) -> None:  # fmt: skip
-    """Refuse a file whose header or weights changed since export (checksum mismatch)."""
-    header = json.loads(str(header_raw))
-    if header.get("checksum") != policy_checksum(spec, weights):
-        raise PolicyFileError(
-            f"{where} is damaged or altered: its checksum does not match its header and weights"
-        )

@@ -17,7 +17,7 @@ import torch
 from torch import nn
 
 from spikectl.agents.encoders import PerNeuronLSTM
-from spikectl.agents.features import belief_width, per_neuron_feature_count, per_neuron_features
+from spikectl.agents.inputs import input_width, per_neuron_inputs
 from spikectl.agents.observation import (
     OBS_KEYS,
     OPTIONAL_KEYS,
@@ -158,24 +158,6 @@ class RecurrentQNetworkBase(nn.Module):
         return obs_seq, state
 
 
-def check_belief(obs: Observation, network: str, width: int) -> None:
-    """A network built with ``belief_in_input`` or ``advice_in_input`` needs
-    ``obs["belief"]`` [..., n, width]."""
-    belief, voltage = obs.get("belief"), obs["voltage"]
-    if belief is None:
-        raise ValueError(
-            f"{network}: this network reads obs['belief'] (AgentSizes.belief_in_input / "
-            "advice_in_input), which the observations lack; play it with "
-            "spikectl.load_controller or give GreedyController "
-            "spikectl.training.greedy.belief_input(network, ...)"
-        )
-    expected = (*voltage.shape, width)
-    if tuple(belief.shape) != expected:
-        raise ValueError(
-            f"{network}: obs['belief'] must have shape {list(expected)}, got {list(belief.shape)}"
-        )
-
-
 class PerNeuronMemory(RecurrentQNetworkBase):
     """A network whose memory is the shared per-neuron LSTM (DDRQN, DMDRQN, TDRQN):
     each neuron's features → one LSTM with a state per neuron, (h, c) each [B, n, H]."""
@@ -183,7 +165,7 @@ class PerNeuronMemory(RecurrentQNetworkBase):
     def build_lstm(self) -> PerNeuronLSTM:
         """The LSTM, for ``build`` to register as ``lstm``, first."""
         s = self.sizes
-        return PerNeuronLSTM(per_neuron_feature_count(s), s.lstm_hidden)
+        return PerNeuronLSTM(input_width(s.inputs), s.lstm_hidden)
 
     def state_shape(self, batch_size: int, n_neurons: int) -> tuple[int, ...]:
         return batch_size, n_neurons, self.sizes.lstm_hidden
@@ -193,18 +175,8 @@ class PerNeuronMemory(RecurrentQNetworkBase):
         the final state."""
         obs_seq, state = self.checked_inputs(obs_seq, state)
         s = self.sizes
-        width = belief_width(s)
-        if width:
-            check_belief(obs_seq, type(self).__name__, width)
-        x = per_neuron_features(
-            obs_seq,
-            v_rest_mV=self.v_rest_mV,
-            v_threshold_mV=self.v_threshold_mV,
-            with_target=s.target_in_input,
-            with_target_voltage=s.target_voltage_in_input,
-            with_others_spiking=s.others_spiking_in_input,
-            with_proximity=s.proximity_in_input,
-            belief_width=width,
+        x = per_neuron_inputs(
+            obs_seq, s.inputs, v_rest_mV=self.v_rest_mV, v_threshold_mV=self.v_threshold_mV,
             dtype=self.param_dtype(),
-        )  # [B, T, n, F]
+        )  # fmt: skip
         return self.lstm(x, state)  # [B, T, n, H], (h, c)

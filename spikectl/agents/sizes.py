@@ -4,10 +4,12 @@ and the architectures' names."""
 from __future__ import annotations
 
 from dataclasses import dataclass, fields
-from typing import Literal, get_args
+from typing import Any, ClassVar, Literal, get_args
 
 from spikectl.agents.heads import PerNeuronQHead
+from spikectl.agents.inputs import input_feature
 from spikectl.config_errors import ConfigError
+from spikectl.registry import RegistryError
 
 Architecture = Literal["drqn", "ddrqn", "dmdrqn", "tdrqn"]
 """The architectures' names (the paper's order); ``AGENTS`` maps them to classes."""
@@ -45,27 +47,25 @@ class AgentSizes:
     """Widths of the pooled do-nothing value MLP of DDRQN and TDRQN (not in the paper)."""
     do_nothing_head: str = "dueling"
     """DDRQN/TDRQN do-nothing Q: 'dueling' (Q_i = V + A_i) or 'pooled' (Q_i = A_i); not in paper."""
-    target_in_input: bool = True
-    """Target indicator also in each neuron's LSTM input; False = paper-literal (only after)."""
-    target_voltage_in_input: bool = False
-    """The target's normalised voltage also in each neuron's LSTM input (not in the paper)."""
-    others_spiking_in_input: bool = False
-    """How many other neurons show a spike, also in each neuron's LSTM input (not in the paper)."""
-    proximity_in_input: bool = False
-    """The generator's prior probability of each neuron's synapse onto the target, by
-    their distance on the line (``features.target_proximity``; positions from the
-    ``position`` observation key, else the neurons' indices), also in each neuron's
-    LSTM input; per-neuron networks only (not in the paper)."""
-    belief_in_input: bool = False
-    """What the observations so far say about each neuron's synapse onto the target (the
-    ``belief`` observation key: ``spikectl.planning.belief``), also in each neuron's LSTM
-    input; per-neuron networks only (not in the paper)."""
-    advice_in_input: bool = False
-    """What identify-and-plan would do now (1 on the neuron it would stimulate, and a
-    do-nothing flag: ``spikectl.planning.advice``), also in each neuron's LSTM input, after
-    the belief; per-neuron networks only (not in the paper)."""
+    inputs: tuple[str, ...] = ("target",)
+    """The per-neuron networks' input features after each neuron's voltage and whether it
+    was stimulated, in order: names registered in ``spikectl.agents.inputs`` (``target``,
+    ``target-voltage``, ``others-spiking``, ``proximity``, ...); ``()`` is the
+    paper-literal input, where the target enters only after the memory."""
     layer_norm: bool = False
     """LayerNorm in every hidden layer of the Q heads and FF blocks (PQN; not in the paper)."""
+
+    removed_fields: ClassVar[dict[str, tuple[Any, str]]] = {
+        "belief_in_input": (
+            False, "the planner's belief as input measured no change, docs/results/belief-input"
+        ),
+        "advice_in_input": (
+            False, "with the planner's advice as input the student copies the planner, "
+            "docs/results/advice-input",
+        ),
+    }  # fmt: skip
+    """Fields of earlier versions' configs, with the value under which a run ran as
+    today's (read by ``spikectl.training.config.Experiment.from_dict``)."""
 
     def __post_init__(self) -> None:
         for field in fields(self):
@@ -93,31 +93,65 @@ class AgentSizes:
                 "do_nothing_head", f"must be one of {PerNeuronQHead.MODES}, got "
                 f"{self.do_nothing_head!r}", label="AgentSizes.do_nothing_head",
             )  # fmt: skip
-        for name in (
-            "target_in_input",
-            "target_voltage_in_input",
-            "others_spiking_in_input",
-            "proximity_in_input",
-            "belief_in_input",
-            "advice_in_input",
-            "layer_norm",
-        ):
-            if not isinstance(getattr(self, name), bool):
-                raise ConfigError(name, f"must be a bool, got {getattr(self, name)!r}",
-                                  label=f"AgentSizes.{name}")  # fmt: skip
+        if not isinstance(self.layer_norm, bool):
+            raise ConfigError("layer_norm", f"must be a bool, got {self.layer_norm!r}",
+                              label="AgentSizes.layer_norm")  # fmt: skip
+        self._check_inputs()
+
+    def _check_inputs(self) -> None:
+        inputs = self.inputs
+        if isinstance(inputs, str) or not all(isinstance(name, str) for name in inputs):
+            raise ConfigError("inputs", f"must be a sequence of feature names, got {inputs!r}",
+                              label="AgentSizes.inputs")  # fmt: skip
+        object.__setattr__(self, "inputs", tuple(inputs))
+        for name in self.inputs:
+            try:
+                input_feature(name)
+            except (RegistryError, TypeError) as error:
+                raise ConfigError("inputs", str(error), label="AgentSizes.inputs:") from None
+        repeated = sorted({name for name in self.inputs if self.inputs.count(name) > 1})
+        if repeated:
+            raise ConfigError("inputs", f"names {', '.join(repeated)} more than once",
+                              label="AgentSizes.inputs")  # fmt: skip
 
     def check_architecture(self, arch: str) -> None:
-        """Refuse the settings ``arch`` does not read (``proximity_in_input``,
-        ``belief_in_input`` and ``advice_in_input``: the per-neuron networks only)."""
-        for name in ("proximity_in_input", "belief_in_input", "advice_in_input"):
-            if getattr(self, name) and arch == "drqn":
+        """Refuse the settings ``arch`` does not read: DRQN reads no per-neuron input
+        feature (those that predate the registry it ignores, ``InputFeature.drqn_ignores``)."""
+        if arch != "drqn":
+            return
+        for name in self.inputs:
+            if not input_feature(name).drqn_ignores:
                 raise ConfigError(
-                    name, "is read by the per-neuron networks (ddrqn, dmdrqn, tdrqn), "
-                    "not by drqn", label=f"AgentSizes.{name}",
+                    "inputs", f"{name!r} is read by the per-neuron networks (ddrqn, dmdrqn, "
+                    "tdrqn), not by drqn", label="AgentSizes.inputs:",
                 )  # fmt: skip
 
-    @property
-    def reads_belief(self) -> bool:
-        """Whether the network reads the ``belief`` observation key (the planner's belief,
-        its advice or both), computed beside it by ``spikectl.training.greedy``."""
-        return self.belief_in_input or self.advice_in_input
+
+INPUT_FLAGS = (
+    ("target_in_input", "target", True),
+    ("target_voltage_in_input", "target-voltage", False),
+    ("others_spiking_in_input", "others-spiking", False),
+    ("proximity_in_input", "proximity", False),
+)
+"""The booleans that chose the input features before ``AgentSizes.inputs``: (field, the
+feature it switched on, its default), in the order the features were computed."""
+
+
+def inputs_from_flags(values: dict[str, Any]) -> None:
+    """Read a saved config's ``agent.sizes`` (``values``, changed in place) written before
+    ``AgentSizes.inputs``: its input booleans become the features they switched on, in
+    the order the network computed them (CHANGELOG: old configs migrate)."""
+    flags = {name: values.pop(name) for name, _, _ in INPUT_FLAGS if name in values}
+    if not flags:
+        return
+    if "inputs" in values:
+        raise ConfigError(
+            ("agent", "sizes", "inputs"), f"and the older {', '.join(flags)} cannot both be "
+            "given (inputs names the features now)", label="sizes.inputs",
+        )  # fmt: skip
+    for name, value in flags.items():
+        if not isinstance(value, bool):
+            raise ConfigError(("agent", "sizes", name), f"must be a bool, got {value!r}",
+                              label=f"sizes.{name}")  # fmt: skip
+    values["inputs"] = [feature for name, feature, default in INPUT_FLAGS
+                        if flags.get(name, default)]  # fmt: skip

@@ -87,7 +87,7 @@ class DRQN(SystemQNetwork):
 class DMDRQN(SystemQNetwork, PerNeuronMemory):
     """Distribute-and-Mix DRQN: per-neuron LSTM states concatenated (fixed n).
 
-    per neuron: [v_norm, stimulated, (is target)] → LSTM (H); concat over neurons
+    per neuron: [v_norm, stimulated, ``sizes.inputs``] → LSTM (H); concat over neurons
     (n*H) → FF ff_hidden + ReLU ⊕ context (C, one-hot target) → MLP head_hidden →
     n+1 Q-values. State (h, c), each [B, n, H].
     """

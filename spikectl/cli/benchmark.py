@@ -195,7 +195,7 @@ def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
         torch.set_num_threads(command.torch_threads)
 
         def trained(name: str):
-            from spikectl.training.greedy import greedy_controller
+            from spikectl.agents.greedy import GreedyController
 
             task = suite.task(name)
             network = load_agent(source, n_neurons=task.n_observed, model=command.model)
@@ -204,9 +204,7 @@ def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
 
                 policy = CompiledPolicy.from_network(network)
                 return lambda seed: policy
-            return lambda seed: greedy_controller(  # the task's, for the inputs it reads
-                network, None, task.extensions, per_environment=command.per_environment
-            )
+            return lambda seed: GreedyController(network, per_environment=command.per_environment)
 
         return trained
     controller = load_controller(command.controller)  # a compiled policy file, or refused

@@ -42,12 +42,14 @@ from typing import Annotated, Any
 import tyro
 
 from spikectl.agents import ARCHITECTURES, AgentSizes, Architecture
+from spikectl.agents.sizes import inputs_from_flags
 from spikectl.config_errors import ConfigError, check_field_types, check_int
 from spikectl.contexts import MAX_EPISODE_LENGTH, MAX_N_NEURONS
 from spikectl.envs.registration import ENV_ID
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.training.config_migration import (
+    drop_removed_fields,
     field_value,
     leaf_paths,
     legacy_normalisation,
@@ -258,13 +260,6 @@ class Experiment:
                 value = getattr(self, name)
                 raise ConfigError(name, f"must be a {_kind_name(kind)}, got {value!r}")
         sizes = self.agent.sizes
-        if sizes.reads_belief and not getattr(self.learner, "stores_belief_inputs", False):
-            name = "belief_in_input" if sizes.belief_in_input else "advice_in_input"
-            raise ConfigError(
-                ("agent", "sizes", name),
-                "needs a learner that stores it with its episodes (one with a replay buffer); "
-                f"the {self.learner.name} learner does not",
-            )
         length, train = self.env.episode_length, self.train
         try:
             check_agent = getattr(self.learner, "check_agent", None)
@@ -326,6 +321,7 @@ class Experiment:
         agent = dict(nested.get("agent", {}))
         learner = dict(nested.get("learner", {}))
         learner_type = learner_config_type(learner.pop("name", DQNConfig.name))
+        drop_removed_fields(learner_type, "learner", learner)
         for kind, section, part in ((EnvConfig, "env", env), (AgentConfig, "agent", agent),
                                     (TrainConfig, "train", nested.get("train", {})),
                                     (learner_type, "learner", learner)):  # fmt: skip
@@ -342,6 +338,8 @@ class Experiment:
             agent["init_from"] = Path(agent["init_from"])
         sizes = dict(agent.get("sizes", {}))
         legacy_normalisation(sizes, env["params"])
+        drop_removed_fields(AgentSizes, "agent.sizes", sizes)
+        inputs_from_flags(sizes)
         check_fields(AgentSizes, "agent.sizes", sizes)
         try:
             agent["sizes"] = AgentSizes(

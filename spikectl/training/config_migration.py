@@ -143,3 +143,16 @@ def legacy_normalisation(sizes: dict[str, Any], params: NeuronParams) -> None:
                     "environment's params now, so this run cannot be rebuilt as it was",
                     label=f"sizes.{name}",
                 )
+
+
+def drop_removed_fields(kind: type, section: str, values: dict[str, Any]) -> None:
+    """Drop from a saved config section the fields spikectl no longer has
+    (``kind.removed_fields``: name → (the value under which a run ran as today's, why
+    the field went)) where they hold that value; any other value cannot be rebuilt and
+    is refused in one line."""
+    for name, (value_now, why) in getattr(kind, "removed_fields", {}).items():
+        if name in values and values.pop(name) != value_now:
+            raise ConfigError(
+                (*section.split("."), name),
+                f"is no longer in spikectl ({why}); a run with it cannot be rebuilt",
+            )

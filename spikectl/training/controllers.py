@@ -149,15 +149,10 @@ def load_controller(
     if path.is_dir():
         network = load_agent(path, model=model)
         if not compiled:
-            from spikectl.training.greedy import greedy_controller
-            from spikectl.training.run_files import read_config
+            from spikectl.agents.greedy import GreedyController
 
-            if env is None and contexts is None and params is None:
-                env_config = read_config(path).env  # the run's own environment
-                params, extensions = env_config.params, env_config.extensions
-            else:
-                _, params, _, _, extensions = _played_on(env, contexts, params)
-            return greedy_controller(network, params, extensions, per_environment=per_environment)
+            _played_on(env, contexts, params)  # refuses what it cannot play
+            return GreedyController(network, per_environment=per_environment)
         from spikectl.agents.compiled import CompiledPolicy
         from spikectl.agents.policy_file import PolicyFileError
 

@@ -12,6 +12,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from spikectl.agents.greedy import GreedyController
 from spikectl.contexts import ContextSet
 from spikectl.envs.controller import Controller, DoNothing
 from spikectl.envs.rollout import EpisodeBatch, evaluate_policy
@@ -24,7 +25,6 @@ from spikectl.training.contexts import (
     check_trained_params,
 )
 from spikectl.training.controllers import load_controller
-from spikectl.training.greedy import greedy_controller
 from spikectl.training.run_files import read_config
 
 
@@ -56,8 +56,7 @@ def greedy_episodes(
     """One greedy episode on every context of the set, in one batch; with a run's
     ``config``, in the run's environment (its params, extensions and evaluation seed,
     as its metrics.csv scored them)."""
-    extensions = contexts.extensions if config is None else config.env.extensions
-    policy = greedy_controller(network, contexts.params, extensions)
+    policy = GreedyController(network)
     if config is None:
         return evaluate_policy(contexts, policy)
     return baseline_episodes(config, contexts, policy)

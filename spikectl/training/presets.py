@@ -28,7 +28,7 @@ QUICK = Experiment(
             tdrqn_head_hidden=(128, 64),
             ff_hidden=256,
             head_hidden=(256, 128, 64),
-            target_voltage_in_input=True,
+            inputs=("target", "target-voltage"),
             do_nothing_head="pooled",
         ),
     ),

@@ -40,10 +40,6 @@ class EpisodeBatchArrays:
     """[B, n] int8 each observed neuron's synapse onto the target (-1, 0, +1), read from
     the training network's weights (privileged), in a buffer made with
     ``privileged=True``; None otherwise."""
-    beliefs: np.ndarray | None = None
-    """[B, N + 1, n, W] float32 the belief input at every observation
-    (``spikectl.training.greedy.belief_input``), in a buffer made with ``belief_width=W``;
-    None otherwise."""
 
 
 NO_LABEL = -2
@@ -52,7 +48,6 @@ NO_LABEL = -2
 _OPTIONAL_ARRAYS = {
     "labels": "teacher labels",
     "target_inputs": "the target's inputs (privileged)",
-    "beliefs": "belief inputs",
 }
 """The arrays a buffer keeps only when made to, and how its errors name them."""
 
@@ -67,14 +62,13 @@ class EpisodeReplay:
         episode_length: int,
         labelled: bool = False,
         privileged: bool = False,
-        belief_width: int = 0,
     ) -> None:
         if capacity < 1:
             raise ValueError(f"replay capacity must be >= 1 episode, got {capacity}")
         check_fits_in_memory(
             capacity
             * (
-                (episode_length + 1) * n_neurons * 4 * (1 + belief_width)
+                (episode_length + 1) * n_neurons * 4
                 + episode_length * (7 + 2 * labelled)
                 + n_neurons * (1 + privileged)
                 + 9
@@ -96,11 +90,6 @@ class EpisodeReplay:
             np.full((capacity, episode_length), NO_LABEL, dtype=np.int16) if labelled else None
         )
         self.target_inputs = np.zeros((capacity, n_neurons), dtype=np.int8) if privileged else None
-        self.beliefs = (
-            np.zeros((capacity, episode_length + 1, n_neurons, belief_width), dtype=np.float32)
-            if belief_width
-            else None
-        )
         self.size = 0
         """Episodes currently held."""
         self.added = 0
@@ -119,12 +108,10 @@ class EpisodeReplay:
         action_masks: np.ndarray,
         labels: np.ndarray | None = None,
         target_inputs: np.ndarray | None = None,
-        beliefs: np.ndarray | None = None,
     ) -> None:
         """Add E finished episodes: voltage [E, N + 1, n], actions/rewards/patterns [E, N],
         targets [E], action_masks [E, n + 1]; in a labelled buffer, labels [E, N] (None:
-        NO_LABEL everywhere); in a privileged buffer, target_inputs [E, n] (required); in
-        a buffer with a belief width W, beliefs [E, N + 1, n, W] (required)."""
+        NO_LABEL everywhere); in a privileged buffer, target_inputs [E, n] (required)."""
         count = voltage.shape[0]
         expected = (count, self.episode_length + 1, self.n_neurons)
         if voltage.shape != expected or actions.shape != (count, self.episode_length):
@@ -142,20 +129,8 @@ class EpisodeReplay:
                 f"target_inputs must have shape {(count, self.n_neurons)}, "
                 f"got {target_inputs.shape}"
             )
-        if (self.beliefs is None) != (beliefs is None):
-            raise ValueError(
-                "a replay buffer with a belief width needs beliefs with every episode, "
-                "any other buffer refuses them"
-            )
-        if beliefs is not None and beliefs.shape != (*expected, self.beliefs.shape[-1]):
-            raise ValueError(
-                f"beliefs must have shape {(*expected, self.beliefs.shape[-1])}, "
-                f"got {beliefs.shape}"
-            )
         slots = (self.added + np.arange(count)) % self.capacity
         self.voltage[slots] = voltage
-        if self.beliefs is not None:
-            self.beliefs[slots] = beliefs
         self.actions[slots] = actions
         self.rewards[slots] = rewards
         self.targets[slots] = targets
@@ -186,7 +161,6 @@ class EpisodeReplay:
             action_masks=self.action_masks[slots],
             labels=None if self.labels is None else self.labels[slots].astype(np.int64),
             target_inputs=None if self.target_inputs is None else self.target_inputs[slots],
-            beliefs=None if self.beliefs is None else self.beliefs[slots],
         )
 
     def state_dict(self) -> dict[str, np.ndarray | int]:

@@ -48,7 +48,7 @@ from spikectl.training.contexts import (
     recorded_config,
     stream_seed,
 )
-from spikectl.training.greedy import greedy_returns
+from spikectl.training.greedy_scores import greedy_returns
 from spikectl.training.group import check_group, prepare_group, seed_dirs
 from spikectl.training.learners import check_stacked, make_learners
 from spikectl.training.learners.protocol import LossDiverged

@@ -83,12 +83,6 @@ def check_stacked(configs) -> None:
             f"--stacked: the {configs[0].learner.name} learner has no stacked form "
             "(drop --stacked: a group of seeds loops, each seed exactly as alone)"
         )
-    if configs[0].agent.sizes.reads_belief:
-        raise ValueError(
-            "--stacked: a stacked group does not compute the belief or advice inputs "
-            "(agent.sizes.belief_in_input / advice_in_input); drop --stacked: a group of "
-            "seeds loops"
-        )
 
 
 def make_learners(configs, train_sets, rngs, stacked: bool = False) -> LearnerGroup:

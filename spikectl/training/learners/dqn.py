@@ -19,11 +19,8 @@ from typing import Any
 import numpy as np
 import torch
 
-from spikectl.agents.features import belief_width
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
-from spikectl.planning.belief import episode_beliefs
-from spikectl.training.greedy import belief_input
 from spikectl.training.learners.dqn_losses import soft_update, training_losses
 from spikectl.training.learners.q_learning import (
     QLearner,
@@ -53,21 +50,11 @@ class DQNLearner(QLearner):
         self.network, self.target = build_networks(config)
         self.predictor = build_predictor(config, self.network)
         self.connectivity_head = self.build_connectivity_head(config)
-        self.critic, self.critic_target = self.build_critic(config)
-        self.stores_target_inputs = self.connectivity_head is not None or self.critic is not None
+        self.stores_target_inputs = self.connectivity_head is not None
         """Whether each stored episode keeps its network's target inputs (privileged)."""
-        # The (target, online) pairs each update moves: the critic's, where the agent
-        # regresses onto it and so never reads its own target network.
-        self.soft_updated = (
-            [(self.target, self.network)]
-            if self.critic is None
-            else [(self.critic_target, self.critic)]
-        )
-        self.belief = belief_input(self.network, config.env.params, config.env.extensions)
-        """What computes the network's belief input (None where it reads none)."""
         self.trained = [
             parameter
-            for module in (self.network, self.predictor, self.connectivity_head, self.critic)
+            for module in (self.network, self.predictor, self.connectivity_head)
             if module is not None
             for parameter in module.parameters()
         ]
@@ -75,7 +62,6 @@ class DQNLearner(QLearner):
         self.replay = EpisodeReplay(
             self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
             labelled=self.labelled_replay, privileged=self.stores_target_inputs,
-            belief_width=belief_width(self.network.sizes) if self.belief is not None else 0,
         )  # fmt: skip
         self.targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
         self.patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
@@ -87,11 +73,6 @@ class DQNLearner(QLearner):
         ``connectivity_weight``); None here."""
         return None
 
-    def build_critic(self, config) -> tuple[torch.nn.Module | None, torch.nn.Module | None]:
-        """A privileged critic and its target copy trained beside the network (the guided
-        learner's ``asymmetric_critic``); (None, None) here."""
-        return None, None
-
     def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
         self.add_to_replay(episodes, contexts)
 
@@ -102,18 +83,11 @@ class DQNLearner(QLearner):
         labels: np.ndarray | None = None,
         target_inputs: np.ndarray | None = None,
     ) -> None:
-        """Store finished episodes (with the belief input at each of their observations,
-        computed again from them: the numbers the policy read, whoever played)."""
-        targets = self.targets[contexts]
-        beliefs = None
-        if self.belief is not None:
-            beliefs = episode_beliefs(
-                self.belief, episodes.voltage, episodes.actions, targets,
-                self.patterns[contexts], episodes.action_mask,
-            )  # fmt: skip
+        """Store finished episodes (with the teacher's labels and the target's inputs
+        where the buffer keeps them)."""
         self.replay.add(
-            episodes.voltage, episodes.actions, episodes.rewards, targets,
-            self.patterns[contexts], episodes.action_mask, labels, target_inputs, beliefs,
+            episodes.voltage, episodes.actions, episodes.rewards, self.targets[contexts],
+            self.patterns[contexts], episodes.action_mask, labels, target_inputs,
         )  # fmt: skip
 
     def update(self, episode: int) -> None:
@@ -124,8 +98,7 @@ class DQNLearner(QLearner):
         for _ in range(settings.updates_per_round):
             batch = self.replay.sample(settings.batch_size, self.rng)
             gradient_step(self, self.batch_loss(batch, episode))
-            for target, online in self.soft_updated:
-                soft_update(target, online, settings.tau)
+            soft_update(self.target, self.network, settings.tau)
 
     def batch_loss(self, batch, episode: int) -> torch.Tensor:
         """The loss of one sampled batch (the TD loss plus the weighted auxiliary loss);

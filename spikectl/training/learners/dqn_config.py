@@ -21,8 +21,6 @@ class DQNConfig(QSettings):
 
     name: ClassVar[str] = "dqn"
     """The learner's name in config.json (``"learner": {"name": "dqn", ...}``)."""
-    stores_belief_inputs: ClassVar[bool] = True
-    """Its replay buffer keeps each episode's belief input (``dqn.DQNLearner.add_to_replay``)."""
 
     updates_per_round: int = 10
     """Gradient updates after each collection round, each on a fresh batch."""

@@ -11,7 +11,7 @@ import torch
 import torch.nn.functional as F
 
 from spikectl.agents import masked_q
-from spikectl.agents.blocks import normalised_voltage
+from spikectl.agents.features import normalised_voltage
 from spikectl.training.learners.dqn_config import DQNConfig
 from spikectl.training.replay import EpisodeBatchArrays
 
@@ -22,11 +22,7 @@ def sequence_observations(batch: EpisodeBatchArrays, device: str) -> dict[str, t
     voltage = torch.as_tensor(batch.voltage, device=device)  # [B, N+1, n]
     actions = torch.as_tensor(batch.actions, device=device)  # [B, N]
     no_action = torch.full((size, 1), -1, dtype=torch.long, device=device)
-    beliefs: dict[str, torch.Tensor] = {}
-    if batch.beliefs is not None:
-        beliefs["belief"] = torch.as_tensor(batch.beliefs, device=device)  # [B, N+1, n, 3]
     return {
-        **beliefs,
         "voltage": voltage,
         "last_action": torch.cat([no_action, actions], dim=1),  # [B, N+1]
         "step": torch.arange(length + 1, device=device).expand(size, -1),  # [B, N+1]

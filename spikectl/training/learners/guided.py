@@ -14,9 +14,7 @@ which is zero once the teacher's action a_E leads every other by the margin, so 
 shapes the ranking of the actions and leaves the values to the TD loss. Its weight
 decays linearly to ``imitation_weight_end`` (0: pure Q-learning from then on, and no
 more labels). The teacher runs in the training process: its CPU time is part of the
-run's, and metrics.csv reports it (``teacher_seconds``). With ``asymmetric_critic`` the
-TD loss is replaced by asymmetric double Q-learning (``learners.asymmetric``): a
-privileged critic learns by TD and the agent regresses onto it.
+run's, and metrics.csv reports it (``teacher_seconds``).
 """
 
 from __future__ import annotations
@@ -36,7 +34,6 @@ from spikectl.envs.rollout import EpisodeBatch
 from spikectl.planning import IdentifyAndPlan
 from spikectl.planning.policy import environment_settings
 from spikectl.seeds import CONNECTIVITY_HEAD_STREAM, torch_seed
-from spikectl.training.learners.asymmetric import asymmetric_losses, make_critic
 from spikectl.training.learners.dqn import DQNLearner
 from spikectl.training.learners.dqn_losses import (
     batch_tensors,
@@ -108,9 +105,6 @@ class GuidedDQNLearner(DQNLearner):
         """This round's policy when the teacher plays some of its episodes, else None."""
         self.imitation_loss_sum, self.agreement_sum, self.imitation_count = 0.0, 0.0, 0
         self.connectivity_loss_sum, self.connectivity_count = 0.0, 0
-        self.critic_loss_sum, self.critic_count = 0.0, 0
-        if self.critic is not None:  # a column of its own only where there is a critic
-            self.metric_fields = type(self).metric_fields + ("critic_loss",)
         # Each training network's observed neurons' synapses onto its target: [C, n].
         self.target_inputs = np.stack(
             [np.sign(c.weights[c.observable, c.target]) for c in train_set]
@@ -126,11 +120,6 @@ class GuidedDQNLearner(DQNLearner):
             torch.manual_seed(torch_seed(config.train.seed, CONNECTIVITY_HEAD_STREAM))
             head = make_connectivity_predictor(self.network)
         return head.to(config.train.device)
-
-    def build_critic(self, config) -> tuple[torch.nn.Module | None, torch.nn.Module | None]:
-        """The privileged critic and its target copy when ``asymmetric_critic``
-        (``learners.asymmetric``)."""
-        return make_critic(config) if config.learner.asymmetric_critic else (None, None)
 
     def imitation_weight(self, episode: int) -> float:
         return self.settings.imitation_weight_at(episode, self.total_episodes)
@@ -169,25 +158,16 @@ class GuidedDQNLearner(DQNLearner):
     def batch_loss(self, batch, episode: int) -> torch.Tensor:
         weight = self.imitation_weight(episode)
         head = self.connectivity_head is not None
-        if weight <= 0 and not head and self.critic is None:
+        if weight <= 0 and not head:
             return super().batch_loss(batch, episode)
         tensors = batch_tensors(batch, self.device)
         if self.stores_target_inputs:
             target_inputs = torch.as_tensor(batch.target_inputs, device=self.device)  # [B, n]
-        if self.critic is None:
-            td, aux, q_values, *features = losses_on_tensors(
-                self.network, self.target, tensors, self.settings, self.predictor,
-                return_q_values=True, return_features=head,
-            )  # fmt: skip
-            loss = self.td_and_aux_loss(td, aux)
-        else:
-            td, critic_loss, aux, q_values, *features = asymmetric_losses(
-                self.network, self.critic, self.critic_target, tensors, target_inputs,
-                self.settings, self.predictor, return_features=head,
-            )  # fmt: skip
-            self.critic_loss_sum += critic_loss.item()
-            self.critic_count += 1
-            loss = self.td_and_aux_loss(td, aux) + critic_loss
+        td, aux, q_values, *features = losses_on_tensors(
+            self.network, self.target, tensors, self.settings, self.predictor,
+            return_q_values=True, return_features=head,
+        )  # fmt: skip
+        loss = self.td_and_aux_loss(td, aux)
         if head:
             connectivity = connectivity_loss(self.connectivity_head, features[0], target_inputs)
             self.connectivity_loss_sum += connectivity.item()
@@ -222,27 +202,14 @@ class GuidedDQNLearner(DQNLearner):
         }  # fmt: skip
         self.imitation_loss_sum, self.agreement_sum, self.imitation_count = 0.0, 0.0, 0
         self.connectivity_loss_sum, self.connectivity_count = 0.0, 0
-        if self.critic is not None:
-            n = self.critic_count
-            row["critic_loss"] = self.critic_loss_sum / n if n else math.nan
-            self.critic_loss_sum, self.critic_count = 0.0, 0
         return row
 
     def progress(self, episode: int) -> dict[str, str]:
         return {**super().progress(episode), "imit": f"{self.imitation_weight(episode):.2f}"}
 
     def state_dict(self) -> dict[str, Any]:
-        critic = {}
-        if self.critic is not None:
-            critic = {
-                "critic": self.critic.state_dict(),
-                "critic_target": self.critic_target.state_dict(),
-                "critic_loss_sum": float(self.critic_loss_sum),
-                "critic_count": int(self.critic_count),
-            }
         return {
             **super().state_dict(),
-            **critic,
             "teacher_seconds": float(self.teacher_seconds),
             "imitation_loss_sum": float(self.imitation_loss_sum),
             "agreement_sum": float(self.agreement_sum),
@@ -265,11 +232,6 @@ class GuidedDQNLearner(DQNLearner):
         # Checkpoints of guided runs from before the connectivity head have no sums.
         self.connectivity_loss_sum = float(state.get("connectivity_loss_sum", 0.0))
         self.connectivity_count = int(state.get("connectivity_count", 0))
-        if self.critic is not None:
-            self.critic.load_state_dict(state["critic"])
-            self.critic_target.load_state_dict(state["critic_target"])
-            self.critic_loss_sum = float(state["critic_loss_sum"])
-            self.critic_count = int(state["critic_count"])
 
 
 __all__ = ["GuidedDQNLearner", "large_margin_loss"]

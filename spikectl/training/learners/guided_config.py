@@ -58,13 +58,15 @@ class GuidedConfig(DQNConfig):
     """Weight of an auxiliary loss asking the features to say, at every step, each observed
     neuron's synapse onto the target, labelled from the training networks' weights
     (privileged, read only by the loss; 0 = off)."""
-    asymmetric_critic: bool = False
-    """Learn values through a privileged critic (asymmetric DQN, Baisero et al. 2022):
-    a second network of the agent's architecture that also reads each observed neuron's
-    synapse onto the target learns by TD on the agent's greedy choices, and the agent's
-    Q-values regress onto it instead of bootstrapping on themselves
-    (``learners.asymmetric``). The agent acts and is saved as without it; per-neuron
-    architectures that read no belief input only."""
+
+    removed_fields: ClassVar[dict[str, tuple[Any, str]]] = {
+        "asymmetric_critic": (
+            False,
+            "the privileged critic measured no change, docs/results/asymmetric-critic",
+        ),
+    }
+    """Fields of earlier versions' configs, with the value under which a run ran as
+    today's (read by ``Experiment.from_dict``)."""
 
     def __post_init__(self) -> None:
         super().__post_init__()
@@ -85,24 +87,6 @@ class GuidedConfig(DQNConfig):
                 "teacher_episodes",
                 f"only teacher 'identify' can play episodes itself, not {self.teacher!r} "
                 "(set teacher_episodes to 0)",
-            )
-
-    def check_agent(self, arch: str, sizes: Any) -> None:
-        """Refuse (ConfigError) an asymmetric critic the agent's network cannot carry: the
-        critic reads the truth through the per-neuron ``belief`` input, so the agent must
-        be a per-neuron network that reads no belief or advice input itself."""
-        if not self.asymmetric_critic:
-            return
-        if arch == "drqn":
-            raise ConfigError(
-                "asymmetric_critic",
-                "needs a per-neuron architecture (ddrqn, dmdrqn, tdrqn), not drqn",
-            )
-        if sizes.reads_belief:
-            raise ConfigError(
-                "asymmetric_critic",
-                "gives the critic the truth through the belief input, which the agent may "
-                "not read itself (drop the belief and advice inputs from the agent's sizes)",
             )
 
     @classmethod

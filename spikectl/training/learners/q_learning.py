@@ -42,9 +42,8 @@ class EpsilonGreedyPolicy(GreedyController):
         rng: np.random.Generator,
         device: str,
         explore_do_nothing: float | None = None,
-        belief: Any = None,
     ) -> None:
-        super().__init__(network, device, belief=belief)
+        super().__init__(network, device)
         self.epsilon, self.rng, self.explore_do_nothing = epsilon, rng, explore_do_nothing
 
     def __call__(self, observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
@@ -256,8 +255,6 @@ class QLearner:
     loss_sum: float
     aux_loss_sum: float
     loss_count: int
-    belief: Any = None
-    """What computes the network's ``belief`` input while collecting (None: none read)."""
 
     def epsilon(self, episode: int) -> float:
         return self.settings.epsilon(episode, self.total_episodes)
@@ -265,7 +262,7 @@ class QLearner:
     def collection_policy(self, episode: int) -> EpsilonGreedyPolicy:
         return EpsilonGreedyPolicy(
             self.network, self.epsilon(episode), self.rng, self.device,
-            self.settings.explore_do_nothing, self.belief,
+            self.settings.explore_do_nothing,
         )  # fmt: skip
 
     def row_metrics(self, episode: int) -> dict[str, float]:

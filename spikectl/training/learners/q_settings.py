@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import ClassVar, Literal
+from typing import Literal
 
 from spikectl.config_errors import ConfigError, check_field_types
 
@@ -19,10 +19,6 @@ from spikectl.config_errors import ConfigError, check_field_types
 class QSettings:
     """Exploration, learning rate, discount and loss of a Q-learner; the schedules are
     pure functions of the episode count (a resumed run needs no scheduler state)."""
-
-    stores_belief_inputs: ClassVar[bool] = False
-    """Whether the learner stores each episode's belief input (``AgentSizes.belief_in_input``)
-    with it, so that it can train a network that reads one."""
 
     learning_rate: float = 5e-4
     """Adam learning rate (at the start of training)."""
