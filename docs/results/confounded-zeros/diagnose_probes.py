@@ -67,7 +67,7 @@ def main(task: str, size: int) -> None:
     contexts = suite.load_split(task, "validation")[:size]
     controller = Diagnosed(**environment_settings(spec.extensions, spec.n_neurons))
     returns = evaluate_policy(
-        contexts, controller, extensions=spec.extensions, seed=suite.ENV_SEED
+        contexts, controller, extensions=spec.extensions, seed=suite.suite_version(1).env_seed
     ).returns
     print(f"{task}, first {size} validation networks: mean return {returns.mean():.4f}")
     print("| steps | chosen by | synapse onto the target two steps later | stimulations |")

@@ -28,7 +28,7 @@ def main(out: Path) -> None:
         writer.writerow(["suite_version", "task", "split", "controller", "model", "context",
                          "return"])  # fmt: skip
         for index, value in enumerate(returns):
-            writer.writerow([suite.SUITE_VERSION, "n16", "test", "identify-and-plan", "",
+            writer.writerow([suite.suite_version(1).number, "n16", "test", "identify-and-plan", "",
                              index, repr(float(value))])  # fmt: skip
     print(f"n16 test: {returns.mean():.6f} ({seconds:.0f} CPU s)")
 

@@ -85,7 +85,8 @@ def main(out: Path, task: str) -> None:
         for split, size in SETS[task].items():
             contexts = suite.load_split(task, split)[:size]
             values = evaluate_policy(
-                contexts, controller, extensions=spec.extensions, seed=suite.ENV_SEED
+                contexts, controller, extensions=spec.extensions,
+                seed=suite.suite_version(1).env_seed,
             ).returns
             played.append(values)
             rows += [{"controller": label, "split": split, "context": index,

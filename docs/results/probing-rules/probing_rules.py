@@ -132,7 +132,7 @@ def main() -> None:
     def play(policy):
         started = time.process_time()
         episodes = evaluate_policy(contexts, policy, extensions=spec.extensions,
-                                   seed=suite.ENV_SEED)  # fmt: skip
+                                   seed=suite.suite_version(1).env_seed)  # fmt: skip
         spikes = episodes.spikes[np.arange(len(contexts)), :, targets]  # [S, N]
         unwanted = np.where(~patterns & spikes, if_silent, 0.0).sum(axis=1).mean()
         return episodes.returns, unwanted, time.process_time() - started

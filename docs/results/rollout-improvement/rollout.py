@@ -130,7 +130,7 @@ def main() -> None:
 
     started = time.process_time()
     episodes = evaluate_policy(contexts, controller, extensions=suite.task(task).extensions,
-                               seed=suite.ENV_SEED)  # fmt: skip
+                               seed=suite.suite_version(1).env_seed)  # fmt: skip
     cpu = time.process_time() - started
     print(f"{task} {split} {part} base={base} K={networks} H={horizon} C={candidates} m={margin} "
           f"mean={episodes.returns.mean():.4f} cpu_s/episode={cpu / size:.2f} "

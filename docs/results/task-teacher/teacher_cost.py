@@ -19,7 +19,7 @@ import numpy as np
 
 from spikectl.envs.controller import RandomLegal
 from spikectl.envs.rollout import evaluate_policy
-from spikectl.experiments.suite import TASKS, load_split, task
+from spikectl.experiments.suite import load_split, suite_version, task
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning.policy import environment_settings
 from spikectl.training.learners.teachers import teacher_labels
@@ -32,7 +32,7 @@ def main() -> None:
     print("| task | labelling CPU s per episode, task's settings | constructor's | ratio | "
           "steps labelled differently |")
     print("|---|---:|---:|---:|---:|")
-    for name in TASKS:
+    for name in suite_version(1).names():
         spec = task(name)
         contexts = load_split(name, "train")[:EPISODES]
         extensions = spec.extensions
