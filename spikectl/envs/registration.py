@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import inspect
 import json
-import re
 from collections.abc import Mapping
 from typing import Any
 
@@ -33,7 +32,7 @@ FLAT_ENTRY_POINTS = (
     "spikectl.wrappers.flat_vector_env:FlatNeuronControlVectorEnv",
 )
 
-VARIANTS: Registry[dict[str, Any]] = Registry("environment variant")
+VARIANTS: Registry[dict[str, Any]] = Registry("variant")
 """Registered variants: id -> keyword arguments of the paper's environment (JSON-ready,
 so that specs serialise), in registration order; :func:`register_envs` registers each
 with Gymnasium, and :func:`register_env_variant` adds one."""
@@ -58,9 +57,6 @@ VARIANTS.register("spikectl/NeuronControlRealistic-v0", {
     }
 })  # fmt: skip
 
-_ID_FORM = re.compile(r"^[\w./]+-v\d+$")
-
-
 def flat_id(env_id: str) -> str:
     """The flat twin of a paper id: ``spikectl/NeuronControlNoisy-v0`` ->
     ``spikectl/NeuronControlNoisyFlat-v0``."""
@@ -82,10 +78,10 @@ def register_env_variant(env_id: str, kwargs: Mapping[str, Any]) -> None:
     under a taken id are a RegistryError."""
     from spikectl.envs.env import NeuronControlEnv
 
-    if not isinstance(env_id, str) or not _ID_FORM.match(env_id) or "Flat-" in env_id:
+    if not _is_variant_id(env_id):
         raise RegistryError(
-            f"an environment variant's id must read 'namespace/Name-vN' (its flat twin "
-            f"adds 'Flat' to the name), got {env_id!r}"
+            f"an environment variant's id reads 'namespace/Name-vN' with a name not ending "
+            f"in 'Flat' (its flat twin adds that), got {env_id!r}"
         )
     if not isinstance(kwargs, Mapping):
         raise RegistryError(f"a variant's kwargs must be a dict, got {type(kwargs).__name__}")
@@ -103,6 +99,16 @@ def register_env_variant(env_id: str, kwargs: Mapping[str, Any]) -> None:
     VARIANTS.register(env_id, kwargs)
     _register_with_gymnasium(env_id, kwargs, PAPER_ENTRY_POINTS)
     _register_with_gymnasium(flat_id(env_id), kwargs, FLAT_ENTRY_POINTS)
+
+
+def _is_variant_id(env_id: object) -> bool:
+    from gymnasium.envs.registration import parse_env_id
+
+    try:
+        _, name, version = parse_env_id(env_id)
+    except (gymnasium.error.Error, TypeError):
+        return False
+    return version is not None and not name.endswith("Flat")
 
 
 def _register_with_gymnasium(env_id: str, kwargs: dict[str, Any], entry_points) -> None:
