@@ -12,6 +12,10 @@ controller = spikectl.load_controller("runs/quick", compiled=True)  # its compil
 controller = spikectl.load_controller("policy.npz")                 # an exported policy
 controller = spikectl.load_controller("identify-and-plan", env=env)
 ```
+
+The named controllers (those that need no training) are the :data:`CONTROLLERS`
+registry; one :func:`register_controller` line adds one, which ``load_controller``,
+``spikectl benchmark`` and ``spikectl realtime`` then play by name.
 """
 
 from __future__ import annotations
