@@ -50,7 +50,7 @@ def spikectl_legal(info) -> np.ndarray:
 
 def vector_rate(num_envs: int, repeats: int) -> tuple[float, float]:
     """(microseconds per vector step, env steps per second), medians over episodes."""
-    env = NeuronControlVectorEnv(num_envs, n_train=100, n_test=100)
+    env = NeuronControlVectorEnv(num_envs, contexts={"n_train": 100, "n_test": 100})
     actions = np.full(num_envs, -1)
     times = []
     for repeat in range(repeats + 1):

@@ -44,8 +44,8 @@ def main() -> None:
     print("| num_envs | vector env steps/CPU-s | flat vector env steps/CPU-s | flat / vector |")
     print("|---:|---:|---:|---:|")
     for num_envs in SIZES:
-        paper = NeuronControlVectorEnv(num_envs, n_train=100, n_test=100)
-        flat = gym.make_vec(FLAT_ENV_ID, num_envs, n_train=100, n_test=100)
+        paper = NeuronControlVectorEnv(num_envs, contexts={"n_train": 100, "n_test": 100})
+        flat = gym.make_vec(FLAT_ENV_ID, num_envs, contexts={"n_train": 100, "n_test": 100})
         rows = []
         for repeat in range(args.repeats + 1):
             row = (

@@ -48,7 +48,7 @@ class PulseOnPattern:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--task", default="paper", choices=list(suite.TASKS))
+    parser.add_argument("--task", default="paper", choices=list(suite.suite_version(1).names()))
     parser.add_argument("--split", default="validation", choices=["validation", "test"])
     parser.add_argument("--seeds", type=int, default=3, help="the controller is random: seeds")
     parser.add_argument("--short", action="store_true", help="one seed (the tests)")

@@ -4,7 +4,13 @@ The public API is re-exported here; importing the package registers the Gymnasiu
 environment ids (a cheap dictionary entry) and does no other work. It first checks the
 environment variables Numba reads (``spikectl.environment_variables``): one it cannot use raises
 :class:`~spikectl.environment_variables.EnvironmentVariableError` (a ValueError) naming it.
-``load_controller`` (which needs PyTorch) loads its module on first use.
+``load_controller`` (which needs PyTorch) loads its module on first use, and so do
+``register_controller`` and the suite's ``register_task`` / ``register_suite_version``.
+
+The extension points, one registry line each: ``register_controller`` (a controller
+for ``load_controller`` and ``spikectl benchmark`` / ``realtime``), ``register_task``
+(a task of a suite version; ``register_suite_version`` for a version beside v1) and
+``register_env_variant`` (a ``gymnasium.make``-able variant and its flat twin).
 """
 
 from typing import Any
@@ -18,7 +24,7 @@ import_numba()
 
 from spikectl.contexts import Context, ContextSet, make_context, make_splits
 from spikectl.envs.env import NeuronControlEnv
-from spikectl.envs.registration import register_envs
+from spikectl.envs.registration import register_env_variant, register_envs
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
@@ -42,6 +48,10 @@ __all__ = [
     "make_context",
     "make_splits",
     "plan_episode",
+    "register_controller",
+    "register_env_variant",
+    "register_suite_version",
+    "register_task",
     "sb3_compatible",
     "sb3_vec_env",
     "simulate",
@@ -49,11 +59,21 @@ __all__ = [
 ]
 
 
-def __getattr__(name: str) -> Any:
-    # PEP 562: ``spikectl.load_controller`` imports PyTorch, so only on first use.
-    if name == "load_controller":
-        from spikectl.training.controllers import load_controller
+_LAZY = {
+    "load_controller": "spikectl.training.controllers",
+    "register_controller": "spikectl.training.controllers",
+    "register_suite_version": "spikectl.experiments.suite",
+    "register_task": "spikectl.experiments.suite",
+}
+"""Public names whose modules load on first use (the controllers import the planners)."""
 
-        globals()[name] = load_controller
-        return load_controller
+
+def __getattr__(name: str) -> Any:
+    # PEP 562: these modules import the planning and training stacks, so only on first use.
+    if name in _LAZY:
+        import importlib
+
+        value = getattr(importlib.import_module(_LAZY[name]), name)
+        globals()[name] = value
+        return value
     raise AttributeError(f"module 'spikectl' has no attribute {name!r}")

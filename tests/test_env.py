@@ -25,7 +25,7 @@ from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.params import NeuronParams
 
 ENV_ID = registration.ENV_ID
-SMALL = {"n_train": 10, "n_test": 10}
+SMALL = {"contexts": {"n_train": 10, "n_test": 10}}
 # Gymnasium's checker warns about any unbounded Box; the voltage is unbounded by design
 # (docs/environment.md).
 UNBOUNDED_BOX = re.compile(r"Box observation space (minimum|maximum) value is -?infinity")
@@ -248,7 +248,7 @@ def test_illegal_actions_raise_with_a_clear_message():
 
 
 def test_allow_target_action_makes_the_target_legal():
-    env = tiny_env(allow_target_action=True)
+    env = tiny_env(extensions={"allow_target_action": True})
     _, info = env.reset()
     assert info["action_mask"].all()
     _, _, _, _, info = env.step(2)
@@ -283,12 +283,17 @@ def test_stepping_outside_an_episode_raises():
         ({"render_mode": "human"}, ValueError, "render_mode"),
         ({"n_neurons": 1}, ValueError, "n_neurons"),
         ({"episode_length": 1}, ValueError, "episode_length"),
-        ({"n_train": 0}, ValueError, "n_train"),
-        ({"n_test": 2.5}, ValueError, "n_test"),
-        ({"context_seed": -1}, ValueError, "context_seed"),
+        ({"contexts": {"n_train": 0}}, ValueError, "contexts: n_train"),
+        ({"contexts": {"n_test": 2.5}}, ValueError, "contexts: n_test"),
+        ({"contexts": {"seed": -1}}, ValueError, "contexts: seed"),
+        ({"contexts": {"context_seed": 1}}, ValueError,
+         r"contexts: unknown key\(s\) \['context_seed'\]; generated sets take n_train, "
+         "n_test, seed"),
+        ({"n_train": 10}, TypeError, "unexpected keyword argument 'n_train'"),
+        ({"allow_target_action": True}, TypeError, "unexpected keyword argument"),
         ({"contexts": 42}, TypeError, "contexts"),
         ({"params": {"dt_ms": 1.0}}, TypeError, "params"),
-        ({"allow_target_action": "yes"}, TypeError, "allow_target_action"),
+        ({"extensions": {"allow_target_action": "yes"}}, TypeError, "allow_target_action"),
     ],
 )
 def test_bad_constructor_arguments(kwargs, error, message):
@@ -311,7 +316,7 @@ def test_the_environment_plays_its_contexts_params():
     params = NeuronParams(release_scale=0.8)
     train, _ = make_splits(3, 1, seed=0, params=params)
     assert NeuronControlEnv(contexts=train).params == params
-    assert NeuronControlEnv(n_train=3, n_test=1, params=params).contexts == train
+    assert NeuronControlEnv(contexts={"n_train": 3, "n_test": 1}, params=params).contexts == train
     assert NeuronControlEnv(contexts=train, params=params).params == params
     for make in (NeuronControlEnv, NeuronControlVectorEnv):
         with pytest.raises(ValueError, match=r"params: params= differ from those the contexts "

@@ -30,8 +30,8 @@ from spikectl.neuron.extensions import EnvironmentEffects, Extensions, Heterogen
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import PARALLEL_MIN_BATCH, PARALLEL_MIN_WORK
 
-SMALL = {"n_train": 10, "n_test": 10}
-SHORT = {"n_train": 6, "n_test": 2, "episode_length": 12}
+SMALL = {"contexts": {"n_train": 10, "n_test": 10}}
+SHORT = {"contexts": {"n_train": 6, "n_test": 2}, "episode_length": 12}
 HETEROGENEOUS = Extensions(threshold_spread=0.2, time_constant_spread=0.3, synaptic_spread=0.25)
 EVERYTHING = Extensions(
     hidden_fraction=0.25,
@@ -368,25 +368,21 @@ def test_background_activity_drives_an_idle_environment():
 # -- the target as an action
 
 
-@pytest.mark.parametrize("how", ["kwarg", "extensions", "with hidden neurons"])
+@pytest.mark.parametrize("how", ["extensions", "with hidden neurons"])
 def test_the_target_can_be_made_an_action(how):
     extensions = {"allow_target_action": True}
-    contexts = None
+    contexts = SMALL["contexts"]
     if how == "with hidden neurons":
         contexts, _ = make_splits(5, 1, seed=2, extensions={"hidden_neurons": 2})
-    env = (
-        NeuronControlEnv(allow_target_action=True, **SMALL)
-        if how == "kwarg"
-        else NeuronControlEnv(contexts=contexts, extensions=extensions, **SMALL)
-    )
-    assert env.extensions.allow_target_action and env.allow_target_action
+    env = NeuronControlEnv(contexts=contexts, extensions=extensions)
+    assert env.extensions.allow_target_action
     obs, info = env.reset(options={"context": 0})
     assert info["action_mask"].all()
     _, _, _, _, info = env.step(int(obs["target"]))
     assert info["target_spiked"] and info["spikes"][obs["target"]]
-    strict = NeuronControlEnv(contexts=contexts, **SMALL)
+    strict = NeuronControlEnv(contexts=contexts)
     target = int(strict.reset(options={"context": 0})[0]["target"])
-    with pytest.raises(ValueError, match="allow_target_action=True"):
+    with pytest.raises(ValueError, match="extensions=\\{'allow_target_action': True\\} allows it"):
         strict.step(target)
 
 
@@ -523,7 +519,7 @@ def test_registered_variants_make_and_pass_the_checker(env_id):
         warnings.simplefilter("always")
         check_env(env.unwrapped)
     assert [str(w.message) for w in caught if not UNBOUNDED_BOX.search(str(w.message))] == []
-    assert json.loads(gym.spec(env_id).to_json())["kwargs"] == VARIANTS[env_id]
+    assert json.loads(gym.spec(env_id).to_json())["kwargs"] == VARIANTS.entry(env_id)
     envs = gym.make_vec(env_id, num_envs=2, **SMALL)
     assert isinstance(envs, NeuronControlVectorEnv)
     obs, _ = envs.reset(seed=0)

@@ -13,20 +13,20 @@ from gymnasium.vector import AsyncVectorEnv, AutoresetMode, SyncVectorEnv
 
 import spikectl  # noqa: F401  (registers the ids)
 from spikectl.envs.env import NeuronControlEnv
-from spikectl.envs.registration import ENV_ID, FLAT_ENV_ID, FLAT_VARIANTS, VARIANTS, flat_id
+from spikectl.envs.registration import ENV_ID, FLAT_ENV_ID, VARIANTS, flat_id
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.wrappers import FlatNeuronControlEnv, FlatNeuronControlVectorEnv, FlatObservation
 
-SMALL = {"n_train": 10, "n_test": 10}
-FLAT_IDS = [FLAT_ENV_ID, *FLAT_VARIANTS]
+SMALL = {"contexts": {"n_train": 10, "n_test": 10}}
+FLAT_IDS = [FLAT_ENV_ID, *map(flat_id, VARIANTS)]
 
 
 def test_every_paper_id_has_a_flat_twin_with_its_arguments():
     assert flat_id(ENV_ID) == FLAT_ENV_ID
     assert flat_id("spikectl/NeuronControlNoisy-v0") == "spikectl/NeuronControlNoisyFlat-v0"
-    for paper_id, kwargs in VARIANTS.items():
+    for paper_id in VARIANTS:
         spec = gym.spec(flat_id(paper_id))
-        assert spec.kwargs == kwargs
+        assert spec.kwargs == VARIANTS.entry(paper_id) == gym.spec(paper_id).kwargs
         assert spec.vector_entry_point.endswith(":FlatNeuronControlVectorEnv")
 
 

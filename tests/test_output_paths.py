@@ -177,8 +177,8 @@ def test_a_task_trains_on_its_own_episode_length():
     from spikectl.experiments import suite
 
     command = parse_train(["smoke", "--task", "paper"])
-    assert command.config.env.episode_length == suite.EPISODE_LENGTH == 60
-    assert command.config.env.n_train == suite.SET_SIZE
+    assert command.config.env.episode_length == suite.suite_version(1).episode_length == 60
+    assert command.config.env.n_train == suite.suite_version(1).set_size
 
 
 def benchmark_all_in_a_child() -> subprocess.Popen:

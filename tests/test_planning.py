@@ -257,7 +257,7 @@ def test_identify_and_plan_never_takes_an_illegal_action(env_id, extensions, hyp
     # The environment raises on an illegal action; each extension alone must degrade
     # the policy, not crash it, and the Realistic variant switches every one on.
     kwargs = {} if extensions is None else {"extensions": extensions}
-    env = gym.make(env_id, n_train=4, n_test=4, **kwargs)
+    env = gym.make(env_id, contexts={"n_train": 4, "n_test": 4}, **kwargs)
     noise = env.unwrapped.extensions.observation_noise_mV
     play_legally(env, IdentifyAndPlan(noise_mV=noise, width=8, hypotheses=hypotheses), range(3))
 

@@ -144,7 +144,7 @@ def test_gamble_never_takes_an_illegal_action_under_extensions(env_id, extension
     # Hidden neurons and noise break what the drawn networks assume; the choice must
     # still be one of the legal actions (the environment raises otherwise).
     kwargs = {} if extensions is None else {"extensions": extensions}
-    env = gym.make(env_id, n_train=3, n_test=3, **kwargs)
+    env = gym.make(env_id, contexts={"n_train": 3, "n_test": 3}, **kwargs)
     noise = env.unwrapped.extensions.observation_noise_mV
     policy = IdentifyAndPlan(noise_mV=noise, width=8, gamble_networks=4, gamble_width=2,
                              gamble_horizon=4)  # fmt: skip

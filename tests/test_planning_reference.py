@@ -20,7 +20,7 @@ from spikectl.envs.registration import VARIANTS
 from spikectl.planning import IdentifyAndPlan, plan_episode
 
 REFERENCE = Path(__file__).parent / "data" / "planning_reference.npz"
-REALISTIC = VARIANTS["spikectl/NeuronControlRealistic-v0"]["extensions"]
+REALISTIC = VARIANTS.entry("spikectl/NeuronControlRealistic-v0")["extensions"]
 
 
 def _splits(n: int, extensions=None):

@@ -132,7 +132,7 @@ def test_relays_need_the_gaussian_estimate():
 def test_relays_play_legally_with_every_tracker(extensions, settings):
     """Relays on hidden-neuron environments beside each tracker the policy can have (the
     virtual relay neurons get the paper's parameters beside the tracked ones)."""
-    env = gym.make("spikectl/NeuronControlPartial-v0", n_train=4, n_test=4,
+    env = gym.make("spikectl/NeuronControlPartial-v0", contexts={"n_train": 4, "n_test": 4},
                    **({} if extensions is None else {"extensions": extensions}))  # fmt: skip
     told = env.unwrapped.extensions
     settings = dict(settings)

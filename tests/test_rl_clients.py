@@ -124,7 +124,7 @@ def test_torchrl_gym_env_passes_check_env_specs():
     from torchrl.envs import GymEnv
     from torchrl.envs.utils import check_env_specs
 
-    env = GymEnv(FLAT_ENV_ID, n_train=10, n_test=10)
+    env = GymEnv(FLAT_ENV_ID, contexts={"n_train": 10, "n_test": 10})
     check_env_specs(env, seed=0)
     rollout = env.rollout(130, break_when_any_done=False)  # random one-hot actions
     assert rollout["next", "observation"].shape == (130, 206)
@@ -137,7 +137,8 @@ def test_torchrl_wraps_the_batched_simulator():
     from torchrl.envs import GymWrapper
     from torchrl.envs.utils import check_env_specs
 
-    envs = gym.make_vec(FLAT_ENV_ID, 4, autoreset_mode="Disabled", n_train=10, n_test=10)
+    envs = gym.make_vec(FLAT_ENV_ID, 4, autoreset_mode="Disabled",
+                          contexts={"n_train": 10, "n_test": 10})  # fmt: skip
     assert isinstance(envs, FlatNeuronControlVectorEnv)
     env = GymWrapper(envs)
     assert env.batch_size == (4,)
@@ -154,7 +155,7 @@ def test_sb3_check_env_is_silent_and_ppo_learns_a_few_steps():
 
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        check_env(gym.make(FLAT_ENV_ID, n_train=10, n_test=10).unwrapped)
+        check_env(gym.make(FLAT_ENV_ID, contexts={"n_train": 10, "n_test": 10}).unwrapped)
     # Given only the id, as SB3 users do (SB3 calls gymnasium.make on it).
     model = PPO("MlpPolicy", FLAT_ENV_ID, n_steps=256, batch_size=64, n_epochs=1, seed=0,
                 device="cpu")  # fmt: skip
@@ -173,7 +174,7 @@ def test_rllib_ppo_trains_an_iteration_on_the_batched_simulator():
 
     config = (
         PPOConfig()
-        .environment(FLAT_ENV_ID, env_config={"n_train": 10, "n_test": 10})
+        .environment(FLAT_ENV_ID, env_config={"contexts": {"n_train": 10, "n_test": 10}})
         .env_runners(
             num_env_runners=0,
             num_envs_per_env_runner=4,

@@ -13,6 +13,9 @@ import pytest
 from spikectl import cli
 from spikectl.contexts import ContextSet
 from spikectl.experiments import suite
+from spikectl.experiments.suite import protocol
+
+V1 = suite.suite_version(1)
 
 SMOKE_RUN = Path(__file__).parent / "data" / "format2-smoke-run"
 
@@ -25,47 +28,47 @@ def fresh_cache():
     suite.load_splits.cache_clear()
 
 
-@pytest.mark.parametrize("name", list(suite.TASKS))
+@pytest.mark.parametrize("name", V1.names())
 def test_every_task_builds_the_pinned_sets(name, fresh_cache):
     # All 10 tasks x 3 sets take about 4 s: checked in the default run.
     sets = suite.load_splits(name)
-    spec = suite.TASKS[name]
-    assert set(sets) == set(suite.SPLITS) == set(suite.CHECKSUMS[name])
+    spec = V1.task(name)
+    assert set(sets) == set(suite.SPLITS) == set(spec.checksums)
     for split, contexts in sets.items():
-        assert len(contexts) == suite.SET_SIZE
+        assert len(contexts) == V1.set_size == 100
         assert contexts.n_neurons == spec.n_neurons
         assert contexts.n_observed == spec.n_observed
-        assert contexts.episode_length == suite.EPISODE_LENGTH
+        assert contexts.episode_length == V1.episode_length == 60
         assert contexts.extensions == spec.extensions.context_part()
-        assert suite.suite_checksum(contexts) == suite.CHECKSUMS[name][split]
+        assert suite.suite_checksum(contexts) == spec.checksums[split]
     # No topology shared between the splits.
     assert not sets["test"].duplicate_topologies(sets["train"])
     assert not sets["validation"].duplicate_topologies(sets["test"])
 
 
 def test_tasks_are_the_registered_variants():
-    assert suite.SUITE_VERSION == 1
-    assert list(suite.TASKS) == [
+    assert (V1.number, V1.frozen, V1.env_seed) == (1, True, 0)
+    assert V1.names() == (
         "paper", "n16", "n32", "noise1", "noise2", "noise4", "hidden25", "stochastic",
         "heterogeneous", "background",
-    ]  # fmt: skip
-    assert [suite.TASKS[f"noise{s}"].extensions.observation_noise_mV for s in (1, 2, 4)] == [
+    )  # fmt: skip
+    assert [V1.task(f"noise{s}").extensions.observation_noise_mV for s in (1, 2, 4)] == [
         1.0, 2.0, 4.0,
     ]  # fmt: skip
-    assert suite.TASKS["hidden25"].n_observed == 6
-    assert suite.TASKS["stochastic"].extensions.stochastic_release
-    assert suite.TASKS["background"].extensions.background_rate == 0.005
-    assert suite.TASKS["heterogeneous"].extensions.heterogeneous
-    assert suite.TASKS["paper"].extensions == suite.TASKS["n32"].extensions.__class__()
+    assert V1.task("hidden25").n_observed == 6
+    assert V1.task("stochastic").extensions.stochastic_release
+    assert V1.task("background").extensions.background_rate == 0.005
+    assert V1.task("heterogeneous").extensions.heterogeneous
+    assert V1.task("paper").extensions == V1.task("n32").extensions.__class__()
 
 
 def test_a_changed_generator_is_refused(monkeypatch, fresh_cache):
-    real = suite.make_splits
+    real = protocol.make_splits
 
     def drifted(*args, **kwargs):  # a generator that now draws other networks
         return real(*args, **{**kwargs, "seed": kwargs["seed"] + 1})
 
-    monkeypatch.setattr(suite, "make_splits", drifted)
+    monkeypatch.setattr(protocol, "make_splits", drifted)
     with pytest.raises(suite.SuiteChecksumError, match=r"suite v1, task 'n16', train set"):
         suite.load_split("n16", "test")
 
@@ -75,8 +78,8 @@ def test_a_tampered_set_is_refused(monkeypatch, fresh_cache):
     contexts = list(sets["validation"])
     contexts[0], contexts[1] = contexts[1], contexts[0]  # the same networks, another order
     tampered = {**sets, "validation": ContextSet(contexts, sets["validation"].params)}
-    monkeypatch.setattr(suite, "generate_splits", lambda name: tampered)
-    expected = "task 'paper', validation set.*SUITE_VERSION"
+    monkeypatch.setattr(protocol, "generate_splits", lambda name, version: tampered)
+    expected = "suite v1, task 'paper', validation set.*a new suite version"
     with pytest.raises(suite.SuiteChecksumError, match=expected):
         suite.load_split("paper", "test")
 
@@ -144,7 +147,7 @@ def test_benchmark_writes_each_networks_return(capsys, tmp_path):
     assert code == 0
     with open(per_network, newline="") as file:
         rows = list(csv.DictReader(file))
-    assert [int(row["context"]) for row in rows] == list(range(suite.SET_SIZE))
+    assert [int(row["context"]) for row in rows] == list(range(V1.set_size))
     assert {(row["task"], row["split"], row["controller"]) for row in rows} == {
         ("paper", "test", "random")
     }
@@ -153,7 +156,7 @@ def test_benchmark_writes_each_networks_return(capsys, tmp_path):
         (summary,) = csv.DictReader(file)
     assert float(summary["mean_return"]) == pytest.approx(returns.mean(), abs=1e-6)
     # The row carries the standard error over the networks, from the per-network returns.
-    expected_error = returns.std(ddof=1) / np.sqrt(suite.SET_SIZE)
+    expected_error = returns.std(ddof=1) / np.sqrt(V1.set_size)
     assert float(summary["standard_error"]) == pytest.approx(expected_error, abs=1e-6)
     assert 0.0 <= returns.min() < returns.max() <= 1.0
 
@@ -208,7 +211,7 @@ def test_a_per_neuron_network_may_play_any_n(tmp_path):
         suite.check_run_fits(read_config(run), name)  # no refusal
 
 
-@pytest.mark.parametrize("name", list(suite.TASKS))
+@pytest.mark.parametrize("name", V1.names())
 def test_train_task_flag_trains_on_the_tasks_pinned_sets(name):
     """``spikectl train --task T`` generates exactly the suite's training, test and
     validation sets of T (their pinned checksums), with T's environment and extensions,
@@ -226,7 +229,7 @@ def test_train_task_flag_trains_on_the_tasks_pinned_sets(name):
         params=env.params, extensions=env.extensions,
     )  # fmt: skip
     for split, contexts in (("train", train), ("test", test), ("validation", validation)):
-        assert suite.suite_checksum(contexts) == suite.CHECKSUMS[name][split], split
+        assert suite.suite_checksum(contexts) == spec.checksums[split], split
     assert suite.trained_on(config, train) == name
 
 
@@ -241,7 +244,7 @@ def test_train_task_flag_pins_the_task_sets_over_the_presets_sizes():
     config = parse_train(["guided", "--task", "paper"]).config
     assert (config.env.n_train, config.env.n_test, config.env.n_val) == (100, 100, 100)
     train, _ = generated_contexts(config)
-    assert suite.suite_checksum(train) == suite.CHECKSUMS["paper"]["train"]
+    assert suite.suite_checksum(train) == V1.task("paper").checksums["train"]
     assert parse_train(["guided", "--task", "paper", "--n-train", "20"]).config.env.n_train == 20
 
 

@@ -18,7 +18,7 @@ from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.registration import ENV_ID
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 
-SMALL = {"n_train": 10, "n_test": 10}
+SMALL = {"contexts": {"n_train": 10, "n_test": 10}}
 INFO_KEYS = ("action_mask", "context_index", "spikes", "target_spiked")
 
 
@@ -265,7 +265,7 @@ def test_bad_actions_among_many_environments_make_a_short_message():
 
 
 def test_allow_target_action():
-    envs = NeuronControlVectorEnv(num_envs=2, allow_target_action=True, **SMALL)
+    envs = NeuronControlVectorEnv(num_envs=2, extensions={"allow_target_action": True}, **SMALL)
     obs, infos = envs.reset(seed=0)
     assert infos["action_mask"].all()
     _, _, _, _, infos = envs.step(obs["target"])

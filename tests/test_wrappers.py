@@ -31,7 +31,7 @@ from spikectl.wrappers import (
 )
 
 ENV_ID = "spikectl/NeuronControl-v0"
-SMALL = {"n_train": 10, "n_test": 10}
+SMALL = {"contexts": {"n_train": 10, "n_test": 10}}
 
 
 def make(flatten: bool = True, illegal_action: str = "do_nothing", env_id=ENV_ID, **kwargs):
@@ -109,7 +109,7 @@ def test_action_masks_mark_the_target_illegal():
         expected[target + 1] = False
         np.testing.assert_array_equal(env.action_masks(), expected)
         np.testing.assert_array_equal(info["action_mask"], expected)  # same indexing
-    env = make(allow_target_action=True)
+    env = make(extensions={"allow_target_action": True})
     env.reset(seed=0)
     assert env.action_masks().all()
 

@@ -16,11 +16,13 @@ class BenchmarkCommand:
     """Score a controller on the frozen benchmark suite: raw and normalised returns."""
 
     controller: Annotated[str, tyro.conf.Positional]
-    """A run directory, a compiled policy file (.npz), or one of do-nothing, random,
-    identify-and-plan, oracle, witness."""
+    """A run directory, a compiled policy file (.npz), or a registered controller
+    (do-nothing, random, identify-and-plan, oracle, witness, ...)."""
     task: tuple[str, ...] = ("all",)
-    """The suite's tasks to play (paper n16 n32 noise1 noise2 noise4 hidden25 stochastic
-    heterogeneous background), or all."""
+    """The suite version's tasks to play (v1: paper n16 n32 noise1 noise2 noise4 hidden25
+    stochastic heterogeneous background), or all."""
+    suite: int = 1
+    """The suite version (results of two versions do not compare)."""
     split: Literal["test", "validation"] = "test"
     """Which frozen set to play: report on test, choose settings on validation."""
     model: Literal["final", "best"] = "final"
@@ -84,16 +86,17 @@ def score_and_write(command: BenchmarkCommand) -> None:
                 raise ValueError(f"{flag} chooses among a run directory's networks; "
                                  f"{command.controller} is not a run directory")  # fmt: skip
     print = Printer()  # results are written even if the reader of stdout goes away
-    names = list(suite.TASKS) if "all" in command.task else list(dict.fromkeys(command.task))
+    version = suite.suite_version(command.suite)  # an unknown one: one line naming those there are
+    names = list(version.names()) if "all" in command.task else list(dict.fromkeys(command.task))
     if not names:
         raise ValueError("--task: give at least one task, or all")
     for name in names:
-        suite.task(name)  # an unknown task is refused before anything is played
+        version.task(name)  # an unknown task is refused before anything is played
     make = controller_factory(command, names)
     origin = training_task(command)
-    seeds = command.random_seeds if command.controller == "random" else 1
-    print(f"benchmark suite v{suite.SUITE_VERSION}, {command.split} sets "
-          f"({suite.SET_SIZE} contexts each, environment seed {suite.ENV_SEED}); "
+    seeds = command.random_seeds if stochastic(command.controller) else 1
+    print(f"benchmark suite v{version.number}, {command.split} sets "
+          f"({version.set_size} contexts each, environment seed {version.env_seed}); "
           f"controller {command.controller}"
           + (f" (mean over seeds 0..{seeds - 1})" if seeds > 1 else "")
           + (f"; trained on task {origin!r}" if origin else ""))  # fmt: skip
@@ -101,21 +104,21 @@ def score_and_write(command: BenchmarkCommand) -> None:
           f"{'oracle':>9}{'CPU s':>9}")  # fmt: skip
     rows, per_network, normalised = [], [], {}
     for name in names:
-        result = suite.score(name, command.split, make(name), seeds)
+        result = suite.score(name, command.split, make(name), seeds, version.number)
         per_network += [
-            {"suite_version": suite.SUITE_VERSION, "task": name, "split": command.split,
+            {"suite_version": version.number, "task": name, "split": command.split,
              "controller": command.controller, "model": model_label(command),
              "context": index, "return": repr(float(value))}
             for index, value in enumerate(result.returns)
         ]  # fmt: skip
-        nothing, oracle = suite.references(name, command.split)
+        nothing, oracle = suite.references(name, command.split, version.number)
         normalised[name] = suite.normalise(result.mean_return, nothing, oracle)
         sd = float(result.seed_means.std(ddof=1)) if seeds > 1 else float("nan")
         raw = f"{result.mean_return:.3f}" + (f" +- {sd:.3f}" if seeds > 1 else "")
         print(f"{name:<15}{raw:>18}{normalised[name]:>12.3f}{nothing:>12.3f}{oracle:>9.3f}"
               f"{result.cpu_seconds:>9.2f}")  # fmt: skip
         rows.append({
-            "suite_version": suite.SUITE_VERSION, "task": name, "split": command.split,
+            "suite_version": version.number, "task": name, "split": command.split,
             "controller": command.controller, "model": model_label(command), "seeds": seeds,
             "mean_return": f"{result.mean_return:.6f}",
             "standard_error": f"{result.standard_error:.6f}",
@@ -151,7 +154,8 @@ def training_task(command: BenchmarkCommand) -> str | None:
 
     if not (source / TRAIN_FILE).is_file():
         return None
-    return suite.trained_on(read_config(source), ContextSet.load(source / TRAIN_FILE))
+    return suite.trained_on(read_config(source), ContextSet.load(source / TRAIN_FILE),
+                            command.suite)  # fmt: skip
 
 
 def model_label(command: BenchmarkCommand) -> str:
@@ -163,21 +167,30 @@ def model_label(command: BenchmarkCommand) -> str:
     return command.model + (" per-environment" if command.per_environment else "")
 
 
+def stochastic(controller: str) -> bool:
+    """Whether ``controller`` is a registered controller whose seed changes what it does."""
+    from spikectl.training.controllers import CONTROLLERS
+
+    return controller in CONTROLLERS and CONTROLLERS.load(controller).stochastic
+
+
 def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
     """task name -> (seed -> a fresh controller for that task); refuses at once a run
     that cannot play one of ``names`` (another neuron model, or a fixed-size network
     on another n)."""
     from spikectl.experiments import suite
-    from spikectl.training.controllers import NAMED_CONTROLLERS, load_agent, load_controller
+    from spikectl.training.controllers import CONTROLLERS, load_agent, load_controller
 
     source = Path(command.controller)
-    if command.controller in NAMED_CONTROLLERS:
+    version = command.suite
+    if command.controller in CONTROLLERS:
 
         def named(name: str):
             from spikectl.envs.env import NeuronControlEnv
 
-            contexts = suite.load_split(name, command.split)
-            env = NeuronControlEnv(contexts=contexts, extensions=suite.task(name).extensions)
+            contexts = suite.load_split(name, command.split, version)
+            extensions = suite.task(name, version).extensions
+            env = NeuronControlEnv(contexts=contexts, extensions=extensions)
             return lambda seed: load_controller(command.controller, env=env, seed=seed)
 
         return named
@@ -187,7 +200,7 @@ def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
         config = read_config(source)
         for name in names:
             try:
-                suite.check_run_fits(config, name)
+                suite.check_run_fits(config, name, version)
             except ValueError as error:
                 raise ValueError(f"{source} cannot play task {name!r}: {error}") from None
         import torch
@@ -197,7 +210,7 @@ def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
         def trained(name: str):
             from spikectl.agents.greedy import GreedyController
 
-            task = suite.task(name)
+            task = suite.task(name, version)
             network = load_agent(source, n_neurons=task.n_observed, model=command.model)
             if command.compiled:
                 from spikectl.agents.compiled import CompiledPolicy

@@ -23,8 +23,8 @@ class RealtimeCommand:
     """Play a controller paced at a wall-clock rate; report latency and deadline misses."""
 
     controller: Annotated[str, tyro.conf.Positional]
-    """A run directory, a compiled policy file (.npz), or one of do-nothing, random,
-    identify-and-plan, oracle, witness."""
+    """A run directory, a compiled policy file (.npz), or a registered controller
+    (do-nothing, random, identify-and-plan, oracle, witness, ...)."""
     model: Literal["final", "best"] = "final"
     """A run's weights: the final model.pt, or best_model.pt (best validation return)."""
     compiled: bool = False

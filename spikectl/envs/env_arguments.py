@@ -11,6 +11,7 @@ grow with the number of environments (one bad action among 200 000 is one short 
 from __future__ import annotations
 
 import reprlib
+from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
@@ -100,7 +101,39 @@ def bad_shape_message(actions: Any, num_envs: int, rule: str) -> str:
             f"{array.shape}")  # fmt: skip
 
 
+def context_choices(choice: Any, envs: np.ndarray, num_envs: int) -> list[Any]:
+    """A batch's ``context`` reset option for each env in ``envs``: None (draw), an index
+    or a Context for all, or one of a sequence of ``num_envs`` of them."""
+    from spikectl.contexts import Context
+
+    if choice is None or isinstance(choice, (Context, int, np.integer)):
+        return [choice] * envs.size
+    if isinstance(choice, (str, bytes)) or not isinstance(choice, (Sequence, np.ndarray)):
+        raise TypeError(
+            f"the context option must be an index, a Context, or a sequence of "
+            f"num_envs={num_envs} of them; got {type(choice).__name__}"
+        )
+    if len(choice) != num_envs:
+        raise ValueError(
+            f"a sequence of contexts must have num_envs={num_envs} entries, got {len(choice)}"
+        )
+    return [choice[i] for i in envs]
+
+
+def reset_mask(mask: Any, num_envs: int) -> np.ndarray:
+    """A batch's ``reset_mask`` reset option: all envs for None, else a bool array
+    [num_envs] marking at least one."""
+    if mask is None:
+        return np.ones(num_envs, dtype=bool)
+    if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.shape != (num_envs,):
+        raise ValueError(f"options['reset_mask'] must be a bool array of shape ({num_envs},)")
+    if not mask.any():
+        raise ValueError("options['reset_mask'] must mark at least one sub-environment")
+    return mask
+
+
 __all__ = [
     "MAX_LISTED", "SEED_RULE", "TARGET_RULE", "SeedError", "bad_actions_message",
-    "bad_shape_message", "check_seed", "seed_list", "short_repr",
+    "bad_shape_message", "check_seed", "context_choices", "reset_mask", "seed_list",
+    "short_repr",
 ]  # fmt: skip

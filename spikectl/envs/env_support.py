@@ -1,7 +1,8 @@
 """What the single and the vector environment share (docs/environment.md).
 
-Resolving the constructor arguments (:func:`resolve_setup`) to a :class:`ContextSet` and the
-effective :class:`~spikectl.neuron.extensions.Extensions`, the per-context lookup tables
+Resolving the constructor arguments (:func:`resolve_setup`; generated sets:
+:class:`GeneratedContexts`) to a :class:`ContextSet` and the effective
+:class:`~spikectl.neuron.extensions.Extensions`, the per-context lookup tables
 (:class:`ContextTables`), the reward formula (:func:`step_rewards`), the spaces and the
 action checks.
 """
@@ -12,7 +13,7 @@ import functools
 import operator
 import os
 from collections.abc import Mapping, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from typing import Any, NamedTuple
 
 import numpy as np
@@ -145,6 +146,45 @@ def _cached_splits(
     return make_splits(n_train, n_test, n_neurons, episode_length, seed, params, extensions)
 
 
+@dataclass(frozen=True)
+class GeneratedContexts:
+    """The sets an environment generates when it is given no context set:
+    ``make_splits(n_train, n_test, n_neurons, episode_length, seed, params, extensions)``,
+    of which it plays the ``split``. Through ``gymnasium.make`` a dict of these fields:
+    ``contexts={"n_train": 10, "n_test": 10, "seed": 3}``."""
+
+    n_train: int = 100
+    """Training contexts."""
+    n_test: int = 100
+    """Unseen test contexts (no topology shared with the training set)."""
+    seed: int = 0
+    """Seed of the generation."""
+
+    def __post_init__(self) -> None:
+        for name in ("n_train", "n_test"):
+            value = getattr(self, name)
+            if not is_int(value) or value < 1:
+                raise ValueError(f"contexts: {name} must be a positive integer, got {value!r}")
+        if not is_int(self.seed) or self.seed < 0:
+            raise ValueError(f"contexts: seed must be a non-negative integer, got {self.seed!r}")
+
+    @classmethod
+    def coerce(cls, value: GeneratedContexts | Mapping[str, Any] | None) -> GeneratedContexts:
+        """``value`` itself, the defaults for None, or one made from a dict of its fields
+        (an unknown key is one ValueError line naming the fields)."""
+        if isinstance(value, cls):
+            return value
+        if value is None:
+            return cls()
+        known = [field.name for field in fields(cls)]
+        unknown = sorted(set(value) - set(known))
+        if unknown:
+            raise ValueError(
+                f"contexts: unknown key(s) {unknown}; generated sets take {', '.join(known)}"
+            )
+        return cls(**value)
+
+
 class Setup(NamedTuple):
     """What an environment's constructor arguments resolve to (:func:`resolve_setup`)."""
 
@@ -155,17 +195,18 @@ class Setup(NamedTuple):
     effects: EnvironmentEffects
 
 
+ContextsArgument = ContextSet | str | os.PathLike | GeneratedContexts | Mapping[str, Any] | None
+"""What an environment's ``contexts`` argument may be: a set, a saved one, or how to
+generate them (:class:`GeneratedContexts` or a dict of its fields; None: its defaults)."""
+
+
 def resolve_setup(
-    contexts: ContextSet | str | os.PathLike | None,
+    contexts: ContextsArgument,
     split: str,
-    n_train: int,
-    n_test: int,
-    context_seed: int,
     n_neurons: int | None,
     episode_length: int | None,
     params: NeuronParams | None,
     extensions: Extensions | Mapping[str, Any] | None,
-    allow_target_action: bool,
     render_mode: str | None,
 ) -> Setup:
     """Check and resolve the constructor arguments that both environments take.
@@ -182,12 +223,9 @@ def resolve_setup(
         raise ValueError(f"split must be one of {SPLITS}, got {split!r}")
     if params is not None and not isinstance(params, NeuronParams):
         raise TypeError(f"params must be a NeuronParams or None, got {type(params).__name__}")
-    if contexts is None:
-        for name, value in (("n_train", n_train), ("n_test", n_test)):
-            if not is_int(value) or value < 1:
-                raise ValueError(f"{name} must be a positive integer, got {value!r}")
-        if not is_int(context_seed) or context_seed < 0:
-            raise ValueError(f"context_seed must be a non-negative integer, got {context_seed!r}")
+    generated = contexts is None or isinstance(contexts, (GeneratedContexts, Mapping))
+    if generated:
+        generation = GeneratedContexts.coerce(contexts)
         n = DEFAULT_N_NEURONS if n_neurons is None else n_neurons
         length = DEFAULT_EPISODE_LENGTH if episode_length is None else episode_length
         if not is_int(n) or n < 2:
@@ -195,7 +233,8 @@ def resolve_setup(
         if not is_int(length) or length < 2:
             raise ValueError(f"episode_length must be an integer >= 2, got {length!r}")
         splits = _cached_splits(
-            int(n_train), int(n_test), int(n), int(length), int(context_seed),
+            int(generation.n_train), int(generation.n_test), int(n), int(length),
+            int(generation.seed),
             NeuronParams() if params is None else params, requested.context_part(),
         )  # fmt: skip
         context_set = splits[SPLITS.index(split)]
@@ -205,8 +244,8 @@ def resolve_setup(
         context_set = ContextSet.load(contexts)
     else:
         raise TypeError(
-            f"contexts must be a ContextSet, a path to a saved one, or None; "
-            f"got {type(contexts).__name__}"
+            f"contexts must be a ContextSet, a path to a saved one, or how to generate them "
+            f"(a dict of n_train, n_test, seed; None: the defaults); got {type(contexts).__name__}"
         )
     for name, given, actual in (
         ("n_neurons", n_neurons, context_set.n_neurons),
@@ -214,28 +253,24 @@ def resolve_setup(
     ):
         if given is not None and given != actual:
             raise ValueError(f"{name}={given!r} conflicts with the context set's {name} {actual}")
-    if params is not None and contexts is not None:
+    if params is not None and not generated:
         context_set.check_params(
             params, "params=",
             "the environment plays the contexts' own params (params= generates contexts: "
             "leave it out, or generate contexts with these params)",
         )  # fmt: skip
     params = context_set.params
-    effective = resolve_extensions(requested, allow_target_action, context_set)
+    effective = resolve_extensions(requested, context_set)
     tables = ContextTables.build(context_set, effective.allow_target_action, params)
     effects = EnvironmentEffects(effective, params, context_set.episode_length)
     return Setup(context_set, params, effective, tables, effects)
 
 
 def resolve_extensions(
-    extensions: Extensions | Mapping[str, Any] | None,
-    allow_target_action: bool,
-    context_set: ContextSet,
+    extensions: Extensions | Mapping[str, Any] | None, context_set: ContextSet
 ) -> Extensions:
-    """The environment's effective extensions: its own environment-level fields, the
-    context set's context-level fields, and ``allow_target_action`` from either place."""
-    if not isinstance(allow_target_action, (bool, np.bool_)):
-        raise TypeError(f"allow_target_action must be a bool, got {allow_target_action!r}")
+    """The environment's effective extensions: its own environment-level fields and the
+    context set's context-level fields."""
     extensions = Extensions.coerce(extensions)
     own = extensions.context_part()
     if own != Extensions() and own != context_set.extensions:
@@ -246,9 +281,7 @@ def resolve_extensions(
             "(ContextSet.generate(..., extensions=...)) or leave them out here"
         )
     return replace(
-        extensions,
-        allow_target_action=bool(allow_target_action) or extensions.allow_target_action,
-        **{name: getattr(context_set.extensions, name) for name in CONTEXT_FIELDS},
+        extensions, **{name: getattr(context_set.extensions, name) for name in CONTEXT_FIELDS}
     )
 
 

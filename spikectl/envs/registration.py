@@ -1,39 +1,61 @@
-"""Gymnasium registration of the environment ids."""
+"""Gymnasium registration of the environment ids: the paper's, its variants and their
+flat twins.
+
+A variant is the paper's environment with a few keyword arguments changed, registered
+in :data:`VARIANTS` (one line: :func:`register_env_variant`); every variant is
+registered with Gymnasium twice, as the paper's strict environment and as its flat twin
+(``spikectl/NeuronControlNoisy-v0`` and ``spikectl/NeuronControlNoisyFlat-v0``).
+"""
 
 from __future__ import annotations
 
+import inspect
+import json
+from collections.abc import Mapping
 from typing import Any
 
 import gymnasium
 
-ENV_ID = "spikectl/NeuronControl-v0"
+from spikectl.registry import Registry, RegistryError
 
-VARIANTS: dict[str, dict[str, Any]] = {
-    # Measurement noise on the observed potentials (docs/extensions.md).
-    "spikectl/NeuronControlNoisy-v0": {"extensions": {"observation_noise_mV": 2.0}},
-    # A quarter of the neurons (2 of 8) hidden: neither observed nor stimulable.
-    "spikectl/NeuronControlPartial-v0": {"extensions": {"hidden_fraction": 0.25}},
-    # A larger network: 32 neurons, the same topology rule.
-    "spikectl/NeuronControl32-v0": {"n_neurons": 32},
-    # Every extension at once, at moderate strength.
-    "spikectl/NeuronControlRealistic-v0": {
-        "extensions": {
-            "hidden_fraction": 0.25,
-            "threshold_spread": 0.1,
-            "time_constant_spread": 0.1,
-            "synaptic_spread": 0.1,
-            "observation_noise_mV": 2.0,
-            "bleaching_time_constant_steps": 300.0,
-            "stochastic_release": True,
-            "background_rate": 0.005,
-        }
-    },
-}
-"""Registered variants: id -> keyword arguments (JSON-ready, so specs serialise)."""
+ENV_ID = "spikectl/NeuronControl-v0"
 
 FLAT_ENV_ID = "spikectl/NeuronControlFlat-v0"
 """The paper's task in generic RL libraries' conventions (spikectl.wrappers.flat_env)."""
 
+PAPER_ENTRY_POINTS = (
+    "spikectl.envs.env:NeuronControlEnv",
+    "spikectl.envs.vector_env:NeuronControlVectorEnv",
+)
+FLAT_ENTRY_POINTS = (
+    "spikectl.wrappers.flat_env:FlatNeuronControlEnv",
+    "spikectl.wrappers.flat_vector_env:FlatNeuronControlVectorEnv",
+)
+
+VARIANTS: Registry[dict[str, Any]] = Registry("variant")
+"""Registered variants: id -> keyword arguments of the paper's environment (JSON-ready,
+so that specs serialise), in registration order; :func:`register_envs` registers each
+with Gymnasium, and :func:`register_env_variant` adds one."""
+
+# Measurement noise on the observed potentials (docs/extensions.md).
+VARIANTS.register("spikectl/NeuronControlNoisy-v0", {"extensions": {"observation_noise_mV": 2.0}})
+# A quarter of the neurons (2 of 8) hidden: neither observed nor stimulable.
+VARIANTS.register("spikectl/NeuronControlPartial-v0", {"extensions": {"hidden_fraction": 0.25}})
+# A larger network: 32 neurons, the same topology rule.
+VARIANTS.register("spikectl/NeuronControl32-v0", {"n_neurons": 32})
+# Every extension at once, at moderate strength.
+VARIANTS.register("spikectl/NeuronControlRealistic-v0", {
+    "extensions": {
+        "hidden_fraction": 0.25,
+        "threshold_spread": 0.1,
+        "time_constant_spread": 0.1,
+        "synaptic_spread": 0.1,
+        "observation_noise_mV": 2.0,
+        "bleaching_time_constant_steps": 300.0,
+        "stochastic_release": True,
+        "background_rate": 0.005,
+    }
+})  # fmt: skip
 
 def flat_id(env_id: str) -> str:
     """The flat twin of a paper id: ``spikectl/NeuronControlNoisy-v0`` ->
@@ -42,13 +64,66 @@ def flat_id(env_id: str) -> str:
     return f"{name}Flat-{version}"
 
 
-FLAT_VARIANTS: dict[str, dict[str, Any]] = {flat_id(i): kwargs for i, kwargs in VARIANTS.items()}
-"""The flat twins of :data:`VARIANTS`: the same keyword arguments."""
+def registered_kwargs(env_id: str) -> dict[str, Any]:
+    """The keyword arguments of a paper id (``{}`` for :data:`ENV_ID`); an unknown id is a
+    one-line RegistryError listing the variants."""
+    return {} if env_id == ENV_ID else dict(VARIANTS.entry(env_id))
+
+
+def register_env_variant(env_id: str, kwargs: Mapping[str, Any]) -> None:
+    """Register ``env_id`` (``"namespace/Name-vN"``) as the paper's environment with
+    ``kwargs`` (JSON-ready keyword arguments of :class:`~spikectl.envs.env.NeuronControlEnv`),
+    and its flat twin :func:`flat_id` with the same ones; both are then
+    ``gymnasium.make``-able. The same variant registered again is a no-op; other kwargs
+    under a taken id are a RegistryError."""
+    from spikectl.envs.env import NeuronControlEnv
+
+    if not _is_variant_id(env_id):
+        raise RegistryError(
+            f"an environment variant's id reads 'namespace/Name-vN' with a name not ending "
+            f"in 'Flat' (its flat twin adds that), got {env_id!r}"
+        )
+    if not isinstance(kwargs, Mapping):
+        raise RegistryError(f"a variant's kwargs must be a dict, got {type(kwargs).__name__}")
+    known = set(inspect.signature(NeuronControlEnv).parameters)
+    unknown = sorted(set(kwargs) - known)
+    if unknown:
+        raise RegistryError(
+            f"variant {env_id!r}: {', '.join(unknown)} not an argument of NeuronControlEnv "
+            f"({', '.join(sorted(known))})"
+        )
+    try:
+        kwargs = json.loads(json.dumps(dict(kwargs)))
+    except (TypeError, ValueError) as error:
+        raise RegistryError(f"variant {env_id!r}: kwargs must be JSON-ready ({error})") from None
+    VARIANTS.register(env_id, kwargs)
+    _register_with_gymnasium(env_id, kwargs, PAPER_ENTRY_POINTS)
+    _register_with_gymnasium(flat_id(env_id), kwargs, FLAT_ENTRY_POINTS)
+
+
+def _is_variant_id(env_id: object) -> bool:
+    from gymnasium.envs.registration import parse_env_id
+
+    try:
+        _, name, version = parse_env_id(env_id)
+    except (gymnasium.error.Error, TypeError):
+        return False
+    return version is not None and not name.endswith("Flat")
+
+
+def _register_with_gymnasium(env_id: str, kwargs: dict[str, Any], entry_points) -> None:
+    # Registering an id twice makes Gymnasium warn, and the package may be re-imported.
+    if env_id in gymnasium.registry:
+        return
+    entry_point, vector_entry_point = entry_points
+    gymnasium.register(
+        id=env_id, entry_point=entry_point, vector_entry_point=vector_entry_point, kwargs=kwargs
+    )
 
 
 def register_envs() -> None:
-    """Register ``spikectl/NeuronControl-v0``, its :data:`VARIANTS` and their flat twins
-    (:data:`FLAT_ENV_ID`, :data:`FLAT_VARIANTS`); idempotent.
+    """Register ``spikectl/NeuronControl-v0``, the library's variants (:data:`VARIANTS`)
+    and their flat twins (:data:`FLAT_ENV_ID`, ...); idempotent.
 
     ``gymnasium.make(ENV_ID, **kwargs)`` builds :class:`spikectl.envs.env.NeuronControlEnv`;
     ``gymnasium.make_vec(ENV_ID, num_envs=...)`` builds the batched
@@ -65,23 +140,8 @@ def register_envs() -> None:
     ``make_vec`` builds :class:`spikectl.wrappers.flat_vector_env.FlatNeuronControlVectorEnv`
     on the batched simulator; see docs/ecosystem.md.
     """
-    paper = (
-        "spikectl.envs.env:NeuronControlEnv",
-        "spikectl.envs.vector_env:NeuronControlVectorEnv",
-    )
-    flat = (
-        "spikectl.wrappers.flat_env:FlatNeuronControlEnv",
-        "spikectl.wrappers.flat_vector_env:FlatNeuronControlVectorEnv",
-    )
-    ids = [(i, kwargs, paper) for i, kwargs in {ENV_ID: {}, **VARIANTS}.items()]
-    ids += [(i, kwargs, flat) for i, kwargs in {FLAT_ENV_ID: {}, **FLAT_VARIANTS}.items()]
-    for env_id, kwargs, (entry_point, vector_entry_point) in ids:
-        # Registering an id twice makes Gymnasium warn, and the package may be re-imported.
-        if env_id in gymnasium.registry:
-            continue
-        gymnasium.register(
-            id=env_id,
-            entry_point=entry_point,
-            vector_entry_point=vector_entry_point,
-            kwargs=kwargs,
-        )
+    _register_with_gymnasium(ENV_ID, {}, PAPER_ENTRY_POINTS)
+    _register_with_gymnasium(FLAT_ENV_ID, {}, FLAT_ENTRY_POINTS)
+    for env_id in VARIANTS:
+        _register_with_gymnasium(env_id, VARIANTS.entry(env_id), PAPER_ENTRY_POINTS)
+        _register_with_gymnasium(flat_id(env_id), VARIANTS.entry(env_id), FLAT_ENTRY_POINTS)

@@ -115,6 +115,30 @@ render_ansi = functools.partial(render, "ansi")
 render_rgb = functools.partial(render, "rgb_array")
 
 
+def render_batch(
+    render_mode: str,
+    patterns: np.ndarray,
+    actions: np.ndarray,
+    spikes: np.ndarray,
+    targets: np.ndarray,
+    steps: np.ndarray,
+) -> tuple[str, ...] | tuple[np.ndarray, ...]:
+    """One raster per environment of a batch (:func:`render` of each): ``patterns``
+    [B, N], ``actions`` [B, N], ``spikes`` [B, N, n], ``targets`` [B], ``steps`` [B]."""
+    return tuple(
+        render(
+            render_mode,
+            patterns[i],
+            spikes[i, :, targets[i]],
+            actions[i],
+            spikes[i],
+            int(targets[i]),
+            int(steps[i]),
+        )  # fmt: skip
+        for i in range(len(patterns))
+    )
+
+
 def _target_codes(pattern: np.ndarray, target_spikes: np.ndarray) -> np.ndarray:
     """Per-step class of the target: 0 silent as wanted, 1 hit, 2 miss, 3 extra spike."""
     wanted = pattern[: target_spikes.shape[0]]

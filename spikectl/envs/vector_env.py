@@ -8,7 +8,6 @@ environments (same seeds, same contexts, same autoreset), only faster.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Mapping, Sequence
 from typing import Any
 
@@ -20,18 +19,21 @@ from gymnasium.utils import seeding
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from spikectl.contexts import Context, ContextSet
+from spikectl.contexts import Context
 from spikectl.contexts.generation import is_int
 from spikectl.envs import render as rendering
 from spikectl.envs.env_arguments import (
     TARGET_RULE,
     bad_actions_message,
     bad_shape_message,
+    context_choices,
+    reset_mask,
     seed_list,
 )
 from spikectl.envs.env_support import (
     RENDER_FPS,
     RENDER_MODES,
+    ContextsArgument,
     ContextTables,
     LegalActionBatchSpace,
     check_context,
@@ -89,27 +91,21 @@ class NeuronControlVectorEnv(VectorEnv):
         num_envs: int = 1,
         n_neurons: int | None = None,
         episode_length: int | None = None,
-        contexts: ContextSet | str | os.PathLike | None = None,
+        contexts: ContextsArgument = None,
         split: str = "train",
-        n_train: int = 100,
-        n_test: int = 100,
-        context_seed: int = 0,
         params: NeuronParams | None = None,
-        allow_target_action: bool = False,
         render_mode: str | None = None,
         extensions: Extensions | Mapping[str, Any] | None = None,
     ) -> None:
         if not is_int(num_envs) or num_envs < 1:
             raise ValueError(f"num_envs must be a positive integer, got {num_envs!r}")
         self.contexts, self.params, self.extensions, self._tables, self._effects = resolve_setup(
-            contexts, split, n_train, n_test, context_seed, n_neurons, episode_length, params,
-            extensions, allow_target_action, render_mode,
-        )  # fmt: skip
+            contexts, split, n_neurons, episode_length, params, extensions, render_mode
+        )
         self.num_envs = batch = int(num_envs)
         self.n_neurons = n = self.contexts.n_neurons
         self.n_observed = k = self.contexts.n_observed
         self.episode_length = length = self.contexts.episode_length
-        self.allow_target_action = self.extensions.allow_target_action
         self.render_mode = render_mode
         # Weights, per-step input buffers and state of every sub-environment, checked
         # before any is allocated (num_envs=10**9 is one line, not a frozen machine).
@@ -179,7 +175,7 @@ class NeuronControlVectorEnv(VectorEnv):
                 f"got {type(options).__name__}"
             )
         options = dict(options or {})
-        which = _reset_mask(options.pop("reset_mask", None), self.num_envs)
+        which = reset_mask(options.pop("reset_mask", None), self.num_envs)
         choice = options.pop("context", None)
         if options:
             raise ValueError(
@@ -190,7 +186,7 @@ class NeuronControlVectorEnv(VectorEnv):
         for i in envs:
             if seeds[i] is not None or self._rngs[i] is None:
                 self._rngs[i] = seeding.np_random(seeds[i])[0]
-        self._reset_envs(envs, self._context_choices(choice, envs))
+        self._reset_envs(envs, context_choices(choice, envs, self.num_envs))
         self._needs_reset[which] = False
         self._any_needs_reset = bool(self._needs_reset.any())
         self._ever_reset |= which
@@ -295,8 +291,8 @@ class NeuronControlVectorEnv(VectorEnv):
         legal = self._legal.reshape(-1).take(self._first_legal + checked + 1)
         if not legal.all():
             raise ValueError(bad_actions_message(
-                array, ~legal, "are illegal", f'{TARGET_RULE} (see info["action_mask"]; pass '
-                "allow_target_action=True to allow it)",
+                array, ~legal, "are illegal", f'{TARGET_RULE} (see info["action_mask"]; '
+                "extensions={'allow_target_action': True} allows it)",
             ))  # fmt: skip
         return checked
 
@@ -329,22 +325,6 @@ class NeuronControlVectorEnv(VectorEnv):
             "last_action": self._last_action.copy(),
         }
 
-    def _context_choices(self, choice: Any, envs: np.ndarray) -> list[int | Context | None]:
-        """The context option for each env in ``envs``: None (draw), an index or a Context."""
-        if choice is None or isinstance(choice, (Context, int, np.integer)):
-            return [choice] * envs.size
-        if isinstance(choice, (str, bytes)) or not isinstance(choice, (Sequence, np.ndarray)):
-            raise TypeError(
-                f"the context option must be an index, a Context, or a sequence of "
-                f"num_envs={self.num_envs} of them; got {type(choice).__name__}"
-            )
-        if len(choice) != self.num_envs:
-            raise ValueError(
-                f"a sequence of contexts must have num_envs={self.num_envs} entries, "
-                f"got {len(choice)}"
-            )
-        return [choice[i] for i in envs]
-
     def _reset_envs(self, envs: np.ndarray, choices: Sequence[int | Context | None]) -> None:
         """Put ``envs`` at rest with a new context each; draws go to each env's own generator."""
         rows = np.empty(envs.size, dtype=np.int64)
@@ -365,7 +345,8 @@ class NeuronControlVectorEnv(VectorEnv):
         self._load(envs[indexed], self._tables, rows[indexed])
         self._context_index[envs] = rows
         for i, context in passed:
-            tables = ContextTables.build([context], self.allow_target_action, self.params)
+            tables = ContextTables.build([context], self.extensions.allow_target_action,
+                                         self.params)  # fmt: skip
             self._load(np.array([i]), tables, 0)
         which = np.zeros(self.num_envs, dtype=bool)
         which[envs] = True
@@ -411,25 +392,7 @@ class NeuronControlVectorEnv(VectorEnv):
             return None
         if not self._all_reset:
             raise ResetNeeded("call reset() before render()")
-        return tuple(
-            rendering.render(
-                self.render_mode,
-                self._patterns[i],
-                self._spike_history[i, :, self._observed_targets[i]],
-                self._action_history[i],
-                self._spike_history[i],
-                int(self._observed_targets[i]),
-                int(self._next_step[i]),
-            )
-            for i in range(self.num_envs)
-        )
-
-
-def _reset_mask(mask: Any, num_envs: int) -> np.ndarray:
-    if mask is None:
-        return np.ones(num_envs, dtype=bool)
-    if not isinstance(mask, np.ndarray) or mask.dtype != np.bool_ or mask.shape != (num_envs,):
-        raise ValueError(f"options['reset_mask'] must be a bool array of shape ({num_envs},)")
-    if not mask.any():
-        raise ValueError("options['reset_mask'] must mark at least one sub-environment")
-    return mask
+        return rendering.render_batch(
+            self.render_mode, self._patterns, self._action_history, self._spike_history,
+            self._observed_targets, self._next_step,
+        )  # fmt: skip

@@ -12,31 +12,118 @@ controller = spikectl.load_controller("runs/quick", compiled=True)  # its compil
 controller = spikectl.load_controller("policy.npz")                 # an exported policy
 controller = spikectl.load_controller("identify-and-plan", env=env)
 ```
+
+The named controllers (those that need no training) are the :data:`CONTROLLERS`
+registry; one :func:`register_controller` line adds one, which ``load_controller``,
+``spikectl benchmark`` and ``spikectl realtime`` then play by name.
 """
 
 from __future__ import annotations
 
 import os
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 from spikectl.contexts import ContextSet
 from spikectl.envs.controller import Controller, DoNothing, RandomLegal, Witness
 from spikectl.file_kinds import FileKind, refuse_other_kinds
+from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
 from spikectl.planning.policy import IdentifyAndPlan, environment_settings
+from spikectl.registry import Registry, load_target
 
-NAMED_CONTROLLERS = ("do-nothing", "random", "identify-and-plan", "oracle", "witness")
-"""The controllers that need no training, by name; the oracle and the witness are
-privileged references that read the played context from ``info["context_index"]``."""
 
-PRIVILEGED = ("oracle", "witness")
+@dataclass(frozen=True)
+class Played:
+    """What a named controller is made for: the contexts played (None where only the
+    neuron model is known), their neuron parameters (None: the paper's) and the
+    environment's extensions (the measurement noise, whether the target is legal, ...)."""
 
-CONTROLLER_SOURCES = (
-    "a controller is a run directory, a compiled policy file (.npz from export_policy) or "
-    f"one of {', '.join(NAMED_CONTROLLERS)}"
-)
+    contexts: ContextSet | None
+    params: NeuronParams | None
+    extensions: Extensions
+
+
+@dataclass(frozen=True)
+class NamedController:
+    """A controller that needs no training, as :data:`CONTROLLERS` holds it."""
+
+    make: Callable[[Played, int], Controller] | str
+    """``make(played, seed)`` -> a fresh controller (or ``"module:function"``, imported
+    when the controller is first made)."""
+    description: str
+    """One line for help texts and docs."""
+    privileged: bool = False
+    """It reads the played context (``info["context_index"]``): it needs the contexts."""
+    stochastic: bool = False
+    """Its seed changes what it does (the benchmark averages it over seeds)."""
+
+
+CONTROLLERS: Registry[NamedController] = Registry("controller")
+"""The controllers that need no training, by name, in registration order."""
+
+
+def register_controller(
+    name: str,
+    make: Callable[[Played, int], Controller] | str,
+    description: str,
+    *,
+    privileged: bool = False,
+    stochastic: bool = False,
+) -> NamedController:
+    """Register a controller under ``name`` for :func:`load_controller` and ``spikectl
+    benchmark`` / ``realtime``: ``make(played, seed)`` builds it from a :class:`Played`;
+    ``privileged`` ones need the contexts, ``stochastic`` ones are averaged over seeds."""
+    return CONTROLLERS.register(name, NamedController(make, description, privileged, stochastic))
+
+
+def do_nothing(played: Played, seed: int) -> Controller:
+    return DoNothing()
+
+
+def random_legal(played: Played, seed: int) -> Controller:
+    return RandomLegal(seed)
+
+
+def identify_and_plan(played: Played, seed: int) -> Controller:
+    # The environment's extensions choose the observation model (environment_settings).
+    n_neurons = None if played.contexts is None else played.contexts.n_observed
+    return IdentifyAndPlan(
+        played.params, noise_mV=played.extensions.observation_noise_mV,
+        **environment_settings(played.extensions, n_neurons),
+    )  # fmt: skip
+
+
+def oracle(played: Played, seed: int) -> Controller:
+    return OraclePlanner(played.contexts, played.params, DEFAULT_ORACLE_WIDTH,
+                         played.extensions.allow_target_action)  # fmt: skip
+
+
+def witness(played: Played, seed: int) -> Controller:
+    return Witness(played.contexts)
+
+
+register_controller("do-nothing", do_nothing, "stimulates nothing (the 0 of the normalised score)")
+register_controller("random", random_legal, "a uniformly random legal action each step",
+                    stochastic=True)  # fmt: skip
+register_controller("identify-and-plan", identify_and_plan,
+                    "identifies the network from what it observes and plans greedily")  # fmt: skip
+register_controller("oracle", oracle, "plans with the played network known (the 1 of the "
+                    "normalised score)", privileged=True)  # fmt: skip
+register_controller("witness", witness, "replays each context's witness sequence (return 1)",
+                    privileged=True)  # fmt: skip
+
+
+def controller_sources() -> str:
+    """What a controller source may be, for messages."""
+    return (
+        "a controller is a run directory, a compiled policy file (.npz from export_policy) "
+        f"or one of {', '.join(CONTROLLERS)}"
+    )
+
 
 MODEL_CHOICES = ("final", "best")
 """Which weights of a run to load: ``final`` (model.pt, else the last checkpoint) or
@@ -116,12 +203,13 @@ def load_controller(
     ``per_environment=True`` to play each environment of a batch alone, with the actions
     the real-time rig takes on every CPU: ``GreedyController``), a
     compiled policy file (.npz from ``spikectl.agents.export_policy``), or one of
-    :data:`NAMED_CONTROLLERS`.
+    :data:`CONTROLLERS` (:func:`register_controller` adds one).
 
-    The named ones take the neuron model, the measurement noise, whether stimulating
-    the target is legal (identify-and-plan: the environment's extensions, which choose
-    its observation model, :func:`~spikectl.planning.policy.environment_settings`), and
-    (oracle, witness) the contexts from ``env`` (a ``NeuronControlEnv`` or
+    The named ones are made from what is played (:class:`Played`): the neuron model,
+    the environment's extensions (the measurement noise, whether stimulating the target
+    is legal; identify-and-plan's observation model,
+    :func:`~spikectl.planning.policy.environment_settings`), and the contexts (which
+    the privileged ones, oracle and witness, need) from ``env`` (a ``NeuronControlEnv`` or
     ``NeuronControlVectorEnv``) where it is given, else from ``contexts``; the neuron
     model is then the contexts' own (``contexts.params``), and ``params`` serves where
     neither is given (identify-and-plan alone; None: the paper's). ``seed`` seeds the
@@ -131,21 +219,21 @@ def load_controller(
         raise ValueError(f"model must be one of {MODEL_CHOICES}, got {model!r}")
     name = os.fspath(source)
     path = Path(name)
-    if (model != "final" or compiled) and not (name not in NAMED_CONTROLLERS and path.is_dir()):
+    if (model != "final" or compiled) and not (name not in CONTROLLERS and path.is_dir()):
         # Silently playing the one network a policy file holds would report it as "best".
         given = f"model={model!r}" if model != "final" else "compiled=True"
         raise ValueError(
             f"{given} chooses among a run directory's networks; {name} is not a run "
             "directory (a compiled policy file holds one network)"
         )
-    if name in NAMED_CONTROLLERS:
-        return _named(name, env, contexts, params, seed)
+    if name in CONTROLLERS:
+        return make_named(name, env, contexts, params, seed)
     if not path.exists():
         raise FileNotFoundError(
             f"no controller {name!r}: not a run directory, not a compiled policy file, and "
-            f"not one of {', '.join(NAMED_CONTROLLERS)}"
+            f"not one of {', '.join(CONTROLLERS)}"
         )
-    refuse_other_kinds(path, (FileKind.RUN_DIR, FileKind.POLICY), CONTROLLER_SOURCES)
+    refuse_other_kinds(path, (FileKind.RUN_DIR, FileKind.POLICY), controller_sources())
     if path.is_dir():
         network = load_agent(path, model=model)
         if not compiled:
@@ -165,12 +253,10 @@ def load_controller(
     return CompiledPolicy.load(path)
 
 
-def _played_on(
-    env: Any, contexts: ContextSet | None, params: NeuronParams | None
-) -> tuple[ContextSet | None, NeuronParams | None, float, bool, Any]:
-    """(contexts, params, noise_mV, allow_target, extensions) of what a controller plays:
-    ``env``'s where it is given, else ``contexts``', else ``params`` alone."""
-    noise_mV, allow_target, extensions = 0.0, False, None
+def _played_on(env: Any, contexts: ContextSet | None, params: NeuronParams | None) -> Played:
+    """What a controller plays: ``env``'s contexts and extensions where it is given, else
+    ``contexts``', else ``params`` alone (with the paper's extensions)."""
+    extensions = Extensions()
     if env is not None:
         unwrapped = getattr(env, "unwrapped", env)
         missing = [key for key in ("contexts", "extensions") if not hasattr(unwrapped, key)]
@@ -180,37 +266,25 @@ def _played_on(
                 f"{type(env).__name__} (it has no {', '.join(missing)})"
             )
         contexts, extensions = unwrapped.contexts, unwrapped.extensions
-        noise_mV = extensions.observation_noise_mV
-        allow_target = extensions.allow_target_action
     elif contexts is not None:
         extensions = contexts.extensions
-        noise_mV = extensions.observation_noise_mV
-        allow_target = extensions.allow_target_action
     if contexts is not None:  # the contexts' own params, as the environment plays them
         if params is not None:
             contexts.check_params(params, "params=", "the controller plays the contexts' own: "
                                   "leave params out")  # fmt: skip
         params = contexts.params
-    return contexts, params, noise_mV, allow_target, extensions
+    return Played(contexts, params, extensions)
 
 
-def _named(
+def make_named(
     name: str, env: Any, contexts: ContextSet | None, params: NeuronParams | None, seed: int
 ) -> Controller:
-    contexts, params, noise_mV, allow_target, extensions = _played_on(env, contexts, params)
-    if name in PRIVILEGED and contexts is None:
+    """The registered controller ``name`` made for what ``env`` / ``contexts`` / ``params``
+    play (see :func:`load_controller`)."""
+    entry = CONTROLLERS.load(name)
+    played = _played_on(env, contexts, params)
+    if entry.privileged and played.contexts is None:
         raise ValueError(
             f"the {name} controller replays a known answer per context: give env= or contexts="
         )
-    if name == "do-nothing":
-        return DoNothing()
-    if name == "random":
-        return RandomLegal(seed)
-    if name == "identify-and-plan":
-        n_neurons = None if contexts is None else contexts.n_observed
-        return IdentifyAndPlan(
-            params, noise_mV=noise_mV, **environment_settings(extensions, n_neurons)
-        )
-    if name == "oracle":
-        return OraclePlanner(contexts, params, DEFAULT_ORACLE_WIDTH, allow_target)
-    return Witness(contexts)
+    return load_target(entry.make)(played, seed)

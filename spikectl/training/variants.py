@@ -15,7 +15,7 @@ from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 
 SIZE_FIELDS = ("n_neurons", "episode_length")
-TAKEN_KWARGS = (*SIZE_FIELDS, "params", "extensions", "allow_target_action")
+TAKEN_KWARGS = (*SIZE_FIELDS, "params", "extensions")
 """Keyword arguments of a registered variant that the trainer's environment takes over."""
 
 
@@ -48,8 +48,6 @@ def variant_settings(env_id: str) -> dict[str, Any]:
     settings = {name: kwargs[name] for name in SIZE_FIELDS if name in kwargs}
     for prefix in ("params", "extensions"):
         settings.update({f"{prefix}.{k}": v for k, v in _as_dict(kwargs.get(prefix)).items()})
-    if "allow_target_action" in kwargs:
-        settings["extensions.allow_target_action"] = kwargs["allow_target_action"]
     return settings
 
 

@@ -155,7 +155,7 @@ class FlatNeuronControlEnv(FlatEnv):
     ## Arguments
 
     `illegal_action` (`"do_nothing"` or `"raise"`) and every argument of
-    `NeuronControlEnv` (`n_train`, `contexts`, `extensions`, ...).
+    `NeuronControlEnv` (`contexts`, `split`, `extensions`, ...).
 
     ## Version History
     * v0: Initial version: zero-based actions, int8 masks, illegal actions do nothing.

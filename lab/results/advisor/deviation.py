@@ -50,7 +50,7 @@ def main() -> None:
     started = time.process_time()
     for k in range(first, first + count):
         env = NeuronControlEnv(contexts=contexts[k : k + 1], extensions=spec.extensions)
-        observation, info = env.reset(seed=suite.ENV_SEED)
+        observation, info = env.reset(seed=suite.suite_version(1).env_seed)
         teacher = IdentifyAndPlan(**settings)
         for step in range(steps):
             # The teacher reads this observation and decides first; the copies then see

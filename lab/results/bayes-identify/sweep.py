@@ -81,7 +81,7 @@ def main() -> None:
             policy = Timed(IdentifyAndPlan(contexts.params, **settings))
             started = time.process_time()
             episodes = evaluate_policy(
-                contexts, policy, extensions=spec.extensions, seed=suite.ENV_SEED
+                contexts, policy, extensions=spec.extensions, seed=suite.suite_version(1).env_seed
             )
             cpu = time.process_time() - started
             mean = float(episodes.returns.mean())

@@ -43,7 +43,7 @@ def main() -> None:
             returns.setdefault(key, {})[int(r["context"])] = float(r["return"])
     print("| task | setting | normalised (return) | − old default [95% CI] | CPU s / episode |")
     print("|---|---|---|---|---|")
-    order = list(suite.TASKS)
+    order = list(suite.suite_version(1).names())
     for (task, settings), r in sorted(rows.items(), key=lambda item: order.index(item[0][0])):
         old = returns.get((task, "{}"))
         difference = "–"

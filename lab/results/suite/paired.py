@@ -54,8 +54,9 @@ def committed_returns(folder: Path, task: str) -> np.ndarray:
     """[100] a seed's test return on each network of ``task`` from its per_network.csv."""
     with open(folder / PER_NETWORK, newline="") as file:
         rows = [row for row in csv.DictReader(file) if row["task"] == task]
-    if [int(row["context"]) for row in rows] != list(range(suite.SET_SIZE)):
-        raise ValueError(f"{folder / PER_NETWORK} lacks the {suite.SET_SIZE} networks of {task}")
+    size = suite.suite_version(1).set_size
+    if [int(row["context"]) for row in rows] != list(range(size)):
+        raise ValueError(f"{folder / PER_NETWORK} lacks the {size} networks of {task}")
     return np.array([float(row["return"]) for row in rows])
 
 
@@ -97,7 +98,7 @@ def main(tasks: list[str], preset: str, trained_on_task: bool = False) -> None:
         with open(out, newline="") as file:
             kept = {row["task"]: row for row in csv.DictReader(file)}
     kept.update({row["task"]: row for row in rows})
-    ordered = [kept[name] for name in suite.TASKS if name in kept]
+    ordered = [kept[name] for name in suite.suite_version(1).names() if name in kept]
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, fieldnames=list(rows[0]), lineterminator="\n")
     writer.writeheader()
@@ -118,4 +119,4 @@ if __name__ == "__main__":
         parser.error("--connectivity means --preset guided-conn; give one of them")
     default = "quick" if arguments.trained_on_task else "guided"
     preset = "guided-conn" if arguments.connectivity else arguments.preset or default
-    main(arguments.tasks or list(suite.TASKS), preset, arguments.trained_on_task)
+    main(arguments.tasks or list(suite.suite_version(1).names()), preset, arguments.trained_on_task)
