@@ -3,9 +3,10 @@
 ``conventions`` holds them in one place (zero-based actions, int8 masks, flat float32
 observations, the illegal-action rule); ``flat_env`` and ``flat_vector_env`` are the
 environments of the registered flat ids (``spikectl/NeuronControlFlat-v0``, ...);
-``sb3`` puts any single environment behind the same conventions for Stable-Baselines3,
-and ``sb3_vec_adapter`` the batched one behind SB3's ``VecEnv`` (imported only when
-used: it needs SB3).
+``final_info`` puts episode statistics where scripts written for Gymnasium < 1.0 read
+them (the ``...FlatFinalInfo-v0`` ids); ``sb3`` puts any single environment behind the
+same conventions for Stable-Baselines3, and ``sb3_vec_adapter`` the batched one behind
+SB3's ``VecEnv`` (imported only when used: it needs SB3).
 """
 
 from spikectl.wrappers.conventions import (
@@ -19,6 +20,7 @@ from spikectl.wrappers.conventions import (
     to_env_action,
     voltage_bounds_mV,
 )
+from spikectl.wrappers.final_info import FinalInfo, FinalInfoEpisodeStatistics, final_info_id
 from spikectl.wrappers.flat_env import FlatEnv, FlatNeuronControlEnv
 from spikectl.wrappers.flat_vector_env import FlatNeuronControlVectorEnv
 from spikectl.wrappers.sb3 import (
@@ -32,12 +34,15 @@ __all__ = [
     "DO_NOTHING",
     "ILLEGAL_ACTIONS",
     "MASK_DTYPE",
+    "FinalInfo",
+    "FinalInfoEpisodeStatistics",
     "FlatEnv",
     "FlatNeuronControlEnv",
     "FlatNeuronControlVectorEnv",
     "FlatObservation",
     "SB3CompatibleEnv",
     "SB3Observation",
+    "final_info_id",
     "from_env_action",
     "make_sb3_compatible",
     "observation_for",

@@ -17,7 +17,7 @@ import numba
 import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
-from gymnasium.vector import AutoresetMode
+from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from spikectl.envs.env_arguments import TARGET_RULE, bad_actions_message, bad_shape_message
@@ -30,7 +30,10 @@ from spikectl.wrappers.conventions import (
 )
 
 
-class FlatNeuronControlVectorEnv(NeuronControlVectorEnv):
+# VectorEnv is named again, after the class it already comes through, for clients that
+# recognise a Gymnasium vector env by its direct bases (skrl's wrap_env); the method
+# resolution order is the same as with NeuronControlVectorEnv alone.
+class FlatNeuronControlVectorEnv(NeuronControlVectorEnv, VectorEnv):
     """``num_envs`` flat environments (:class:`~spikectl.wrappers.flat_env.FlatNeuronControlEnv`)
     stepped as one batch.
 
