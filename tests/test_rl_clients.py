@@ -191,8 +191,9 @@ def test_sb3_check_env_is_silent_and_ppo_learns_a_few_steps():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         check_env(gym.make(FLAT_ENV_ID, contexts={"n_train": 10, "n_test": 10}).unwrapped)
-    # Given only the id, as SB3 users do (SB3 calls gymnasium.make on it).
-    model = PPO("MlpPolicy", FLAT_ENV_ID, n_steps=256, batch_size=64, n_epochs=1, seed=0,
+    # Given only the id, as SB3 users do (SB3 calls gymnasium.make on it), in the form that
+    # works where spikectl was not imported (docs/ecosystem.md).
+    model = PPO("MlpPolicy", IMPORTING_FLAT_ID, n_steps=256, batch_size=64, n_epochs=1, seed=0,
                 device="cpu")  # fmt: skip
     model.learn(total_timesteps=512)
     assert model.num_timesteps == 512
