@@ -9,7 +9,7 @@ import pytest
 import torch
 
 from spikectl.config_errors import ConfigError
-from spikectl.training.learners.q_learning import build_network
+from spikectl.training.agent_network import build_network
 from spikectl.training.presets import SMOKE
 from spikectl.training.run import train
 from spikectl.training.run_files import read_metrics

@@ -28,7 +28,7 @@ from spikectl.training.config import Experiment
 from spikectl.training.learners import learner_entries, register
 from spikectl.training.learners.protocol import LossDiverged
 from spikectl.training.presets import PRESETS, SMOKE
-from spikectl.training.run import train, train_seeds
+from spikectl.training.run import METRIC_FIELDS, train, train_seeds
 from spikectl.training.run_files import CLOCK_FIELDS, RunDirError, read_metrics
 from spikectl.training.torch_files import load_model_weights
 
@@ -121,7 +121,8 @@ def test_the_loop_trains_evaluates_and_saves_any_learner(tmp_path):
     # Greedy evaluation plays the learner's network: once do nothing wins, exactly 0.5.
     assert rows[-1]["train_return"] == rows[-1]["test_return"] == 0.5
     saved = read_metrics(tmp_path / "run")
-    assert math.isnan(saved[0]["epsilon"])  # a DQN column this learner does not fill
+    # The loop's columns, then the learner's own: no other learner's (no epsilon).
+    assert tuple(saved[0]) == (*METRIC_FIELDS, "margin")
     assert [row["margin"] for row in saved] == [-1.0, -0.5, 0.0, 0.5]
     assert load_model_weights(tmp_path / "run" / "model.pt")["margin"].item() == 0.5
 

@@ -22,7 +22,7 @@ from typing import Any
 
 from spikectl.config_errors import ConfigError
 from spikectl.neuron.params import NeuronParams
-from spikectl.training.learners.dqn_config import DQNConfig
+from spikectl.training.learners import DQNConfig
 
 SECTIONS = ("env", "agent", "train", "learner")
 RUN_FIELDS = ("seed", "total_env_steps", "num_envs", "eval_every_episodes",

@@ -35,6 +35,7 @@ from spikectl.contexts import ContextSet
 from spikectl.envs.controller import DoNothing, RandomLegal
 from spikectl.envs.rollout import EpisodeBatch, run_episodes
 from spikectl.seeds import COLLECT_STREAM, EVAL_STREAM
+from spikectl.training.agent_network import check_initial_weights
 from spikectl.training.best_model import kept_network, restore_best_model
 from spikectl.training.checkpoint import RunState, load_checkpoint, save_checkpoint
 from spikectl.training.config import Experiment
@@ -52,7 +53,6 @@ from spikectl.training.greedy_scores import greedy_returns
 from spikectl.training.group import check_group, prepare_group, seed_dirs
 from spikectl.training.learners import check_stacked, make_learners
 from spikectl.training.learners.protocol import LossDiverged
-from spikectl.training.learners.q_learning import check_initial_weights
 from spikectl.training.machine import record_machine
 from spikectl.training.run_files import (
     BEST_MODEL_FILE,
@@ -69,10 +69,11 @@ from spikectl.training.termination import TrainingTerminated, deferred_terminati
 from spikectl.training.torch_files import save_model
 
 METRIC_FIELDS = (
-    "episode", "env_steps", "updates", "epsilon", "train_return", "test_return", "loss",
-    "wall_time_s", "val_return", "aux_loss", "cpu_time_s", "eval_cpu_time_s",
+    "episode", "env_steps", "updates", "train_return", "test_return", "loss",
+    "wall_time_s", "val_return", "cpu_time_s", "eval_cpu_time_s",
 )  # fmt: skip
-"""metrics.csv's columns; a learner's other ``metric_fields`` follow them."""
+"""The loop's columns of metrics.csv; the learner's ``metric_fields`` follow them (a
+Q-learner's ``epsilon`` and ``aux_loss``, ...)."""
 SPLITS = ("train", "test", "val")
 
 
@@ -332,7 +333,7 @@ class Loop:
             if best_on_validation(state.metrics) is row:
                 save_model(run_dir, network, BEST_MODEL_FILE, episode=state.episodes)
                 state.best_model = kept_network(network, state.episodes)
-            self.loggers[k].log(row)
+            self.loggers[k].log(row, self.learners.metric_fields)
         evaluating = time.process_time() - started  # the group's, like its other clocks
         for state in self.states:
             state.eval_cpu_time_s += evaluating

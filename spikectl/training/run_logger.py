@@ -97,9 +97,11 @@ class RunLogger:
         self.bar.set_postfix({**self.round, **self.last}, refresh=False)
         self.bar.update(episodes)
 
-    def log(self, row: dict) -> None:
+    def log(self, row: dict, learner_fields: tuple[str, ...] = ()) -> None:
+        """Write the row's returns, loss and the learner's ``learner_fields`` (those
+        that are numbers) to TensorBoard, and show the returns on the bar."""
         with self._writing():
-            for key in ("train_return", "test_return", "loss", "epsilon"):
+            for key in ("train_return", "test_return", "loss", *learner_fields):
                 if key in row and not math.isnan(row[key]):
                     self.writer.add_scalar(key, row[key], row["episode"])
             self.writer.flush()

@@ -33,6 +33,7 @@ import torch
 from spikectl.agents import masked_q
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
+from spikectl.training.agent_network import build_network
 from spikectl.training.learners.dqn_losses import (
     batch_tensors,
     next_voltage_loss,
@@ -42,7 +43,6 @@ from spikectl.training.learners.dqn_losses import (
 from spikectl.training.learners.pqn_config import PQNConfig
 from spikectl.training.learners.q_learning import (
     QLearner,
-    build_network,
     build_predictor,
     gradient_step,
     set_learning_rate,

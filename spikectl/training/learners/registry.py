@@ -5,17 +5,18 @@ sweeps and checkpoints).
 An entry is a learner's config class (a frozen dataclass whose ``name`` is the learner's
 name in config.json), where its implementation lives (a class, or ``"module:Class"``
 imported when a run starts, so that the config tree never imports Torch), its stacked
-form if it has one, and its presets with their help. Gymnasium's environment registry is
-the model: ``register`` once, then look up by name.
+form if it has one, and its presets with their help. The entries live in a
+:class:`spikectl.registry.Registry` (``LEARNERS``), the one registry mechanism.
 """
 
 from __future__ import annotations
 
 import dataclasses
-import importlib
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
 from typing import Any
+
+from spikectl.registry import Registry, RegistryError, load_target
 
 
 @dataclass(frozen=True)
@@ -46,13 +47,13 @@ class LearnerEntry:
         return self.config.name
 
     def learner_class(self) -> type:
-        return _load(self.learner)
+        return load_target(self.learner)
 
     def stacked_class(self) -> type | None:
-        return None if self.stacked is None else _load(self.stacked)
+        return None if self.stacked is None else load_target(self.stacked)
 
 
-_LEARNERS: dict[str, LearnerEntry] = {}
+LEARNERS: Registry[LearnerEntry] = Registry("learner")
 
 
 def register(
@@ -63,7 +64,7 @@ def register(
     presets: tuple[Preset, ...] = (),
 ) -> LearnerEntry:
     """Register a learner under ``config.name``; the same entry again is a no-op, another
-    entry under a taken name a ValueError."""
+    entry under a taken name a RegistryError (a ValueError)."""
     name = getattr(config, "name", None)
     if not dataclasses.is_dataclass(config) or not isinstance(name, str) or not name:
         raise TypeError(
@@ -72,25 +73,22 @@ def register(
     if not callable(getattr(config, "check_episode_length", None)):
         raise TypeError(f"{config.__name__} lacks check_episode_length(episode_length)")
     entry = LearnerEntry(config, learner, stacked, tuple(presets))
-    if _LEARNERS.get(name, entry) != entry:
-        raise ValueError(f"a learner named {name!r} is already registered")
-    _LEARNERS[name] = entry
+    LEARNERS.register(name, entry)
     return entry
 
 
 def learner_entries() -> tuple[LearnerEntry, ...]:
     """Every registered learner, in the order of registration."""
-    return tuple(_LEARNERS.values())
+    return tuple(LEARNERS.load(name) for name in LEARNERS)
 
 
 def learner_entry(name: object) -> LearnerEntry:
-    """The entry of the learner called ``name``; a one-line error for another name."""
-    if not isinstance(name, str) or name not in _LEARNERS:
-        raise ValueError(
-            f"learner.name: unknown learner {name!r}; this spikectl has "
-            f"{', '.join(sorted(_LEARNERS))}"
-        )
-    return _LEARNERS[name]
+    """The entry of the learner called ``name``; a one-line RegistryError (a ValueError)
+    naming the field and the registered learners for another name."""
+    try:
+        return LEARNERS.load(name)
+    except RegistryError as error:
+        raise RegistryError(f"learner.name: {error}") from None
 
 
 def learner_config_type(name: object) -> type:
@@ -100,11 +98,4 @@ def learner_config_type(name: object) -> type:
 
 def learner_configs() -> tuple[type, ...]:
     """Every registered learner's config class."""
-    return tuple(entry.config for entry in _LEARNERS.values())
-
-
-def _load(target: type | str) -> type:
-    if not isinstance(target, str):
-        return target
-    module, _, attribute = target.partition(":")
-    return getattr(importlib.import_module(module), attribute)
+    return tuple(entry.config for entry in learner_entries())
