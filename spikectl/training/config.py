@@ -49,6 +49,7 @@ from spikectl.envs.registration import ENV_ID
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.training.config_migration import (
+    check_fields,
     drop_removed_fields,
     field_value,
     leaf_paths,
@@ -397,13 +398,3 @@ class Experiment:
 
 def _kind_name(kind: type | tuple[type, ...]) -> str:
     return " or ".join(k.__name__ for k in kind) if isinstance(kind, tuple) else kind.__name__
-
-
-def check_fields(kind: type, section: str, values: Mapping[str, Any]) -> None:
-    """Refuse a config section that is not a mapping or names fields ``kind`` lacks."""
-    if not isinstance(values, Mapping):
-        raise ConfigError(tuple(section.split(".")), f"must be a JSON object, got {values!r}")
-    known = {f.name for f in dataclasses.fields(kind)}
-    unknown = sorted(set(values) - known)
-    if unknown:
-        raise ValueError(f"unknown {kind.__name__} field(s): {', '.join(unknown)}")

@@ -12,6 +12,11 @@ Three generations of config.json exist:
 :func:`migrate` turns any of them into the third's nested form; the same field names
 work in sweep files and ``Experiment.with_changes`` (``"learning_rate"``,
 ``"train.learning_rate"`` and ``"learner.learning_rate"`` are one field).
+
+Kept because docs/training.md promises it: ``Experiment.from_dict`` reads every
+generation, and every committed run under docs/results/ loads. The checks of a saved
+section (:func:`check_fields`, :func:`drop_removed_fields`) are here too: a saved config
+names only fields the tree has, or fields it dropped at the value runs ran as today's.
 """
 
 from __future__ import annotations
@@ -156,3 +161,13 @@ def drop_removed_fields(kind: type, section: str, values: dict[str, Any]) -> Non
                 (*section.split("."), name),
                 f"is no longer in spikectl ({why}); a run with it cannot be rebuilt",
             )
+
+
+def check_fields(kind: type, section: str, values: Mapping[str, Any]) -> None:
+    """Refuse a config section that is not a mapping or names fields ``kind`` lacks."""
+    if not isinstance(values, Mapping):
+        raise ConfigError(tuple(section.split(".")), f"must be a JSON object, got {values!r}")
+    known = {f.name for f in dataclasses.fields(kind)}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"unknown {kind.__name__} field(s): {', '.join(unknown)}")

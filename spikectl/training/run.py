@@ -31,8 +31,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from spikectl.contexts import ContextSet
-from spikectl.envs.controller import DoNothing, RandomLegal
 from spikectl.envs.rollout import EpisodeBatch, run_episodes
 from spikectl.seeds import COLLECT_STREAM, EVAL_STREAM
 from spikectl.training.agent_network import check_initial_weights
@@ -43,9 +41,7 @@ from spikectl.training.contexts import (
     TEST_FILE,
     TRAIN_FILE,
     VAL_FILE,
-    baseline_episodes,
     load_or_make_contexts,
-    make_env,
     recorded_config,
     stream_seed,
 )
@@ -53,6 +49,7 @@ from spikectl.training.greedy_scores import greedy_returns
 from spikectl.training.group import check_group, prepare_group, seed_dirs
 from spikectl.training.learners import check_stacked, make_learners
 from spikectl.training.learners.protocol import LossDiverged
+from spikectl.training.loop_envs import baselines, collection_env, evaluation_envs
 from spikectl.training.machine import record_machine
 from spikectl.training.run_files import (
     BEST_MODEL_FILE,
@@ -74,7 +71,6 @@ METRIC_FIELDS = (
 )  # fmt: skip
 """The loop's columns of metrics.csv; the learner's ``metric_fields`` follow them (a
 Q-learner's ``epsilon`` and ``aux_loss``, ...)."""
-SPLITS = ("train", "test", "val")
 
 
 def train(config: Experiment, run_dir: str | Path, resume: bool = False) -> list[dict]:
@@ -339,20 +335,6 @@ class Loop:
             state.eval_cpu_time_s += evaluating
 
 
-def baselines(config: Experiment, train_set: ContextSet, test_set: ContextSet) -> dict:
-    """Doing nothing's and the random policy's mean returns on the training and test sets."""
-    return {
-        name: {
-            split: float(baseline_episodes(config, contexts, policy).returns.mean())
-            for split, contexts in (("train", train_set), ("test", test_set))
-        }
-        for name, policy in (
-            ("do_nothing", DoNothing()),
-            ("random", RandomLegal(config.train.seed)),
-        )
-    }
-
-
 SPLIT_FILES = {"train": TRAIN_FILE, "test": TEST_FILE, "validation": VAL_FILE}
 
 
@@ -374,43 +356,6 @@ def check_same_contexts(state: RunState, run_dir: Path, seed_sets) -> None:
                 f"on (checksum {str(found.get(split))[:12]}, recorded {recorded[:12]}): put "
                 "the run's own file back, or start a new run on these contexts"
             )
-
-
-def collection_env(config: Experiment, train_sets: list[ContextSet], num_envs: int):
-    """One vector environment of K blocks of ``num_envs`` sub-environments over the
-    seeds' distinct training sets held one after another, and each seed's offset into it."""
-    start: dict[str, int] = {}
-    distinct: list[ContextSet] = []
-    offsets = []
-    for train_set in train_sets:
-        key = train_set.checksum()
-        if key not in start:
-            start[key] = sum(len(s) for s in distinct)
-            distinct.append(train_set)
-        offsets.append(start[key])
-    contexts = distinct[0] if len(distinct) == 1 else ContextSet(
-        [context for s in distinct for context in s],
-        params=distinct[0].params, extensions=distinct[0].extensions,
-    )  # fmt: skip
-    return make_env(config, contexts, len(train_sets) * num_envs), offsets
-
-
-def evaluation_envs(config: Experiment, sets: list[tuple]) -> list[dict]:
-    """Per seed, an environment for each of its sets (train, test, validation), one per
-    distinct set."""
-    by_checksum: dict[str, object] = {}
-    per_seed = []
-    for seed_sets in sets:
-        envs = {}
-        for split, contexts in zip(SPLITS, seed_sets, strict=True):
-            if contexts is None:
-                continue
-            key = contexts.checksum()
-            if key not in by_checksum:
-                by_checksum[key] = make_env(config, contexts, len(contexts))
-            envs[split] = by_checksum[key]
-        per_seed.append(envs)
-    return per_seed
 
 
 def block(episodes: EpisodeBatch, start: int, stop: int) -> EpisodeBatch:
