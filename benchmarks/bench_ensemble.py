@@ -68,7 +68,7 @@ def micro(seeds: list[int], repeats: int, preset: str, device: str) -> None:
     import numpy as np
     import torch
 
-    from spikectl.training.learners.dqn_losses import training_losses
+    from spikectl.training.learners.dqn import training_losses
     from spikectl.training.learners.q_learning import build_networks, build_predictor
     from spikectl.training.replay import EpisodeReplay
 
@@ -133,8 +133,10 @@ def micro(seeds: list[int], repeats: int, preset: str, device: str) -> None:
             update, step = stacked_timings(config, K, replay, rng, observation, timed, repeats,
                                            cuda_graphs)  # fmt: skip
             how = "graph" if cuda_graphs else "eager"
-            print(f"{K:>3} {how:<7}{update:>11.1f}{update / K:>10.1f}"
-                  f"{K * single / update:>11.2f}x{step:>9.2f}{K * single_step / step:>11.2f}x")
+            print(
+                f"{K:>3} {how:<7}{update:>11.1f}{update / K:>10.1f}"
+                f"{K * single / update:>11.2f}x{step:>9.2f}{K * single_step / step:>11.2f}x"
+            )
 
 
 def stacked_timings(

@@ -27,8 +27,12 @@ from spikectl.agents import ARCHITECTURES
 from spikectl.contexts import make_splits
 from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
-from spikectl.training.learners.dqn_losses import sequence_observations, soft_update, td_loss
-from spikectl.training.learners.q_learning import EpsilonGreedyPolicy, build_networks
+from spikectl.training.learners.dqn import soft_update, td_loss
+from spikectl.training.learners.q_learning import (
+    EpsilonGreedyPolicy,
+    build_networks,
+    sequence_observations,
+)
 from spikectl.training.presets import PAPER, PRESETS
 from spikectl.training.replay import EpisodeReplay
 

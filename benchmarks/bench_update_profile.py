@@ -34,17 +34,13 @@ from spikectl.contexts import make_splits
 from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.training.greedy_scores import greedy_returns
-from spikectl.training.learners.dqn_losses import (
-    batch_tensors,
-    losses_on_tensors,
-    sequence_observations,
-    soft_update,
-    training_losses,
-)
+from spikectl.training.learners.dqn import losses_on_tensors, soft_update, training_losses
 from spikectl.training.learners.q_learning import (
     EpsilonGreedyPolicy,
+    batch_tensors,
     build_networks,
     build_predictor,
+    sequence_observations,
 )
 from spikectl.training.presets import PRESETS
 from spikectl.training.replay import EpisodeReplay

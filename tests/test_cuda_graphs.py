@@ -187,7 +187,7 @@ def test_the_captured_update_computes_the_eager_update():
 def test_the_graph_reads_the_learning_rate_set_after_the_capture():
     """A learning rate of 0 set after the capture leaves the online weights as they were
     (Adam's step is lr times a finite ratio), while the target still moves towards them."""
-    from spikectl.training.learners.dqn_losses import batch_tensors
+    from spikectl.training.learners.q_learning import batch_tensors
     from spikectl.training.stacked_update import stack_seeds
 
     group = _stacked_group(True)

@@ -374,7 +374,7 @@ def without_clocks_or_nan(rows):
 
 def test_connectivity_loss_by_hand_and_head_shapes():
     from spikectl.agents import make_agent, make_connectivity_predictor
-    from spikectl.training.learners.dqn_losses import connectivity_loss
+    from spikectl.training.learners.guided import connectivity_loss
 
     class Constant(torch.nn.Module):
         def forward(self, features):  # logits favouring "excitatory" by ln 2

@@ -11,7 +11,7 @@ from spikectl import ContextSet, make_splits
 from spikectl.agents import ARCHITECTURES, make_agent, make_voltage_predictor
 from spikectl.training.config import Experiment
 from spikectl.training.learners import DQNConfig
-from spikectl.training.learners.dqn_losses import n_step_targets, td_loss, training_losses
+from spikectl.training.learners.dqn import n_step_targets, td_loss, training_losses
 from spikectl.training.presets import PRESETS, SMOKE
 from spikectl.training.replay import EpisodeBatchArrays
 from spikectl.training.run import train
@@ -80,7 +80,7 @@ def test_auxiliary_loss_reads_the_encoder_and_leaves_the_td_loss_unchanged(arch)
 
 
 def _seq(batch):
-    from spikectl.training.learners.dqn_losses import sequence_observations
+    from spikectl.training.learners.q_learning import sequence_observations
 
     return sequence_observations(batch, "cpu")
 

@@ -15,7 +15,7 @@ from spikectl.agents import AgentSizes, make_agent
 from spikectl.config_errors import ConfigError
 from spikectl.training.config import Experiment
 from spikectl.training.learners import PQNConfig
-from spikectl.training.learners.dqn_losses import n_step_targets
+from spikectl.training.learners.dqn import n_step_targets
 from spikectl.training.learners.pqn import pqn_losses, q_lambda_returns
 from spikectl.training.presets import PRESETS, SMOKE
 from spikectl.training.run import train, train_seeds

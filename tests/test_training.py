@@ -18,7 +18,7 @@ from spikectl.files import FileWriteError, atomic_write_bytes
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.training.config import EnvConfig, Experiment
-from spikectl.training.learners.dqn_losses import td_loss
+from spikectl.training.learners.dqn import td_loss
 from spikectl.training.presets import PRESETS, QUICK, SMOKE
 from spikectl.training.replay import EpisodeBatchArrays, EpisodeReplay
 from spikectl.training.run import train

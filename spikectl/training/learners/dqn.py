@@ -1,14 +1,17 @@
 """Recurrent double Q-learning over whole episodes (docs/training.md, paper Appendix D):
-the first learner of the training loop.
+the first learner of the training loop, readable top to bottom.
 
 Each round the loop collects ``num_envs`` episodes with :meth:`DQNLearner.collection_policy`
 (epsilon-greedy on the online network's step forward); the learner stores them in its
 episodic buffer (:meth:`DQNLearner.observe`), then makes ``updates_per_round`` gradient
 updates, each on ``batch_size`` whole episodes sampled uniformly
-(:meth:`DQNLearner.update`): the double-Q TD loss (``dqn_losses``), with
-``aux_voltage_weight > 0`` plus an auxiliary next-voltage loss, Adam with an optional
-gradient-norm clip and a linearly decaying learning rate, then a soft update of the
-target network. Exploration and replay sampling draw from the run's generator.
+(:meth:`DQNLearner.update`): the double-Q TD loss over ``n_step`` observed rewards (1 in
+the paper; :func:`losses_on_tensors`), with ``aux_voltage_weight > 0`` plus an auxiliary
+next-voltage loss, Adam with an optional gradient-norm clip and a linearly decaying
+learning rate, then a soft update of the target network. Exploration and replay sampling
+draw from the run's generator. Its settings are ``dqn_config.DQNConfig``; its stacked
+form (K seeds in one computation) is ``dqn_stacked``; the pieces it shares with the
+other Q-learners are ``q_learning``.
 """
 
 from __future__ import annotations
@@ -18,26 +21,30 @@ from typing import Any
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
+from spikectl.agents import masked_q
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
-from spikectl.training.learners.dqn_losses import soft_update, training_losses
+from spikectl.training.learners.dqn_config import DQNConfig
 from spikectl.training.learners.q_learning import (
     QLearner,
+    batch_tensors,
     build_networks,
     build_predictor,
     gradient_step,
+    next_voltage_loss,
+    online_forward,
     set_learning_rate,
+    td_regression_loss,
 )
-from spikectl.training.replay import EpisodeReplay
+from spikectl.training.replay import EpisodeBatchArrays, EpisodeReplay
 
 
 class DQNLearner(QLearner):
     """One seed's recurrent double-Q learner (``Experiment.learner`` a DQNConfig)."""
 
     metric_fields = ("epsilon", "aux_loss")
-    labelled_replay = False
-    """Whether the buffer keeps a label per step (a learner that imitates sets it)."""
     counter_and_replay_keys = ("replay", "updates", "loss_sum", "aux_loss_sum", "loss_count")
     """The entries of :meth:`state_dict` that are not networks or the optimiser (a stacked
     group keeps those stacked, ``dqn_stacked``)."""
@@ -49,45 +56,25 @@ class DQNLearner(QLearner):
         self.rng = rng
         self.network, self.target = build_networks(config)
         self.predictor = build_predictor(config, self.network)
-        self.connectivity_head = self.build_connectivity_head(config)
-        self.stores_target_inputs = self.connectivity_head is not None
-        """Whether each stored episode keeps its network's target inputs (privileged)."""
         self.trained = [
             parameter
-            for module in (self.network, self.predictor, self.connectivity_head)
+            for module in (self.network, self.predictor)
             if module is not None
             for parameter in module.parameters()
         ]
         self.optimizer = torch.optim.Adam(self.trained, lr=self.settings.learning_rate)
         self.replay = EpisodeReplay(
-            self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
-            labelled=self.labelled_replay, privileged=self.stores_target_inputs,
-        )  # fmt: skip
+            self.settings.buffer_size, config.env.n_observed, config.env.episode_length
+        )
         self.targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
         self.patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
         self.updates, self.loss_count = 0, 0
         self.loss_sum, self.aux_loss_sum = 0.0, 0.0
 
-    def build_connectivity_head(self, config) -> torch.nn.Module | None:
-        """A privileged auxiliary head trained beside the network (the guided learner's
-        ``connectivity_weight``); None here."""
-        return None
-
     def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
-        self.add_to_replay(episodes, contexts)
-
-    def add_to_replay(
-        self,
-        episodes: EpisodeBatch,
-        contexts: np.ndarray,
-        labels: np.ndarray | None = None,
-        target_inputs: np.ndarray | None = None,
-    ) -> None:
-        """Store finished episodes (with the teacher's labels and the target's inputs
-        where the buffer keeps them)."""
         self.replay.add(
             episodes.voltage, episodes.actions, episodes.rewards, self.targets[contexts],
-            self.patterns[contexts], episodes.action_mask, labels, target_inputs,
+            self.patterns[contexts], episodes.action_mask,
         )  # fmt: skip
 
     def update(self, episode: int) -> None:
@@ -100,7 +87,7 @@ class DQNLearner(QLearner):
             gradient_step(self, self.batch_loss(batch, episode))
             soft_update(self.target, self.network, settings.tau)
 
-    def batch_loss(self, batch, episode: int) -> torch.Tensor:
+    def batch_loss(self, batch: EpisodeBatchArrays, episode: int) -> torch.Tensor:
         """The loss of one sampled batch (the TD loss plus the weighted auxiliary loss);
         adds its parts to the running sums the metrics rows report."""
         td, aux = training_losses(
@@ -147,3 +134,103 @@ class DQNLearner(QLearner):
         )  # fmt: skip
         self.updates, self.loss_count = int(state["updates"]), int(state["loss_count"])
         self.loss_sum, self.aux_loss_sum = float(state["loss_sum"]), float(state["aux_loss_sum"])
+
+
+# The double-Q maths: the loss of a sampled batch, its n-step target, the target update.
+
+
+def training_losses(
+    online: torch.nn.Module,
+    target: torch.nn.Module,
+    batch: EpisodeBatchArrays,
+    settings: DQNConfig,
+    predictor: torch.nn.Module | None = None,
+    device: str = "cpu",
+    return_q_values: bool = False,
+    return_features: bool = False,
+) -> tuple[torch.Tensor, ...]:
+    """The double-Q TD loss over every step of the sampled episodes and, with a
+    ``predictor``, the auxiliary next-voltage loss (None without one); with
+    ``return_q_values`` also the online Q-values [B, N + 1, n + 1] they were made from,
+    with ``return_features`` (last) the encoder's features [B, N + 1, (n,) D]."""
+    tensors = batch_tensors(batch, device)
+    return losses_on_tensors(
+        online, target, tensors, settings, predictor, return_q_values, return_features
+    )
+
+
+def losses_on_tensors(
+    online,
+    target,
+    tensors: dict,
+    settings: DQNConfig,
+    predictor=None,
+    return_q_values: bool = False,
+    return_features: bool = False,
+) -> tuple[torch.Tensor, ...]:
+    """:func:`training_losses` on :func:`batch_tensors`' output; the networks may be
+    modules or one seed's view of stacked networks (inside vmap)."""
+    obs_seq, actions, rewards, legal = (
+        tensors["obs_seq"], tensors["actions"], tensors["rewards"], tensors["legal"]
+    )  # fmt: skip
+    # One online forward serves the taken-action values, the double-Q argmax and the
+    # auxiliary prediction (which reads the encoder's features).
+    q_values, features = online_forward(
+        online, obs_seq, with_features=predictor is not None or return_features
+    )
+    q_taken = q_values[:, :-1].gather(2, (actions + 1)[..., None]).squeeze(2)  # [B, N]
+    with torch.no_grad():
+        # Double Q-learning: the online network picks the action at every observation,
+        # the target network evaluates it; illegal actions are masked in the choice.
+        best_actions = masked_q(q_values.detach(), legal).argmax(dim=2)  # [B, N+1]
+        target_q_values, _ = target(obs_seq)  # [B, N+1, n+1]
+        bootstrap = target_q_values.gather(2, best_actions[..., None]).squeeze(2)  # [B, N+1]
+        bootstrap[:, -1] = 0.0  # observation N follows the terminal step
+        td_target = n_step_targets(rewards, bootstrap, settings.gamma, settings.n_step)  # [B, N]
+    td = td_regression_loss(q_taken, td_target, settings.loss)
+    aux = None
+    if predictor is not None:
+        aux = next_voltage_loss(online, predictor, features, obs_seq, actions)
+    return (
+        (td, aux)
+        + ((q_values,) if return_q_values else ())
+        + ((features,) if return_features else ())
+    )
+
+
+def n_step_targets(
+    rewards: torch.Tensor, bootstrap: torch.Tensor, gamma: float, n_step: int
+) -> torch.Tensor:
+    """n-step TD targets of every step of whole episodes.
+
+    ``rewards`` [B, N] are r_0 … r_{N-1}; ``bootstrap`` [B, N + 1] is the value of
+    observation j (the one before step j), 0 at j = N because the episode terminates
+    after step N - 1. For step t:
+
+        td_target_t = Σ_{k<n, t+k<N} γ^k r_{t+k}  +  γ^n · bootstrap[t + n]
+
+    with bootstrap beyond N read as 0. With n = 1 this is r_t + γ · bootstrap[t + 1].
+    """
+    steps = rewards.shape[1]
+    discounts = gamma ** torch.arange(n_step, dtype=rewards.dtype, device=rewards.device)  # [n]
+    windows = F.pad(rewards, (0, n_step - 1)).unfold(1, n_step, 1)  # [B, N, n]
+    reward_sums = (windows * discounts).sum(dim=2)  # [B, N]
+    future = F.pad(bootstrap, (0, n_step - 1))[:, n_step : n_step + steps]  # [B, N]
+    return reward_sums + gamma**n_step * future
+
+
+def td_loss(
+    online: torch.nn.Module,
+    target: torch.nn.Module,
+    batch: EpisodeBatchArrays,
+    settings: DQNConfig,
+) -> torch.Tensor:
+    """Double-Q TD loss over every step of the sampled episodes."""
+    return training_losses(online, target, batch, settings)[0]
+
+
+@torch.no_grad()
+def soft_update(target: torch.nn.Module, online: torch.nn.Module, tau: float) -> None:
+    """target <- tau * online + (1 - tau) * target."""
+    for target_param, online_param in zip(target.parameters(), online.parameters(), strict=True):
+        target_param.lerp_(online_param, tau)

@@ -34,10 +34,9 @@ from spikectl.training.cuda_graphs import (
     make_capturable,
     update_snapshot,
 )
-from spikectl.training.learners.dqn import DQNLearner
-from spikectl.training.learners.dqn_losses import batch_tensors, losses_on_tensors
+from spikectl.training.learners.dqn import DQNLearner, losses_on_tensors
 from spikectl.training.learners.protocol import LossDiverged
-from spikectl.training.learners.q_learning import explore, set_learning_rate
+from spikectl.training.learners.q_learning import batch_tensors, explore, set_learning_rate
 from spikectl.training.stacked_update import clip_grad_norm_per_seed, stack_seeds
 
 

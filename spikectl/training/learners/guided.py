@@ -27,6 +27,7 @@ from typing import Any
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from spikectl.agents import make_connectivity_predictor, masked_q
 from spikectl.contexts import ContextSet
@@ -34,13 +35,10 @@ from spikectl.envs.rollout import EpisodeBatch
 from spikectl.planning import IdentifyAndPlan
 from spikectl.planning.policy import environment_settings
 from spikectl.seeds import CONNECTIVITY_HEAD_STREAM, torch_seed
-from spikectl.training.learners.dqn import DQNLearner
-from spikectl.training.learners.dqn_losses import (
-    batch_tensors,
-    connectivity_loss,
-    losses_on_tensors,
-)
+from spikectl.training.learners.dqn import DQNLearner, losses_on_tensors
+from spikectl.training.learners.q_learning import batch_tensors
 from spikectl.training.learners.teachers import TeacherMixedPolicy, teacher_labels
+from spikectl.training.replay import EpisodeReplay
 
 
 def large_margin_loss(
@@ -69,6 +67,18 @@ def large_margin_loss(
     return loss, agreement
 
 
+def connectivity_loss(
+    head: torch.nn.Module, features: torch.Tensor, target_inputs: torch.Tensor
+) -> torch.Tensor:
+    """The privileged auxiliary loss: cross-entropy of the head's every-step guess of each
+    observed neuron's synapse onto the target, from the features [B, N + 1, (n,) D],
+    against the training network's signs ``target_inputs`` [B, n] (-1, 0, +1), averaged
+    over episodes, steps and neurons."""
+    logits = head(features)  # [B, N+1, n, 3]
+    classes = (target_inputs.long() + 1)[:, None].expand(-1, logits.shape[1], -1)  # [B, N+1, n]
+    return F.cross_entropy(logits.flatten(0, 2), classes.flatten())
+
+
 class GuidedDQNLearner(DQNLearner):
     """One seed's teacher-guided learner (``Experiment.learner`` a GuidedConfig)."""
 
@@ -77,10 +87,21 @@ class GuidedDQNLearner(DQNLearner):
         "connectivity_loss",
     )  # fmt: skip
 
-    labelled_replay = True
-
     def __init__(self, config, train_set: ContextSet, rng: np.random.Generator) -> None:
         super().__init__(config, train_set, rng)
+        # The privileged connectivity head trains beside the network and the voltage
+        # head, in one Adam (made again with it: Adam draws nothing and has not stepped).
+        self.connectivity_head = self.build_connectivity_head(config)
+        if self.connectivity_head is not None:
+            self.trained += list(self.connectivity_head.parameters())
+            self.optimizer = torch.optim.Adam(self.trained, lr=self.settings.learning_rate)
+        self.stores_target_inputs = self.connectivity_head is not None
+        """Whether each stored episode keeps its network's target inputs (privileged)."""
+        # The buffer keeps the teacher's label of every step (and the target's inputs).
+        self.replay = EpisodeReplay(
+            self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
+            labelled=True, privileged=self.stores_target_inputs,
+        )  # fmt: skip
         self.contexts = list(train_set)
         self.params = config.env.params
         self.noise_mV = float(config.env.extensions.observation_noise_mV)
@@ -153,7 +174,10 @@ class GuidedDQNLearner(DQNLearner):
             )  # fmt: skip
             self.teacher_seconds += time.process_time() - started
         told = self.target_inputs[contexts] if self.stores_target_inputs else None
-        self.add_to_replay(episodes, contexts, labels, told)
+        self.replay.add(
+            episodes.voltage, episodes.actions, episodes.rewards, self.targets[contexts],
+            self.patterns[contexts], episodes.action_mask, labels, told,
+        )  # fmt: skip
 
     def batch_loss(self, batch, episode: int) -> torch.Tensor:
         weight = self.imitation_weight(episode)
@@ -234,4 +258,4 @@ class GuidedDQNLearner(DQNLearner):
         self.connectivity_count = int(state.get("connectivity_count", 0))
 
 
-__all__ = ["GuidedDQNLearner", "large_margin_loss"]
+__all__ = ["GuidedDQNLearner", "connectivity_loss", "large_margin_loss"]

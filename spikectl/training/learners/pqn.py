@@ -34,18 +34,16 @@ from spikectl.agents import masked_q
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.training.agent_network import build_network
-from spikectl.training.learners.dqn_losses import (
-    batch_tensors,
-    next_voltage_loss,
-    online_forward,
-    td_regression_loss,
-)
 from spikectl.training.learners.pqn_config import PQNConfig
 from spikectl.training.learners.q_learning import (
     QLearner,
+    batch_tensors,
     build_predictor,
     gradient_step,
+    next_voltage_loss,
+    online_forward,
     set_learning_rate,
+    td_regression_loss,
 )
 from spikectl.training.replay import EpisodeBatchArrays
 
@@ -81,7 +79,7 @@ def pqn_losses(
     predictor: torch.nn.Module | None = None,
 ) -> tuple[torch.Tensor, torch.Tensor | None]:
     """The Q(lambda) TD loss over every step of a minibatch of whole episodes
-    (:func:`~spikectl.training.learners.dqn_losses.batch_tensors`' output) and, with a
+    (:func:`~spikectl.training.learners.q_learning.batch_tensors`' output) and, with a
     ``predictor``, the auxiliary next-voltage loss (None without one)."""
     obs_seq, actions, rewards, legal = (
         tensors["obs_seq"], tensors["actions"], tensors["rewards"], tensors["legal"]

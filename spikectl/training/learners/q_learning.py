@@ -1,7 +1,10 @@
 """The pieces every Q-learner of the loop shares (the double-Q learner's, the guided
 learner's and PQN's): epsilon-greedy collection on the online network, the online and
-target networks (``spikectl.training.agent_network`` builds the agent's), the learning-rate
-setter a CUDA graph can read, one gradient step, and the metrics row of running loss sums.
+target networks (``spikectl.training.agent_network`` builds the agent's) and the
+auxiliary next-voltage head, the learning-rate setter a CUDA graph can read, one gradient
+step, the metrics row of running loss sums, and the sampled episodes as the networks'
+sequence input with the losses every Q-learner computes alike (the TD regression and the
+auxiliary next-voltage loss). The double-Q maths itself is in ``learners/dqn.py``.
 """
 
 from __future__ import annotations
@@ -12,13 +15,16 @@ from typing import Any
 
 import numpy as np
 import torch
+import torch.nn.functional as F
 
 from spikectl.agents import make_voltage_predictor
+from spikectl.agents.features import normalised_voltage
 from spikectl.agents.greedy import GreedyController
 from spikectl.envs.env_support import random_legal_actions
 from spikectl.seeds import AUX_HEAD_STREAM, torch_seed
 from spikectl.training.agent_network import build_network
 from spikectl.training.learners.protocol import LossDiverged
+from spikectl.training.replay import EpisodeBatchArrays
 
 
 class EpsilonGreedyPolicy(GreedyController):
@@ -156,3 +162,64 @@ def gradient_step(learner: Any, loss: torch.Tensor) -> None:
     learner.optimizer.step()
     learner.updates += 1
     learner.loss_count += 1
+
+
+def sequence_observations(batch: EpisodeBatchArrays, device: str) -> dict[str, torch.Tensor]:
+    """Stored episodes → the networks' sequence input, observations 0..N (N + 1 steps)."""
+    size, length = batch.actions.shape
+    voltage = torch.as_tensor(batch.voltage, device=device)  # [B, N+1, n]
+    actions = torch.as_tensor(batch.actions, device=device)  # [B, N]
+    no_action = torch.full((size, 1), -1, dtype=torch.long, device=device)
+    return {
+        "voltage": voltage,
+        "last_action": torch.cat([no_action, actions], dim=1),  # [B, N+1]
+        "step": torch.arange(length + 1, device=device).expand(size, -1),  # [B, N+1]
+        "target": torch.as_tensor(batch.targets, device=device)[:, None].expand(-1, length + 1),
+        "pattern": torch.as_tensor(batch.patterns, device=device, dtype=torch.float32)[
+            :, None
+        ].expand(-1, length + 1, -1),  # [B, N+1, N]
+    }
+
+
+def batch_tensors(batch: EpisodeBatchArrays, device: str) -> dict[str, torch.Tensor]:
+    """Sampled episodes as the tensors the losses read (``obs_seq`` is a nested dict)."""
+    return {
+        "obs_seq": sequence_observations(batch, device),
+        "actions": torch.as_tensor(batch.actions, device=device),  # [B, N]
+        "rewards": torch.as_tensor(batch.rewards, device=device),  # [B, N]
+        "legal": torch.as_tensor(batch.action_masks, device=device)[:, None],  # [B, 1, n+1]
+    }
+
+
+def online_forward(
+    online, obs_seq: dict[str, torch.Tensor], with_features: bool
+) -> tuple[torch.Tensor, torch.Tensor | None]:
+    """The sequence forward from a zero state: Q-values [B, N + 1, n + 1] and, when
+    ``with_features`` (an auxiliary head reads them), the encoder's features
+    [B, N + 1, (n,) D] (else None)."""
+    if not with_features:
+        q_values, _ = online(obs_seq)  # [B, N+1, n+1]
+        return q_values, None
+    features, _ = online.encode(obs_seq)  # [B, N+1, (n,) D]
+    return online.q_values(features, obs_seq), features  # [B, N+1, n+1]
+
+
+def td_regression_loss(q_taken: torch.Tensor, td_target: torch.Tensor, loss: str) -> torch.Tensor:
+    """Mean over batch and steps of (q_taken - td_target)^2 (``"mse"``) or its Huber
+    form with delta 1 (``"huber"``)."""
+    if loss == "huber":
+        return F.smooth_l1_loss(q_taken, td_target)
+    return F.mse_loss(q_taken, td_target)
+
+
+def next_voltage_loss(
+    online, predictor, features: torch.Tensor, obs_seq: dict[str, torch.Tensor],
+    actions: torch.Tensor,
+) -> torch.Tensor:  # fmt: skip
+    """The auxiliary loss: MSE of the predictor's every-neuron next normalised voltage,
+    read from the features at t [B, N + 1, (n,) D] and the action at t [B, N]."""
+    next_voltage = normalised_voltage(
+        obs_seq["voltage"][:, 1:], online.v_rest_mV, online.v_threshold_mV
+    )  # [B, N, n]
+    predicted = predictor(features[:, :-1], actions)  # [B, N, n]
+    return F.mse_loss(predicted, next_voltage)
