@@ -90,11 +90,12 @@ class GuidedDQNLearner(DQNLearner):
     def __init__(self, config, train_set: ContextSet, rng: np.random.Generator) -> None:
         super().__init__(config, train_set, rng)
         # The privileged connectivity head trains beside the network and the voltage
-        # head, in one Adam (made again with it: Adam draws nothing and has not stepped).
+        # head, in one optimiser: the double-Q learner's, made again with the same
+        # settings over its parameters and the head's (it draws nothing, has not stepped).
         self.connectivity_head = self.build_connectivity_head(config)
         if self.connectivity_head is not None:
             self.trained += list(self.connectivity_head.parameters())
-            self.optimizer = torch.optim.Adam(self.trained, lr=self.settings.learning_rate)
+            self.optimizer = type(self.optimizer)(self.trained, **self.optimizer.defaults)
         self.stores_target_inputs = self.connectivity_head is not None
         """Whether each stored episode keeps its network's target inputs (privileged)."""
         # The buffer keeps the teacher's label of every step (and the target's inputs).
