@@ -51,9 +51,12 @@ MAX_RANDOM_SEEDS = 1000
 CSV_FIELDS = (
     "suite_version", "task", "split", "controller", "model", "seeds", "mean_return",
     "standard_error", "sd_over_seeds", "normalised", "do_nothing", "oracle", "cpu_seconds",
-    "contexts", "trained_on",
+    "contexts", "trained_on", "composition",
 )  # fmt: skip
-PER_NETWORK_FIELDS = ("suite_version", "task", "split", "controller", "model", "context", "return")
+PER_NETWORK_FIELDS = ("suite_version", "task", "split", "controller", "model", "context", "return",
+                      "composition")  # fmt: skip
+"""``composition``: the name of the composition a composed controller played on the task
+(identify-and-plan's, :mod:`spikectl.planning.named`); empty for the others."""
 
 
 def benchmark(command: BenchmarkCommand) -> None:
@@ -104,11 +107,16 @@ def score_and_write(command: BenchmarkCommand) -> None:
           f"{'oracle':>9}{'CPU s':>9}")  # fmt: skip
     rows, per_network, normalised = [], [], {}
     for name in names:
-        result = suite.score(name, command.split, make(name), seeds, version.number)
+        played = []  # the controllers made, to name the composition they played
+        make_one = make(name)
+        result = suite.score(name, command.split,
+                             lambda seed: played.append(make_one(seed)) or played[-1], seeds,
+                             version.number)
+        composition = composition_of(played[0])
         per_network += [
             {"suite_version": version.number, "task": name, "split": command.split,
              "controller": command.controller, "model": model_label(command),
-             "context": index, "return": repr(float(value))}
+             "context": index, "return": repr(float(value)), "composition": composition}
             for index, value in enumerate(result.returns)
         ]  # fmt: skip
         nothing, oracle = suite.references(name, command.split, version.number)
@@ -126,6 +134,7 @@ def score_and_write(command: BenchmarkCommand) -> None:
             "normalised": f"{normalised[name]:.6f}", "do_nothing": f"{nothing:.6f}",
             "oracle": f"{oracle:.6f}", "cpu_seconds": f"{result.cpu_seconds:.3f}",
             "contexts": len(result.returns), "trained_on": origin or "",
+            "composition": composition,
         })  # fmt: skip
     if len(names) > 1:
         print(f"mean normalised score over {len(names)} tasks: "
@@ -156,6 +165,11 @@ def training_task(command: BenchmarkCommand) -> str | None:
         return None
     return suite.trained_on(read_config(source), ContextSet.load(source / TRAIN_FILE),
                             command.suite)  # fmt: skip
+
+
+def composition_of(controller: Any) -> str:
+    """The name of the composition ``controller`` plays ("" where it is not composed)."""
+    return str(getattr(getattr(controller, "composition", None), "name", ""))
 
 
 def model_label(command: BenchmarkCommand) -> str:

@@ -5,8 +5,8 @@ decides by a look-ahead on the network it has identified, which a student that s
 only potentials (or even the planner's belief, :mod:`spikectl.planning.belief`) does
 not reproduce. :class:`PlannerAdvice` plays the planner itself beside a policy, as a
 shadow: every episode of a batch has its own :class:`~spikectl.planning.policy.IdentifyAndPlan`
-with the settings the named ``identify-and-plan`` plays the environment with
-(:func:`~spikectl.planning.policy.environment_settings`), which observes the episode the
+with the composition the named ``identify-and-plan`` plays the environment with
+(:func:`~spikectl.planning.named.named_composition`), which observes the episode the
 policy plays (the policy's actions, not its own) and says, at each step, which action it
 would take. For every observed neuron i:
 
@@ -28,7 +28,8 @@ import numpy as np
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING
-from spikectl.planning.policy import IdentifyAndPlan, environment_settings
+from spikectl.planning.named import named_composition
+from spikectl.planning.policy import IdentifyAndPlan
 
 ADVICE_FEATURES = ("advised", "waits")
 """The per-neuron features of :class:`PlannerAdvice`, in order."""
@@ -61,8 +62,8 @@ class PlannerAdvice:
 
     def _new_planner(self, n: int) -> IdentifyAndPlan:
         """The named identify-and-plan on this environment, with ``n`` observed neurons."""
-        settings = environment_settings(self.extensions, n)
-        return IdentifyAndPlan(self.params, noise_mV=self.noise_mV, **settings)
+        composition = named_composition(self.extensions, n)
+        return IdentifyAndPlan(self.params, composition, extensions=self.extensions)
 
     def __call__(
         self, observations: Mapping[str, np.ndarray], action_mask: np.ndarray

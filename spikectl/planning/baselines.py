@@ -93,8 +93,9 @@ def run_baselines(
             come from the set); None: the set's own.
         random_seeds: seeds 0 .. random_seeds - 1 of the random policy.
         oracle_width: beam width of the oracle planner.
-        policy: the identify-and-plan settings; ``IdentifyAndPlan(contexts.params,
-            noise_mV=sigma)`` with the extensions' measurement noise when None.
+        policy: the identify-and-plan controller; when None, ``IdentifyAndPlan(
+            contexts.params, extensions=...)``, the paper's composition told the
+            environment's measurement noise.
         env_seed: seed of the environments' generators (noise, stochastic release).
     """
     if random_seeds < 1:
@@ -108,7 +109,7 @@ def run_baselines(
     env = NeuronControlVectorEnv(num_envs=len(contexts), contexts=contexts, extensions=extensions)
     params = contexts.params
     if policy is None:
-        policy = IdentifyAndPlan(params, noise_mV=env.extensions.observation_noise_mV)
+        policy = IdentifyAndPlan(params, extensions=env.extensions)
     indices = np.arange(len(contexts))
 
     def play(controller: Controller) -> np.ndarray:

@@ -26,6 +26,8 @@ inputs, times a small weight.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from spikectl.envs.env_support import step_rewards
@@ -38,18 +40,65 @@ from spikectl.planning.beam import state_signature_rows, take_states
 # Weight of the target's depolarisation (mV) in the ranking: breaks ties only (as in beam).
 _TIE_BREAK = 1e-6
 _PROJECTION_SEED = 20261122
+# Q values this close to the best count as tied (float round-off of the weighted mean).
+_TIE_TOLERANCE = 1e-12
+
+
+@dataclass(frozen=True)
+class Episode:
+    """The episode a decision is taken in: what every valued action is played against.
+
+    Attributes:
+        pattern: [N] bool target pattern of the episode.
+        target: the rewarded neuron.
+        actions: int64 [A] the legal simulator actions, do nothing (-1) first.
+        params: the neuron parameters.
+    """
+
+    pattern: np.ndarray
+    target: int
+    actions: np.ndarray
+    params: NeuronParams
+
+
+@dataclass(frozen=True)
+class QMDPSettings:
+    """How the expected-return choice values actions (the decision rule's "gamble").
+
+    Attributes:
+        networks: K, the networks drawn from the estimate.
+        information: the bonus, in units of return per nat, for stimulating a ready
+            neuron whose synapse onto the target is unknown (the entropy of that synapse
+            over the K networks): QMDP alone values no information and waits (chosen on
+            validation networks, docs/baselines.md).
+        horizon: steps each action is valued over, its own included.
+        width: beam width of the best continuation on each drawn network.
+        candidates: at most this many actions are valued (do nothing, the probe and the
+            likeliest excitatory inputs of the target), for large n.
+    """
+
+    networks: int = 16
+    information: float = 0.03
+    horizon: int = 10
+    width: int = 8
+    candidates: int = 8
+
+    def __post_init__(self) -> None:
+        for name, least in (("networks", 1), ("horizon", 1), ("width", 1), ("candidates", 2)):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < least:
+                raise ValueError(f"{name} must be an integer >= {least}, got {value!r}")
+        if isinstance(self.information, bool) or not self.information >= 0:
+            raise ValueError(f"information must be >= 0, got {self.information!r}")
 
 
 def best_returns(
     weights: np.ndarray,
     start: SimulatorState,
-    pattern: np.ndarray,
+    episode: Episode,
     start_step: int,
     horizon: int,
     width: int,
-    actions: np.ndarray,
-    target: int,
-    params: NeuronParams,
 ) -> np.ndarray:
     """[P] the best return over steps start_step .. start_step + horizon - 1 found for
     each of P independent problems (problem p: network ``weights[p]`` from row p of
@@ -58,16 +107,14 @@ def best_returns(
     Args:
         weights: [P, n, n] int8 or float64 signed weights in units of w_in.
         start: the P start states (advanced copies are made; ``start`` is not changed).
-        pattern: [N] bool target pattern of the episode.
+        episode: the pattern, target, legal actions and neuron model.
         start_step: the first step searched.
         horizon: steps searched (cut at the episode's end); 0 returns zeros.
         width: states kept per problem and step.
-        actions: int64 [A] legal simulator actions, do nothing (-1) first.
-        target: the rewarded neuron.
-        params: the neuron parameters.
     """
+    actions, target, params = episode.actions, episode.target, episode.params
     problems = weights.shape[0]
-    pattern = np.asarray(pattern, dtype=bool)
+    pattern = np.asarray(episode.pattern, dtype=bool)
     end = min(pattern.shape[0], start_step + horizon)
     if end <= start_step:
         return np.zeros(problems)
@@ -120,13 +167,9 @@ def expected_returns(
     network_weights: np.ndarray,
     state: SimulatorState,
     candidates: np.ndarray,
-    actions: np.ndarray,
-    pattern: np.ndarray,
+    episode: Episode,
     step: int,
-    horizon: int,
-    width: int,
-    target: int,
-    params: NeuronParams,
+    settings: QMDPSettings,
 ) -> np.ndarray:
     """[A0] Q(a) for each candidate action: the w-weighted mean over the K networks of
     the reward of ``step`` after a plus the best return of the next ``horizon - 1``
@@ -137,14 +180,13 @@ def expected_returns(
         network_weights: [K] non-negative importance weights (not all 0).
         state: the current simulator state (batch of one), before ``step``.
         candidates: int64 [A0] the actions to value (legal ones).
-        actions: int64 [A] the legal actions of the continuations, do nothing first.
-        pattern, step, target, params: the episode, the current step, the target, the model.
-        horizon: steps valued, this one included (>= 1).
-        width: beam width of each continuation.
+        episode: the episode (its legal actions are the continuations').
+        step: the current step.
+        settings: ``horizon`` (steps valued, this one included) and ``width`` (beam
+            width of each continuation).
     """
+    pattern, target, params = episode.pattern, episode.target, episode.params
     k, n_candidates = networks.shape[0], candidates.shape[0]
-    if horizon < 1:
-        raise ValueError(f"horizon must be >= 1, got {horizon}")
     total = float(np.sum(network_weights))
     if not total > 0:
         raise ValueError("network_weights must have a positive sum")
@@ -158,7 +200,7 @@ def expected_returns(
     reward_if_spike, reward_if_silent = step_rewards(np.asarray(pattern, dtype=bool))
     values = np.where(spikes[:, 0, target], reward_if_spike[step], reward_if_silent[step])
     values = values + best_returns(
-        weights, start, pattern, step + 1, horizon - 1, width, actions, target, params
+        weights, start, episode, step + 1, settings.horizon - 1, settings.width
     )
     return portable.matmul(network_weights / total, values.reshape(k, n_candidates))  # [A0]
 
@@ -201,55 +243,47 @@ def qmdp_action(
     networks: np.ndarray,
     excitation: np.ndarray,
     state: SimulatorState,
-    ready: np.ndarray,
-    known_target_synapse: np.ndarray,
+    teachable: np.ndarray,
     probe: int,
-    legal: np.ndarray,
-    pattern: np.ndarray,
+    episode: Episode,
     step: int,
-    target: int,
-    params: NeuronParams,
-    horizon: int,
-    width: int,
-    information: float,
-    max_candidates: int,
+    settings: QMDPSettings,
 ) -> int:
     """The legal action of highest Q (:func:`expected_returns`, the networks weighted by
-    :func:`context_likelihood`) plus ``information`` times the entropy of the stimulated
-    neuron's synapse onto the target, where that neuron is ready and the synapse
-    unknown. Ties go to ``probe``, then to do nothing.
+    :func:`context_likelihood`) plus ``settings.information`` times the entropy of the
+    stimulated neuron's synapse onto the target, where that neuron is ``teachable``.
+    Ties go to ``probe``, then to do nothing.
 
     Args:
         networks: [K, n, n] int8 networks drawn from the estimate.
         excitation: [n] P(neuron excites the target), to pick the candidates when more
-            than ``max_candidates`` actions are legal (do nothing, the probe and the
+            than ``settings.candidates`` actions are legal (do nothing, the probe and the
             likeliest excitatory inputs are valued).
         state: the current simulator state (batch of one).
-        ready: [n] bool, neurons that release if they spike now.
-        known_target_synapse: [n] bool, synapses onto the target the estimate knows.
+        teachable: [n] bool, neurons that release if they spike now and whose synapse
+            onto the target the estimate does not know.
         probe: the action the probing rule would take (a legal action).
-        legal: int64 [A] legal actions, do nothing (-1) first.
-        pattern, step, target, params: the episode, the current step, the target, the model.
-        horizon, width: of each continuation (:func:`expected_returns`).
-        information: the bonus per nat.
-        max_candidates: at most this many actions are valued.
+        episode: the pattern, target, legal actions (do nothing first) and the model.
+        step: the current step.
+        settings: the continuations' horizon and width, the bonus per nat and the most
+            actions valued.
     """
-    legal = np.asarray(legal, dtype=np.int64)
-    likelihood = context_likelihood(networks, target, pattern, legal.shape[0])
+    legal = np.asarray(episode.actions, dtype=np.int64)
+    target = episode.target
+    likelihood = context_likelihood(networks, target, episode.pattern, legal.shape[0])
     if not likelihood.sum() > 0:
         likelihood = np.ones(networks.shape[0])  # the estimate contradicts the context
     candidates = legal
-    if legal.shape[0] > max_candidates:
+    if legal.shape[0] > settings.candidates:
         neurons = legal[1:][np.argsort(-excitation[legal[1:]], kind="stable")]
         keep = dict.fromkeys([int(legal[0]), probe, *neurons.tolist()])
-        candidates = np.array(list(keep)[:max_candidates], dtype=np.int64)
-    values = expected_returns(networks, likelihood, state, candidates, legal, pattern, step,
-                              horizon, width, target, params)  # fmt: skip
+        candidates = np.array(list(keep)[: settings.candidates], dtype=np.int64)
+    values = expected_returns(networks, likelihood, state, candidates, episode, step, settings)
     entropy = synapse_entropy(networks[:, :, target], likelihood)  # [n]
     neuron = np.maximum(candidates, 0)
-    teaches = (candidates >= 0) & ready[neuron] & ~known_target_synapse[neuron]
-    values = values + information * np.where(teaches, entropy[neuron], 0.0)
+    teaches = (candidates >= 0) & teachable[neuron]
+    values = values + settings.information * np.where(teaches, entropy[neuron], 0.0)
     probe_value = values[np.flatnonzero(candidates == probe)[0]]
-    if probe_value >= values.max() - 1e-12:
+    if probe_value >= values.max() - _TIE_TOLERANCE:
         return int(probe)
     return int(candidates[np.argmax(values)])

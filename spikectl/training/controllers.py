@@ -32,7 +32,8 @@ from spikectl.file_kinds import FileKind, refuse_other_kinds
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
-from spikectl.planning.policy import IdentifyAndPlan, environment_settings
+from spikectl.planning.named import named_composition
+from spikectl.planning.policy import IdentifyAndPlan
 from spikectl.registry import Registry, load_target
 
 
@@ -89,12 +90,10 @@ def random_legal(played: Played, seed: int) -> Controller:
 
 
 def identify_and_plan(played: Played, seed: int) -> Controller:
-    # The environment's extensions choose the observation model (environment_settings).
+    # The environment's extensions and size choose the composition (planning/named.py).
     n_neurons = None if played.contexts is None else played.contexts.n_observed
-    return IdentifyAndPlan(
-        played.params, noise_mV=played.extensions.observation_noise_mV,
-        **environment_settings(played.extensions, n_neurons),
-    )  # fmt: skip
+    composition = named_composition(played.extensions, n_neurons)
+    return IdentifyAndPlan(played.params, composition, extensions=played.extensions)
 
 
 def oracle(played: Played, seed: int) -> Controller:
@@ -208,7 +207,7 @@ def load_controller(
     The named ones are made from what is played (:class:`Played`): the neuron model,
     the environment's extensions (the measurement noise, whether stimulating the target
     is legal; identify-and-plan's observation model,
-    :func:`~spikectl.planning.policy.environment_settings`), and the contexts (which
+    :func:`~spikectl.planning.named.named_composition`), and the contexts (which
     the privileged ones, oracle and witness, need) from ``env`` (a ``NeuronControlEnv`` or
     ``NeuronControlVectorEnv``) where it is given, else from ``contexts``; the neuron
     model is then the contexts' own (``contexts.params``), and ``params`` serves where

@@ -32,12 +32,11 @@ import torch.nn.functional as F
 from spikectl.agents import make_connectivity_predictor, masked_q
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
-from spikectl.planning import IdentifyAndPlan
-from spikectl.planning.policy import environment_settings
+from spikectl.planning import Composition, IdentifyAndPlan, named_composition
 from spikectl.seeds import CONNECTIVITY_HEAD_STREAM, torch_seed
 from spikectl.training.learners.dqn import DQNLearner, losses_on_tensors
 from spikectl.training.learners.q_learning import batch_tensors
-from spikectl.training.learners.teachers import TeacherMixedPolicy, teacher_labels
+from spikectl.training.learners.teachers import TeacherMixedPolicy, at_width, teacher_labels
 from spikectl.training.replay import EpisodeReplay
 
 
@@ -105,13 +104,13 @@ class GuidedDQNLearner(DQNLearner):
         )  # fmt: skip
         self.contexts = list(train_set)
         self.params = config.env.params
-        self.noise_mV = float(config.env.extensions.observation_noise_mV)
-        # The identify teacher's settings: the named controller's on this environment, in
-        # the form whose every decision is fast (it labels every step), or the defaults.
-        self.teacher_settings = (
-            environment_settings(config.env.extensions, config.env.n_observed, fast=True)
+        self.extensions = config.env.extensions
+        # The identify teacher's composition: the named controller's on this environment,
+        # in the form whose every decision is fast (it labels every step), or the paper's.
+        self.teacher_composition = (
+            named_composition(config.env.extensions, config.env.n_observed, fast=True)
             if self.settings.teacher_settings == "task"
-            else {}
+            else Composition()
         )
         if (
             self.settings.teacher == "told-weights"
@@ -155,8 +154,11 @@ class GuidedDQNLearner(DQNLearner):
         # Drawn only while the teacher plays, so runs without it keep their draws.
         teacher_plays = self.rng.random(self.num_envs) < share  # [S]
         # Only the realisable teacher plays (GuidedConfig refuses the other).
-        teacher = functools.partial(IdentifyAndPlan, self.params, width=self.settings.teacher_width,
-                                    noise_mV=self.noise_mV, **self.teacher_settings)  # fmt: skip
+        teacher = functools.partial(
+            IdentifyAndPlan, self.params,
+            at_width(self.teacher_composition, self.settings.teacher_width),
+            extensions=self.extensions,
+        )  # fmt: skip
         self.mixed_policy = TeacherMixedPolicy(student, teacher_plays, teacher)
         return self.mixed_policy
 
@@ -170,8 +172,8 @@ class GuidedDQNLearner(DQNLearner):
             started = time.process_time()
             labels = teacher_labels(
                 episodes, [self.contexts[i] for i in contexts], self.settings.teacher,
-                self.params, self.noise_mV, self.settings.teacher_width,
-                played=played, settings=self.teacher_settings,
+                self.params, self.extensions, self.settings.teacher_width,
+                played=played, composition=self.teacher_composition,
             )  # fmt: skip
             self.teacher_seconds += time.process_time() - started
         told = self.target_inputs[contexts] if self.stores_target_inputs else None

@@ -38,7 +38,7 @@ class GuidedConfig(DQNConfig):
     teacher_settings: Literal["task", "defaults"] = "task"
     """The ``identify`` teacher's other settings. ``task``: those the named
     ``identify-and-plan`` plays on the training environment, in the form whose every
-    decision is fast (``environment_settings(..., fast=True)``: the task's observation
+    decision is fast (``named_composition(..., fast=True)``: the task's observation
     model under noise, the extensions, the relays through hidden neurons; from 16 neurons
     on ``known_sd`` 0.4 and no QMDP). ``defaults``: the constructor's defaults on every
     environment (the teacher of the runs saved before this setting existed). On the
@@ -95,9 +95,9 @@ class GuidedConfig(DQNConfig):
         them on the environment ``env`` (an ``EnvConfig``): ``teacher_settings`` was the
         constructor's defaults, which are the task's own where the two are the same (the
         paper's environment), so those runs read back as today's preset."""
-        from spikectl.planning.policy import environment_settings
+        from spikectl.planning.named import composition_name
 
-        same = environment_settings(env.extensions, env.n_observed, fast=True) == {}
+        same = composition_name(env.extensions, env.n_observed, fast=True) == "paper"
         return {"teacher_settings": "task" if same else "defaults"}
 
     def teacher_share_at(self, episode: int, total_episodes: int) -> float:

@@ -10,41 +10,52 @@ on nothing but those observations (and, for the privileged teacher, the weights)
 
 from __future__ import annotations
 
+import dataclasses
 import time
-from collections.abc import Callable, Mapping, Sequence
-from typing import Any
+from collections.abc import Callable, Sequence
 
 import numpy as np
 
 from spikectl.contexts import Context
 from spikectl.envs.rollout import EpisodeBatch
+from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.planning import IdentifyAndPlan
+from spikectl.planning import Composition, IdentifyAndPlan
 
 
 def make_teacher(
     teacher: str,
     context: Context,
     params: NeuronParams,
-    noise_mV: float,
+    extensions: Extensions | None,
     width: int,
-    settings: Mapping[str, Any] | None = None,
+    composition: Composition | None = None,
 ) -> IdentifyAndPlan:
-    """A fresh teacher for one episode on ``context``: identify-and-plan
-    (``"identify"``, with the constructor's further ``settings``, e.g. the environment's
-    from :func:`~spikectl.planning.policy.environment_settings`) or the constructor's
-    loop told the context's weights (``"told-weights"``)."""
+    """A fresh teacher for one episode on ``context`` in an environment with
+    ``extensions``: identify-and-plan (``"identify"``, playing ``composition``, e.g. the
+    environment's :func:`~spikectl.planning.named.named_composition` with ``fast=True``;
+    None: the paper's) or the paper's composition told the context's weights
+    (``"told-weights"``), each planning at beam ``width``."""
     if teacher == "identify":
-        return IdentifyAndPlan(params, width=width, noise_mV=noise_mV, **(settings or {}))
+        return IdentifyAndPlan(params, at_width(composition or Composition(), width),
+                               extensions=extensions)  # fmt: skip
     if teacher == "told-weights":
         if context.n_observed != context.n_neurons:
             raise ValueError(
                 "teacher 'told-weights' needs every neuron observed; this environment "
                 "hides some (use teacher 'identify')"
             )
-        return IdentifyAndPlan(params, width=width, noise_mV=noise_mV,
-                               known_weights=context.weights)  # fmt: skip
+        return IdentifyAndPlan(params, at_width(Composition(), width), extensions=extensions,
+                               told_weights=context.weights)  # fmt: skip
     raise ValueError(f"unknown teacher {teacher!r}: 'identify' or 'told-weights'")
+
+
+def at_width(composition: Composition, width: int) -> Composition:
+    """``composition`` re-planning at beam ``width`` (the teacher's setting)."""
+    if width == composition.decision.width:
+        return composition
+    decision = dataclasses.replace(composition.decision, width=width)
+    return composition.but(f"{composition.name}-width{width}", decision=decision)
 
 
 class TeacherMixedPolicy:
@@ -75,14 +86,14 @@ def teacher_labels(
     contexts: Sequence[Context],
     teacher: str,
     params: NeuronParams,
-    noise_mV: float = 0.0,
+    extensions: Extensions | None = None,
     width: int = 32,
     played: np.ndarray | None = None,
-    settings: Mapping[str, Any] | None = None,
+    composition: Composition | None = None,
 ) -> np.ndarray:
     """[S, N] int16: the teacher's action at every step of each of the S episodes
     (episode s played ``contexts[s]``), in the agent's indexing (-1 = do nothing);
-    ``settings`` as :func:`make_teacher`'s.
+    ``extensions`` and ``composition`` as :func:`make_teacher`'s.
     Episodes the teacher played itself (``played[s]``) are labelled with their actions
     (what it would do again), without playing it a second time."""
     count, length = episodes.actions.shape
@@ -93,7 +104,7 @@ def teacher_labels(
         if played is not None and played[s]:
             labels[s] = episodes.actions[s]
             continue
-        policy = make_teacher(teacher, context, params, noise_mV, width, settings)
+        policy = make_teacher(teacher, context, params, extensions, width, composition)
         info = {"action_mask": episodes.action_mask[s]}
         pattern = np.asarray(context.pattern, dtype=np.int8)
         target = context.observed_target

@@ -1,0 +1,150 @@
+"""The named controller ``identify-and-plan`` as data: one declared composition per suite
+situation, and the rule that picks one for an environment.
+
+Each composition was chosen on the suite's validation sets (docs/baselines.md, the
+research record docs/research/identify-and-plan.md):
+
+- ``paper``: the constructor's defaults (the paper's model).
+- ``noise``: under measurement noise, the exact posterior under the task's observation
+  model (``"bayes"``) with potentials filtered against the model.
+- ``stochastic``: under stochastic release, the task's observation model (releases
+  settled from the residuals, unrested inputs stimulated) and ``known_sd``
+  :data:`KNOWN_SD_STOCHASTIC_RELEASE`: a failed release teaches little, and waiting for
+  certainty costs wanted spikes.
+- ``background``: under background input, ``known_sd`` :data:`KNOWN_SD_BACKGROUND`.
+- ``heterogeneous``: the task's observation model (each neuron's threshold and leak
+  learned, known synapses planned at their estimated strength).
+- ``hidden``: with hidden neurons, the relays through them.
+
+From :data:`LARGE_FROM_NEURONS` neurons on, each is played with :data:`LARGE` on top
+(``-16``: QMDP where it would probe, ``known_sd`` :data:`KNOWN_SD_LARGE`); the paper's
+situation from :data:`PARTICLES_FROM_NEURONS` on with the particle posterior as well
+(``paper-32``). ``fast`` forms are what the guided learner's teacher plays (its labels
+cover every step of training, so every decision must be fast): the same but for QMDP and
+the particles, replaced from :data:`LARGE_FROM_NEURONS` on by :data:`KNOWN_SD_FAST_LARGE`
+alone (``-16-fast``). Below that size the fast form is the named composition itself.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+from spikectl.neuron.extensions import Extensions
+from spikectl.planning.composition import Composition
+from spikectl.planning.deciding import DecisionSettings
+from spikectl.planning.estimators import EstimatorSettings
+from spikectl.planning.observing import ObservationSettings
+from spikectl.planning.qmdp import QMDPSettings
+
+LARGE_FROM_NEURONS = 16
+"""From this many neurons on, the named controller plays its situation's composition with
+:data:`LARGE` (or :data:`FAST_LARGE`) on top: chosen on the ``n16`` and ``n32``
+validation sets; at n = 8 QMDP costs about 5x the CPU time for a gain within noise."""
+PARTICLES_FROM_NEURONS = 32
+"""From this many neurons on, where the task's extensions ask for nothing of their own,
+the named controller (not its fast form) keeps the particle posterior: chosen on the
+``n32`` validation set with QMDP, where it also takes less CPU time; on ``n16`` it did not
+score more (docs/results/particles)."""
+GAMBLE_NETWORKS = 16
+"""K, the networks QMDP draws from the estimate from :data:`LARGE_FROM_NEURONS` on."""
+KNOWN_SD_LARGE = 0.35
+"""``known_sd`` (w_in) from :data:`LARGE_FROM_NEURONS` neurons on: the generator's prior
+already puts the synapses of pairs more than 8 neurons apart below it, so the planner
+probes only the target's neighbours and plans sooner on what it knows (the best mean of
+the ``n16`` and ``n32`` validation sets)."""
+KNOWN_SD_FAST_LARGE = 0.4
+"""``known_sd`` (w_in) of the fast form from :data:`LARGE_FROM_NEURONS` neurons on,
+without QMDP: about as good as the QMDP setting at about a hundredth of its CPU time."""
+KNOWN_SD_STOCHASTIC_RELEASE = 0.4
+"""``known_sd`` (w_in) under stochastic release (the ``stochastic`` validation set)."""
+KNOWN_SD_BACKGROUND = 0.35
+"""``known_sd`` (w_in) under background input (the ``background`` validation set)."""
+
+_TASK_MODEL = ObservationSettings(task_model=True)
+
+COMPOSITIONS: dict[str, Composition] = {
+    composition.name: composition
+    for composition in (
+        Composition("paper"),
+        Composition("noise", EstimatorSettings("bayes"),
+                    ObservationSettings(task_model=True, filter_voltage=True)),
+        Composition("stochastic", EstimatorSettings(known_sd=KNOWN_SD_STOCHASTIC_RELEASE),
+                    _TASK_MODEL),
+        Composition("background", EstimatorSettings(known_sd=KNOWN_SD_BACKGROUND)),
+        Composition("heterogeneous", observation=_TASK_MODEL),
+        Composition("hidden", EstimatorSettings("relays")),
+    )
+}  # fmt: skip
+"""The situations' compositions by name (before a size's overlay)."""
+
+SITUATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("noise", ("observation_noise_mV",)),
+    ("stochastic", ("stochastic_release",)),
+    ("background", ("background_rate",)),
+    ("heterogeneous", ("threshold_spread", "time_constant_spread", "synaptic_spread")),
+    ("hidden", ("hidden_neurons", "hidden_fraction")),
+)
+"""(composition, the extension fields that ask for it): an environment plays the first
+situation one of whose fields is set (nonzero); none: ``paper``."""
+
+LARGE = {"known_sd": KNOWN_SD_LARGE, "gamble": QMDPSettings(networks=GAMBLE_NETWORKS)}
+"""The overlay from :data:`LARGE_FROM_NEURONS` neurons on (suffix ``-16``)."""
+LARGEST = {**LARGE, "kind": "particles"}
+"""The overlay of the paper's situation from :data:`PARTICLES_FROM_NEURONS` on (``-32``)."""
+FAST_LARGE = {"known_sd": KNOWN_SD_FAST_LARGE}
+"""The fast forms' overlay from :data:`LARGE_FROM_NEURONS` neurons on (``-16-fast``)."""
+
+
+def situation(extensions: Extensions | None) -> str:
+    """The situation of an environment with ``extensions`` (:data:`SITUATIONS`)."""
+    if extensions is not None:
+        for name, fields in SITUATIONS:
+            if any(getattr(extensions, field) for field in fields):
+                return name
+    return "paper"
+
+
+def composition_name(extensions: Extensions | None, n_neurons: int | None = None,
+                     fast: bool = False) -> str:  # fmt: skip
+    """The name of the composition the named controller plays on an environment with
+    ``extensions`` and ``n_neurons`` observed neurons (``fast``: the teacher's form):
+    the situation's, with the size's suffix (``-16``, ``-16-fast``, ``-32``)."""
+    name = situation(extensions)
+    if n_neurons is None or n_neurons < LARGE_FROM_NEURONS:
+        return name
+    if fast:
+        return f"{name}-16-fast"
+    if name == "paper" and n_neurons >= PARTICLES_FROM_NEURONS:
+        return "paper-32"
+    return f"{name}-16"
+
+
+def composition(name: str) -> Composition:
+    """The declared composition ``name``: a situation's (:data:`COMPOSITIONS`), or one
+    with a size's overlay (``NAME-16``, ``NAME-16-fast``, ``paper-32``)."""
+    base, _, size = name.partition("-")
+    overlays = {"": {}, "16": LARGE, "16-fast": FAST_LARGE, "32": LARGEST}
+    if base not in COMPOSITIONS or size not in overlays or (size == "32" and base != "paper"):
+        raise ValueError(f"unknown composition {name!r}; the named ones are "
+                         f"{', '.join(COMPOSITIONS)}, each also -16 and -16-fast, "
+                         "and paper-32")  # fmt: skip
+    return _overlaid(COMPOSITIONS[base], name, overlays[size])
+
+
+def named_composition(extensions: Extensions | None, n_neurons: int | None = None,
+                      fast: bool = False) -> Composition:  # fmt: skip
+    """What the named controller ``identify-and-plan`` plays on an environment with
+    ``extensions`` and ``n_neurons`` observed neurons (``spikectl benchmark``,
+    ``spikectl realtime``, ``spikectl.load_controller``); ``fast=True``: the form the
+    guided learner's teacher plays."""
+    return composition(composition_name(extensions, n_neurons, fast))
+
+
+def _overlaid(base: Composition, name: str, overlay: dict[str, Any]) -> Composition:
+    """``base`` named ``name`` with an overlay's estimator (``kind``, ``known_sd``) and
+    decision (``gamble``) settings."""
+    estimator = {key: overlay[key] for key in ("kind", "known_sd") if key in overlay}
+    decision = {key: overlay[key] for key in ("gamble",) if key in overlay}
+    return base.but(name, estimator=dataclasses.replace(base.estimator, **estimator),
+                    decision=dataclasses.replace(base.decision, **decision))  # fmt: skip

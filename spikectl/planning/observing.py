@@ -1,0 +1,168 @@
+"""Identify-and-plan's observation part: how an observation becomes evidence about G and
+the simulator state the planner starts from.
+
+On the paper's model a spike is read at the threshold and each residual over 20 mV is a
+linear equation in a column of G (:class:`~spikectl.planning.identify.ObservedState`).
+The task's own observation model changes that where the composition reads it
+(``task_model``): under measurement noise spikes are read below the threshold, or from
+potentials filtered against the model (``filter_voltage``,
+:class:`~spikectl.planning.filtering.FilteredState`); with heterogeneous neurons each
+neuron's threshold and leak are learned (:class:`~spikectl.planning.heterogeneity.
+NeuronTracker`); under stochastic release each spike's release is read back from the next
+step's residuals where they are exact (:func:`~spikectl.planning.release.
+settled_releases`), else it enters at its release chance; with a synaptic spread known
+synapses are planned at their estimated strength.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from spikectl.neuron.extensions import Extensions
+from spikectl.neuron.kernel import SINCE_RELEASE_CAP
+from spikectl.neuron.params import NeuronParams
+from spikectl.planning.bayes import ObservationModel, release_chances
+from spikectl.planning.filtering import FilteredState, model_variance
+from spikectl.planning.heterogeneity import NeuronTracker, tracks_neurons
+from spikectl.planning.identify import ConnectivityEstimate, ObservedState, residual_sd
+from spikectl.planning.release import exact_residuals, settled_releases
+
+
+@dataclass(frozen=True)
+class ObservationSettings:
+    """The observation part's settings.
+
+    Attributes:
+        task_model: read the environment's extensions as the observation model
+            (stochastic release, heterogeneous neurons, synaptic spread, and the
+            likelihood of the ``"bayes"`` estimator); False: the paper's model with the
+            environment's measurement noise alone.
+        filter_voltage: under measurement noise, plan from potentials filtered against
+            the model's prediction instead of the raw observations.
+        spike_margin_sd: under measurement noise, spikes are read this many noise
+            standard deviations below the threshold (chosen on training networks at 1,
+            2 and 4 mV, docs/baselines.md).
+    """
+
+    task_model: bool = False
+    filter_voltage: bool = False
+    spike_margin_sd: float = 2.0
+
+    def __post_init__(self) -> None:
+        if isinstance(self.spike_margin_sd, bool) or not self.spike_margin_sd >= 0:
+            raise ValueError(f"spike_margin_sd must be >= 0, got {self.spike_margin_sd!r}")
+
+    def bind(self, params: NeuronParams, extensions: Extensions | None) -> Observation:
+        """This part on an environment with ``extensions`` (None: the paper's)."""
+        return Observation(self, params, extensions)
+
+    def settles_releases(self, extensions: Extensions | None, noise_mV: float) -> bool:
+        """Whether each release of a stochastic one is settled from the next step's
+        residuals: where they are exact integers (no measurement noise, hidden or
+        heterogeneous neurons, background input; :func:`~spikectl.planning.release.
+        exact_residuals`). On the ``stochastic`` sets +0.013 network by network
+        against the release chance (docs/results/release-settling)."""
+        return not noise_mV and exact_residuals(extensions)
+
+
+class Observation:
+    """The observation part bound to an environment: what the estimate and the planner
+    are told of the task.
+
+    Attributes:
+        noise_mV: the environment's measurement noise (0: none).
+        extensions: the extensions read as the observation model (None: the paper's).
+        model: the likelihood the ``"bayes"`` estimator reads.
+        residual_sd: the residual noise (units of w_in) the Gaussian estimates assume.
+        stochastic_release: spikes release by chance (the evidence carries chances).
+        strengths: synapses differ in strength (known ones planned at their estimate).
+    """
+
+    def __init__(self, settings: ObservationSettings, params: NeuronParams,
+                 extensions: Extensions | None) -> None:  # fmt: skip
+        if extensions is not None and not isinstance(extensions, Extensions):
+            raise TypeError(f"extensions must be an Extensions, got {type(extensions).__name__}")
+        self.settings, self.params = settings, params
+        self.noise_mV = 0.0 if extensions is None else float(extensions.observation_noise_mV)
+        self.extensions = extensions if settings.task_model else None
+        self.model = ObservationModel.of(self.extensions, params)
+        if self.extensions is None and self.noise_mV:
+            self.model = ObservationModel(noise_mV=self.noise_mV)
+        self.residual_sd = residual_sd(params, self.noise_mV)
+        self.stochastic_release = self.model.stochastic_release
+        self.settles = self.stochastic_release and settings.settles_releases(
+            self.extensions, self.noise_mV
+        )
+        self.strengths = self.extensions is not None and self.extensions.synaptic_spread > 0
+
+    @property
+    def plan_mean(self) -> bool:
+        """Whether unknown weights are planned at their posterior mean (without noise)
+        rather than 0 (under noise that mean is noisy)."""
+        return self.noise_mV == 0
+
+    def reader(self, n: int) -> Reader:
+        """A fresh reader for an episode on ``n`` observed neurons."""
+        settings, params, noise = self.settings, self.params, self.noise_mV
+        if tracks_neurons(self.extensions, noise, params):
+            tracker = NeuronTracker(n, params, self.extensions)
+        elif settings.filter_voltage and noise > 0:
+            tracker = FilteredState(n, params, noise, settings.spike_margin_sd,
+                                    model_variance(self.extensions))  # fmt: skip
+        else:
+            tracker = ObservedState(n, params, settings.spike_margin_sd * noise)
+        return Reader(self, tracker)
+
+
+class Reader:
+    """One episode's observations read into evidence and the tracked simulator state.
+
+    Attributes:
+        tracker: the tracked state (``tracker.state``, ``tracker.spiked``).
+        chances: [n] each spike's release chance at the last step (stochastic release;
+            zeros otherwise).
+    """
+
+    def __init__(self, observation: Observation, tracker: ObservedState) -> None:
+        self.observation, self.tracker = observation, tracker
+        self.chances = np.zeros(tracker.spiked.shape[0])
+
+    def read(self, voltage: np.ndarray, action: int, estimate) -> tuple:
+        """The evidence of the observation after a step with ``action``
+        (``estimate.add``'s arguments); advances the tracked state."""
+        tracker = self.tracker
+        since = tracker.state.steps_since_release[0].copy()
+        if isinstance(tracker, FilteredState):
+            evidence = tracker.observe(voltage, action, estimate.posterior())
+        else:
+            evidence = tracker.observe(voltage, action)
+        if self.observation.stochastic_release:
+            evidence = self.release_evidence(estimate, *evidence[1:])
+            self.chances = self.chances_after(tracker.spiked, since)
+        return evidence
+
+    def release_evidence(self, estimate, residual: np.ndarray, observed: np.ndarray) -> tuple:
+        """Under stochastic release, the evidence of the last step's spikes: each release
+        settled from the residuals where they are exact (for the Gaussian estimate),
+        otherwise each spike's release chance."""
+        if (self.observation.settles and self.chances.any()
+                and isinstance(estimate, ConnectivityEstimate)):  # fmt: skip
+            excites, inhibits = estimate.entry_probabilities()
+            return settled_releases(self.chances, residual, observed, excites, inhibits)
+        return self.chances, residual, observed
+
+    def chances_after(self, spiking: np.ndarray, since: np.ndarray) -> np.ndarray:
+        """[n] the release chance of each ``spiking`` neuron one step after ``since``
+        steps since its last release (0 where not spiking)."""
+        since = np.minimum(since + 1, SINCE_RELEASE_CAP)
+        return release_chances(spiking, since, self.observation.params)
+
+    def neurons(self) -> np.ndarray | None:
+        """[1, 2, n] per-neuron kernel parameters to plan with where the tracker has its
+        own (learned neurons; a threshold with a margin for the noise), else None (the
+        paper's)."""
+        if isinstance(self.tracker, (NeuronTracker, FilteredState)):
+            return self.tracker.neurons()
+        return None

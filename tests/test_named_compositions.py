@@ -1,0 +1,143 @@
+"""The named controller as data (spikectl/planning/named.py): which composition each
+environment gets, and that the named compositions replay the committed suite results
+exactly (docs/results/suite: identify-and-plan's return on every test network, the
+oracle's mean per task)."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from spikectl.neuron.extensions import Extensions
+from spikectl.planning import Composition, IdentifyAndPlan, composition_name, named_composition
+from spikectl.planning.named import (
+    COMPOSITIONS,
+    KNOWN_SD_BACKGROUND,
+    KNOWN_SD_FAST_LARGE,
+    KNOWN_SD_LARGE,
+    KNOWN_SD_STOCHASTIC_RELEASE,
+    composition,
+)
+
+SUITE = Path(__file__).resolve().parents[1] / "docs" / "results" / "suite"
+NOISY = Extensions(observation_noise_mV=2.0)
+STOCHASTIC = Extensions(stochastic_release=True)
+HIDDEN = Extensions(hidden_fraction=0.25)
+HETEROGENEOUS = Extensions(threshold_spread=0.1, time_constant_spread=0.2)
+
+
+@pytest.mark.parametrize(
+    ("extensions", "n", "fast", "name"),
+    [
+        (None, None, False, "paper"),
+        (Extensions(), 8, False, "paper"),
+        (None, 15, False, "paper"),
+        (None, 16, False, "paper-16"),
+        (None, 32, False, "paper-32"),
+        (Extensions(), 32, False, "paper-32"),
+        (None, 32, True, "paper-16-fast"),
+        (None, 8, True, "paper"),
+        (NOISY, 8, False, "noise"),
+        (Extensions(observation_noise_mV=1.0, hidden_fraction=0.25), 8, False, "noise"),
+        (NOISY, 32, False, "noise-16"),
+        (NOISY, 16, True, "noise-16-fast"),
+        (STOCHASTIC, 8, False, "stochastic"),
+        (STOCHASTIC, 32, False, "stochastic-16"),
+        (Extensions(background_rate=0.005), 8, False, "background"),
+        (HETEROGENEOUS, 8, False, "heterogeneous"),
+        (Extensions(synaptic_spread=0.2), 8, True, "heterogeneous"),
+        (HIDDEN, 8, False, "hidden"),
+        (Extensions(hidden_neurons=1), 8, False, "hidden"),
+        (HIDDEN, 32, False, "hidden-16"),
+    ],
+)
+def test_each_environment_gets_its_situations_composition(extensions, n, fast, name):
+    assert composition_name(extensions, n, fast) == name
+    assert named_composition(extensions, n, fast).name == name
+
+
+def test_the_declared_compositions_hold_what_was_chosen():
+    paper = composition("paper")
+    assert paper == Composition()  # the constructor's default is the paper's
+    noise = composition("noise")
+    assert noise.estimator.kind == "bayes" and noise.observation.filter_voltage
+    assert noise.observation.task_model
+    stochastic = composition("stochastic")
+    assert stochastic.estimator.known_sd == KNOWN_SD_STOCHASTIC_RELEASE
+    assert stochastic.observation.task_model
+    assert composition("background").estimator.known_sd == KNOWN_SD_BACKGROUND
+    assert not composition("background").observation.task_model
+    assert composition("heterogeneous").observation.task_model
+    assert composition("hidden").estimator.kind == "relays"
+    large = composition("stochastic-16")
+    assert large.estimator.known_sd == KNOWN_SD_LARGE and large.decision.gamble.networks == 16
+    assert large.observation == stochastic.observation
+    assert composition("paper-32").estimator.kind == "particles"
+    fast = composition("noise-16-fast")
+    assert fast.estimator == noise.estimator.__class__("bayes", KNOWN_SD_FAST_LARGE)
+    assert fast.decision.gamble is None
+    assert set(COMPOSITIONS) == {"paper", "noise", "stochastic", "background",
+                                 "heterogeneous", "hidden"}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", ["nothing", "noise-32", "paper-8", "paper-16-slow"])
+def test_an_unknown_composition_is_refused_in_one_line(name):
+    with pytest.raises(ValueError, match=f"unknown composition '{name}'") as caught:
+        composition(name)
+    assert "\n" not in str(caught.value)
+
+
+def test_the_controller_names_what_it_plays_and_its_copies_play_the_same():
+    policy = IdentifyAndPlan(composition=named_composition(NOISY, 8), extensions=NOISY, seed=3)
+    assert policy.composition.name == "noise" and policy.noise_mV == 2.0
+    copy = policy.spawn(2)
+    assert copy.composition == policy.composition and copy.seed == 5
+    assert copy.extensions is NOISY
+
+
+def _committed(file: str, task: str) -> list[dict[str, str]]:
+    with open(SUITE / file, newline="") as handle:
+        return [row for row in csv.DictReader(handle) if row["task"] == task]
+
+
+# Tasks whose environment draws nothing are replayed on their first networks; the others
+# whole (a network's draws depend on the batch it is played in), which is cheap at n = 8.
+REPLAYED = {"paper": 100, "n16": 3, "n32": 2, "noise1": 100, "noise2": 100, "noise4": 100,
+            "hidden25": 100, "stochastic": 100, "heterogeneous": 100, "background": 100}  # fmt: skip
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("task", "count"), list(REPLAYED.items()))
+def test_the_named_controller_replays_the_committed_per_network_returns(task, count):
+    """Every return identical to the committed one, network by network (the benchmark's
+    protocol: the task's split, extensions and environment seed)."""
+    from spikectl.envs.env import NeuronControlEnv
+    from spikectl.envs.rollout import evaluate_policy
+    from spikectl.experiments import suite
+    from spikectl.training.controllers import load_controller
+
+    contexts = suite.load_split(task, "test")[:count]
+    extensions = suite.task(task).extensions
+    controller = load_controller(
+        "identify-and-plan", env=NeuronControlEnv(contexts=contexts, extensions=extensions)
+    )
+    returns = evaluate_policy(contexts, controller, extensions=extensions,
+                              seed=suite.ENV_SEED).returns  # fmt: skip
+    rows = sorted(_committed("identify-and-plan-per-network.csv", task),
+                  key=lambda row: int(row["context"]))[:count]  # fmt: skip
+    assert [repr(float(value)) for value in returns] == [row["return"] for row in rows]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("task", list(REPLAYED))
+def test_the_oracle_replays_its_committed_mean_return(task):
+    from spikectl.experiments import suite
+    from spikectl.training.controllers import load_controller
+
+    contexts = suite.load_split(task, "test")
+    returns, _ = suite.play(task, "test", load_controller("oracle", contexts=contexts))
+    (row,) = _committed("oracle.csv", task)
+    assert f"{np.mean(returns):.6f}" == row["mean_return"]
