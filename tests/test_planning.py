@@ -15,7 +15,17 @@ from spikectl.cli import main
 from spikectl.contexts import NeuronSetup
 from spikectl.envs.controller import batched
 from spikectl.envs.rollout import evaluate_policy
-from spikectl.planning import ConnectivityEstimate, DiscreteConnectivityEstimate, ObservedState
+from spikectl.planning import (
+    Composition,
+    ConnectivityEstimate,
+    DecisionSettings,
+    DiscreteConnectivityEstimate,
+    EstimatorSettings,
+    ObservationSettings,
+    ObservedState,
+    ProberSettings,
+    named_composition,
+)
 from spikectl.planning.baselines import run_baselines
 
 # -- the oracle planner on hand-built networks
@@ -150,25 +160,6 @@ def test_every_entry_identification_calls_known_is_exact(splits):
         assert np.array_equal(signs[known], context.weights[known])
 
 
-def test_discrete_identification_knows_more_and_is_rarely_wrong(splits):
-    # The discrete posterior is calibrated, not certain: an excitatory and an
-    # inhibitory synapse onto one neuron from two neurons that always release together
-    # look like no synapses, which the prior prefers (train[6] has one such pair).
-    train, _ = splits
-    known_counts, wrong = {}, 0
-    for identification in ("gaussian", "discrete"):
-        policy = batched(IdentifyAndPlan(identification=identification))
-        evaluate_policy(train[:10], policy)
-        known_counts[identification] = 0
-        for context, copy in zip(train[:10], policy.copies, strict=True):
-            signs, known = copy.estimate.weights(copy.known_sd)
-            known_counts[identification] += known.sum()
-            if identification == "discrete":
-                wrong += (signs[known] != context.weights[known]).sum()
-    assert known_counts["discrete"] > known_counts["gaussian"]
-    assert wrong <= 0.01 * known_counts["discrete"]
-
-
 def test_sampled_hypotheses_keep_known_entries_and_follow_the_uniforms():
     weights, actions = feed_forward_probe()
     estimate = _identify(weights, actions)
@@ -245,51 +236,60 @@ EXTENSION_CASES = {
 }  # fmt: skip
 
 
+NARROW = Composition("width8", decision=DecisionSettings(width=8))
+
+
 @pytest.mark.parametrize(
-    ("env_id", "extensions", "hypotheses"),
-    [("spikectl/NeuronControl-v0", None, 1), ("spikectl/NeuronControlPartial-v0", None, 1),
-     ("spikectl/NeuronControl-v0", None, 4),
-     *[pytest.param("spikectl/NeuronControl-v0", value, 1, id=key)
+    ("env_id", "extensions"),
+    [("spikectl/NeuronControl-v0", None), ("spikectl/NeuronControlPartial-v0", None),
+     *[pytest.param("spikectl/NeuronControl-v0", value, id=key)
        for key, value in EXTENSION_CASES.items()],
-     pytest.param("spikectl/NeuronControlRealistic-v0", None, 1, marks=pytest.mark.slow)],
+     pytest.param("spikectl/NeuronControlRealistic-v0", None, marks=pytest.mark.slow)],
 )  # fmt: skip
-def test_identify_and_plan_never_takes_an_illegal_action(env_id, extensions, hypotheses):
+def test_identify_and_plan_never_takes_an_illegal_action(env_id, extensions):
     # The environment raises on an illegal action; each extension alone must degrade
     # the policy, not crash it, and the Realistic variant switches every one on.
     kwargs = {} if extensions is None else {"extensions": extensions}
     env = gym.make(env_id, contexts={"n_train": 4, "n_test": 4}, **kwargs)
-    noise = env.unwrapped.extensions.observation_noise_mV
-    play_legally(env, IdentifyAndPlan(noise_mV=noise, width=8, hypotheses=hypotheses), range(3))
+    told = env.unwrapped.extensions
+    play_legally(env, IdentifyAndPlan(composition=NARROW, extensions=told), range(3))
+    named = named_composition(told, env.unwrapped.contexts.n_observed)
+    play_legally(env, IdentifyAndPlan(composition=named.with_width(8), extensions=told), range(3))
 
 
-@pytest.mark.parametrize("hypotheses", [1, 4])
-def test_identify_and_plan_is_deterministic(splits, hypotheses):
+def test_identify_and_plan_is_deterministic(splits):
     train, _ = splits
-    first = evaluate_policy(train[:6], batched(IdentifyAndPlan(hypotheses=hypotheses)))
-    second = evaluate_policy(train[:6], batched(IdentifyAndPlan(hypotheses=hypotheses)))
+    first = evaluate_policy(train[:6], batched(IdentifyAndPlan()))
+    second = evaluate_policy(train[:6], batched(IdentifyAndPlan()))
     assert np.array_equal(first.actions, second.actions)
     assert np.array_equal(first.returns, second.returns)
 
 
 def test_identify_and_plan_rejects_bad_settings_and_mid_episode_starts(splits):
     with pytest.raises(ValueError, match="width"):
-        IdentifyAndPlan(width=0)
+        DecisionSettings(width=0)
     with pytest.raises(ValueError, match="horizon"):
-        IdentifyAndPlan(horizon=0)
-    with pytest.raises(ValueError, match="noise_mV"):
-        IdentifyAndPlan(noise_mV=-1.0)
-    with pytest.raises(ValueError, match="hypotheses"):
-        IdentifyAndPlan(hypotheses=0)
+        DecisionSettings(horizon=0)
+    with pytest.raises(ValueError, match="known_sd"):
+        EstimatorSettings(known_sd=0.0)
     with pytest.raises(ValueError, match="seed"):
         IdentifyAndPlan(seed=-1)
-    with pytest.raises(ValueError, match="identification"):
-        IdentifyAndPlan(identification="exact")
-    with pytest.raises(ValueError, match="plan_on"):
-        IdentifyAndPlan(plan_on="mode")
+    with pytest.raises(ValueError, match="unknown estimator 'exact'; this spikectl has gaussian"):
+        EstimatorSettings("exact")
     with pytest.raises(ValueError, match="spike_margin_sd"):
-        IdentifyAndPlan(spike_margin_sd=-1.0)
+        ObservationSettings(spike_margin_sd=-1.0)
+    with pytest.raises(ValueError, match="unknown_entry_bonus"):
+        ProberSettings(unknown_entry_bonus=-1.0)
     with pytest.raises(TypeError, match="NeuronParams"):
         IdentifyAndPlan(params="paper")
+    with pytest.raises(TypeError, match="composition must be a Composition"):
+        IdentifyAndPlan(composition={"width": 8})
+    with pytest.raises(TypeError, match="decision must be a DecisionSettings"):
+        Composition(decision=EstimatorSettings())
+    with pytest.raises(ValueError, match="name"):
+        Composition("")
+    with pytest.raises(TypeError, match="extensions must be an Extensions"):
+        IdentifyAndPlan(extensions={"stochastic_release": True})
     env = spikectl.NeuronControlEnv(contexts=splits[0][:2])
     observation, info = env.reset(seed=0)
     observation, *_, info = env.step(-1)

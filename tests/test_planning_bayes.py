@@ -12,7 +12,7 @@ import pytest
 from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.planning import IdentifyAndPlan
+from spikectl.planning import Composition, EstimatorSettings, IdentifyAndPlan, ObservationSettings
 from spikectl.planning.bayes import (
     BayesConnectivityEstimate,
     ObservationModel,
@@ -26,6 +26,9 @@ from spikectl.planning.discrete import (
 )
 
 PARAMS = NeuronParams()
+TASK_MODEL = Composition("task-model", observation=ObservationSettings(task_model=True))
+BAYES = TASK_MODEL.but("bayes", estimator=EstimatorSettings("bayes"))
+FILTERED = TASK_MODEL.but("filtered", observation=ObservationSettings(True, filter_voltage=True))
 
 
 def normal(x, mean, sd):
@@ -207,7 +210,7 @@ def test_bayes_policy_plays_stochastic_release_deterministically():
     extensions = Extensions(stochastic_release=True)
     contexts, _ = make_splits(3, 1, 8, 60, seed=5)
     env = NeuronControlEnv(contexts=contexts, params=PARAMS, extensions=extensions)
-    policy = IdentifyAndPlan(PARAMS, identification="bayes", extensions=extensions)
+    policy = IdentifyAndPlan(PARAMS, BAYES, extensions=extensions)
     first = [play(policy, env, c) for c in range(3)]
     again = [play(policy.spawn(0), env, c) for c in range(3)]
     assert first == again
@@ -218,13 +221,8 @@ def test_bayes_policy_plays_stochastic_release_deterministically():
 def test_bayes_falls_back_to_gaussian_beyond_exact_size():
     from spikectl.planning.identify import ConnectivityEstimate
 
-    policy = IdentifyAndPlan(PARAMS, identification="bayes")
+    policy = IdentifyAndPlan(PARAMS, BAYES)
     assert isinstance(policy._new_estimate(16), ConnectivityEstimate)
-
-
-def test_extensions_type_is_checked():
-    with pytest.raises(TypeError, match="extensions must be an Extensions"):
-        IdentifyAndPlan(PARAMS, extensions={"stochastic_release": True})
 
 
 def test_filtered_state_values():
@@ -326,14 +324,13 @@ def test_told_the_weights_the_filter_is_exact_under_noise(noise_mV):
     exact = NeuronControlEnv(contexts=contexts)
     for index in range(len(contexts)):
         weights = contexts[index].weights
-        told = IdentifyAndPlan(PARAMS, known_weights=weights, noise_mV=noise_mV,
-                               filter_voltage=True, extensions=noise)  # fmt: skip
+        told = IdentifyAndPlan(PARAMS, FILTERED, extensions=noise, told_weights=weights)
         seen: list[np.ndarray] = []
         act = told.act
 
         def recording(observation, info, act=act, seen=seen, told=told):
             action = act(observation, info)
-            seen.append((told._tracker.filtered.copy(), told._tracker.spiked.copy()))
+            seen.append((told.reader.tracker.filtered.copy(), told.reader.tracker.spiked.copy()))
             return action
 
         told.act = recording
@@ -349,17 +346,17 @@ def test_told_the_weights_the_filter_is_exact_under_noise(noise_mV):
             refractory[lag:] |= spikes[:-lag]
         free = ~refractory[:-1]
         np.testing.assert_array_equal(filtered[free], potentials[:-1][free])
-        plain, _ = play_episode(exact, IdentifyAndPlan(PARAMS, known_weights=weights), index)
+        plain, _ = play_episode(exact, IdentifyAndPlan(PARAMS, told_weights=weights), index)
         np.testing.assert_array_equal(actions, plain)
 
 
 def test_named_controller_takes_the_environments_observation_model():
     """`identify-and-plan` by name plays the Bayes model where the environment changes
-    what an observation means, and the constructor's defaults (the guided learner's
-    teacher) on the paper's environment."""
+    what an observation means, and the paper's composition (the guided learner's
+    teacher) on the paper's environment (tests/test_named_compositions.py has the rule)."""
     from spikectl.contexts import make_splits
     from spikectl.envs.env import NeuronControlEnv
-    from spikectl.planning.policy import KNOWN_SD_LARGE, environment_settings
+    from spikectl.planning.named import KNOWN_SD_LARGE
     from spikectl.training.controllers import load_controller
 
     contexts, _ = make_splits(2, 1, 8, 60, seed=5)
@@ -367,58 +364,20 @@ def test_named_controller_takes_the_environments_observation_model():
     controller = load_controller(
         "identify-and-plan", env=NeuronControlEnv(contexts=contexts, extensions=noisy)
     )
-    assert controller.identification == "bayes" and controller.filter_voltage
-    assert controller.extensions == noisy and controller.noise_mV == 2.0
+    assert controller.composition.name == "noise"
+    assert controller.observation.extensions == noisy and controller.noise_mV == 2.0
+    assert isinstance(controller.observation.model, ObservationModel)
+    assert controller.observation.model.noise_mV == 2.0
     plain = load_controller("identify-and-plan", env=NeuronControlEnv(contexts=contexts))
-    assert plain.identification == "gaussian" and not plain.filter_voltage
+    assert plain.composition.name == "paper" and plain.observation.extensions is None
     assert plain.known_sd == 0.25 and controller.known_sd == 0.25
-    assert environment_settings(Extensions(hidden_fraction=0.25)) == {"relays": True}
-    heterogeneous = Extensions(threshold_spread=0.1)
-    assert environment_settings(heterogeneous) == {"extensions": heterogeneous}
-    assert environment_settings(Extensions(background_rate=0.005)) == {"known_sd": 0.35}
-    stochastic = Extensions(stochastic_release=True)
-    assert environment_settings(stochastic) == {"extensions": stochastic, "known_sd": 0.4}
-    assert plain.gamble_networks == 0  # n = 8: no QMDP
-    # From 16 observed neurons on, QMDP where it would probe and an earlier commitment,
-    # beside the observation model.
+    assert plain.composition.decision.gamble is None  # n = 8: no QMDP
+    # From 16 observed neurons on, QMDP where it would probe and an earlier commitment.
     large, _ = make_splits(2, 1, 16, 60, seed=5)
     controller = load_controller("identify-and-plan", contexts=large)
-    assert controller.gamble_networks == 16 and controller.identification == "gaussian"
+    assert controller.composition.name == "paper-16"
+    assert controller.composition.decision.gamble.networks == 16
     assert controller.known_sd == KNOWN_SD_LARGE
-    assert environment_settings(noisy, 32) == {
-        "identification": "bayes", "extensions": noisy, "filter_voltage": True,
-        "gamble_networks": 16, "known_sd": KNOWN_SD_LARGE,
-    }  # fmt: skip
-    assert environment_settings(stochastic, 16)["known_sd"] == KNOWN_SD_LARGE
-    assert environment_settings(None, 15) == {} and environment_settings(None, 16) != {}
-    # From 32 on, under the paper's dynamics only, the particle posterior (not in the fast
-    # form, nor where a task has its own identification or relays).
-    assert "identification" not in environment_settings(None, 16)
-    assert environment_settings(None, 32)["identification"] == "particles"
-    assert environment_settings(Extensions(), 32)["identification"] == "particles"
-    assert "identification" not in environment_settings(None, 32, fast=True)
-    assert "identification" not in environment_settings(stochastic, 32)
-    assert environment_settings(Extensions(hidden_fraction=0.25), 32)["relays"]
-    assert "identification" not in environment_settings(Extensions(hidden_fraction=0.25), 32)
-
-
-def test_the_fast_form_drops_qmdp_and_nothing_else():
-    """``fast=True`` (the guided learner's teacher) replaces QMDP from 16 neurons on by an
-    earlier commitment alone, and changes nothing below 16."""
-    from spikectl.planning.policy import KNOWN_SD_FAST_LARGE, environment_settings
-
-    noisy, stochastic = Extensions(observation_noise_mV=2.0), Extensions(stochastic_release=True)
-    others = (Extensions(hidden_fraction=0.25), Extensions(background_rate=0.005),
-              Extensions(threshold_spread=0.1))  # fmt: skip
-    for extensions in (None, Extensions(), noisy, stochastic, *others):
-        assert environment_settings(extensions, 8, fast=True) == environment_settings(extensions, 8)
-    assert environment_settings(None, 8, fast=True) == {}
-    assert environment_settings(None, 32, fast=True) == {"known_sd": KNOWN_SD_FAST_LARGE}
-    assert environment_settings(noisy, 16, fast=True) == {
-        "identification": "bayes", "extensions": noisy, "filter_voltage": True,
-        "known_sd": KNOWN_SD_FAST_LARGE,
-    }  # fmt: skip
-    assert KNOWN_SD_FAST_LARGE == 0.4
 
 
 def test_gaussian_estimate_learns_from_release_chances_under_noise():
@@ -432,7 +391,7 @@ def test_gaussian_estimate_learns_from_release_chances_under_noise():
     extensions = Extensions(stochastic_release=True, observation_noise_mV=1.0)
     contexts, _ = make_splits(1, 1, 8, 60, seed=2)
     env = NeuronControlEnv(contexts=contexts, params=PARAMS, extensions=extensions)
-    policy = IdentifyAndPlan(PARAMS, extensions=extensions)
+    policy = IdentifyAndPlan(PARAMS, TASK_MODEL, extensions=extensions)
     seen = []
     add = None
 

@@ -12,11 +12,12 @@ from spikectl.envs.env import NeuronControlEnv
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, simulate
-from spikectl.planning import IdentifyAndPlan
+from spikectl.planning import Composition, IdentifyAndPlan, ObservationSettings
 from spikectl.planning.heterogeneity import NeuronTracker, tracks_neurons
 
 PARAMS = NeuronParams()
 SPREADS = Extensions(threshold_spread=0.1, time_constant_spread=0.1, synaptic_spread=0.1)
+TASK_MODEL = Composition("task-model", observation=ObservationSettings(task_model=True))
 
 
 def test_a_single_release_settles_the_threshold_and_the_state():
@@ -73,11 +74,11 @@ def test_played_on_heterogeneous_networks_the_reads_intervals_and_leaks_are_true
     env = NeuronControlEnv(contexts=contexts, extensions=SPREADS)
     narrowed = 0
     for index in range(len(contexts)):
-        policy = IdentifyAndPlan(PARAMS, extensions=SPREADS)
+        policy = IdentifyAndPlan(PARAMS, TASK_MODEL, extensions=SPREADS)
         observation, info = env.reset(seed=0, options={"context": index})
         truth, settled = [], []
         action = policy.act(observation, info)
-        tracker = policy._tracker
+        tracker = policy.reader.tracker
         assert isinstance(tracker, NeuronTracker)
         settle = tracker._settle
 
@@ -99,7 +100,7 @@ def test_played_on_heterogeneous_networks_the_reads_intervals_and_leaks_are_true
         assert np.all(tracker.low < theta) and np.all(theta <= tracker.high)
         narrowed += int(np.sum(tracker.high - tracker.low < 3.99))
         # Known synapses are planned at their strength (the synaptic spread), not their sign.
-        planned, known = policy._planning_weights()
+        planned, known = policy.planning_weights()
         strengths = contexts[index].weights * heterogeneity.synaptic_scale
         np.testing.assert_allclose(planned[known], strengths[known], atol=0.02)
         own = PARAMS.dt_ms / heterogeneity.time_constants_ms
@@ -123,10 +124,10 @@ def test_which_environments_track_neurons():
     # The policy then keeps the paper's tracker and still plays.
     contexts, _ = make_splits(1, 1, 8, 60, seed=3, params=no_refractory, extensions=SPREADS)
     env = NeuronControlEnv(contexts=contexts, extensions=SPREADS)
-    policy = IdentifyAndPlan(no_refractory, extensions=SPREADS)
+    policy = IdentifyAndPlan(no_refractory, TASK_MODEL, extensions=SPREADS)
     observation, info = env.reset(seed=0, options={"context": 0})
     env.step(policy.act(observation, info))
-    assert type(policy._tracker).__name__ == "ObservedState"
+    assert type(policy.reader.tracker).__name__ == "ObservedState"
 
 
 def test_the_paper_and_its_planner_are_unchanged_by_the_tracker():
@@ -137,11 +138,12 @@ def test_the_paper_and_its_planner_are_unchanged_by_the_tracker():
     contexts, _ = make_splits(3, 1, 8, 60, seed=4)
     env = NeuronControlEnv(contexts=contexts)
     for index in range(len(contexts)):
-        plain, told = IdentifyAndPlan(PARAMS), IdentifyAndPlan(PARAMS, extensions=Extensions())
+        plain = IdentifyAndPlan(PARAMS)
+        told = IdentifyAndPlan(PARAMS, TASK_MODEL, extensions=Extensions())
         observation, info = env.reset(seed=0, options={"context": index})
         done = False
         while not done:
             action = plain.act(observation, info)
             assert told.act(observation, info) == action
             observation, _, done, _, info = env.step(action)
-        assert type(told._tracker) is ObservedState
+        assert type(told.reader.tracker) is ObservedState

@@ -13,7 +13,13 @@ from spikectl.contexts import make_splits
 from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
 from spikectl.envs.controller import batched
 from spikectl.envs.rollout import evaluate_policy
-from spikectl.planning import ConnectivityEstimate, IdentifyAndPlan
+from spikectl.planning import (
+    Composition,
+    ConnectivityEstimate,
+    DecisionSettings,
+    EstimatorSettings,
+    IdentifyAndPlan,
+)
 from spikectl.planning.discrete import (
     _OUTLIER_RANGE,
     OUTLIER_PROBABILITY,
@@ -156,8 +162,9 @@ def test_identify_and_plan_with_particles_at_16_and_32_neurons():
     # the network's but for a rare one (at most 2 %; the Gaussian estimate errs too at 32).
     for n in (16, 32):
         train, _ = make_splits(3, 1, n_neurons=n, seed=3)
-        policy, twin = (batched(IdentifyAndPlan(identification="particles", width=8))
-                        for _ in range(2))  # fmt: skip
+        particles = Composition("particles-width8", EstimatorSettings("particles"),
+                                decision=DecisionSettings(width=8))  # fmt: skip
+        policy, twin = (batched(IdentifyAndPlan(composition=particles)) for _ in range(2))
         result, again = evaluate_policy(train, policy), evaluate_policy(train, twin)
         assert np.array_equal(result.actions, again.actions)
         assert result.returns.mean() > 0.5

@@ -13,8 +13,15 @@ from spikectl.contexts.generation import legal_actions
 from spikectl.envs.controller import batched
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.neuron.simulator import SimulatorState
-from spikectl.planning import PlanningModel, beam_search
+from spikectl.planning import (
+    Composition,
+    DecisionSettings,
+    PlanningModel,
+    QMDPSettings,
+    beam_search,
+)
 from spikectl.planning.qmdp import (
+    Episode,
     best_returns,
     context_likelihood,
     expected_returns,
@@ -22,6 +29,11 @@ from spikectl.planning.qmdp import (
 )
 
 PARAMS = NeuronParams()
+
+
+def gambling(settings: QMDPSettings, width: int = 32) -> Composition:
+    """The paper's composition choosing by expected return where it would probe."""
+    return Composition("gamble", decision=DecisionSettings(width=width, gamble=settings))
 
 
 @pytest.mark.parametrize(("width", "horizon"), [(8, 10), (32, 60)])
@@ -37,19 +49,19 @@ def test_best_returns_is_the_beam_search_return(splits, width, horizon):
         start = SimulatorState.at_rest(1, 8, PARAMS)
         expected.append(beam_search(model, start, context.pattern, 0, width, horizon))
         weights = context.weights[None].copy()
-        found.append(best_returns(weights, start, context.pattern, 0, horizon, width, legal,
-                                  context.target, PARAMS)[0])  # fmt: skip
+        episode = Episode(context.pattern, context.target, legal, PARAMS)
+        found.append(best_returns(weights, start, episode, 0, horizon, width)[0])
     assert np.allclose(found, [plan.predicted_return for plan in expected], atol=1e-12)
     # Batched: problems of one pattern and target, different networks, one call.
     context = contexts[0]
     weights = np.stack([c.weights for c in contexts])  # [P, n, n]
     start = SimulatorState.at_rest(len(contexts), 8, PARAMS)
     legal = legal_actions(8, context.target).astype(np.int64)
-    batched = best_returns(weights, start, context.pattern, 0, horizon, width, legal,
-                           context.target, PARAMS)  # fmt: skip
+    episode = Episode(context.pattern, context.target, legal, PARAMS)
+    batched = best_returns(weights, start, episode, 0, horizon, width)
     alone = [
-        best_returns(w[None].copy(), SimulatorState.at_rest(1, 8, PARAMS), context.pattern,
-                     0, horizon, width, legal, context.target, PARAMS)[0]
+        best_returns(w[None].copy(), SimulatorState.at_rest(1, 8, PARAMS), episode, 0,
+                     horizon, width)[0]
         for w in weights
     ]  # fmt: skip
     assert np.array_equal(batched, alone)
@@ -66,24 +78,24 @@ def test_expected_returns_by_hand():
     networks[1, 1, 2] = 1
     pattern = spike_pattern(4, [1])
     actions = np.array([-1, 0, 1], dtype=np.int64)
+    episode = Episode(pattern, 2, actions, PARAMS)
     values = expected_returns(
         networks, np.array([3.0, 1.0]), SimulatorState.at_rest(1, 3, PARAMS), actions,
-        actions, pattern, step=0, horizon=3, width=4, target=2, params=PARAMS,
+        episode, step=0, settings=QMDPSettings(horizon=3, width=4),
     )  # fmt: skip
     silent = 0.5 / 3
     assert np.allclose(values, [2 * silent, 2 * silent + 0.75 * 0.5, 2 * silent + 0.25 * 0.5])
     # Horizon 1 values the step itself only: nothing reaches the target within it.
     values = expected_returns(
         networks, np.array([3.0, 1.0]), SimulatorState.at_rest(1, 3, PARAMS), actions,
-        actions, pattern, step=0, horizon=1, width=4, target=2, params=PARAMS,
+        episode, step=0, settings=QMDPSettings(horizon=1, width=4),
     )  # fmt: skip
     assert np.allclose(values, silent)
     with pytest.raises(ValueError, match="positive sum"):
         expected_returns(networks, np.zeros(2), SimulatorState.at_rest(1, 3, PARAMS),
-                         actions, actions, pattern, 0, 3, 4, 2, PARAMS)  # fmt: skip
+                         actions, episode, 0, QMDPSettings(horizon=3, width=4))  # fmt: skip
     with pytest.raises(ValueError, match="horizon"):
-        expected_returns(networks, np.ones(2), SimulatorState.at_rest(1, 3, PARAMS),
-                         actions, actions, pattern, 0, 0, 4, 2, PARAMS)  # fmt: skip
+        QMDPSettings(horizon=0)
 
 
 def test_context_likelihood_by_hand():
@@ -110,25 +122,28 @@ def test_synapse_entropy_by_hand():
 
 def test_gamble_option_is_legal_deterministic_and_checked(splits):
     train, _ = splits
-    policy = IdentifyAndPlan(gamble_networks=4, gamble_width=4, gamble_horizon=5)
+    policy = IdentifyAndPlan(composition=gambling(QMDPSettings(networks=4, width=4, horizon=5)))
     vector = batched(policy)
     first = evaluate_policy(train[:4], vector)  # the environment raises on illegal actions
     second = evaluate_policy(train[:4], batched(policy))
     assert np.array_equal(first.actions, second.actions)
     assert np.array_equal(first.returns, second.returns)
     assert sum(copy.gambles for copy in vector.copies) > 0  # the option was exercised
-    for name in ("gamble_networks", "gamble_horizon", "gamble_width", "gamble_candidates"):
-        with pytest.raises(ValueError, match=name):
-            IdentifyAndPlan(**{name: -1})
-    with pytest.raises(ValueError, match="gamble_information"):
-        IdentifyAndPlan(gamble_information=-0.1)
+    for name in ("networks", "horizon", "width", "candidates"):
+        with pytest.raises(ValueError, match=f"{name} must be an integer"):
+            QMDPSettings(**{name: -1})
+    with pytest.raises(ValueError, match="information"):
+        QMDPSettings(information=-0.1)
+    with pytest.raises(TypeError, match="gamble must be a QMDPSettings"):
+        DecisionSettings(gamble={"networks": 4})
 
 
 def test_gamble_values_a_subset_of_actions_on_larger_networks():
     # n = 16 with at most 4 candidates valued: every action taken stays legal.
     train, _ = make_splits(3, 3, 16, seed=1)
-    policy = IdentifyAndPlan(width=8, gamble_networks=4, gamble_width=2, gamble_horizon=4,
-                             gamble_candidates=4)  # fmt: skip
+    policy = IdentifyAndPlan(composition=gambling(
+        QMDPSettings(networks=4, width=2, horizon=4, candidates=4), width=8
+    ))  # fmt: skip
     vector = batched(policy)
     episodes = evaluate_policy(train, vector)
     assert sum(copy.gambles for copy in vector.copies) > 0
@@ -145,9 +160,9 @@ def test_gamble_never_takes_an_illegal_action_under_extensions(env_id, extension
     # still be one of the legal actions (the environment raises otherwise).
     kwargs = {} if extensions is None else {"extensions": extensions}
     env = gym.make(env_id, contexts={"n_train": 3, "n_test": 3}, **kwargs)
-    noise = env.unwrapped.extensions.observation_noise_mV
-    policy = IdentifyAndPlan(noise_mV=noise, width=8, gamble_networks=4, gamble_width=2,
-                             gamble_horizon=4)  # fmt: skip
+    policy = IdentifyAndPlan(composition=gambling(QMDPSettings(networks=4, width=2, horizon=4),
+                                                  width=8),
+                             extensions=env.unwrapped.extensions)  # fmt: skip
     gambles = 0
     for episode in range(2):
         play_legally(env, policy, [episode])

@@ -15,15 +15,23 @@ from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.kernel import SINCE_RELEASE_CAP
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import SimulatorState
-from spikectl.planning import IdentifyAndPlan
+from spikectl.planning import (
+    Composition,
+    DecisionSettings,
+    EstimatorSettings,
+    IdentifyAndPlan,
+    ObservationSettings,
+    composition_name,
+)
 from spikectl.planning.identify import NOISE_FREE_SD
-from spikectl.planning.policy import environment_settings
 from spikectl.planning.relays import (
     RELAY_PRIOR_VARIANCE,
     RelayConnectivityEstimate,
     relay_state,
     relay_weights,
 )
+
+RELAYS = Composition("relays", EstimatorSettings("relays"))
 
 PARAMS = NeuronParams()
 EVERY = np.ones(3, dtype=bool)
@@ -96,7 +104,7 @@ def test_a_target_driven_only_through_a_hidden_neuron(relays):
     weights[0, 3] = weights[3, 2] = 1
     pattern = np.zeros(20, dtype=bool)
     pattern[[2, 12]] = True
-    policy = IdentifyAndPlan(relays=relays)
+    policy = IdentifyAndPlan(composition=RELAYS if relays else None)
     actions, fired = play_by_hand(policy, weights, 2, pattern, [0, -1], observed=[0, 1, 2])
     fired = np.array(fired)
     assert fired[2]
@@ -106,38 +114,33 @@ def test_a_target_driven_only_through_a_hidden_neuron(relays):
 
 
 def test_the_named_controller_plans_relays_with_hidden_neurons_alone():
-    assert environment_settings(Extensions(hidden_fraction=0.25), 8) == {"relays": True}
-    assert environment_settings(Extensions(hidden_neurons=1), 8) == {"relays": True}
-    assert "relays" not in environment_settings(
-        Extensions(hidden_fraction=0.25, observation_noise_mV=1.0), 8
-    )
-    assert "relays" not in environment_settings(None, 8)
+    assert composition_name(Extensions(hidden_fraction=0.25), 8) == "hidden"
+    assert composition_name(Extensions(hidden_neurons=1), 8) == "hidden"
+    assert composition_name(Extensions(hidden_fraction=0.25, observation_noise_mV=1.0), 8) == "noise"
+    assert composition_name(None, 8) == "paper"
 
 
-def test_relays_need_the_gaussian_estimate():
-    with pytest.raises(ValueError, match="relays=True needs identification='gaussian'"):
-        IdentifyAndPlan(relays=True, identification="discrete")
+def test_the_relay_estimate_refuses_a_bad_prior():
     with pytest.raises(ValueError, match="relay_variance must be > 0"):
         RelayConnectivityEstimate(3, NOISE_FREE_SD, relay_variance=0.0)
 
 
 @pytest.mark.parametrize(
-    ("extensions", "settings"),
-    [(None, {}), (None, {"hypotheses": 4}),
+    ("extensions", "observation"),
+    [(None, ObservationSettings()),
      ({"hidden_fraction": 0.25, "threshold_spread": 0.1, "time_constant_spread": 0.1},
-      {"with_extensions": True}),
-     ({"hidden_fraction": 0.25, "observation_noise_mV": 2.0}, {"filter_voltage": True})],
-    ids=["observed state", "sampled hypotheses", "neuron tracker", "filtered state"],
+      ObservationSettings(task_model=True)),
+     ({"hidden_fraction": 0.25, "observation_noise_mV": 2.0},
+      ObservationSettings(filter_voltage=True))],
+    ids=["observed state", "neuron tracker", "filtered state"],
 )  # fmt: skip
-def test_relays_play_legally_with_every_tracker(extensions, settings):
+def test_relays_play_legally_with_every_tracker(extensions, observation):
     """Relays on hidden-neuron environments beside each tracker the policy can have (the
     virtual relay neurons get the paper's parameters beside the tracked ones)."""
     env = gym.make("spikectl/NeuronControlPartial-v0", contexts={"n_train": 4, "n_test": 4},
                    **({} if extensions is None else {"extensions": extensions}))  # fmt: skip
-    told = env.unwrapped.extensions
-    settings = dict(settings)
-    if settings.pop("with_extensions", False):
-        settings["extensions"] = told
-    policy = IdentifyAndPlan(relays=True, noise_mV=told.observation_noise_mV, width=8, **settings)
+    composition = RELAYS.but("relays-width8", observation=observation,
+                             decision=DecisionSettings(width=8))  # fmt: skip
+    policy = IdentifyAndPlan(composition=composition, extensions=env.unwrapped.extensions)
     play_legally(env, policy, range(3))
     assert policy.estimate.relays()[0].shape == (6, 6)

@@ -13,8 +13,13 @@ from spikectl.contexts import make_splits
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.planning import IdentifyAndPlan
-from spikectl.planning import policy as policy_module
+from spikectl.planning import (
+    Composition,
+    IdentifyAndPlan,
+    ObservationSettings,
+    named_composition,
+)
+from spikectl.planning import observing as observing_module
 from spikectl.planning.release import (
     SETTLED,
     exact_residuals,
@@ -23,6 +28,7 @@ from spikectl.planning.release import (
 )
 
 PARAMS = NeuronParams()
+TASK_MODEL = Composition("task-model", observation=ObservationSettings(task_model=True))
 N = 4
 
 
@@ -117,9 +123,10 @@ def test_on_stochastic_networks_every_settled_release_and_known_weight_is_true(m
     extensions = Extensions(stochastic_release=True)
     contexts, _ = make_splits(6, 1, 8, 60, seed=3)
     env = NeuronControlEnv(contexts=contexts, params=PARAMS, extensions=extensions)
-    policy = IdentifyAndPlan(PARAMS, extensions=extensions, known_sd=0.4)
+    policy = IdentifyAndPlan(PARAMS, named_composition(extensions, 8), extensions=extensions)
+    assert policy.composition.name == "stochastic" and policy.known_sd == 0.4
     settled = []  # (step acted on, posterior, chances, observed) of each settling
-    real = policy_module.settled_releases
+    real = observing_module.settled_releases
     acting = [0]  # the step the policy is acting on
 
     def record(chances, residual, observed, excites, inhibits):
@@ -127,7 +134,7 @@ def test_on_stochastic_networks_every_settled_release_and_known_weight_is_true(m
         settled.append((acting[0], posterior, np.asarray(chances).copy(), observed.copy()))
         return real(chances, residual, observed, excites, inhibits)
 
-    monkeypatch.setattr(policy_module, "settled_releases", record)
+    monkeypatch.setattr(observing_module, "settled_releases", record)
     agree = {True: 0, False: 0}
     learned = 0
     for index, context in enumerate(contexts):
@@ -172,24 +179,22 @@ def _play_by_hand(policy, weights, pattern, target, first_actions):
     return actions[-1]
 
 
-@pytest.mark.parametrize("unrested", [True, False])
-def test_an_unrested_known_input_is_stimulated_where_the_plan_misses_the_next_spike(unrested):
+def test_an_unrested_known_input_is_stimulated_where_the_plan_misses_the_next_spike():
     """Neuron 0 is the target's only input (told); it released at step 0 and the target
     spiked at step 1. Spikes are wanted at steps 1 and 3: by the paper's rule neuron 0's
     vesicles are back only at step 5, so the plan misses step 3; under stochastic release
     it releases at step 2 with chance p_r (1 - exp(-2 dt / tau_R)) = 0.32, and the
-    policy stimulates it (unrested_inputs=True) or follows the plan (do nothing)."""
+    policy stimulates it (lab/planners' PlanUnderRelease follows the plan instead)."""
     weights = np.zeros((3, 3), dtype=np.int8)
     weights[0, 2] = 1
     pattern = np.zeros(60, dtype=np.int8)
     pattern[[1, 3]] = 1
     stochastic = Extensions(stochastic_release=True)
-    policy = IdentifyAndPlan(known_weights=weights, extensions=stochastic,
-                             unrested_inputs=unrested)  # fmt: skip
+    policy = IdentifyAndPlan(composition=TASK_MODEL, extensions=stochastic, told_weights=weights)
     action = _play_by_hand(policy, weights, pattern, target=2, first_actions=[0, -1])
-    assert action == (0 if unrested else -1)
+    assert action == 0
     # Without stochastic release the rule is exact: the input stays silent, no stimulus.
-    paper = IdentifyAndPlan(known_weights=weights, unrested_inputs=unrested)
+    paper = IdentifyAndPlan(told_weights=weights)
     assert _play_by_hand(paper, weights, pattern, target=2, first_actions=[0, -1]) == -1
 
 
@@ -202,8 +207,6 @@ def test_the_unrested_input_with_the_highest_release_chance_is_chosen():
     pattern = np.zeros(60, dtype=np.int8)
     pattern[[1, 3, 5]] = 1
     stochastic = Extensions(stochastic_release=True)
-    for unrested, chosen in ((True, 0), (False, -1)):
-        policy = IdentifyAndPlan(known_weights=weights, extensions=stochastic,
-                                 unrested_inputs=unrested)  # fmt: skip
-        action = _play_by_hand(policy, weights, pattern, target=2, first_actions=[0, -1, 1, -1])
-        assert action == chosen
+    policy = IdentifyAndPlan(composition=TASK_MODEL, extensions=stochastic, told_weights=weights)
+    action = _play_by_hand(policy, weights, pattern, target=2, first_actions=[0, -1, 1, -1])
+    assert action == 0

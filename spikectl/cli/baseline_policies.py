@@ -117,7 +117,7 @@ def baselines(command: BaselinesCommand) -> None:
     from dataclasses import replace
 
     from spikectl.cli.output import claimed_outputs
-    from spikectl.planning import Composition, DecisionSettings, IdentifyAndPlan
+    from spikectl.planning import Composition, IdentifyAndPlan
     from spikectl.planning.baselines import run_baselines
 
     for flag, value in (("--identify-width", command.identify_width),
@@ -147,8 +147,7 @@ def baselines(command: BaselinesCommand) -> None:
             n_neurons = kwargs.get("n_neurons") or 8
             context_set = generated_split(command.split, n_neurons, extensions)
             where = f"the generated {command.split} set ({n_neurons} neurons, seed 0)"
-        width = command.identify_width  # the paper's composition at this beam width
-        composition = Composition(f"paper-width{width}", decision=DecisionSettings(width=width))
+        composition = Composition().with_width(command.identify_width)
         policy = IdentifyAndPlan(context_set.params, composition, extensions=extensions)
         results = run_baselines(context_set, extensions=extensions,
                                 random_seeds=command.random_seeds,

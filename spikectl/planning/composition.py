@@ -56,3 +56,11 @@ class Composition:
     def but(self, name: str, **parts: Any) -> Composition:
         """A copy named ``name`` with some parts replaced (``estimator=...``, ...)."""
         return dataclasses.replace(self, name=name, **parts)
+
+    def with_width(self, width: int) -> Composition:
+        """This composition re-planning at beam ``width`` (itself at its own width; else
+        named ``NAME-widthW``)."""
+        if width == self.decision.width:
+            return self
+        decision = dataclasses.replace(self.decision, width=width)
+        return self.but(f"{self.name}-width{width}", decision=decision)

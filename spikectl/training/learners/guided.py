@@ -156,7 +156,7 @@ class GuidedDQNLearner(DQNLearner):
         # Only the realisable teacher plays (GuidedConfig refuses the other).
         teacher = functools.partial(
             IdentifyAndPlan, self.params,
-            at_width(self.teacher_composition, self.settings.teacher_width),
+            self.teacher_composition.with_width(self.settings.teacher_width),
             extensions=self.extensions,
         )  # fmt: skip
         self.mixed_policy = TeacherMixedPolicy(student, teacher_plays, teacher)

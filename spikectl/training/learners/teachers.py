@@ -10,7 +10,6 @@ on nothing but those observations (and, for the privileged teacher, the weights)
 
 from __future__ import annotations
 
-import dataclasses
 import time
 from collections.abc import Callable, Sequence
 
@@ -37,7 +36,7 @@ def make_teacher(
     None: the paper's) or the paper's composition told the context's weights
     (``"told-weights"``), each planning at beam ``width``."""
     if teacher == "identify":
-        return IdentifyAndPlan(params, at_width(composition or Composition(), width),
+        return IdentifyAndPlan(params, (composition or Composition()).with_width(width),
                                extensions=extensions)  # fmt: skip
     if teacher == "told-weights":
         if context.n_observed != context.n_neurons:
@@ -45,17 +44,9 @@ def make_teacher(
                 "teacher 'told-weights' needs every neuron observed; this environment "
                 "hides some (use teacher 'identify')"
             )
-        return IdentifyAndPlan(params, at_width(Composition(), width), extensions=extensions,
+        return IdentifyAndPlan(params, Composition().with_width(width), extensions=extensions,
                                told_weights=context.weights)  # fmt: skip
     raise ValueError(f"unknown teacher {teacher!r}: 'identify' or 'told-weights'")
-
-
-def at_width(composition: Composition, width: int) -> Composition:
-    """``composition`` re-planning at beam ``width`` (the teacher's setting)."""
-    if width == composition.decision.width:
-        return composition
-    decision = dataclasses.replace(composition.decision, width=width)
-    return composition.but(f"{composition.name}-width{width}", decision=decision)
 
 
 class TeacherMixedPolicy:

@@ -1,0 +1,101 @@
+"""The research-only parts of identify-and-plan (lab/planners): each plays exactly what
+the core's switch it replaced played (the recorded actions of
+tests/data/planning_reference.npz), legally, and differs from the core where it should."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+from lab.planners import PlanUnderRelease, ReleaseChanceEvidence, SampledHypotheses
+from spikectl import make_splits
+from spikectl.envs.controller import batched
+from spikectl.envs.rollout import evaluate_policy
+from spikectl.neuron.extensions import Extensions
+from spikectl.planning import (
+    Composition,
+    EstimatorSettings,
+    IdentifyAndPlan,
+    ObservationSettings,
+    named_composition,
+)
+
+TESTS = Path(__file__).resolve().parents[3] / "tests"
+sys.path.insert(0, str(TESTS))
+from conftest import play_by_hand, play_legally  # noqa: E402
+from test_planning_reference import REFERENCE, play  # noqa: E402
+
+HYPOTHESES4 = Composition("hypotheses4", decision=SampledHypotheses(hypotheses=4))
+DISCRETE = Composition("discrete", EstimatorSettings("discrete"))
+
+
+@pytest.mark.parametrize(
+    ("name", "composition"),
+    [("identify_n8_hypotheses4", HYPOTHESES4), ("identify_n8_discrete", DISCRETE)],
+)
+def test_the_lab_parts_choose_the_recorded_actions(name, composition):
+    test = make_splits(100, 100, 8, seed=0, n_val=100)[1]
+    np.testing.assert_array_equal(play(test, range(4), composition=composition),
+                                  np.load(REFERENCE)[name])  # fmt: skip
+
+
+def test_sampled_hypotheses_are_legal_deterministic_and_checked():
+    env = gym.make("spikectl/NeuronControl-v0", contexts={"n_train": 4, "n_test": 4})
+    play_legally(env, IdentifyAndPlan(composition=HYPOTHESES4), range(3))
+    train = make_splits(6, 1, 8, seed=0)[0]
+    first = evaluate_policy(train, batched(IdentifyAndPlan(composition=HYPOTHESES4)))
+    second = evaluate_policy(train, batched(IdentifyAndPlan(composition=HYPOTHESES4)))
+    assert np.array_equal(first.actions, second.actions)
+    with pytest.raises(ValueError, match="hypotheses must be an integer >= 1"):
+        SampledHypotheses(hypotheses=0)
+    one = Composition("one", decision=SampledHypotheses(hypotheses=1))
+    plain = evaluate_policy(train, batched(IdentifyAndPlan()))
+    assert np.array_equal(evaluate_policy(train, batched(IdentifyAndPlan(composition=one))).actions,
+                          plain.actions)  # fmt: skip
+
+
+def test_the_discrete_estimate_knows_more_and_is_rarely_wrong():
+    # The discrete posterior is calibrated, not certain: an excitatory and an
+    # inhibitory synapse onto one neuron from two neurons that always release together
+    # look like no synapses, which the prior prefers (train[6] has one such pair).
+    train = make_splits(100, 100, 8, seed=0)[0]
+    known_counts, wrong = {}, 0
+    for composition in (Composition(), DISCRETE):
+        policy = batched(IdentifyAndPlan(composition=composition))
+        evaluate_policy(train[:10], policy)
+        known_counts[composition.name] = 0
+        for context, copy in zip(train[:10], policy.copies, strict=True):
+            signs, known = copy.estimate.weights(copy.known_sd)
+            known_counts[composition.name] += known.sum()
+            if composition is DISCRETE:
+                wrong += (signs[known] != context.weights[known]).sum()
+    assert known_counts["discrete"] > known_counts["paper"]
+    assert wrong <= 0.01 * known_counts["discrete"]
+
+
+def test_the_plan_under_release_does_not_stimulate_an_unrested_input():
+    """As tests/test_planning_release.py's case: the core stimulates neuron 0 at step 2
+    (an unrested input of the target), the lab's part follows the plan."""
+    weights = np.zeros((3, 3), dtype=np.int8)
+    weights[0, 2] = 1
+    pattern = np.zeros(60, dtype=np.int8)
+    pattern[[1, 3]] = 1
+    stochastic = Extensions(stochastic_release=True)
+    named = named_composition(stochastic, 3)
+    for decision, chosen in ((named.decision, 0), (PlanUnderRelease(), -1)):
+        composition = named.but("plan-under-release", decision=decision)
+        policy = IdentifyAndPlan(composition=composition, extensions=stochastic,
+                                 told_weights=weights)  # fmt: skip
+        actions, _ = play_by_hand(policy, weights, 2, pattern, [0, -1], steps=3)
+        assert actions[-1] == chosen
+
+
+def test_release_chance_evidence_never_settles_a_release():
+    stochastic = Extensions(stochastic_release=True)
+    observation = ReleaseChanceEvidence(task_model=True).bind(IdentifyAndPlan().params, stochastic)
+    assert observation.stochastic_release and not observation.settles
+    assert ObservationSettings(task_model=True).bind(IdentifyAndPlan().params, stochastic).settles

@@ -1,0 +1,92 @@
+"""Identify-and-plan's parts the research record measured no gain in, as plug-ins.
+
+Each subclasses a core part's settings (:mod:`spikectl.planning`) and overrides its rule;
+a :class:`~spikectl.planning.Composition` takes it where it takes the core part:
+
+```python
+from lab.planners import SampledHypotheses
+from spikectl.planning import Composition, IdentifyAndPlan
+
+policy = IdentifyAndPlan(composition=Composition("hypotheses-8",
+                                                 decision=SampledHypotheses(hypotheses=8)))
+```
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from spikectl.neuron.params import NeuronParams
+from spikectl.planning import (
+    DecisionSettings,
+    DiscreteConnectivityEstimate,
+    ObservationSettings,
+    PlanningModel,
+)
+from spikectl.planning.bayes import ObservationModel
+from spikectl.planning.deciding import Situation
+from spikectl.planning.relays import relay_weights
+
+
+def discrete(n: int, residual_sd: float, model: ObservationModel, params: NeuronParams):
+    """The ``"discrete"`` estimator: the exact posterior over {-1, 0, +1} under the paper's
+    model (n <= 11). It knows more entries than the Gaussian estimate (55 vs 48 of 64 at
+    the end of a training episode) but did not plan better (-0.010 on the training
+    networks, docs/research/identify-and-plan.md); the core's ``"bayes"`` is the same
+    posterior under the task's observation model."""
+    return DiscreteConnectivityEstimate(n, residual_sd)
+
+
+@dataclass(frozen=True)
+class SampledHypotheses(DecisionSettings):
+    """Plan one action sequence on K networks drawn from the estimate, for the best mean
+    return over them (K = ``hypotheses``; 1 plans on the estimate, as the core does).
+    Measured worse than planning on the estimate: -0.037 on the training networks at
+    K = 8, and 4x slower (docs/research/identify-and-plan.md)."""
+
+    hypotheses: int = 1
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if (isinstance(self.hypotheses, bool) or not isinstance(self.hypotheses, (int, np.integer))
+                or self.hypotheses < 1):  # fmt: skip
+            raise ValueError(f"hypotheses must be an integer >= 1, got {self.hypotheses!r}")
+
+    @property
+    def draws(self) -> int:
+        return max(self.hypotheses if self.hypotheses > 1 else 0, super().draws)
+
+    def planning_model(self, policy, weights: np.ndarray, situation: Situation) -> PlanningModel:
+        if self.hypotheses <= 1:
+            return super().planning_model(policy, weights, situation)
+        k = self.hypotheses
+        uniforms = (policy.uniforms[0][:k], policy.uniforms[1][:k])
+        hypotheses = policy.estimate.sample(policy.known_sd, *uniforms)  # [K, n, n]
+        if policy.plans_relays:
+            relays = policy.estimate.relay_signs(policy.known_sd)
+            hypotheses = np.stack([relay_weights(drawn, relays) for drawn in hypotheses])
+        return PlanningModel(hypotheses, situation.target, situation.actions, policy.params,
+                             policy.planned_neurons())  # fmt: skip
+
+
+@dataclass(frozen=True)
+class ReleaseChanceEvidence(ObservationSettings):
+    """Under stochastic release, each spike enters the Gaussian estimate at its release
+    chance, never settled from the residuals: what the named controller played before
+    release settling (0.675 against 0.688 on the ``stochastic`` train and validation
+    sets, docs/results/release-settling)."""
+
+    def settles_releases(self, extensions, noise_mV: float) -> bool:
+        return False
+
+
+@dataclass(frozen=True)
+class PlanUnderRelease(DecisionSettings):
+    """Under stochastic release, the plan's own action where it misses the next wanted
+    spike (no unrested input stimulated): what the named controller played before
+    (-0.008 network by network on the ``stochastic`` sets, docs/results/unrested-inputs)."""
+
+    def under_release(self, policy, weights, known, situation, action: int) -> int:
+        return action
