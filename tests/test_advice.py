@@ -51,7 +51,7 @@ def test_the_advice_on_anothers_episodes_is_the_guided_teachers_label(splits):
     contexts = splits[1][:6]
     episodes = evaluate_policy(contexts, RandomLegal(seed=3))
     advice = _advice(contexts, episodes)
-    labels = teacher_labels(episodes, list(contexts), "identify", NeuronParams(), 0.0, 32)
+    labels = teacher_labels(episodes, list(contexts), "identify", NeuronParams(), None, 32)
     assert np.array_equal(_advised_actions(advice), labels)
     assert not np.array_equal(labels, episodes.actions)
     one = {"voltage": episodes.voltage[2:3], "actions": episodes.actions[2:3],
@@ -76,7 +76,7 @@ def test_advice_refuses_bad_inputs():
 
 def test_the_advice_on_a_noisy_task_is_the_named_planner_of_that_task():
     # Under measurement noise the named identify-and-plan plays with the Bayes
-    # observation model and filtered potentials (environment_settings); the advice is
+    # observation model and filtered potentials (its composition "noise"); the advice is
     # that planner, so on its own episodes it names exactly the actions it took.
     from spikectl.envs.vector_env import NeuronControlVectorEnv
     from spikectl.experiments.suite import load_split, task
@@ -84,7 +84,7 @@ def test_the_advice_on_a_noisy_task_is_the_named_planner_of_that_task():
     contexts, extensions = load_split("noise2", "validation")[:4], task("noise2").extensions
     env = NeuronControlVectorEnv(num_envs=4, contexts=contexts, extensions=extensions)
     planner = spikectl.load_controller("identify-and-plan", env=env)
-    assert planner.identification == "bayes" and planner.filter_voltage
+    assert planner.composition.name == "noise"
     episodes = evaluate_policy(contexts, planner, extensions=extensions, seed=0)
     targets = np.array([c.observed_target for c in contexts])
     patterns = np.stack([c.pattern for c in contexts])

@@ -34,7 +34,7 @@ import hashlib, json, sys
 import numpy as np
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
-from spikectl.planning import policy
+from spikectl.planning import EstimatorSettings, QMDPSettings, named_composition, policy
 
 cases = json.loads(sys.argv[1])
 act = policy.IdentifyAndPlan.act
@@ -52,11 +52,14 @@ result = {}
 for name, task, count, settings in cases:
     spec = suite.task(task)
     contexts = suite.load_split(task, "test")[:count]
-    # As load_controller builds the named controller, with the case's settings on top.
-    named = policy.environment_settings(spec.extensions, spec.n_observed)
-    controller = policy.IdentifyAndPlan(
-        contexts.params, noise_mV=spec.extensions.observation_noise_mV, **{**named, **settings}
-    )
+    # As load_controller builds the named controller, with the case's parts on top.
+    composition = named_composition(spec.extensions, spec.n_observed)
+    if "estimator" in settings:
+        composition = composition.but(name, estimator=EstimatorSettings(settings["estimator"]))
+    if "gamble_networks" in settings:
+        gamble = QMDPSettings(networks=settings["gamble_networks"])
+        composition = composition.but(name, decision=composition.decision.__class__(gamble=gamble))
+    controller = policy.IdentifyAndPlan(contexts.params, composition, extensions=spec.extensions)
     seen.clear()
     returns = evaluate_policy(contexts, controller, extensions=spec.extensions, seed=0).returns
     result[name] = {"returns": returns.tolist(), "steps": {str(k): v for k, v in seen.items()}}
@@ -70,10 +73,10 @@ print("RESULT" + json.dumps(result))
 """
 
 CASES = [
-    # name, suite task, networks, settings beyond the named controller's
+    # name, suite task, networks, parts beyond the named controller's
     ("bayes-filtered", "noise2", 4, {}),
     ("gaussian", "paper", 4, {}),
-    ("particles-qmdp", "paper", 3, {"identification": "particles", "gamble_networks": 4}),
+    ("particles-qmdp", "paper", 3, {"estimator": "particles", "gamble_networks": 4}),
     ("stochastic-release", "stochastic", 4, {}),
     ("relays", "hidden25", 4, {}),
 ]

@@ -81,7 +81,7 @@ def test_labels_of_the_teachers_own_episodes_are_its_actions(contexts):
 
 def told_weights_policy(contexts):
     """The loop told each context's weights, batched (context i in environment i)."""
-    copies = [IdentifyAndPlan(known_weights=context.weights) for context in contexts]
+    copies = [IdentifyAndPlan(told_weights=context.weights) for context in contexts]
 
     def policy(observations, action_mask):
         return np.array([
@@ -96,8 +96,9 @@ def told_weights_policy(contexts):
 def test_the_teacher_plays_the_training_tasks_settings():
     """With ``teacher_settings="task"`` (the default) the identify teacher is the named
     identify-and-plan of the training environment in its fast form; with ``"defaults"``
-    (every earlier run's) the constructor's; on the paper's task the two are the same."""
-    from spikectl.planning.policy import environment_settings
+    (every earlier run's) the paper's composition; on the paper's task the two are the
+    same."""
+    from spikectl.planning import Composition, named_composition
     from spikectl.training.learners.guided import GuidedDQNLearner
     from spikectl.training.learners.teachers import make_teacher
 
@@ -110,21 +111,23 @@ def test_the_teacher_plays_the_training_tasks_settings():
         for choice in ("task", "defaults"):
             config = dataclasses.replace(guided(teacher_settings=choice), env=env)
             learner = GuidedDQNLearner(config, train_set, np.random.default_rng(0))
-            expected = (environment_settings(extensions, n_neurons, fast=True)
-                        if choice == "task" else {})  # fmt: skip
-            assert learner.teacher_settings == expected
-            teacher = make_teacher("identify", train_set[0], NeuronParams(),
-                                   extensions.observation_noise_mV, 32,
-                                   learner.teacher_settings)  # fmt: skip
+            expected = (named_composition(extensions, n_neurons, fast=True)
+                        if choice == "task" else Composition())  # fmt: skip
+            assert learner.teacher_composition == expected
+            teacher = make_teacher("identify", train_set[0], NeuronParams(), extensions, 32,
+                                   learner.teacher_composition)  # fmt: skip
             task = choice == "task"
-            assert teacher.filter_voltage == (task and extensions == noisy)
+            assert teacher.composition.observation.filter_voltage == (task and extensions == noisy)
+            assert teacher.noise_mV == extensions.observation_noise_mV
             assert teacher.known_sd == (0.4 if task and n_neurons == 16 else 0.25)
-            assert teacher.gamble_networks == 0
+            assert teacher.composition.decision.gamble is None
+            assert make_teacher("identify", train_set[0], NeuronParams(), extensions, 8,
+                                expected).composition.decision.width == 8  # fmt: skip
     # The paper's environment: the task's settings are the constructor's.
     assert GuidedDQNLearner(
         guided(teacher_settings="task"), make_splits(2, 1, seed=0, n_val=0)[0],
         np.random.default_rng(0),
-    ).teacher_settings == {}  # fmt: skip
+    ).teacher_composition == Composition()  # fmt: skip
     with pytest.raises(ConfigError, match="teacher_settings"):
         Experiment.from_dict({"learner": {"name": "guided", "teacher_settings": "named"}})
 
@@ -149,18 +152,19 @@ def test_configs_saved_before_teacher_settings_read_back_as_they_ran():
 def test_labels_under_noise_with_the_tasks_settings_are_the_teachers_actions():
     """Label exactness holds for the task's teacher too: under measurement noise the
     named controller's fast form, played beside its own episodes, says what it did."""
-    from spikectl.planning.policy import environment_settings
+    from spikectl.planning import named_composition
 
     contexts = make_splits(3, 1, seed=4, n_val=0)[0]
     noisy = Extensions(observation_noise_mV=2.0)
-    settings = environment_settings(noisy, 8, fast=True)
+    composition = named_composition(noisy, 8, fast=True)
     episodes = evaluate_policy(
-        contexts, batched(IdentifyAndPlan(noise_mV=2.0, **settings)), extensions=noisy, seed=1
-    )
-    labels = teacher_labels(episodes, list(contexts), "identify", NeuronParams(), 2.0,
-                            settings=settings)  # fmt: skip
+        contexts, batched(IdentifyAndPlan(composition=composition, extensions=noisy)),
+        extensions=noisy, seed=1,
+    )  # fmt: skip
+    labels = teacher_labels(episodes, list(contexts), "identify", NeuronParams(), noisy,
+                            composition=composition)  # fmt: skip
     np.testing.assert_array_equal(labels, episodes.actions)
-    plain = teacher_labels(episodes, list(contexts), "identify", NeuronParams(), 2.0)
+    plain = teacher_labels(episodes, list(contexts), "identify", NeuronParams(), noisy)
     assert (plain != episodes.actions).any()  # the defaults would have taught otherwise
 
 
@@ -180,11 +184,11 @@ def test_told_weights_loop_scores_near_the_oracle():
     assert told.mean() >= 0.97 and told.mean() > identify.mean()
 
 
-def test_known_weights_are_checked():
-    with pytest.raises(ValueError, match="known_weights must be a square"):
-        IdentifyAndPlan(known_weights=np.zeros((3, 4)))
+def test_told_weights_are_checked():
+    with pytest.raises(ValueError, match="told_weights must be a square"):
+        IdentifyAndPlan(told_weights=np.zeros((3, 4)))
     with pytest.raises(ValueError, match="only -1, 0 and \\+1"):
-        IdentifyAndPlan(known_weights=np.full((3, 3), 2))
+        IdentifyAndPlan(told_weights=np.full((3, 3), 2))
 
 
 def test_labelled_replay_round_trip_and_mismatch():

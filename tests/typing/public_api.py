@@ -17,7 +17,14 @@ from spikectl.envs import ENV_ID, NeuronControlEnv, NeuronControlVectorEnv
 from spikectl.envs.controller import Controller
 from spikectl.envs.realtime import RealtimeReport, run_realtime
 from spikectl.neuron import Extensions, NeuronParams, simulate
-from spikectl.planning import IdentifyAndPlan, Plan, plan_episode
+from spikectl.planning import (
+    Composition,
+    DecisionSettings,
+    IdentifyAndPlan,
+    Plan,
+    named_composition,
+    plan_episode,
+)
 from spikectl.wrappers import SB3CompatibleEnv, sb3_compatible, sb3_vec_env
 
 
@@ -50,7 +57,11 @@ def environments() -> float:
 
 
 def controllers(env: NeuronControlEnv) -> float:
-    planner: Controller = IdentifyAndPlan(width=16, seed=0)
+    planner: Controller = IdentifyAndPlan(
+        composition=Composition("width16", decision=DecisionSettings(width=16)), seed=0
+    )
+    named: Controller = IdentifyAndPlan(composition=named_composition(None, 8))
+    named.reset()
     planner.reset()
     observation, info = env.reset(seed=0)
     action: int = planner.act(observation, info)
