@@ -105,8 +105,10 @@ def _committed(file: str, task: str) -> list[dict[str, str]]:
 
 # Tasks whose environment draws nothing are replayed on their first networks; the others
 # whole (a network's draws depend on the batch it is played in), which is cheap at n = 8.
-REPLAYED = {"paper": 100, "n16": 3, "n32": 2, "noise1": 100, "noise2": 100, "noise4": 100,
-            "hidden25": 100, "stochastic": 100, "heterogeneous": 100, "background": 100}  # fmt: skip
+REPLAYED = {
+    "paper": 100, "n16": 3, "n32": 2, "noise1": 100, "noise2": 100, "noise4": 100,
+    "hidden25": 100, "stochastic": 100, "heterogeneous": 100, "background": 100,
+}  # fmt: skip
 
 
 @pytest.mark.slow

@@ -5,8 +5,9 @@ kernel's :func:`spikectl.neuron.kernel.step_network` (the step
 :func:`spikectl.neuron.simulator.advance` runs), doing nothing, and every other action
 with :func:`spikectl.neuron.kernel.step_neuron` on the stimulated neuron (an action
 enters the step only through its own neuron). The search is one compiled function
-(Numba, :mod:`spikectl.planning.beam_kernel`): the same search as the NumPy one it replaced (issue 24, part 4; the same plans, tests/test_planning_reference.py),
-without NumPy's per-call overhead, which was nearly all of its time (a re-plan of 20
+(Numba, :mod:`spikectl.planning.beam_kernel`): the same search as the NumPy one it
+replaced (issue 24, part 4; the same plans, tests/test_planning_reference.py), without
+NumPy's per-call overhead, which was nearly all of its time (a re-plan of 20
 steps at width 32: 8.0 ms -> 0.33 ms at n = 8; docs/benchmarks.md). Two facts of the model
 (docs/model.md) make a beam search strong here:
 
@@ -28,7 +29,8 @@ import numpy as np
 from spikectl.envs.env_support import step_rewards
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import SimulatorState
-from spikectl.planning.beam_kernel import VOLTAGE_RESOLUTION_MV, multipliers, search
+from spikectl.planning.beam_kernel import VOLTAGE_RESOLUTION_MV, search
+
 
 @dataclass(frozen=True)
 class PlanningModel:

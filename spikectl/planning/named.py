@@ -32,7 +32,6 @@ from typing import Any
 
 from spikectl.neuron.extensions import Extensions
 from spikectl.planning.composition import Composition
-from spikectl.planning.deciding import DecisionSettings
 from spikectl.planning.estimators import EstimatorSettings
 from spikectl.planning.observing import ObservationSettings
 from spikectl.planning.qmdp import QMDPSettings

@@ -26,7 +26,7 @@ from spikectl.neuron.params import NeuronParams
 from spikectl.planning.bayes import ObservationModel, release_chances
 from spikectl.planning.filtering import FilteredState, model_variance
 from spikectl.planning.heterogeneity import NeuronTracker, tracks_neurons
-from spikectl.planning.identify import ConnectivityEstimate, ObservedState, residual_sd
+from spikectl.planning.identify import ObservedState, residual_sd
 from spikectl.planning.release import exact_residuals, settled_releases
 
 
@@ -145,10 +145,11 @@ class Reader:
 
     def release_evidence(self, estimate, residual: np.ndarray, observed: np.ndarray) -> tuple:
         """Under stochastic release, the evidence of the last step's spikes: each release
-        settled from the residuals where they are exact (for the Gaussian estimate),
-        otherwise each spike's release chance."""
+        settled from the residuals where they are exact, for an estimate that answers
+        ``entry_probabilities`` (the Gaussian ones: the settling weighs each combination
+        of releases by them); otherwise each spike's release chance."""
         if (self.observation.settles and self.chances.any()
-                and isinstance(estimate, ConnectivityEstimate)):  # fmt: skip
+                and hasattr(estimate, "entry_probabilities")):  # fmt: skip
             excites, inhibits = estimate.entry_probabilities()
             return settled_releases(self.chances, residual, observed, excites, inhibits)
         return self.chances, residual, observed

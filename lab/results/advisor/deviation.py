@@ -22,7 +22,7 @@ import numpy as np
 
 from spikectl.envs import NeuronControlEnv
 from spikectl.experiments import suite
-from spikectl.planning import IdentifyAndPlan, environment_settings
+from spikectl.planning import IdentifyAndPlan, named_composition
 
 BANDS = ((0, 1), (1, 5), (5, 10), (10, 20), (20, 30), (30, 60))
 
@@ -45,13 +45,13 @@ def main() -> None:
         raise SystemExit("choose on train or validation; the test set is played once")
     contexts = suite.load_split(task, split)
     spec = suite.task(task)
-    settings = environment_settings(spec.extensions, spec.n_neurons)
+    composition = named_composition(spec.extensions, spec.n_neurons)
     rows = []  # (network, step, best return - the teacher's)
     started = time.process_time()
     for k in range(first, first + count):
         env = NeuronControlEnv(contexts=contexts[k : k + 1], extensions=spec.extensions)
         observation, info = env.reset(seed=suite.suite_version(1).env_seed)
-        teacher = IdentifyAndPlan(**settings)
+        teacher = IdentifyAndPlan(composition=composition, extensions=spec.extensions)
         for step in range(steps):
             # The teacher reads this observation and decides first; the copies then see
             # each deviation in the next observation's last action.

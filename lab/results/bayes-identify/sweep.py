@@ -5,9 +5,11 @@ CPU s per episode and per-decision CPU-time percentiles, one line per (task, set
         --settings '{}' '{"identification": "bayes", "extensions": true}' [--size 30] \
         [--out rows.csv] [--per-network out.csv]
 
-A setting is IdentifyAndPlan's keyword arguments as JSON; "extensions": true passes the
-task's extensions; {"named": true} is what `spikectl benchmark identify-and-plan` plays
-(spikectl.planning.policy.environment_settings of the task's extensions).
+A setting is a composition of identify-and-plan as JSON, in the words of the research
+record (:func:`composition_of`): "identification" (the estimator), "extensions": true (the
+task's observation model), "filter_voltage", "gamble_networks" (QMDP's K), "known_sd",
+"width"; {"named": true} is what `spikectl benchmark identify-and-plan` plays
+(spikectl.planning.named_composition of the task), the other keys on top of it.
 
 Choose on validation (a training split checks a choice on more unseen networks); the
 test split is played once, at the end.
@@ -24,7 +26,15 @@ import numpy as np
 
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
-from spikectl.planning import IdentifyAndPlan, environment_settings
+from spikectl.planning import (
+    Composition,
+    DecisionSettings,
+    EstimatorSettings,
+    IdentifyAndPlan,
+    ObservationSettings,
+    QMDPSettings,
+    named_composition,
+)
 
 
 class Timed:
@@ -47,6 +57,28 @@ class Timed:
         return action
 
 
+def composition_of(text: str, extensions, n_neurons: int) -> Composition:
+    """The composition a ``--settings`` JSON names (its text is the composition's name)."""
+    settings = json.loads(text)
+    named = settings.pop("named", False)
+    base = named_composition(extensions, n_neurons) if named else Composition()
+    estimator, observation, decision = base.estimator, base.observation, base.decision
+    if "identification" in settings or "known_sd" in settings:
+        kind = settings.pop("identification", estimator.kind)
+        estimator = EstimatorSettings(kind, settings.pop("known_sd", estimator.known_sd))
+    if "extensions" in settings or "filter_voltage" in settings:
+        task_model = settings.pop("extensions", observation.task_model)
+        filtered = settings.pop("filter_voltage", observation.filter_voltage)
+        observation = ObservationSettings(task_model, filtered)
+    if "gamble_networks" in settings or "width" in settings:
+        networks = settings.pop("gamble_networks", decision.draws)
+        gamble = QMDPSettings(networks=networks) if networks else None
+        decision = DecisionSettings(settings.pop("width", decision.width), decision.horizon, gamble)
+    if settings:
+        raise SystemExit(f"--settings {text}: unknown keys {', '.join(settings)}")
+    return base.but(text, estimator=estimator, observation=observation, decision=decision)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser()
     parser.add_argument("--tasks", nargs="+", default=["paper"])
@@ -67,18 +99,9 @@ def main() -> None:
         scored = args.size >= 100 and args.split != "train"
         nothing, oracle = suite.references(name, args.split) if scored else (None, None)
         for text in args.settings:
-            settings = json.loads(text)
-            if settings.pop("named", False):
-                # What `spikectl benchmark identify-and-plan` plays (load_controller).
-                settings = {
-                    "noise_mV": spec.extensions.observation_noise_mV,
-                    **environment_settings(spec.extensions, contexts.n_observed),
-                    **settings,
-                }
-            settings.setdefault("noise_mV", spec.extensions.observation_noise_mV)
-            if settings.pop("extensions", False):
-                settings["extensions"] = spec.extensions
-            policy = Timed(IdentifyAndPlan(contexts.params, **settings))
+            composition = composition_of(text, spec.extensions, contexts.n_observed)
+            policy = Timed(IdentifyAndPlan(contexts.params, composition,
+                                           extensions=spec.extensions))  # fmt: skip
             started = time.process_time()
             episodes = evaluate_policy(
                 contexts, policy, extensions=spec.extensions, seed=suite.suite_version(1).env_seed

@@ -17,19 +17,23 @@ from pathlib import Path
 
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
-from spikectl.planning import IdentifyAndPlan, environment_settings
+from spikectl.planning import Composition, IdentifyAndPlan, ObservationSettings, named_composition
 
 TASK = "heterogeneous"
+TASK_MODEL = Composition("task-model", observation=ObservationSettings(task_model=True))
 
 
 def main(out: Path) -> None:
     extensions = suite.task(TASK).extensions
     controllers = {
         "before: the constructor's defaults": IdentifyAndPlan(),
-        "after: the named controller": IdentifyAndPlan(**environment_settings(extensions, 8)),
+        "after: the named controller": IdentifyAndPlan(
+            composition=named_composition(extensions, 8), extensions=extensions),
         "thresholds and leaks learned, synapses as signs": IdentifyAndPlan(
+            composition=TASK_MODEL,
             extensions=dataclasses.replace(extensions, synaptic_spread=0.0)),
         "synapses at their strength, the paper's neurons": IdentifyAndPlan(
+            composition=TASK_MODEL,
             extensions=dataclasses.replace(extensions, threshold_spread=0.0,
                                            time_constant_spread=0.0)),
     }  # fmt: skip

@@ -1,6 +1,7 @@
 """Identify-and-plan on the ``stochastic`` task's train and validation sets (never the
 test set), network by network: the named controller with each spike's release chance as
-the Gaussian estimate's evidence (``settle_releases=False``, what it played before) and
+the Gaussian estimate's evidence (lab/planners' ``ReleaseChanceEvidence``, what it played
+before) and
 with each release settled from the next step's residuals (the named controller now), at
 the ``known_sd`` of each; and how right the known weights are at steps 10, 30 and 59.
 
@@ -18,9 +19,10 @@ from pathlib import Path
 
 import numpy as np
 
+from lab.planners import ReleaseChanceEvidence
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
-from spikectl.planning import IdentifyAndPlan, environment_settings
+from spikectl.planning import EstimatorSettings, IdentifyAndPlan, named_composition
 
 TASK = "stochastic"
 SPLITS = ("train", "validation")
@@ -52,19 +54,22 @@ class Checked(IdentifyAndPlan):
 
 
 def main(out: Path) -> None:
-    settings = environment_settings(suite.task(TASK).extensions, 8)
+    extensions = suite.task(TASK).extensions
+    named = named_composition(extensions, 8)
     variants = {
-        "release chance (before)": {"settle_releases": False},
-        "settled releases (now)": {},
-        "settled releases, known_sd 0.3": {"known_sd": 0.3},
-    }
+        "release chance (before)": named.but("release-chances",
+                                             observation=ReleaseChanceEvidence(task_model=True)),
+        "settled releases (now)": named,
+        "settled releases, known_sd 0.3": named.but("known-sd-0.3",
+                                                    estimator=EstimatorSettings(known_sd=0.3)),
+    }  # fmt: skip
     rows, returns, knowledge = [], {}, {}
-    for label, override in variants.items():
+    for label, composition in variants.items():
         record: list = []
         played, cpu = [], 0.0
         for split in SPLITS:
             contexts = suite.load_split(TASK, split)
-            policy = Checked(contexts, record, **{**settings, **override})
+            policy = Checked(contexts, record, composition=composition, extensions=extensions)
             values, seconds = suite.play(TASK, split, policy)
             played.append(values)
             cpu += seconds
