@@ -83,6 +83,19 @@ def test_the_declared_compositions_hold_what_was_chosen():
                                  "heterogeneous", "hidden"}  # fmt: skip
 
 
+@pytest.mark.parametrize(
+    "extensions",
+    [None, Extensions(), NOISY, STOCHASTIC, HIDDEN, HETEROGENEOUS,
+     Extensions(background_rate=0.005)],
+)  # fmt: skip
+def test_below_16_neurons_the_fast_form_is_the_named_composition(extensions):
+    assert named_composition(extensions, 8, fast=True) == named_composition(extensions, 8)
+    assert named_composition(extensions, 15, fast=True) == named_composition(extensions, 15)
+    fast = named_composition(extensions, 16, fast=True)
+    assert fast.decision.gamble is None and fast.estimator.known_sd == KNOWN_SD_FAST_LARGE
+    assert fast.observation == named_composition(extensions, 8).observation
+
+
 @pytest.mark.parametrize("name", ["nothing", "noise-32", "paper-8", "paper-16-slow"])
 def test_an_unknown_composition_is_refused_in_one_line(name):
     with pytest.raises(ValueError, match=f"unknown composition '{name}'") as caught:
