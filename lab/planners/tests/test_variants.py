@@ -12,10 +12,9 @@ import numpy as np
 import pytest
 
 from lab.planners import PlanUnderRelease, ReleaseChanceEvidence, SampledHypotheses
-from spikectl import make_splits
+from spikectl import Extensions, make_splits
 from spikectl.envs.controller import batched
 from spikectl.envs.rollout import evaluate_policy
-from spikectl.neuron.extensions import Extensions
 from spikectl.planning import (
     Composition,
     EstimatorSettings,
