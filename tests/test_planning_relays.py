@@ -116,7 +116,8 @@ def test_a_target_driven_only_through_a_hidden_neuron(relays):
 def test_the_named_controller_plans_relays_with_hidden_neurons_alone():
     assert composition_name(Extensions(hidden_fraction=0.25), 8) == "hidden"
     assert composition_name(Extensions(hidden_neurons=1), 8) == "hidden"
-    assert composition_name(Extensions(hidden_fraction=0.25, observation_noise_mV=1.0), 8) == "noise"
+    noisy = Extensions(hidden_fraction=0.25, observation_noise_mV=1.0)
+    assert composition_name(noisy, 8) == "noise"
     assert composition_name(None, 8) == "paper"
 
 
