@@ -33,8 +33,9 @@ def discrete(n: int, residual_sd: float, model, params: NeuronParams):
     """The ``"discrete"`` estimator (an :data:`~spikectl.planning.estimators.EstimateFactory`;
     ``model``, the task's observation model, is not read): the exact posterior over
     {-1, 0, +1} under the paper's model (n <= 11). It knows more entries than the Gaussian
-    estimate (55 vs 48 of 64 at the end of a training episode) but did not plan better (-0.010 on the training
-    networks, docs/research/identify-and-plan.md); the core's ``"bayes"`` is the same
+    estimate (55 vs 48 of 64 at the end of a training episode) but did not plan better
+    (-0.010 on the training networks, docs/research/identify-and-plan.md); the core's
+    ``"bayes"`` is the same
     posterior under the task's observation model."""
     return DiscreteConnectivityEstimate(n, residual_sd)
 
