@@ -35,8 +35,7 @@ def discrete(n: int, residual_sd: float, model, params: NeuronParams):
     {-1, 0, +1} under the paper's model (n <= 11). It knows more entries than the Gaussian
     estimate (55 vs 48 of 64 at the end of a training episode) but did not plan better
     (-0.010 on the training networks, docs/research/identify-and-plan.md); the core's
-    ``"bayes"`` is the same
-    posterior under the task's observation model."""
+    ``"bayes"`` is the same posterior under the task's observation model."""
     return DiscreteConnectivityEstimate(n, residual_sd)
 
 

@@ -107,11 +107,10 @@ def score_and_write(command: BenchmarkCommand) -> None:
           f"{'oracle':>9}{'CPU s':>9}")  # fmt: skip
     rows, per_network, normalised = [], [], {}
     for name in names:
-        played = []  # the controllers made, to name the composition they played
-        make_one = make(name)
-        result = suite.score(name, command.split,
-                             lambda seed: played.append(make_one(seed)) or played[-1], seeds,
+        played: list[Any] = []  # the controllers made, to name the composition they played
+        result = suite.score(name, command.split, recorded(make(name), played), seeds,
                              version.number)
+        composition = composition_of(played[0])
         composition = composition_of(played[0])
         per_network += [
             {"suite_version": version.number, "task": name, "split": command.split,
@@ -165,6 +164,16 @@ def training_task(command: BenchmarkCommand) -> str | None:
         return None
     return suite.trained_on(read_config(source), ContextSet.load(source / TRAIN_FILE),
                             command.suite)  # fmt: skip
+
+
+def recorded(make: Any, played: list[Any]) -> Any:
+    """``make`` (seed -> controller), appending each controller it makes to ``played``."""
+
+    def make_and_keep(seed: int) -> Any:
+        played.append(make(seed))
+        return played[-1]
+
+    return make_and_keep
 
 
 def composition_of(controller: Any) -> str:

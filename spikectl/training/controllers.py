@@ -31,8 +31,8 @@ from spikectl.envs.controller import Controller, DoNothing, RandomLegal, Witness
 from spikectl.file_kinds import FileKind, refuse_other_kinds
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
 from spikectl.planning.named import named_composition
+from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
 from spikectl.planning.policy import IdentifyAndPlan
 from spikectl.registry import Registry, load_target
 
