@@ -28,6 +28,8 @@ sys.path.insert(0, str(TESTS))
 from conftest import play_by_hand, play_legally  # noqa: E402
 from test_planning_reference import REFERENCE, play  # noqa: E402
 
+pytestmark = pytest.mark.lab  # the lab's tier (pyproject.toml's markers)
+
 HYPOTHESES4 = Composition("hypotheses4", decision=SampledHypotheses(hypotheses=4))
 DISCRETE = Composition("discrete", EstimatorSettings("discrete"))
 
