@@ -227,13 +227,13 @@ def claims() -> Iterator[Claim]:
                 "{suite/identify-and-plan/noise4/mean_return:.3f} at σ = 1, 2 and 4 mV")
     normalised = {task: f"{{suite/identify-and-plan/{task}/normalised:.3f}}" for task in TASKS}
     tails = {  # the end of each row of the named controller's table (its configuration)
-        "paper": "| `paper` | the constructor's defaults |",
-        "hidden25": "(`relays=True`) |",
+        "paper": "| `paper` | `paper` | the constructor's default |",
+        "hidden25": "(the `\"relays\"` estimator) |",
         "heterogeneous": "known synapses planned at their strength |",
         "background": "(`known_sd`; 0.25 by default) |",
         "stochastic": "where the plan misses the next wanted spike |",
         "n16": "drawn from its estimate (QMDP) |",
-        "n32": "(`identification=\"particles\"`) |",
+        "n32": "(the `\"particles\"` estimator) |",
     }
     for task, tail in tails.items():
         yield Claim(baselines, f"{tail} {normalised[task]} |\n")
