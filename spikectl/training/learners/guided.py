@@ -36,7 +36,7 @@ from spikectl.planning import Composition, IdentifyAndPlan, named_composition
 from spikectl.seeds import CONNECTIVITY_HEAD_STREAM, torch_seed
 from spikectl.training.learners.dqn import DQNLearner, losses_on_tensors
 from spikectl.training.learners.q_learning import batch_tensors
-from spikectl.training.learners.teachers import TeacherMixedPolicy, at_width, teacher_labels
+from spikectl.training.learners.teachers import TeacherMixedPolicy, teacher_labels
 from spikectl.training.replay import EpisodeReplay
 
 
