@@ -140,7 +140,7 @@ def test_the_named_controller_replays_the_committed_per_network_returns(task, co
         "identify-and-plan", env=NeuronControlEnv(contexts=contexts, extensions=extensions)
     )
     returns = evaluate_policy(contexts, controller, extensions=extensions,
-                              seed=suite.ENV_SEED).returns  # fmt: skip
+                              seed=suite.suite_version(1).env_seed).returns  # fmt: skip
     rows = sorted(_committed("identify-and-plan-per-network.csv", task),
                   key=lambda row: int(row["context"]))[:count]  # fmt: skip
     assert [repr(float(value)) for value in returns] == [row["return"] for row in rows]
