@@ -4,6 +4,7 @@ tests/data/planning_reference.npz), legally, and differs from the core where it 
 
 from __future__ import annotations
 
+import importlib.util
 import sys
 from pathlib import Path
 
@@ -24,9 +25,22 @@ from spikectl.planning import (
 )
 
 TESTS = Path(__file__).resolve().parents[3] / "tests"
-sys.path.insert(0, str(TESTS))
-from conftest import play_by_hand, play_legally  # noqa: E402
-from test_planning_reference import REFERENCE, play  # noqa: E402
+
+
+def _core_test_module(name: str):
+    """A module of the core's tests, loaded from its file under a name of its own: the
+    lab's tier has a conftest of its own, so ``import conftest`` would find that one."""
+    spec = importlib.util.spec_from_file_location(f"core_tests_{name}", TESTS / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = module
+    spec.loader.exec_module(module)
+    return module
+
+
+_core_conftest = _core_test_module("conftest")
+play_by_hand, play_legally = _core_conftest.play_by_hand, _core_conftest.play_legally
+_reference = _core_test_module("test_planning_reference")
+REFERENCE, play = _reference.REFERENCE, _reference.play
 
 pytestmark = pytest.mark.lab  # the lab's tier (pyproject.toml's markers)
 
