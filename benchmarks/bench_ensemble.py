@@ -148,8 +148,8 @@ def stacked_timings(
 
     import numpy as np
 
-    from spikectl.training.contexts import generated_contexts
     from spikectl.training.learners.dqn_stacked import StackedDQN
+    from spikectl.training.run_sets import generated_contexts
 
     config = config.with_changes(updates_per_round=1, learning_starts=1, cuda_graphs=cuda_graphs)
     train_set = generated_contexts(config)[0]

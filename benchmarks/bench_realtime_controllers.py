@@ -28,7 +28,7 @@ from spikectl.cli.baseline_policies import generated_split
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.realtime import run_realtime
 from spikectl.neuron.extensions import Extensions
-from spikectl.training.controllers import load_controller
+from spikectl.training.loaders import load_controller
 from spikectl.training.machine import cpu_description
 
 SLOW_AT_32 = ("identify-and-plan", "oracle")

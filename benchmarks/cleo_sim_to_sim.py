@@ -28,7 +28,7 @@ from spikectl.envs.env import NeuronControlEnv
 from spikectl.experiments.stats import bootstrap_ci
 from spikectl.experiments.suite import load_split
 from spikectl.files import atomic_write_text
-from spikectl.training.controllers import load_controller
+from spikectl.training.loaders import load_controller
 
 FIELDS = ("controller", "seed", "setting", "context", "return", "seconds", "same_actions")
 

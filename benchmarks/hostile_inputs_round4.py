@@ -78,7 +78,7 @@ def controller_probe(name: str, who: str, change: str) -> Probe:
         "import numpy as np\n"
         "from spikectl.contexts import ContextSet\n"
         "from spikectl.envs.env import NeuronControlEnv\n"
-        "from spikectl.training.controllers import load_controller\n"
+        "from spikectl.training.loaders import load_controller\n"
         "cs = ContextSet.load('ctx.npz'); env = NeuronControlEnv(contexts=cs)\n"
         "obs, info = env.reset(seed=0, options={'context': 0})\n"
         f"c = load_controller({who!r}, env=env)\n"

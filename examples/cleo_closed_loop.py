@@ -33,7 +33,7 @@ def main(argv: list[str] | None = None) -> int:
     from spikectl.envs.controller import play_episode
     from spikectl.envs.env import NeuronControlEnv
     from spikectl.experiments.suite import load_split
-    from spikectl.training.controllers import load_controller
+    from spikectl.training.loaders import load_controller
 
     unknown = [name for name in args.settings if name not in SETTINGS]
     if unknown or not 1 <= args.networks <= 100:

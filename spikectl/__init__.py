@@ -62,8 +62,8 @@ __all__ = [
 
 
 _LAZY = {
-    "load_controller": "spikectl.training.controllers",
-    "register_controller": "spikectl.training.controllers",
+    "load_controller": "spikectl.training.loaders",
+    "register_controller": "spikectl.training.loaders",
     "register_suite_version": "spikectl.experiments.suite",
     "register_task": "spikectl.experiments.suite",
 }

@@ -19,7 +19,7 @@ from spikectl.agents.inputs import INPUT_FEATURES, InputFeature, input_width, pe
 from spikectl.config_errors import ConfigError
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.training.config import Experiment
-from spikectl.training.controllers import load_agent
+from spikectl.training.loaders import load_agent
 from spikectl.training.presets import PRESETS, SMOKE
 from spikectl.training.run import train
 from spikectl.training.run_files import read_metrics

@@ -7,8 +7,8 @@ import math
 import pytest
 import torch
 
-from spikectl.training.controllers import load_agent
 from spikectl.training.evaluate import evaluate_run
+from spikectl.training.loaders import load_agent
 from spikectl.training.presets import SMOKE
 from spikectl.training.run import best_on_validation, train
 from spikectl.training.run_files import BEST_MODEL_FILE, RunDirError, read_metrics

@@ -112,7 +112,7 @@ def test_depression_blocks_a_release_within_the_interval():
 def test_ideal_setting_equals_the_environment(test_set):
     """Ideal sensing and pulse, no latency: every action, every target spike and the
     return equal NeuronControlEnv's, for the planners and the privileged references."""
-    from spikectl.training.controllers import load_controller
+    from spikectl.training.loaders import load_controller
 
     env = NeuronControlEnv(contexts=test_set)
     loop = cleo_bridge.CleoLoop(test_set)

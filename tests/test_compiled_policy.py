@@ -190,7 +190,7 @@ def test_a_network_runs_on_another_n_as_the_network_does():
 
 
 def test_a_trained_network_matches():
-    from spikectl.training.controllers import load_agent
+    from spikectl.training.loaders import load_agent
 
     run_dir = ROOT / "tests" / "data" / "format2-smoke-run"
     trained = load_agent(run_dir, model="best")

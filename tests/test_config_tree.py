@@ -14,9 +14,9 @@ from spikectl.agents.inputs import per_neuron_inputs
 from spikectl.cli import main
 from spikectl.training.checkpoint import read_checkpoint
 from spikectl.training.config import Experiment
-from spikectl.training.controllers import load_agent
 from spikectl.training.evaluate import evaluate_run
 from spikectl.training.learners.q_learning import build_networks
+from spikectl.training.loaders import load_agent
 from spikectl.training.presets import SMOKE
 from spikectl.training.run import train
 from spikectl.training.run_files import read_config, read_metrics

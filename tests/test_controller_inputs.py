@@ -34,7 +34,7 @@ def start(sets):
 
 @pytest.fixture(scope="module")
 def controllers(sets):
-    from spikectl.training.controllers import load_controller
+    from spikectl.training.loaders import load_controller
 
     network = make_agent("tdrqn", 5, 20)
     env = NeuronControlEnv(contexts=sets[1])

@@ -24,10 +24,10 @@ from spikectl.envs.controller import (
 )
 from spikectl.envs.rollout import evaluate_policy, run_episodes
 from spikectl.planning import OraclePlanner, plan_episode
-from spikectl.training.contexts import baseline_episodes
-from spikectl.training.controllers import CONTROLLERS, load_controller
 from spikectl.training.evaluate import evaluate_run
+from spikectl.training.loaders import CONTROLLERS, load_controller
 from spikectl.training.run_files import read_config
+from spikectl.training.run_sets import baseline_episodes
 
 ROOT = Path(__file__).resolve().parent.parent
 RUN = ROOT / "tests" / "data" / "format2-smoke-run"
@@ -192,7 +192,7 @@ def test_named_controllers_play_their_contexts_params(contexts):
 
 def test_a_compiled_policy_file_loads_without_pytorch(tmp_path):
     from spikectl.agents import export_policy
-    from spikectl.training.controllers import load_agent
+    from spikectl.training.loaders import load_agent
 
     export_policy(load_agent(RUN, model="best"), tmp_path / "policy.npz")
     script = (

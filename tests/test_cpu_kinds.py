@@ -235,7 +235,7 @@ def _replay(task: str, count: int) -> np.ndarray:
     from spikectl.envs.env import NeuronControlEnv
     from spikectl.envs.rollout import evaluate_policy
     from spikectl.experiments import suite
-    from spikectl.training.controllers import load_controller
+    from spikectl.training.loaders import load_controller
 
     contexts = suite.load_split(task, "test")[:count]
     extensions = suite.task(task).extensions

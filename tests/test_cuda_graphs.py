@@ -108,8 +108,8 @@ def test_a_captured_call_replays_on_new_inputs_and_refuses_other_shapes():
 
 
 def _stacked_group(cuda_graphs: bool, seeds=(0, 1), device: str = "cuda"):
-    from spikectl.training.contexts import generated_contexts
     from spikectl.training.learners.dqn_stacked import StackedDQN
+    from spikectl.training.run_sets import generated_contexts
 
     config = TINY.with_changes(device=device, cuda_graphs=cuda_graphs, aux_voltage_weight=1.0)
     configs = [config.with_changes(seed=s) for s in seeds]

@@ -81,7 +81,7 @@ def read(reader: str, path: Path):
     from spikectl.agents.compiled import CompiledPolicy
     from spikectl.contexts import ContextSet
     from spikectl.training.checkpoint import read_checkpoint
-    from spikectl.training.controllers import load_controller
+    from spikectl.training.loaders import load_controller
     from spikectl.training.run_files import read_config
     from spikectl.training.torch_files import load_model_weights
 

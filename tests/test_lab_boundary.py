@@ -155,7 +155,7 @@ def test_the_public_api_is_read_from_the_reference():
     assert "spikectl.training.run:train" in names  # a members list
     assert "spikectl.training.run:train_runs" in names
     assert "spikectl.training.run:crossed_multiple" not in names  # not in that list
-    assert "spikectl.training.controllers:load_controller" in names
+    assert "spikectl.training.loaders:load_controller" in names
     assert "spikectl.agents:make_agent" in names  # __all__ = sorted(_HOMES)
     assert "spikectl.experiments.suite" in modules and "spikectl.planning.beam" not in modules
     assert "spikectl.experiments:suite" not in names  # members: false, but the module is public

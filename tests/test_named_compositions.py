@@ -132,7 +132,7 @@ def test_the_named_controller_replays_the_committed_per_network_returns(task, co
     from spikectl.envs.env import NeuronControlEnv
     from spikectl.envs.rollout import evaluate_policy
     from spikectl.experiments import suite
-    from spikectl.training.controllers import load_controller
+    from spikectl.training.loaders import load_controller
 
     contexts = suite.load_split(task, "test")[:count]
     extensions = suite.task(task).extensions
@@ -150,7 +150,7 @@ def test_the_named_controller_replays_the_committed_per_network_returns(task, co
 @pytest.mark.parametrize("task", list(REPLAYED))
 def test_the_oracle_replays_its_committed_mean_return(task):
     from spikectl.experiments import suite
-    from spikectl.training.controllers import load_controller
+    from spikectl.training.loaders import load_controller
 
     contexts = suite.load_split(task, "test")
     returns, _ = suite.play(task, "test", load_controller("oracle", contexts=contexts))

@@ -160,7 +160,7 @@ def test_options_out_of_range_or_without_effect_are_refused(args, message, capsy
 def test_model_best_with_a_policy_file_is_refused_in_the_api(tmp_path):
     """Class 9: ``--model best`` with a .npz played the file's one network as "best"."""
     from spikectl.agents import export_policy, make_agent
-    from spikectl.training.controllers import load_controller
+    from spikectl.training.loaders import load_controller
 
     path = export_policy(make_agent("tdrqn", 5, 20), tmp_path / "policy.npz")
     with pytest.raises(ValueError, match="model='best' chooses among a run directory's"):

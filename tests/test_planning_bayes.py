@@ -357,7 +357,7 @@ def test_named_controller_takes_the_environments_observation_model():
     from spikectl.contexts import make_splits
     from spikectl.envs.env import NeuronControlEnv
     from spikectl.planning.named import KNOWN_SD_LARGE
-    from spikectl.training.controllers import load_controller
+    from spikectl.training.loaders import load_controller
 
     contexts, _ = make_splits(2, 1, 8, 60, seed=5)
     noisy = Extensions(observation_noise_mV=2.0)

@@ -229,7 +229,7 @@ def test_cli_refuses_stacked_pqn_in_one_line(tmp_path, capsys):
 
 
 def test_evaluation_and_load_agent_rebuild_the_layer_norm_network(tmp_path):
-    from spikectl.training.controllers import load_agent
+    from spikectl.training.loaders import load_agent
 
     config = pqn(SMOKE.with_changes(total_env_steps=2 * 20 * 8), epochs=1)
     rows = train(config, tmp_path / "run")

@@ -19,7 +19,7 @@ from spikectl.envs.controller import DoNothing
 from spikectl.experiments import suite
 from spikectl.experiments.suite import SuiteVersion, Task
 from spikectl.registry import RegistryError
-from spikectl.training.controllers import CONTROLLERS, Played
+from spikectl.training.loaders import CONTROLLERS, Played
 
 VARIANT_ID = "spikectl-test/NeuronControlNoisy3-v0"
 TEST_SUITE = 901

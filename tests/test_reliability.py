@@ -223,7 +223,7 @@ def test_model_files_are_plain_state_dicts_with_a_checksum(finished_run):
     assert header["format"] == "spikectl.model" and header["checksum"] == payload_checksum(
         dict(weights)
     )
-    from spikectl.training.controllers import load_agent
+    from spikectl.training.loaders import load_agent
 
     network = load_agent(finished_run)
     network.load_state_dict(weights)  # strict: the metadata entry is not a weight

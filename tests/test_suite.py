@@ -217,7 +217,7 @@ def test_train_task_flag_trains_on_the_tasks_pinned_sets(name):
     validation sets of T (their pinned checksums), with T's environment and extensions,
     and trained_on recognises the run as T's (and no other task's)."""
     from spikectl.cli.training import parse_train
-    from spikectl.training.contexts import generated_contexts, make_validation_set
+    from spikectl.training.run_sets import generated_contexts, make_validation_set
 
     config = parse_train(["quick", "--task", name, "--seed", "3"]).config
     env, spec = config.env, suite.task(name)
@@ -237,8 +237,8 @@ def test_train_task_flag_pins_the_task_sets_over_the_presets_sizes():
     """The guided preset trains on 1 000 networks; --task still gives the task's 100
     (its pinned training set), and a later --n-train still overrides the task."""
     from spikectl.cli.training import parse_train
-    from spikectl.training.contexts import generated_contexts
     from spikectl.training.presets import PRESETS
+    from spikectl.training.run_sets import generated_contexts
 
     assert PRESETS["guided"].env.n_train == 1000
     config = parse_train(["guided", "--task", "paper"]).config
@@ -250,7 +250,7 @@ def test_train_task_flag_pins_the_task_sets_over_the_presets_sizes():
 
 def test_train_task_flag_is_overridden_by_later_flags_and_checked():
     from spikectl.cli.training import parse_train
-    from spikectl.training.contexts import generated_contexts
+    from spikectl.training.run_sets import generated_contexts
 
     config = parse_train(["guided", "--task=noise1", "--extensions.observation-noise-mV",
                           "3"]).config  # fmt: skip

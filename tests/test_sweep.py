@@ -173,8 +173,8 @@ def test_plot_a_sweep(tmp_path, capsys):
 def test_figure3_contexts_are_regenerated_when_a_trial_kept_only_its_metrics(tmp_path):
     from spikectl.contexts import ContextSet
     from spikectl.experiments.plot import training_contexts
-    from spikectl.training.contexts import TRAIN_FILE
     from spikectl.training.run_files import read_config
+    from spikectl.training.run_sets import TRAIN_FILE
 
     run_dir = tmp_path / "run"
     config = TINY.with_changes(n_train=5, context_seed=3)

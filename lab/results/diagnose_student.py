@@ -20,7 +20,7 @@ from spikectl import IdentifyAndPlan, make_splits
 from spikectl.envs.controller import Copies
 from spikectl.envs.env_support import step_rewards
 from spikectl.envs.rollout import evaluate_policy
-from spikectl.training.controllers import load_controller
+from spikectl.training.loaders import load_controller
 
 STEP_BINS = (0, 5, 10, 20, 30, 60)
 DO_NOTHING = -1

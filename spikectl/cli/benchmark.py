@@ -157,8 +157,8 @@ def training_task(command: BenchmarkCommand) -> str | None:
         return None
     from spikectl.contexts import ContextSet
     from spikectl.experiments import suite
-    from spikectl.training.contexts import TRAIN_FILE
     from spikectl.training.run_files import read_config
+    from spikectl.training.run_sets import TRAIN_FILE
 
     if not (source / TRAIN_FILE).is_file():
         return None
@@ -192,7 +192,7 @@ def model_label(command: BenchmarkCommand) -> str:
 
 def stochastic(controller: str) -> bool:
     """Whether ``controller`` is a registered controller whose seed changes what it does."""
-    from spikectl.training.controllers import CONTROLLERS
+    from spikectl.training.loaders import CONTROLLERS
 
     return controller in CONTROLLERS and CONTROLLERS.load(controller).stochastic
 
@@ -202,7 +202,7 @@ def controller_factory(command: BenchmarkCommand, names: list[str]) -> Any:
     that cannot play one of ``names`` (another neuron model, or a fixed-size network
     on another n)."""
     from spikectl.experiments import suite
-    from spikectl.training.controllers import CONTROLLERS, load_agent, load_controller
+    from spikectl.training.loaders import CONTROLLERS, load_agent, load_controller
 
     source = Path(command.controller)
     version = command.suite

@@ -84,7 +84,7 @@ def play_and_write(command: RealtimeCommand) -> None:
     from spikectl.contexts import ContextSet
     from spikectl.envs.env import NeuronControlEnv
     from spikectl.envs.realtime import run_realtime
-    from spikectl.training.controllers import load_controller
+    from spikectl.training.loaders import load_controller
 
     print = Printer()  # the decisions are written even if the reader of stdout goes away
     if command.cpu is not None:
@@ -113,7 +113,7 @@ def play_and_write(command: RealtimeCommand) -> None:
         )
         where = f"the generated {command.split} set ({n_neurons} neurons, seed 0)"
     if config is not None:
-        from spikectl.training.contexts import check_trained_params
+        from spikectl.training.run_sets import check_trained_params
 
         check_trained_params(context_set, config, str(source), where)
         if context_set.episode_length != episode_length:

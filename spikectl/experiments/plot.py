@@ -20,15 +20,15 @@ from spikectl.experiments.report import (
 )
 from spikectl.experiments.sweep import trial_dirs
 from spikectl.training.config import Experiment, field_value
-from spikectl.training.contexts import TEST_FILE, TRAIN_FILE, generated_contexts
+from spikectl.training.run_sets import TEST_FILE, TRAIN_FILE, generated_contexts
 
 
 def plot_sweep(
     sweep_dir: str | os.PathLike, out_dir: str | os.PathLike | None = None
 ) -> list[Path]:
     """Write figure3/4/5 PNGs, results tables and an episode raster; returns their paths."""
-    from spikectl.training.controllers import load_agent
     from spikectl.training.evaluate import greedy_episodes
+    from spikectl.training.loaders import load_agent
 
     sweep_dir = Path(sweep_dir)
     out_dir = Path(out_dir) if out_dir is not None else sweep_dir / "figures"

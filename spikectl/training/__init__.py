@@ -12,8 +12,8 @@ The entry points a user calls (the ``spikectl train`` command calls the same):
 - The learners' configurations: :class:`~spikectl.training.learners.DQNConfig`,
   :class:`~spikectl.training.learners.GuidedConfig` and
   :class:`~spikectl.training.learners.PQNConfig`.
-- A trained run read back: :func:`spikectl.training.controllers.load_controller`
-  (re-exported as ``spikectl.load_controller``), :func:`~spikectl.training.controllers.load_agent`
+- A trained run read back: :func:`spikectl.training.loaders.load_controller`
+  (re-exported as ``spikectl.load_controller``), :func:`~spikectl.training.loaders.load_agent`
   and :func:`spikectl.training.evaluate.evaluate_run`.
 
 Example (a run of the ``smoke`` preset, seconds on one core)::

@@ -17,15 +17,15 @@ from spikectl.contexts import ContextSet
 from spikectl.envs.controller import Controller, DoNothing
 from spikectl.envs.rollout import EpisodeBatch, evaluate_policy
 from spikectl.training.config import Experiment
-from spikectl.training.contexts import (
+from spikectl.training.loaders import load_controller
+from spikectl.training.run_files import read_config
+from spikectl.training.run_sets import (
     TEST_FILE,
     TRAIN_FILE,
     VAL_FILE,
     baseline_episodes,
     check_trained_params,
 )
-from spikectl.training.controllers import load_controller
-from spikectl.training.run_files import read_config
 
 
 @dataclass(frozen=True)

@@ -8,7 +8,7 @@ from __future__ import annotations
 from spikectl.contexts import ContextSet
 from spikectl.envs.controller import DoNothing, RandomLegal
 from spikectl.training.config import Experiment
-from spikectl.training.contexts import baseline_episodes, make_env
+from spikectl.training.run_sets import baseline_episodes, make_env
 
 SPLITS = ("train", "test", "val")
 

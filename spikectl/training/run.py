@@ -37,14 +37,6 @@ from spikectl.training.agent_network import check_initial_weights
 from spikectl.training.best_model import kept_network, restore_best_model
 from spikectl.training.checkpoint import RunState, load_checkpoint, save_checkpoint
 from spikectl.training.config import Experiment
-from spikectl.training.contexts import (
-    TEST_FILE,
-    TRAIN_FILE,
-    VAL_FILE,
-    load_or_make_contexts,
-    recorded_config,
-    stream_seed,
-)
 from spikectl.training.greedy_scores import greedy_returns
 from spikectl.training.group import check_group, prepare_group, seed_dirs
 from spikectl.training.learners import check_stacked, make_learners
@@ -62,6 +54,14 @@ from spikectl.training.run_files import (
     write_metrics,
 )
 from spikectl.training.run_logger import RunLogger
+from spikectl.training.run_sets import (
+    TEST_FILE,
+    TRAIN_FILE,
+    VAL_FILE,
+    load_or_make_contexts,
+    recorded_config,
+    stream_seed,
+)
 from spikectl.training.termination import TrainingTerminated, deferred_termination
 from spikectl.training.torch_files import save_model
 

@@ -29,7 +29,7 @@ from spikectl import IdentifyAndPlan
 from spikectl.agents import GreedyController
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments.suite import load_split
-from spikectl.training.controllers import load_agent
+from spikectl.training.loaders import load_agent
 
 # The student beside its teacher, as the diagnosis at 8 neurons plays them.
 sys.path.insert(0, str(Path(__file__).resolve().parent.parent))

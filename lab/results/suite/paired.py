@@ -34,7 +34,7 @@ import numpy as np
 from spikectl.agents import GreedyController
 from spikectl.envs import NeuronControlEnv
 from spikectl.experiments import suite
-from spikectl.training.controllers import load_agent, load_controller
+from spikectl.training.loaders import load_agent, load_controller
 
 # The committed data this script reads (its script lives in lab/results/, its data here).
 HERE = Path(__file__).resolve().parents[3] / "docs" / "results" / "suite"
