@@ -1,24 +1,19 @@
 """Model-based controllers that need no training: an oracle planner and identify-and-plan.
 
 ``plan_episode`` knows a context's weights and searches action sequences with the
-batched simulator (the headroom of a network); ``IdentifyAndPlan`` knows only the
-neuron model, estimates the connectivity from what it observes and plans on its
-estimate every step. See docs/baselines.md. ``TargetInputBelief`` gives that estimate of
-the target's inputs to a learned policy, ``PlannerAdvice`` the planner's next action
-(docs/agents.md). ``ObservedState``, ``FilteredState`` (measurement noise) and
-``NeuronTracker`` (heterogeneous neurons) are the trackers identify-and-plan reads its
-observations with; ``RelayConnectivityEstimate`` is its estimate with the relays through
-hidden neurons (the ``"relays"`` estimator); ``DiscreteConnectivityEstimate``
-(n <= 11) and ``ParticleConnectivityEstimate`` (any n) its posteriors over {-1, 0, +1}.
+batched simulator (the headroom of a network); ``IdentifyAndPlan`` knows only the neuron
+model, estimates the connectivity from what it observes and plans on its estimate every
+step. See docs/baselines.md. ``ObservedState``, ``FilteredState`` (measurement noise)
+and ``NeuronTracker`` (heterogeneous neurons) are the trackers identify-and-plan reads
+its observations with; ``RelayConnectivityEstimate`` is its estimate with the relays
+through hidden neurons (the ``"relays"`` estimator); ``DiscreteConnectivityEstimate`` (n
+<= 11) and ``ParticleConnectivityEstimate`` (any n) its posteriors over {-1, 0, +1}.
 ``IdentifyAndPlan`` is a ``Composition`` of parts (``EstimatorSettings``,
-``ObservationSettings``, ``DecisionSettings`` with ``QMDPSettings``, ``ProberSettings``);
-``named_composition`` gives the one the named ``identify-and-plan`` plays on an
-environment (``fast=True``: the form the guided learner's teacher plays).
-"""
+``ObservationSettings``, ``DecisionSettings`` with ``QMDPSettings``,
+``ProberSettings``); ``named_composition`` gives the one the named ``identify-and-plan``
+plays on an environment (``fast=True``: the form the guided learner's teacher plays)."""
 
-from spikectl.planning.advice import PlannerAdvice
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
-from spikectl.planning.belief import BeliefInputs, TargetInputBelief, episode_beliefs
 from spikectl.planning.composition import Composition
 from spikectl.planning.deciding import DecisionSettings
 from spikectl.planning.discrete import DiscreteConnectivityEstimate
@@ -43,7 +38,6 @@ from spikectl.planning.relays import RelayConnectivityEstimate
 __all__ = [
     "DEFAULT_ORACLE_WIDTH",
     "ESTIMATORS",
-    "BeliefInputs",
     "Composition",
     "ConnectivityEstimate",
     "DecisionSettings",
@@ -56,16 +50,13 @@ __all__ = [
     "ObservedState",
     "OraclePlanner",
     "Plan",
-    "PlannerAdvice",
     "ParticleConnectivityEstimate",
     "PlanningModel",
     "ProberSettings",
     "QMDPSettings",
     "RelayConnectivityEstimate",
-    "TargetInputBelief",
     "beam_search",
     "composition_name",
-    "episode_beliefs",
     "model_of_context",
     "named_composition",
     "plan_episode",

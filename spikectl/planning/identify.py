@@ -118,16 +118,6 @@ class ConnectivityEstimate:
             self._cache = (mean.T.copy(), sd.T.copy())
         return self._cache
 
-    def column(self, post: int) -> tuple[np.ndarray, np.ndarray]:
-        """(mean, standard deviation) of column ``post`` of G, both [n (pre)]: the
-        posterior's (to rounding), for the price of one [n, n] inverse."""
-        if self._cache is not None:
-            mean, sd = self._cache
-            return mean[:, post].copy(), sd[:, post].copy()
-        covariance = portable.spd_inverse(self.precision[post])  # [pre, pre]
-        mean = portable.matmul(covariance, self.moment[post])
-        return mean, np.sqrt(np.diagonal(covariance)).copy()
-
     def weights(self, known_sd: float) -> tuple[np.ndarray, np.ndarray]:
         """(signed weights [n, n] in {-1, 0, +1} to plan with, known [n, n] bool).
 
