@@ -19,7 +19,6 @@ training seed, main                s        the loop's generator: context choice
                                             stochastic release) after ``e`` episodes
 ``EVAL_STREAM``                    [s, 3]   the evaluation environments' own draws (the
                                             same at every evaluation)
-``CRITIC_STREAM``                  [s, 4]   the guided learner's privileged critic
 =================================  =======  ==============================================
 
 Under one seed a number names one stream: ``AUX_HEAD_STREAM`` and ``VALIDATION_STREAM``
@@ -42,8 +41,6 @@ COLLECT_STREAM = 2
 """Under the training seed, with the episode count: the collecting environment's draws."""
 EVAL_STREAM = 3
 """Under the training seed: the evaluation environments' own draws."""
-CRITIC_STREAM = 4
-"""Under the training seed: the privileged critic's Torch initialisation (guided learner)."""
 
 
 def torch_seed(seed: int, stream: int) -> int:
