@@ -242,3 +242,16 @@ def no_hang(seconds: int = 60) -> Iterator[None]:
     finally:
         signal.alarm(0)
         signal.signal(signal.SIGALRM, previous)
+
+
+def run_main(argv: list[str], capsys) -> tuple[int, str, str]:
+    """Run the ``spikectl`` command in this process: (exit code, stdout, stderr)."""
+    from spikectl import cli
+
+    try:
+        cli.main(argv)
+        code = 0
+    except SystemExit as exit_:
+        code = exit_.code
+    captured = capsys.readouterr()
+    return code, captured.out, captured.err

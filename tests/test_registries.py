@@ -12,9 +12,9 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import run_main
 
 import spikectl
-from spikectl import cli
 from spikectl.envs.controller import DoNothing
 from spikectl.experiments import suite
 from spikectl.experiments.suite import SuiteVersion, Task
@@ -51,16 +51,6 @@ def register_plugins() -> None:
     spikectl.register_suite_version(SUITE)
     spikectl.register_task(Task("noise3", VARIANT_ID, {}, 8, 0, "measurement noise 3 mV",
                                 PAPER_SETS), TEST_SUITE)  # fmt: skip
-
-
-def run_main(argv: list[str], capsys) -> tuple[int, str, str]:
-    try:
-        cli.main(argv)
-        code = 0
-    except SystemExit as exit_:
-        code = exit_.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def test_a_registered_controller_is_loaded_by_name():

@@ -9,8 +9,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import run_main
 
-from spikectl import cli
 from spikectl.contexts import ContextSet
 from spikectl.experiments import suite
 from spikectl.experiments.suite import protocol
@@ -111,16 +111,6 @@ def test_standard_error_on_hand_values():
     assert np.isnan(suite.standard_error([0.7]))
     score = suite.Score("paper", "test", np.array([0.5, 1.0]), np.array([0.75]), 0.0)
     assert score.standard_error == pytest.approx(0.25)
-
-
-def run_main(argv: list[str], capsys) -> tuple[int, str, str]:
-    try:
-        cli.main(argv)
-        code = 0
-    except SystemExit as exit_:
-        code = exit_.code
-    captured = capsys.readouterr()
-    return code, captured.out, captured.err
 
 
 def test_benchmark_do_nothing_on_paper(capsys, tmp_path):
