@@ -27,7 +27,10 @@ from spikectl.neuron.extensions import CONTEXT_FIELDS, Extensions
 from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
 from spikectl.planning.policy import IdentifyAndPlan
 
-CONTROLLERS = ("do_nothing", "random", "identify_and_plan", "oracle", "witness")
+BASELINE_ROWS = ("do_nothing", "random", "identify_and_plan", "oracle", "witness")
+"""The rows of ``spikectl baselines``, in order: its own fixed table with adjustable beam
+widths (the named controllers of ``spikectl benchmark`` are the registry's,
+:data:`spikectl.training.loaders.CONTROLLERS`)."""
 
 
 @dataclass
@@ -47,7 +50,7 @@ class BaselineResults:
     def table(self) -> str:
         """The printed table: mean return of each controller."""
         lines = [f"{'controller':<20}{'mean return':>16}"]
-        for name in CONTROLLERS:
+        for name in BASELINE_ROWS:
             if name not in self.returns:
                 continue
             if name == "random":
@@ -65,7 +68,7 @@ class BaselineResults:
     def write_csv(self, path: str | os.PathLike, replace: bool = True) -> Path:
         """One row per context, one column per controller; written atomically
         (``replace=False``: never over an existing file)."""
-        names = [name for name in CONTROLLERS if name in self.returns]
+        names = [name for name in BASELINE_ROWS if name in self.returns]
         buffer = io.StringIO()
         writer = csv.writer(buffer, lineterminator="\n")
         writer.writerow(["context", *names])
@@ -84,7 +87,7 @@ def run_baselines(
     policy: IdentifyAndPlan | None = None,
     env_seed: int = 0,
 ) -> BaselineResults:
-    """Score the controllers of :data:`CONTROLLERS` on every context of ``contexts``.
+    """Score the controllers of :data:`BASELINE_ROWS` on every context of ``contexts``.
 
     Args:
         contexts: the set to play (one episode per context and controller), under the
