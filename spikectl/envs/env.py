@@ -160,7 +160,8 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         self.n_observed = k = self.contexts.n_observed
         self.episode_length = length = self.contexts.episode_length
         self.render_mode = render_mode
-        self._release_uniforms, self._input_mV = self._effects.input_buffers(1, n)
+        # The extensions' per-step draws, filled in place before each step.
+        self._drawn = DrawnInputs(*self._effects.input_buffers(1, n))
         self._plain = self._effects.plain  # observations are the potentials
         self._random_dynamics = self._effects.random_dynamics
 
@@ -256,9 +257,9 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         observable = self._observable
         actions[0, 0] = action if observable is None or action < 0 else observable[action]
         if self._random_dynamics:
-            self._effects.draw_inputs(self.np_random, self._release_uniforms, self._input_mV)
+            self._effects.draw_inputs(self.np_random, *self._drawn)
         advance(self._state, self._weights, actions, self.params, voltage, spikes,
-                self._neurons, DrawnInputs(self._release_uniforms, self._input_mV))  # fmt: skip
+                self._neurons, self._drawn)  # fmt: skip
         spikes = self._spike_history[t]
         target_spiked = bool(spikes[self._target])
         reward = self._reward_if_spike[t] if target_spiked else self._reward_if_silent[t]

@@ -112,7 +112,8 @@ class NeuronControlVectorEnv(VectorEnv):
         check_fits_in_memory(batch * (16 * n * n + 16 * length * n + 64 * n),
                              f"num_envs={batch:,} environments of {n} neurons",
                              "use fewer environments")  # fmt: skip
-        self._release_uniforms, self._input_mV = self._effects.input_buffers(batch, n)
+        # The extensions' per-step draws, filled in place before each step.
+        self._drawn = DrawnInputs(*self._effects.input_buffers(batch, n))
 
         self.single_observation_space = observation_space(k, length)
         self.single_action_space = spaces.Discrete(k + 1, start=DO_NOTHING)
@@ -220,8 +221,7 @@ class NeuronControlVectorEnv(VectorEnv):
         if effects.random_dynamics:
             self._draw_inputs(np.flatnonzero(~autoreset))
         advance(self._state, self._weights, self._actions, self.params, self._out_voltage,
-                self._out_spikes, self._neurons,
-                DrawnInputs(self._release_uniforms, self._input_mV))  # fmt: skip
+                self._out_spikes, self._neurons, self._drawn)  # fmt: skip
         length = self.episode_length
         # Flat index of each env's current step into its [num_envs * N] tables; an env
         # about to autoreset points at its last step, which its reset then clears.
@@ -299,7 +299,7 @@ class NeuronControlVectorEnv(VectorEnv):
     def _draw_inputs(self, envs: np.ndarray) -> None:
         """Release uniforms and background input of ``envs`` for one step, each from its
         own generator in the single environment's order."""
-        release, background = self._release_uniforms, self._input_mV
+        release, background = self._drawn
         for i in envs:
             self._effects.draw_inputs(
                 self._rngs[i],
