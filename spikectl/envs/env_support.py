@@ -20,7 +20,7 @@ import numpy as np
 from gymnasium import spaces
 
 from spikectl.contexts import Context, ContextSet, make_splits
-from spikectl.contexts.generation import is_int
+from spikectl.contexts.generation import check_seed, check_size, is_int
 from spikectl.neuron.extensions import CONTEXT_FIELDS, EnvironmentEffects, Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, neuron_parameters
@@ -162,11 +162,8 @@ class GeneratedContexts:
 
     def __post_init__(self) -> None:
         for name in ("n_train", "n_test"):
-            value = getattr(self, name)
-            if not is_int(value) or value < 1:
-                raise ValueError(f"contexts: {name} must be a positive integer, got {value!r}")
-        if not is_int(self.seed) or self.seed < 0:
-            raise ValueError(f"contexts: seed must be a non-negative integer, got {self.seed!r}")
+            check_size(getattr(self, name), f"contexts: {name}")
+        check_seed(self.seed, "contexts: seed")
 
     @classmethod
     def coerce(cls, value: GeneratedContexts | Mapping[str, Any] | None) -> GeneratedContexts:
