@@ -32,10 +32,8 @@ from spikectl.neuron.simulator import simulate
 from spikectl.planning import IdentifyAndPlan, plan_episode
 from spikectl.version import __version__
 from spikectl.wrappers import sb3_compatible, sb3_vec_env
-from spikectl.wrappers.final_info import register_final_info_ids
 
 register_envs()
-register_final_info_ids()  # after register_envs: a twin of each flat id
 
 __all__ = [
     "Context",

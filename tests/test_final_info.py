@@ -12,14 +12,13 @@ import pytest
 from gymnasium.vector import SyncVectorEnv
 
 import spikectl  # noqa: F401  (registers the ids)
-from spikectl.envs.registration import FLAT_ENV_ID, VARIANTS, flat_id
+from spikectl.envs.registration import FLAT_ENV_ID, VARIANTS, flat_id, register_envs
 from spikectl.wrappers import (
     FinalInfo,
     FinalInfoEpisodeStatistics,
     FlatNeuronControlEnv,
     final_info_id,
 )
-from spikectl.wrappers.final_info import register_final_info_ids
 
 SMALL = {"contexts": {"n_train": 10, "n_test": 10}}  # ten networks a split
 FLAT_IDS = [FLAT_ENV_ID, *(flat_id(paper_id) for paper_id in VARIANTS)]
@@ -42,7 +41,7 @@ def test_every_flat_id_has_a_twin_with_its_arguments_and_the_wrapper():
 
 def test_registering_again_changes_nothing():
     before = {i: gym.spec(i) for i in gym.registry}
-    register_final_info_ids()
+    register_envs()
     assert {i: gym.spec(i) for i in gym.registry} == before
 
 

@@ -20,6 +20,7 @@ from spikectl.experiments import suite
 from spikectl.experiments.suite import SuiteVersion, Task
 from spikectl.registry import RegistryError
 from spikectl.training.loaders import CONTROLLERS, Played
+from spikectl.wrappers import FinalInfoEpisodeStatistics
 
 VARIANT_ID = "spikectl-test/NeuronControlNoisy3-v0"
 TEST_SUITE = 901
@@ -86,6 +87,11 @@ def test_a_registered_variant_and_its_flat_twin_are_made_by_gymnasium():
     flat = gym.make("spikectl-test/NeuronControlNoisy3Flat-v0", contexts={"n_train": 4,
                                                                           "n_test": 4})  # fmt: skip
     assert flat.unwrapped.env.extensions.observation_noise_mV == 3.0
+    # ... and the flat twin's FinalInfo twin, wrapped for CleanRL's published scripts.
+    twin = gym.make("spikectl-test/NeuronControlNoisy3FlatFinalInfo-v0",
+                    contexts={"n_train": 4, "n_test": 4})  # fmt: skip
+    assert isinstance(twin, FinalInfoEpisodeStatistics)
+    assert twin.unwrapped.env.extensions.observation_noise_mV == 3.0
     envs = gym.make_vec(VARIANT_ID, num_envs=2, contexts={"n_train": 4, "n_test": 4})
     assert isinstance(envs, spikectl.NeuronControlVectorEnv)
     assert envs.extensions.observation_noise_mV == 3.0

@@ -64,6 +64,18 @@ def flat_id(env_id: str) -> str:
     return f"{name}Flat-{version}"
 
 
+FINAL_INFO_WRAPPER = "spikectl.wrappers.final_info:FinalInfoEpisodeStatistics"
+"""The wrapper of each flat id's FinalInfo twin (imported when a twin is made)."""
+
+
+def final_info_id(env_id: str) -> str:
+    """The FinalInfo twin of a flat id: ``spikectl/NeuronControlNoisyFlat-v0`` ->
+    ``spikectl/NeuronControlNoisyFlatFinalInfo-v0`` (the flat environment with
+    ``info["final_info"]`` as Gymnasium < 1.0 gave it, docs/ecosystem.md)."""
+    name, version = env_id.rsplit("-", 1)
+    return f"{name}FinalInfo-{version}"
+
+
 def registered_kwargs(env_id: str) -> dict[str, Any]:
     """The keyword arguments of a paper id (``{}`` for :data:`ENV_ID`); an unknown id is a
     one-line RegistryError listing the variants."""
@@ -73,9 +85,9 @@ def registered_kwargs(env_id: str) -> dict[str, Any]:
 def register_env_variant(env_id: str, kwargs: Mapping[str, Any]) -> None:
     """Register ``env_id`` (``"namespace/Name-vN"``) as the paper's environment with
     ``kwargs`` (JSON-ready keyword arguments of :class:`~spikectl.envs.env.NeuronControlEnv`),
-    and its flat twin :func:`flat_id` with the same ones; both are then
-    ``gymnasium.make``-able. The same variant registered again is a no-op; other kwargs
-    under a taken id are a RegistryError."""
+    its flat twin :func:`flat_id` with the same ones and the flat twin's
+    :func:`final_info_id`; all are then ``gymnasium.make``-able. The same variant
+    registered again is a no-op; other kwargs under a taken id are a RegistryError."""
     from spikectl.envs.env import NeuronControlEnv
 
     if not _is_variant_id(env_id):
@@ -97,8 +109,7 @@ def register_env_variant(env_id: str, kwargs: Mapping[str, Any]) -> None:
     except (TypeError, ValueError) as error:
         raise RegistryError(f"variant {env_id!r}: kwargs must be JSON-ready ({error})") from None
     VARIANTS.register(env_id, kwargs)
-    _register_with_gymnasium(env_id, kwargs, PAPER_ENTRY_POINTS)
-    _register_with_gymnasium(flat_id(env_id), kwargs, FLAT_ENTRY_POINTS)
+    _register_ids(env_id, kwargs)
 
 
 def _is_variant_id(env_id: object) -> bool:
@@ -111,19 +122,33 @@ def _is_variant_id(env_id: object) -> bool:
     return version is not None and not name.endswith("Flat")
 
 
-def _register_with_gymnasium(env_id: str, kwargs: dict[str, Any], entry_points) -> None:
-    # Registering an id twice makes Gymnasium warn, and the package may be re-imported.
-    if env_id in gymnasium.registry:
-        return
-    entry_point, vector_entry_point = entry_points
-    gymnasium.register(
-        id=env_id, entry_point=entry_point, vector_entry_point=vector_entry_point, kwargs=kwargs
-    )
+def _register_ids(env_id: str, kwargs: dict[str, Any]) -> None:
+    """A paper id, its flat twin and the flat twin's FinalInfo twin, with one ``kwargs``.
+
+    A FinalInfo twin has no vector entry point (Gymnasium applies no wrapper to one), so
+    ``gymnasium.make_vec`` of it is a ``SyncVectorEnv`` of wrapped flat environments,
+    whose infos carry ``final_info`` as Gymnasium < 1.0's did."""
+    from gymnasium.envs.registration import WrapperSpec
+
+    flat = flat_id(env_id)
+    twin = WrapperSpec(name="FinalInfoEpisodeStatistics", entry_point=FINAL_INFO_WRAPPER,
+                       kwargs={})  # fmt: skip
+    for id_, (entry_point, vector_entry_point), wrappers in (
+        (env_id, PAPER_ENTRY_POINTS, ()),
+        (flat, FLAT_ENTRY_POINTS, ()),
+        (final_info_id(flat), (FLAT_ENTRY_POINTS[0], None), (twin,)),
+    ):
+        # Registering an id twice makes Gymnasium warn, and the package may be re-imported.
+        if id_ not in gymnasium.registry:
+            gymnasium.register(id=id_, entry_point=entry_point, kwargs=kwargs,
+                               vector_entry_point=vector_entry_point,
+                               additional_wrappers=wrappers)  # fmt: skip
 
 
 def register_envs() -> None:
-    """Register ``spikectl/NeuronControl-v0``, the library's variants (:data:`VARIANTS`)
-    and their flat twins (:data:`FLAT_ENV_ID`, ...); idempotent.
+    """Register ``spikectl/NeuronControl-v0``, the library's variants (:data:`VARIANTS`),
+    their flat twins (:data:`FLAT_ENV_ID`, ...) and the flat ids' FinalInfo twins
+    (:func:`final_info_id`); idempotent.
 
     ``gymnasium.make(ENV_ID, **kwargs)`` builds :class:`spikectl.envs.env.NeuronControlEnv`;
     ``gymnasium.make_vec(ENV_ID, num_envs=...)`` builds the batched
@@ -140,8 +165,6 @@ def register_envs() -> None:
     ``make_vec`` builds :class:`spikectl.wrappers.flat_vector_env.FlatNeuronControlVectorEnv`
     on the batched simulator; see docs/ecosystem.md.
     """
-    _register_with_gymnasium(ENV_ID, {}, PAPER_ENTRY_POINTS)
-    _register_with_gymnasium(FLAT_ENV_ID, {}, FLAT_ENTRY_POINTS)
+    _register_ids(ENV_ID, {})
     for env_id in VARIANTS:
-        _register_with_gymnasium(env_id, VARIANTS.entry(env_id), PAPER_ENTRY_POINTS)
-        _register_with_gymnasium(flat_id(env_id), VARIANTS.entry(env_id), FLAT_ENTRY_POINTS)
+        _register_ids(env_id, VARIANTS.entry(env_id))

@@ -9,6 +9,7 @@ same conventions for Stable-Baselines3, and ``sb3_vec_adapter`` the batched one 
 SB3's ``VecEnv`` (imported only when used: it needs SB3).
 """
 
+from spikectl.envs.registration import final_info_id
 from spikectl.wrappers.conventions import (
     DO_NOTHING,
     ILLEGAL_ACTIONS,
@@ -20,7 +21,7 @@ from spikectl.wrappers.conventions import (
     to_env_action,
     voltage_bounds_mV,
 )
-from spikectl.wrappers.final_info import FinalInfo, FinalInfoEpisodeStatistics, final_info_id
+from spikectl.wrappers.final_info import FinalInfo, FinalInfoEpisodeStatistics
 from spikectl.wrappers.flat_env import FlatEnv, FlatNeuronControlEnv
 from spikectl.wrappers.flat_vector_env import FlatNeuronControlVectorEnv
 from spikectl.wrappers.sb3 import (

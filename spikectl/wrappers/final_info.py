@@ -21,8 +21,9 @@ object whole, per sub-environment, in an object array, which is the old
 of the info) is the wrapped environment's, unchanged.
 
 The published scripts build their environments from an id alone, so
-:func:`register_final_info_ids` registers a twin of every flat id with the wrapper applied
-by Gymnasium itself: ``spikectl/NeuronControlFlatFinalInfo-v0`` and so on
+:func:`spikectl.envs.register_envs` registers a twin of every flat id (and
+``register_env_variant`` of every new one) with the wrapper applied by Gymnasium
+itself: ``spikectl/NeuronControlFlatFinalInfo-v0`` and so on
 (``--env-id spikectl:spikectl/NeuronControlFlatFinalInfo-v0``; docs/ecosystem.md).
 """
 
@@ -32,9 +33,7 @@ from collections.abc import Iterator, Mapping
 from typing import Any
 
 import gymnasium as gym
-from gymnasium.envs.registration import WrapperSpec
 
-FINAL_INFO_SUFFIX = "FinalInfo"
 """A flat id's twin's name adds it (``NeuronControlFlat`` -> ``NeuronControlFlatFinalInfo``)."""
 
 
@@ -93,42 +92,3 @@ class FinalInfoEpisodeStatistics(gym.Wrapper, gym.utils.RecordConstructorArgs):
             episode = {"r": self._return, "l": self._length}
             info = {**info, "final_info": FinalInfo({"episode": episode})}
         return observation, reward, terminated, truncated, info
-
-
-def final_info_id(env_id: str) -> str:
-    """The twin of a flat id: ``spikectl/NeuronControlNoisyFlat-v0`` ->
-    ``spikectl/NeuronControlNoisyFlatFinalInfo-v0``."""
-    name, version = env_id.rsplit("-", 1)
-    return f"{name}{FINAL_INFO_SUFFIX}-{version}"
-
-
-def register_final_info_ids() -> None:
-    """Register the twin (:func:`final_info_id`) of every flat id registered now (namespace
-    ``spikectl``, name ending in ``Flat``): the flat id's entry point and keyword
-    arguments with :class:`FinalInfoEpisodeStatistics` as a Gymnasium additional wrapper;
-    idempotent.
-
-    A twin has no vector entry point (Gymnasium applies no wrapper to one), so
-    ``gymnasium.make_vec`` of a twin is a ``SyncVectorEnv`` of wrapped flat environments,
-    whose infos carry ``final_info`` as Gymnasium < 1.0's did.
-    """
-    wrapper = WrapperSpec(
-        name=FinalInfoEpisodeStatistics.__name__,
-        entry_point=f"{__name__}:{FinalInfoEpisodeStatistics.__name__}",
-        kwargs={},
-    )
-    flat = [
-        spec
-        for spec in gym.registry.values()
-        if spec.namespace == "spikectl" and spec.name.endswith("Flat")
-    ]
-    for spec in flat:
-        twin = final_info_id(spec.id)
-        if twin in gym.registry:  # registering an id twice makes Gymnasium warn
-            continue
-        gym.register(
-            id=twin,
-            entry_point=spec.entry_point,
-            kwargs=dict(spec.kwargs),
-            additional_wrappers=(wrapper,),
-        )
