@@ -19,6 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
 from lab.planners import ReleaseChanceEvidence
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
