@@ -41,7 +41,8 @@ with Gymnasium, and :func:`register_env_variant` adds one."""
 VARIANTS.register("spikectl/NeuronControlNoisy-v0", {"extensions": {"observation_noise_mV": 2.0}})
 # A quarter of the neurons (2 of 8) hidden: neither observed nor stimulable.
 VARIANTS.register("spikectl/NeuronControlPartial-v0", {"extensions": {"hidden_fraction": 0.25}})
-# A larger network: 32 neurons, the same topology rule.
+# Larger networks, the same topology rule: 16 and 32 neurons (the suite's n16 and n32).
+VARIANTS.register("spikectl/NeuronControl16-v0", {"n_neurons": 16})
 VARIANTS.register("spikectl/NeuronControl32-v0", {"n_neurons": 32})
 # Every extension at once, at moderate strength.
 VARIANTS.register("spikectl/NeuronControlRealistic-v0", {

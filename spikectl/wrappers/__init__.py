@@ -4,9 +4,11 @@
 observations, the illegal-action rule); ``flat_env`` and ``flat_vector_env`` are the
 environments of the registered flat ids (``spikectl/NeuronControlFlat-v0``, ...);
 ``final_info`` puts episode statistics where scripts written for Gymnasium < 1.0 read
-them (the ``...FlatFinalInfo-v0`` ids); ``sb3`` puts any single environment behind the
-same conventions for Stable-Baselines3, and ``sb3_vec_adapter`` the batched one behind
-SB3's ``VecEnv`` (imported only when used: it needs SB3).
+them (the ``...FlatFinalInfo-v0`` ids); ``flat_policy`` plays a policy trained on a flat
+id as a controller (the suite, ``evaluate_policy``, the real-time rig); ``sb3`` puts any
+single environment behind the same conventions for Stable-Baselines3, and
+``sb3_vec_adapter`` the batched one behind SB3's ``VecEnv`` (imported only when used: it
+needs SB3).
 """
 
 from spikectl.envs.registration import final_info_id
@@ -23,6 +25,7 @@ from spikectl.wrappers.conventions import (
 )
 from spikectl.wrappers.final_info import FinalInfo, FinalInfoEpisodeStatistics
 from spikectl.wrappers.flat_env import FlatEnv, FlatNeuronControlEnv
+from spikectl.wrappers.flat_policy import FlatPolicy, FlatPolicyController, FlatPolicyError
 from spikectl.wrappers.flat_vector_env import FlatNeuronControlVectorEnv
 from spikectl.wrappers.sb3 import (
     SB3CompatibleEnv,
@@ -40,6 +43,9 @@ __all__ = [
     "FlatEnv",
     "FlatNeuronControlEnv",
     "FlatNeuronControlVectorEnv",
+    "FlatPolicy",
+    "FlatPolicyController",
+    "FlatPolicyError",
     "FlatObservation",
     "SB3CompatibleEnv",
     "SB3Observation",
