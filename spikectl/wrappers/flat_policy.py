@@ -33,6 +33,7 @@ from spikectl.wrappers.conventions import (
     observation_for,
     to_env_action,
 )
+from spikectl.wrappers.flat_env import FlatEnv
 
 FlatPolicy = Callable[[np.ndarray, np.ndarray], Any]
 """(observations float32 [S, D], action_mask int8 [S, k + 1]) -> zero-based actions [S]."""
@@ -71,7 +72,10 @@ class FlatPolicyController:
     ) -> FlatPolicyController:
         """The controller of ``policy`` as trained on ``env`` (a spikectl environment or
         ``gymnasium.make`` / ``make_vec`` of a spikectl id, flat or not)."""
-        return cls(policy, observation_for(env.unwrapped, flatten=True), reset)
+        base = env.unwrapped
+        if isinstance(base, FlatEnv):  # a flat id's single env holds the paper env
+            base = base.env.unwrapped
+        return cls(policy, observation_for(base, flatten=True), reset)
 
     def reset(self) -> None:
         if self._reset is not None:
