@@ -58,6 +58,7 @@ VARIANTS.register("spikectl/NeuronControlRealistic-v0", {
     }
 })  # fmt: skip
 
+
 def flat_id(env_id: str) -> str:
     """The flat twin of a paper id: ``spikectl/NeuronControlNoisy-v0`` ->
     ``spikectl/NeuronControlNoisyFlat-v0``."""

@@ -1,0 +1,124 @@
+"""The reference baselines' table and learning curves, from the committed runs of run.py.
+
+    python lab/results/reference-baselines/table.py [--figure]
+
+Reads docs/results/reference-baselines/TASK/ALGORITHM/seedS/ (result.json,
+test-per-network.csv, curve.csv) and prints, per task, one row per algorithm: the test
+mean return and normalised score (mean ± sd over seeds), the IQM of the normalised
+per-seed scores with its stratified-bootstrap 95% interval, training core-minutes per
+seed, and the paired difference to identify-and-plan network by network (the seeds'
+mean return on each test network minus the planner's, from
+docs/results/suite/identify-and-plan-per-network.csv: mean with its 95% bootstrap
+interval over the networks, and how many networks each way). ``--figure`` also draws
+``curves.png`` (training return per 20 000 steps, mean over seeds, the seeds' range
+shaded).
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+from pathlib import Path
+
+import numpy as np
+
+from spikectl.experiments.stats import paired_difference_cells, summarise
+
+RESULTS = Path(__file__).resolve().parents[3] / "docs" / "results"
+HERE = RESULTS / "reference-baselines"
+PLANNER = RESULTS / "suite" / "identify-and-plan-per-network.csv"
+ORDER = ("cleanrl-ppo", "cleanrl-dqn", "sb3-ppo", "sb3-maskable-ppo", "sb3-dqn",
+         "sb3-recurrent-ppo")  # fmt: skip
+
+
+def read_csv(path: Path) -> list[dict]:
+    with open(path, newline="") as handle:
+        return list(csv.DictReader(handle))
+
+
+def runs(task: str, algorithm: str) -> list[Path]:
+    folder = HERE / task / algorithm
+    return sorted(path.parent for path in folder.glob("seed*/result.json"))
+
+
+def planner_returns(task: str) -> np.ndarray:
+    rows = [row for row in read_csv(PLANNER) if row["task"] == task and row["split"] == "test"]
+    rows.sort(key=lambda row: int(row["context"]))
+    return np.array([float(row["return"]) for row in rows])
+
+
+def row_of(task: str, algorithm: str) -> str | None:
+    seeds = runs(task, algorithm)
+    if not seeds:
+        return None
+    results = [json.loads((seed / "result.json").read_text()) for seed in seeds]
+    means = np.array([r["test_mean_return"] for r in results])
+    normalised = np.array([r["test_normalised"] for r in results])
+    per_network = np.array([
+        [float(row["return"]) for row in read_csv(seed / "test-per-network.csv")]
+        for seed in seeds
+    ])  # [seeds, networks]
+    summary = summarise(normalised)
+    minutes = np.median([r["train_core_minutes"] for r in results])
+    difference = per_network.mean(axis=0) - planner_returns(task)
+    return (
+        f"| {algorithm} | {len(seeds)} | {means.mean():.3f} ± {means.std():.3f} | "
+        f"{normalised.mean():.3f} ± {normalised.std():.3f} | {summary['iqm']:.3f} "
+        f"[{summary['iqm_low']:.3f}, {summary['iqm_high']:.3f}] | {minutes:.1f} | "
+        f"{paired_difference_cells(difference)} |"
+    )
+
+
+def table(task: str) -> str:
+    lines = [
+        f"Task `{task}`, 100 test networks, greedy play; mean ± sd over seeds.",
+        "",
+        "| algorithm | seeds | test mean return | normalised | IQM normalised [95%] | "
+        "core-min a seed | − identify-and-plan, per network [95%] | better / worse |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|",
+    ]
+    rows = [row_of(task, algorithm) for algorithm in ORDER]
+    return "\n".join(lines + [row for row in rows if row])
+
+
+def figure(tasks: list[str]) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, len(tasks), figsize=(5.5 * len(tasks), 4), squeeze=False)
+    for axis, task in zip(axes[0], tasks, strict=True):
+        for algorithm in ORDER:
+            seeds = runs(task, algorithm)
+            if not seeds:
+                continue
+            curves = [read_csv(seed / "curve.csv") for seed in seeds]
+            steps = np.array([int(row["step"]) for row in curves[0]])
+            values = np.array([
+                [float(row["mean_return"]) if row["mean_return"] else np.nan for row in curve]
+                for curve in curves
+            ])  # [seeds, bins]
+            axis.plot(steps, np.nanmean(values, axis=0), label=f"{algorithm} ({len(seeds)})")
+            axis.fill_between(steps, np.nanmin(values, 0), np.nanmax(values, 0), alpha=0.2)
+        axis.axhline(0.5, color="grey", linestyle=":", label="do nothing")
+        axis.set(title=f"{task}: training return", xlabel="environment steps",
+                 ylabel="mean episode return (training networks)")  # fmt: skip
+        axis.legend(fontsize=8)
+    fig.tight_layout()
+    fig.savefig(HERE / "curves.png", dpi=110)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--figure", action="store_true")
+    args = parser.parse_args()
+    tasks = sorted(path.name for path in HERE.iterdir() if path.is_dir())
+    print("\n\n".join(table(task) for task in tasks))
+    if args.figure:
+        figure(tasks)
+
+
+if __name__ == "__main__":
+    main()
