@@ -37,7 +37,9 @@ def test_spaces_are_zero_based_and_finitely_bounded(env_id):
     assert env.action_space == gym.spaces.Discrete(k + 1)  # start 0: 0 = do nothing
     space = env.observation_space
     assert isinstance(space, gym.spaces.Box) and space.dtype == np.float32
-    assert space.shape == (3 * k + 3 * length + 2,)
+    # With loop latency L the actions in flight follow, one-hot: L (k + 1) entries.
+    latency = env.unwrapped.env.extensions.latency_steps
+    assert space.shape == (3 * k + 3 * length + 2 + latency * (k + 1),)
     assert np.isfinite(space.low).all() and np.isfinite(space.high).all()
     assert (space.low[k:] >= -1).all() and (space.high[k:] <= 1).all()
 

@@ -23,6 +23,7 @@ except ImportError as _error:
     ) from None
 
 from spikectl.envs.controller import Controller
+from spikectl.envs.latency import IN_FLIGHT_KEY
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING
 
@@ -87,9 +88,11 @@ class ControllerProcessor(LatencyIOProcessor):
 
     At each 1 ms sample it turns the recorder's measurement into the observation
     ``NeuronControlEnv`` would give (voltage float32 in mV, target, pattern, step,
-    last action) and ``info`` (action mask, context index, and after step 0 the previous
-    step's spikes), asks the controller for an action, and returns the control signals
-    that apply it (``actuate``), delivered ``latency`` later by LatencyIOProcessor.
+    last action, and with latency the actions in flight, as ``extensions={"latency_steps":
+    latency_ms}`` gives them) and ``info`` (action mask, context index, and after step 0
+    the previous step's spikes), asks the controller for an action, and returns the
+    control signals that apply it (``actuate``), delivered ``latency`` later by
+    LatencyIOProcessor.
     """
 
     def __init__(self, sample_period, latency_ms: int, actuate: Callable[[int], dict],
@@ -119,6 +122,9 @@ class ControllerProcessor(LatencyIOProcessor):
             "step": step,
             "last_action": self.actions[-1] if self.actions else DO_NOTHING,
         }
+        if self.latency_ms:  # chosen, not yet delivered: the last latency_ms, oldest first
+            in_flight = [DO_NOTHING] * self.latency_ms + self.actions[-self.latency_ms :]
+            observation[IN_FLIGHT_KEY] = np.array(in_flight[-self.latency_ms :], dtype=np.int64)
         info: dict[str, Any] = {
             "action_mask": self.legal.copy(),
             "context_index": self.context_index,

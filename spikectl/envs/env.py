@@ -29,6 +29,7 @@ from spikectl.envs.env_support import (
     observation_space,
     resolve_setup,
 )
+from spikectl.envs.latency import IN_FLIGHT_KEY, ActionDelay
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, DrawnInputs, SimulatorState, advance
@@ -76,6 +77,13 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     Potentials are observed after integration and before reset, so a spike shows as
     >= -50 mV; after reset all are at rest (-70 mV). Measurement noise and
     photobleaching (extensions) change what is observed, never the dynamics.
+
+    With loop latency (`extensions={"latency_steps": L}`, L in 1..5) an action chosen at
+    step t stimulates at step t + L, and the observation has one more key,
+    `actions_in_flight` (`MultiDiscrete`, int64 [L] in -1..n-1): the actions chosen at
+    steps s - L .. s - 1 of the observation with step index s, oldest first, -1 before
+    the episode. `last_action` stays the action chosen last; the action mask applies to
+    the chosen action.
 
     ## Rewards
 
@@ -164,9 +172,12 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         self._drawn = DrawnInputs(*self._effects.input_buffers(1, n))
         self._plain = self._effects.plain  # observations are the potentials
         self._random_dynamics = self._effects.random_dynamics
+        # Loop latency: the actions chosen but not yet applied (none without it).
+        self._delay = ActionDelay(1, self.extensions.latency_steps)
+        self._latency = self._delay.steps
 
         self.action_space = LegalActionSpace(k)
-        self.observation_space = observation_space(k, length)
+        self.observation_space = observation_space(k, length, self._latency)
         # Episode history, written by the simulator in place through per-step views.
         self._action_history = np.full((1, length), DO_NOTHING, dtype=np.int64)
         self._voltage_history = np.zeros((length, n), dtype=np.float64)
@@ -222,6 +233,7 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         self._state = SimulatorState.at_rest(1, self.n_neurons, self.params)
         self._action_history.fill(DO_NOTHING)
         self._spike_history.fill(False)
+        self._delay.clear()
         self._next_step = 0
         voltage = np.full(self.n_observed, self.params.v_rest_mV, dtype=np.float32)
         if not self._plain:
@@ -233,6 +245,8 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
             "step": 0,
             "last_action": DO_NOTHING,
         }
+        if self._latency:
+            observation[IN_FLIGHT_KEY] = self._delay.in_flight[0].copy()
         info = {"action_mask": self._mask.copy(), "context_index": self._context_index}
         return observation, info
 
@@ -255,7 +269,9 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
             raise ValueError(self._illegal_action_message(action))
         actions, voltage, spikes = self._step_views[t]
         observable = self._observable
-        actions[0, 0] = action if observable is None or action < 0 else observable[action]
+        # With latency the action chosen latency_steps steps ago stimulates now.
+        landing = self._delay.push_one(action) if self._latency else action
+        actions[0, 0] = landing if observable is None or landing < 0 else observable[landing]
         if self._random_dynamics:
             self._effects.draw_inputs(self.np_random, *self._drawn)
         advance(self._state, self._weights, actions, self.params, voltage, spikes,
@@ -274,6 +290,8 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
             "step": t + 1,
             "last_action": action,
         }
+        if self._latency:
+            observation[IN_FLIGHT_KEY] = self._delay.in_flight[0].copy()
         info = {
             "action_mask": self._mask.copy(),
             "context_index": self._context_index,

@@ -11,7 +11,7 @@ grow with the number of environments (one bad action among 200 000 is one short 
 from __future__ import annotations
 
 import reprlib
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -132,8 +132,26 @@ def reset_mask(mask: Any, num_envs: int) -> np.ndarray:
     return mask
 
 
+def batch_reset_options(options: Any, num_envs: int) -> tuple[np.ndarray, Any]:
+    """A batch's reset ``options`` (None or a dict of ``reset_mask`` and ``context``) as
+    (the bool [num_envs] mask of the envs to reset, the context option unchecked)."""
+    if options is not None and not isinstance(options, Mapping):
+        raise TypeError(
+            "options must be a dict such as {'context': [0, 1]} or None, "
+            f"got {type(options).__name__}"
+        )
+    options = dict(options or {})
+    which = reset_mask(options.pop("reset_mask", None), num_envs)
+    choice = options.pop("context", None)
+    if options:
+        raise ValueError(
+            f"unknown reset option(s) {sorted(options)}; the options are 'context' and 'reset_mask'"
+        )
+    return which, choice
+
+
 __all__ = [
     "MAX_LISTED", "SEED_RULE", "TARGET_RULE", "SeedError", "bad_actions_message",
-    "bad_shape_message", "check_seed", "context_choices", "reset_mask", "seed_list",
-    "short_repr",
+    "bad_shape_message", "batch_reset_options", "check_seed", "context_choices",
+    "reset_mask", "seed_list", "short_repr",
 ]  # fmt: skip

@@ -21,6 +21,7 @@ from gymnasium import spaces
 
 from spikectl.contexts import Context, ContextSet, make_splits
 from spikectl.contexts.generation import check_seed, check_size, is_int
+from spikectl.envs.latency import IN_FLIGHT_KEY, in_flight_space
 from spikectl.neuron.extensions import CONTEXT_FIELDS, EnvironmentEffects, Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, neuron_parameters
@@ -318,18 +319,19 @@ def as_action(action: Any) -> int:
         raise ValueError(f"action must be an integer, got {short_repr(action)}") from None
 
 
-def observation_space(n_neurons: int, episode_length: int) -> spaces.Dict:
+def observation_space(n_neurons: int, episode_length: int, latency_steps: int = 0) -> spaces.Dict:
     """The observation space of one environment (docs/environment.md); the connectivity is
-    not in it."""
-    return spaces.Dict(
-        {
-            "voltage": spaces.Box(-np.inf, np.inf, (n_neurons,), np.float32),
-            "target": spaces.Discrete(n_neurons),
-            "pattern": spaces.MultiBinary(episode_length),
-            "step": spaces.Discrete(episode_length + 1),
-            "last_action": spaces.Discrete(n_neurons + 1, start=DO_NOTHING),
-        }
-    )
+    not in it. With loop latency (an extension) it has ``actions_in_flight`` too."""
+    entries = {
+        "voltage": spaces.Box(-np.inf, np.inf, (n_neurons,), np.float32),
+        "target": spaces.Discrete(n_neurons),
+        "pattern": spaces.MultiBinary(episode_length),
+        "step": spaces.Discrete(episode_length + 1),
+        "last_action": spaces.Discrete(n_neurons + 1, start=DO_NOTHING),
+    }
+    if latency_steps:
+        entries[IN_FLIGHT_KEY] = in_flight_space(n_neurons + 1, latency_steps)
+    return spaces.Dict(entries)
 
 
 class LegalActionSpace(spaces.Discrete):

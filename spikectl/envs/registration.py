@@ -44,6 +44,9 @@ VARIANTS.register("spikectl/NeuronControlPartial-v0", {"extensions": {"hidden_fr
 # Larger networks, the same topology rule: 16 and 32 neurons (the suite's n16 and n32).
 VARIANTS.register("spikectl/NeuronControl16-v0", {"n_neurons": 16})
 VARIANTS.register("spikectl/NeuronControl32-v0", {"n_neurons": 32})
+# Loop latency of 1 and 2 steps: an action lands that many steps after it is chosen.
+VARIANTS.register("spikectl/NeuronControlLatency1-v0", {"extensions": {"latency_steps": 1}})
+VARIANTS.register("spikectl/NeuronControlLatency2-v0", {"extensions": {"latency_steps": 2}})
 # Every extension at once, at moderate strength.
 VARIANTS.register("spikectl/NeuronControlRealistic-v0", {
     "extensions": {

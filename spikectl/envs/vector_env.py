@@ -26,8 +26,8 @@ from spikectl.envs.env_arguments import (
     TARGET_RULE,
     bad_actions_message,
     bad_shape_message,
+    batch_reset_options,
     context_choices,
-    reset_mask,
     seed_list,
 )
 from spikectl.envs.env_support import (
@@ -41,6 +41,7 @@ from spikectl.envs.env_support import (
     observation_space,
     resolve_setup,
 )
+from spikectl.envs.latency import IN_FLIGHT_KEY, ActionDelay
 from spikectl.files import check_fits_in_memory
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
@@ -115,7 +116,8 @@ class NeuronControlVectorEnv(VectorEnv):
         # The extensions' per-step draws, filled in place before each step.
         self._drawn = DrawnInputs(*self._effects.input_buffers(batch, n))
 
-        self.single_observation_space = observation_space(k, length)
+        self._delay = ActionDelay(batch, self.extensions.latency_steps)  # loop latency
+        self.single_observation_space = observation_space(k, length, self._delay.steps)
         self.single_action_space = spaces.Discrete(k + 1, start=DO_NOTHING)
         self.observation_space = batch_space(self.single_observation_space, batch)
         self.action_space = LegalActionBatchSpace(batch, k)
@@ -148,10 +150,11 @@ class NeuronControlVectorEnv(VectorEnv):
         self._first_legal = self._envs * (k + 1)
         self._target_cells = self._envs * n
         self._actions = np.full((batch, 1), DO_NOTHING, dtype=np.int64)  # neuron indices
-        self._agent_actions = np.zeros(batch, dtype=np.int64)  # with hidden neurons
+        self._agent_actions = np.zeros(batch, dtype=np.int64)  # with hidden neurons or latency
+        self._indirect = self._observable is not None or self._delay.steps > 0
         self._out_voltage = np.zeros((batch, 1, n), dtype=np.float64)
         self._out_spikes = np.zeros((batch, 1, n), dtype=bool)
-        # The episode as the agent sees it: its actions and the observable neurons' spikes.
+        # The episode as the agent sees it: the actions that landed, the observable spikes.
         self._action_history = np.full((batch, length), DO_NOTHING, dtype=np.int64)
         self._spike_history = np.zeros((batch, length, k), dtype=bool)
         self._ever_reset = np.zeros(batch, dtype=bool)
@@ -170,19 +173,7 @@ class NeuronControlVectorEnv(VectorEnv):
         seeds = seed_list(seed, self.num_envs)
         if is_int(seed):
             super().reset(seed=int(seed))
-        if options is not None and not isinstance(options, Mapping):
-            raise TypeError(
-                "options must be a dict such as {'context': [0, 1]} or None, "
-                f"got {type(options).__name__}"
-            )
-        options = dict(options or {})
-        which = reset_mask(options.pop("reset_mask", None), self.num_envs)
-        choice = options.pop("context", None)
-        if options:
-            raise ValueError(
-                f"unknown reset option(s) {sorted(options)}; "
-                "the options are 'context' and 'reset_mask'"
-            )
+        which, choice = batch_reset_options(options, self.num_envs)
         envs = np.flatnonzero(which)
         for i in envs:
             if seeds[i] is not None or self._rngs[i] is None:
@@ -214,10 +205,16 @@ class NeuronControlVectorEnv(VectorEnv):
         actions = self._checked_actions(actions)
         autoreset = self._needs_reset
         effects = self._effects
+        # With latency the actions chosen latency_steps ago land (an autoreset: none).
+        landing = self._delay.push(actions)
+        if self._delay.steps and self._any_needs_reset:
+            landing[autoreset] = DO_NOTHING
         if self._observable is not None:  # the agent's indices -> neuron indices
             self._actions[:, 0] = np.where(
-                actions >= 0, self._observable[self._envs, np.maximum(actions, 0)], DO_NOTHING
+                landing >= 0, self._observable[self._envs, np.maximum(landing, 0)], DO_NOTHING
             )
+        elif self._delay.steps:
+            self._actions[:, 0] = landing
         if effects.random_dynamics:
             self._draw_inputs(np.flatnonzero(~autoreset))
         advance(self._state, self._weights, self._actions, self.params, self._out_voltage,
@@ -237,7 +234,7 @@ class NeuronControlVectorEnv(VectorEnv):
         if self._observable is not None:
             spikes = np.take_along_axis(spikes, self._observable, axis=1)
             voltage = np.take_along_axis(voltage, self._observable, axis=1)
-        self._action_history.reshape(-1)[cells] = actions
+        self._action_history.reshape(-1)[cells] = landing
         self._spike_history.reshape(-1, self.n_observed)[cells] = spikes
         self._next_step += 1
         self._last_action[:] = actions
@@ -277,8 +274,8 @@ class NeuronControlVectorEnv(VectorEnv):
         array = np.asarray(actions)
         if array.shape != (self.num_envs,) or array.dtype.kind not in "iu":
             raise ValueError(bad_shape_message(array, self.num_envs, "integers"))
-        # The agent's actions: without hidden neurons the simulator's input itself.
-        checked = self._actions[:, 0] if self._observable is None else self._agent_actions
+        # The agent's actions: without hidden neurons or latency the simulator's input itself.
+        checked = self._agent_actions if self._indirect else self._actions[:, 0]
         checked[:] = array
         if self._any_needs_reset:
             checked[self._needs_reset] = DO_NOTHING
@@ -317,13 +314,16 @@ class NeuronControlVectorEnv(VectorEnv):
         return noise
 
     def _observation(self, voltage: np.ndarray) -> dict[str, np.ndarray]:
-        return {
+        observation = {
             "voltage": voltage,
             "target": self._observed_targets.copy(),
             "pattern": self._patterns.copy(),
             "step": self._next_step.copy(),
             "last_action": self._last_action.copy(),
         }
+        if self._delay.steps:
+            observation[IN_FLIGHT_KEY] = self._delay.in_flight.copy()
+        return observation
 
     def _reset_envs(self, envs: np.ndarray, choices: Sequence[int | Context | None]) -> None:
         """Put ``envs`` at rest with a new context each; draws go to each env's own generator."""
@@ -361,6 +361,7 @@ class NeuronControlVectorEnv(VectorEnv):
             )
         self._action_history[envs] = DO_NOTHING
         self._spike_history[envs] = False
+        self._delay.clear(envs)
 
     def _load(self, envs: np.ndarray, tables: ContextTables, rows: np.ndarray | int) -> None:
         self._weights[envs] = tables.weights[rows]

@@ -12,8 +12,8 @@ Two kinds of field:
   :meth:`spikectl.ContextSet.generate` / :func:`spikectl.make_splits` and saved with
   the set (:class:`Heterogeneity` and ``Context.hidden``);
 - **environment level** (measurement noise, photobleaching, stochastic release,
-  background activity, the target as an action): applied by the environments, drawn
-  from their own seeded generators, and saved in their Gymnasium spec.
+  background activity, the target as an action, loop latency): applied by the
+  environments, drawn from their own seeded generators, and saved in their Gymnasium spec.
 
 This module holds the settings, the per-context data and the pure functions that draw
 and apply them; ``docs/extensions.md`` is the reference table.
@@ -45,6 +45,8 @@ MAX_BACKGROUND_RATE = 1000.0
 """Spontaneous inputs per neuron per step, at most (the registered variant uses 0.005)."""
 MAX_BACKGROUND_CURRENT_pA = 1e6
 """The largest spontaneous input current in pA, either sign (the default is 600)."""
+MAX_LATENCY_STEPS = 5
+"""The longest loop latency in steps (a rig's round trip is 1-3 ms)."""
 
 
 @dataclass(frozen=True)
@@ -78,6 +80,10 @@ class Extensions:
     like one excitatory synapse; negative is inhibitory)."""
     allow_target_action: bool = False
     """Environment level: stimulating the target neuron is a legal action."""
+    latency_steps: int = 0
+    """Environment level: loop latency, an action chosen at step t stimulates at step
+    t + latency_steps (nothing is stimulated in an episode's first latency_steps steps);
+    the observation then carries the actions still in flight."""
 
     CONTEXT_FIELDS: ClassVar[tuple[str, ...]] = CONTEXT_FIELDS
 
@@ -87,17 +93,20 @@ class Extensions:
                 raise ConfigTypeError(name, f"must be a bool, got {getattr(self, name)!r}",
                                       label=f"Extensions.{name}")  # fmt: skip
             object.__setattr__(self, name, bool(getattr(self, name)))
-        hidden = self.hidden_neurons
-        if isinstance(hidden, (bool, np.bool_)) or not isinstance(hidden, (int, np.integer)):
-            raise ConfigTypeError("hidden_neurons", f"must be an integer, got {hidden!r}",
-                                  label="Extensions.hidden_neurons")  # fmt: skip
-        if hidden < 0:
-            raise ConfigError("hidden_neurons", f"must be >= 0, got {hidden}",
-                              label="Extensions.hidden_neurons")  # fmt: skip
-        object.__setattr__(self, "hidden_neurons", int(hidden))
+        for name, high in (("hidden_neurons", None), ("latency_steps", MAX_LATENCY_STEPS)):
+            count = getattr(self, name)
+            if isinstance(count, (bool, np.bool_)) or not isinstance(count, (int, np.integer)):
+                raise ConfigTypeError(name, f"must be an integer, got {count!r}",
+                                      label=f"Extensions.{name}")  # fmt: skip
+            if count < 0 or (high is not None and count > high):
+                bounds = "be >= 0" if high is None else f"lie in 0..{high}"
+                raise ConfigError(name, f"must {bounds}, got {count}",
+                                  label=f"Extensions.{name}")  # fmt: skip
+            object.__setattr__(self, name, int(count))
         for field in fields(self):
             value = getattr(self, field.name)
-            if field.name in ("stochastic_release", "allow_target_action", "hidden_neurons"):
+            if field.name in ("stochastic_release", "allow_target_action", "hidden_neurons",
+                              "latency_steps"):  # fmt: skip
                 continue
             if value is None and field.name == "bleaching_time_constant_steps":
                 continue

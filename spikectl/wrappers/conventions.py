@@ -29,6 +29,7 @@ import numpy as np
 from gymnasium import spaces
 
 from spikectl.envs.env_arguments import TARGET_RULE, bad_actions_message
+from spikectl.envs.latency import IN_FLIGHT_KEY
 from spikectl.neuron.params import NEVER_RELEASES, NeuronParams
 
 DO_NOTHING = 0
@@ -110,10 +111,15 @@ class FlatObservation:
     | next N + 1     | step t, one-hot over 0..N                                 |
     | next N         | pattern                                                   |
     | next N         | pattern ahead: pattern[t + j], -1 past the end            |
+    | next L (k + 1) | with loop latency L > 0 only: the actions in flight,      |
+    |                | oldest first, each one-hot over 0..k                      |
 
     The pattern ahead repeats what pattern and step say, aligned with the current step,
     so that a policy without memory or attention can read the next wanted spikes.
-    Every entry but the voltage lies in [0, 1] (the pattern ahead in [-1, 1]).
+    Every entry but the voltage lies in [0, 1] (the pattern ahead in [-1, 1]). With
+    ``latency_steps`` L > 0 (an extension) the ``Dict`` has ``actions_in_flight`` too
+    (zero-based, as ``last_action``) and the vector L (k + 1) more entries; with L = 0
+    both are as they were.
     """
 
     def __init__(
@@ -124,10 +130,12 @@ class FlatObservation:
         params: NeuronParams,
         stochastic_release: bool = False,
         flatten: bool = True,
+        latency_steps: int = 0,
     ) -> None:
         self.k = k = n_observed
         self.N = length = episode_length
         self.flatten = flatten
+        self.latency_steps = latency_steps
         self.v_rest_mV, self.v_threshold_mV = params.v_rest_mV, params.v_threshold_mV
         low, high = _float32_outward(*voltage_bounds_mV(params, n_neurons, stochastic_release))
         self.voltage_low_mV, self.voltage_high_mV = low, high
@@ -141,12 +149,16 @@ class FlatObservation:
                     "last_action": spaces.Discrete(k + 1),
                 }
             )
+            if latency_steps:
+                self.space[IN_FLIGHT_KEY] = spaces.MultiDiscrete(np.full(latency_steps, k + 1))
             return
-        self.size = size = 3 * k + 3 * length + 2
+        # The paper's layout, then the actions in flight (none without latency).
+        self.in_flight_column = 3 * k + 3 * length + 2
+        self.size = size = self.in_flight_column + latency_steps * (k + 1)
         lows = np.zeros(size, dtype=np.float32)
         highs = np.ones(size, dtype=np.float32)
         lows[:k], highs[:k] = _float32_outward(self._scaled(low), self._scaled(high))
-        lows[-length:] = -1.0
+        lows[self.in_flight_column - length : self.in_flight_column] = -1.0
         self.space = spaces.Box(lows, highs, (size,), np.float32)
         self._constants = np.array(
             [low, high, self.v_rest_mV, 1.0 / (self.v_threshold_mV - self.v_rest_mV),
@@ -166,7 +178,7 @@ class FlatObservation:
         last_action = from_env_action(np.asarray(observation["last_action"], dtype=np.int64))
         if not self.flatten:
             batched = voltage.ndim == 2
-            return {
+            converted = {
                 "voltage": voltage,
                 "target": np.asarray(observation["target"], dtype=np.int64)
                 if batched
@@ -177,7 +189,14 @@ class FlatObservation:
                 else int(observation["step"]),
                 "last_action": last_action if batched else int(last_action),
             }
+            if self.latency_steps:
+                converted[IN_FLIGHT_KEY] = self._in_flight(observation)
+            return converted
         return self._flat(voltage, observation, last_action)
+
+    def _in_flight(self, observation: dict[str, Any]) -> np.ndarray:
+        """The observation's actions in flight, zero-based."""
+        return from_env_action(np.asarray(observation[IN_FLIGHT_KEY], dtype=np.int64))
 
     def _flat(
         self, voltage: np.ndarray, observation: dict[str, Any], last_action: np.ndarray
@@ -189,6 +208,9 @@ class FlatObservation:
             last_action.reshape(-1),
             np.asarray(observation["step"], dtype=np.int64).reshape(-1),
             np.asarray(observation["pattern"], dtype=np.int8).reshape(-1, self.N),
+            self._in_flight(observation).reshape(-1, self.latency_steps)
+            if self.latency_steps
+            else None,
         )
         return out[0] if single else out
 
@@ -199,11 +221,21 @@ class FlatObservation:
         last_action: np.ndarray,
         step: np.ndarray,
         pattern: np.ndarray,
+        in_flight: np.ndarray | None = None,
     ) -> np.ndarray:
         """The flat observations [B, size] of a batch given as arrays: voltage [B, k] in mV,
-        target, zero-based last action and step int64 [B], pattern int8 [B, N]."""
+        target, zero-based last action and step int64 [B], pattern int8 [B, N]; with
+        latency, the zero-based actions in flight int64 [B, L]."""
         out = np.empty((voltage_mV.shape[0], self.size), dtype=np.float32)
         _write_flat(voltage_mV, target, last_action, step, pattern, self._constants, out)
+        if self.latency_steps:
+            # The compiled writer fills every row to its end (the pattern ahead's -1s run
+            # into these columns): the one-hot blocks are written over them.
+            blocks = out[:, self.in_flight_column :]
+            blocks[:] = 0.0
+            offsets = np.arange(self.latency_steps) * (self.k + 1)
+            rows = np.arange(out.shape[0])[:, None]
+            blocks[rows, offsets + in_flight] = 1.0
         return out
 
 
@@ -281,4 +313,5 @@ def observation_for(env: Any, flatten: bool) -> FlatObservation:
         env.params,
         env.extensions.stochastic_release,
         flatten,
+        env.extensions.latency_steps,
     )

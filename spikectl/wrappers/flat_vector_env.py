@@ -109,8 +109,8 @@ class FlatNeuronControlVectorEnv(NeuronControlVectorEnv, VectorEnv):
         array = np.asarray(actions)
         if array.shape != (self.num_envs,) or array.dtype.kind not in "iu":
             raise ValueError(bad_shape_message(array, self.num_envs, self._action_rule()))
-        # The paper's actions: without hidden neurons the simulator's input itself.
-        checked = self._actions[:, 0] if self._observable is None else self._agent_actions
+        # The paper's actions: without hidden neurons or latency the simulator's input itself.
+        checked = self._agent_actions if self._indirect else self._actions[:, 0]
         first_illegal = _translate_actions(
             array.astype(np.int64, copy=False), self._legal, self._needs_reset,
             self.illegal_action == "raise", checked, self._illegal, self._illegal_actions,
@@ -134,7 +134,7 @@ class FlatNeuronControlVectorEnv(NeuronControlVectorEnv, VectorEnv):
     def _observation(self, voltage: np.ndarray) -> np.ndarray:
         return self.observation_codec.write(
             voltage, self._observed_targets, self._last_action + 1, self._next_step,
-            self._patterns,
+            self._patterns, self._delay.in_flight + 1 if self._delay.steps else None,
         )  # fmt: skip
 
     def _with_illegal(
