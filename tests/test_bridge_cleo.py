@@ -143,6 +143,46 @@ def test_latency_delays_every_action(test_set, latency):
         assert total < 1.0  # the witness's timing matters
 
 
+class Recording:
+    """A controller that plays another and keeps every observation it was shown."""
+
+    def __init__(self, controller):
+        self.controller, self.seen = controller, []
+
+    def reset(self):
+        self.seen = []
+        self.controller.reset()
+
+    def act(self, observation, info):
+        self.seen.append(observation)
+        return self.controller.act(observation, info)
+
+
+@pytest.mark.parametrize("latency", [1, 2])
+def test_latency_settings_equal_the_environment_with_latency_steps(test_set, latency):
+    """Cleo's latency{L} and spikectl's extensions={"latency_steps": L}: the same
+    observations (actions in flight included), actions, target spikes and returns, for the
+    latency-aware oracle, a random controller and identify-and-plan (5 episodes each L)."""
+    from spikectl.training.loaders import load_controller
+
+    env = NeuronControlEnv(contexts=test_set, extensions={"latency_steps": latency})
+    loop = cleo_bridge.CleoLoop(test_set, cleo_bridge.SETTINGS[f"latency{latency}"])
+    for name, contexts in (("oracle", (0, 1)), ("random", (0, 1)), ("identify-and-plan", (2,))):
+        for context in contexts:
+            ours = Recording(load_controller(name, env=env, seed=context))
+            actions, total = play_episode(env, ours, context)
+            spikes = env.unwrapped._spike_history[:, test_set[context].target].copy()
+            theirs = Recording(load_controller(name, env=env, seed=context))
+            episode = loop.play(theirs, context)
+            np.testing.assert_array_equal(episode.actions, actions, err_msg=f"{name} {context}")
+            np.testing.assert_array_equal(episode.target_spikes, spikes)
+            assert episode.total == total
+            for a, b in zip(ours.seen, theirs.seen, strict=True):
+                assert a.keys() == b.keys()
+                for key in a:
+                    np.testing.assert_array_equal(a[key], b[key], err_msg=f"{name} {key}")
+
+
 def test_noise_is_seeded_and_only_in_what_is_measured(test_set):
     """Noise of 1 mV moves the observed potentials (sd ~1 mV around the true ones),
     is the same for the same seed, and changes no dynamics: an open-loop controller
