@@ -140,7 +140,7 @@ def test_a_task_without_its_checksums_is_refused():
          "no controller 'nope': not a run directory, not a compiled policy file, and not one of "
          "do-nothing, random, identify-and-plan, oracle, witness"),
         (lambda: suite.suite_version(7),
-         "unknown benchmark suite version '7'; this spikectl has 1"),
+         "unknown benchmark suite version '7'; this spikectl has 1, 2"),
         (lambda: suite.task("nope"), "unknown task 'nope' of benchmark suite v1; tasks: paper, "
          "n16, n32, noise1"),
         (lambda: spikectl.register_env_variant("spikectl/Bad", {}),

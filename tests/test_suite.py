@@ -126,7 +126,6 @@ def test_benchmark_do_nothing_on_paper(capsys, tmp_path):
     assert lines[1].startswith("1,paper,test,do-nothing,")
 
 
-
 def test_benchmark_writes_each_networks_return(capsys, tmp_path):
     """--per-network: one row per test network whose mean is the task's mean return
     (for the random controller, each network's mean over its seeds)."""
@@ -149,6 +148,7 @@ def test_benchmark_writes_each_networks_return(capsys, tmp_path):
     expected_error = returns.std(ddof=1) / np.sqrt(V1.set_size)
     assert float(summary["standard_error"]) == pytest.approx(expected_error, abs=1e-6)
     assert 0.0 <= returns.min() < returns.max() <= 1.0
+
 
 @pytest.mark.parametrize(
     ("argv", "message"),
@@ -253,9 +253,39 @@ def test_train_task_flag_is_overridden_by_later_flags_and_checked():
         (["--task", "n64"], "unknown task 'n64' of benchmark suite v1"),
         (["--task", "paper", "--task", "n16"], "one task per run"),
         (["--task"], "give a task of the benchmark suite"),
-        (["--task", "paper", "--train-contexts", "c.npz"],
-         "--task paper trains on the task's pinned sets, --train-contexts on a file"),
+        (
+            ["--task", "paper", "--train-contexts", "c.npz"],
+            "--task paper trains on the task's pinned sets, --train-contexts on a file",
+        ),
         (["--task=n16", "--test-contexts=c.npz"], "--test-contexts on a file of its own"),
     ):
         with pytest.raises(ValueError, match=message):
             parse_train(argv)
+
+
+V2 = suite.suite_version(2)
+
+
+def test_v2_is_the_rigs_loop_on_1000_networks_beside_a_frozen_v1(fresh_cache):
+    assert (V2.number, V2.frozen, V2.set_size, V2.env_seed) == (2, False, 1000, 0)
+    assert V2.names() == ("paper", "latency1", "latency2")
+    assert [V2.task(name).extensions.latency_steps for name in V2.names()] == [0, 1, 2]
+    assert {V2.task(name).seed for name in V2.names()} == {2}
+    sets = suite.load_splits("latency1", 2)  # checked against the pinned checksums
+    assert [len(sets[split]) for split in suite.SPLITS] == [1000, 1000, 1000]
+    assert sets["test"] == suite.load_split("paper", "test", 2)  # the paper's networks
+    assert not sets["test"].duplicate_topologies(sets["train"])
+    # No v2 network is one of v1's test networks: a seed of its own.
+    assert not sets["test"].duplicate_topologies(suite.load_split("paper", "test", 1))
+    assert suite.load_split("paper", "test", 1) != sets["test"]
+
+
+def test_benchmark_plays_a_v2_task_under_its_latency(capsys, tmp_path):
+    out = tmp_path / "v2.csv"
+    code, stdout, _ = run_main(["benchmark", "do-nothing", "--suite", "2", "--task", "latency2",
+                                "--out", str(out)], capsys)  # fmt: skip
+    assert code == 0, stdout
+    assert "benchmark suite v2" in stdout and "1000 contexts" in stdout
+    (row,) = list(csv.DictReader(out.open()))
+    assert (row["suite_version"], row["task"], row["contexts"]) == ("2", "latency2", "1000")
+    assert float(row["mean_return"]) == 0.5  # doing nothing: half the pattern's steps right

@@ -5,7 +5,9 @@ Each task is a registered environment (``spikectl/NeuronControl-v0`` or one of i
 variants, with a few settings changed) and a network size. A suite version is data
 (:mod:`~spikectl.experiments.suite.versions`): its tasks, set size, episode length,
 environment seed and the checksums of its sets. Version 1
-(:mod:`~spikectl.experiments.suite.v1`) is frozen; another version lives beside it,
+(:mod:`~spikectl.experiments.suite.v1`) is frozen; v2
+(:mod:`~spikectl.experiments.suite.v2`, the rig's loop on 1 000 networks a set) lives
+beside it, and another version would too,
 registered with :func:`register_suite_version` and given its tasks with
 :func:`register_task`. The protocol (:mod:`~spikectl.experiments.suite.protocol`) and
 the runs' side (:mod:`~spikectl.experiments.suite.runs`) take the task's name and the
@@ -13,6 +15,7 @@ version (default 1).
 """
 
 from spikectl.experiments.suite import v1 as _v1  # noqa: F401  (registers suite v1)
+from spikectl.experiments.suite import v2 as _v2  # noqa: F401  (registers suite v2)
 from spikectl.experiments.suite.protocol import (
     Score,
     SuiteChecksumError,
