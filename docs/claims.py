@@ -14,6 +14,8 @@ Sources (paths under docs/results/suite/, the suite's committed results):
 
 - ``suite/CONTROLLER/TASK/COLUMN``: a column of ``CONTROLLER.csv`` (``spikectl benchmark
   CONTROLLER --task all``) on TASK's row, e.g. ``suite/identify-and-plan/n32/mean_return``;
+- ``suite2/CONTROLLER/TASK/COLUMN``: the same for suite v2 (``docs/results/suite-v2/``,
+  ``spikectl benchmark CONTROLLER --suite 2 --task all``);
 - ``summary/CONTROLLER``: the suite's summary, the mean over its ten tasks of the
   normalised column;
 - ``trained/PRESET/paper/TASK/COLUMN``: over the seeds of ``trained/PRESET/paper``, the
@@ -50,6 +52,7 @@ import numpy as np
 DOCS = Path(__file__).resolve().parent
 ROOT = DOCS.parent
 SUITE = DOCS / "results" / "suite"
+SUITE2 = DOCS / "results" / "suite-v2"
 TASKS = ("paper", "n16", "n32", "noise1", "noise2", "noise4", "hidden25", "stochastic",
          "heterogeneous", "background")  # fmt: skip
 """The suite's ten tasks (version 1), in its order."""
@@ -102,6 +105,9 @@ def values(source: str) -> list[float]:
     if kind == "suite":
         controller, task, column = parts
         return [float(rows(SUITE / f"{controller}.csv")[task][column])]
+    if kind == "suite2":
+        controller, task, column = parts
+        return [float(rows(SUITE2 / f"{controller}.csv")[task][column])]
     if kind == "summary":
         (controller,) = parts
         table = rows(SUITE / f"{controller}.csv")
@@ -170,6 +176,20 @@ def suite_row(task: str) -> str:
             f"| {oracle} |")  # fmt: skip
 
 
+def suite2_row(task: str) -> str:
+    """docs/benchmark.md's suite v2 row of ``task``."""
+
+    def cell(controller: str, standard_error: bool) -> str:
+        source = f"suite2/{controller}/{task}"
+        error = f" ± {{{source}/standard_error:.3f}}" if standard_error else ""
+        return f"{{{source}/mean_return:.3f}}{error} ({{{source}/normalised:.3f}})"
+
+    return (f"| `{task}` | {{suite2/do-nothing/{task}/mean_return:.3f}} (0) | "
+            f"{cell('random', False)} | {cell('identify-and-plan', True)} | "
+            f"{{suite2/oracle/{task}/mean_return:.3f}} ± "
+            f"{{suite2/oracle/{task}/standard_error:.3f}} (1) |")  # fmt: skip
+
+
 def learned_row(task: str) -> str:
     """docs/benchmark.md's row of the learned table for one task."""
     on_task = "paper" if task == "paper" else "task"  # paper's own runs are its transfer rows
@@ -186,6 +206,8 @@ def claims() -> Iterator[Claim]:
     for task in TASKS:
         yield Claim(benchmark, suite_row(task))
         yield Claim(benchmark, learned_row(task))
+    for task in ("paper", "latency1", "latency2"):
+        yield Claim(benchmark, suite2_row(task))
     yield Claim(benchmark, "| **mean normalised** | {summary/do-nothing:.3f} | "
                 "{summary/random:.3f} | **{summary/identify-and-plan:.3f}** | "
                 "{summary/oracle:.3f} |")  # fmt: skip
