@@ -6,10 +6,12 @@ Reads docs/results/reference-baselines/TASK/ALGORITHM/seedS/ (result.json,
 test-per-network.csv, curve.csv) and prints, per task, one row per algorithm: the test
 mean return and normalised score (mean ± sd over seeds), the IQM of the normalised
 per-seed scores with its stratified-bootstrap 95% interval, training core-minutes per
-seed, and the paired difference to identify-and-plan network by network (the seeds'
-mean return on each test network minus the planner's, from
-docs/results/suite/identify-and-plan-per-network.csv: mean with its 95% bootstrap
-interval over the networks, and how many networks each way). ``--figure`` also draws
+seed, and the paired differences network by network (the seeds' mean return on each
+test network minus the reference's: mean with its 95% bootstrap interval over the
+networks, and how many networks each way) to identify-and-plan
+(docs/results/suite/identify-and-plan-per-network.csv) and to the suite's TDRQN
+``guided`` trained on the task (the mean of its seeds' per_network.csv under
+TASK/tdrqn-guided/, where run). ``--figure`` also draws
 ``curves.png`` (training return per 20 000 steps, mean over seeds, the seeds' range
 shaded).
 """
@@ -48,6 +50,18 @@ def planner_returns(task: str) -> np.ndarray:
     return np.array([float(row["return"]) for row in rows])
 
 
+def tdrqn_returns(task: str) -> np.ndarray | None:
+    """[networks] the TDRQN ``guided`` seeds' mean test return per network, if run."""
+    files = sorted((HERE / task / "tdrqn-guided").glob("seed*/per_network.csv"))
+    if not files:
+        return None
+    per_seed = []
+    for path in files:
+        rows = sorted(read_csv(path), key=lambda row: int(row["context"]))
+        per_seed.append([float(row["return"]) for row in rows])
+    return np.mean(per_seed, axis=0)
+
+
 def row_of(task: str, algorithm: str) -> str | None:
     seeds = runs(task, algorithm)
     if not seeds:
@@ -61,12 +75,14 @@ def row_of(task: str, algorithm: str) -> str | None:
     ])  # [seeds, networks]
     summary = summarise(normalised)
     minutes = np.median([r["train_core_minutes"] for r in results])
-    difference = per_network.mean(axis=0) - planner_returns(task)
+    played = per_network.mean(axis=0)
+    tdrqn = tdrqn_returns(task)
+    to_tdrqn = "n/a | n/a" if tdrqn is None else paired_difference_cells(played - tdrqn)
     return (
         f"| {algorithm} | {len(seeds)} | {means.mean():.3f} ± {means.std():.3f} | "
         f"{normalised.mean():.3f} ± {normalised.std():.3f} | {summary['iqm']:.3f} "
         f"[{summary['iqm_low']:.3f}, {summary['iqm_high']:.3f}] | {minutes:.1f} | "
-        f"{paired_difference_cells(difference)} |"
+        f"{paired_difference_cells(played - planner_returns(task))} | {to_tdrqn} |"
     )
 
 
@@ -75,8 +91,9 @@ def table(task: str) -> str:
         f"Task `{task}`, 100 test networks, greedy play; mean ± sd over seeds.",
         "",
         "| algorithm | seeds | test mean return | normalised | IQM normalised [95%] | "
-        "core-min a seed | − identify-and-plan, per network [95%] | better / worse |",
-        "|---|---:|---:|---:|---:|---:|---:|---:|",
+        "core-min a seed | − identify-and-plan, per network [95%] | better / worse | "
+        "− TDRQN guided, per network [95%] | better / worse |",
+        "|---|---:|---:|---:|---:|---:|---:|---:|---:|---:|",
     ]
     rows = [row_of(task, algorithm) for algorithm in ORDER]
     return "\n".join(lines + [row for row in rows if row])
@@ -116,6 +133,10 @@ def main() -> None:
     args = parser.parse_args()
     tasks = sorted(path.name for path in HERE.iterdir() if path.is_dir())
     print("\n\n".join(table(task) for task in tasks))
+    for task in tasks:
+        tdrqn = tdrqn_returns(task)
+        if tdrqn is not None:
+            print(f"\n{task}: TDRQN guided (the reference), mean test return {tdrqn.mean():.3f}")
     if args.figure:
         figure(tasks)
 
