@@ -29,6 +29,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from spikectl.config_errors import ConfigError, ConfigTypeError
+from spikectl.neuron.opsin import check_actuator
 from spikectl.neuron.params import NeuronParams
 
 CONTEXT_FIELDS = (
@@ -78,6 +79,13 @@ class Extensions:
     like one excitatory synapse; negative is inhibitory)."""
     allow_target_action: bool = False
     """Environment level: stimulating the target neuron is a legal action."""
+    actuator: str = "pulse"
+    """Environment level: what an action does. ``"pulse"``: the paper's current pulse
+    for one step; ``"chr2"``: a 1 ms light pulse from an optic fibre above the neuron,
+    every neuron expressing ChR2 (:mod:`spikectl.neuron.opsin`)."""
+    light_irradiance_mW_per_mm2: float = 5.0
+    """Environment level, with ``actuator="chr2"``: the fibre tip's irradiance during a
+    pulse (5 mW/mm^2: one pulse makes a resting neuron spike at the next step)."""
 
     CONTEXT_FIELDS: ClassVar[tuple[str, ...]] = CONTEXT_FIELDS
 
@@ -97,6 +105,8 @@ class Extensions:
         object.__setattr__(self, "hidden_neurons", int(hidden))
         for field in fields(self):
             value = getattr(self, field.name)
+            if field.name == "actuator":  # checked with the irradiance below
+                continue
             if field.name in ("stochastic_release", "allow_target_action", "hidden_neurons"):
                 continue
             if value is None and field.name == "bleaching_time_constant_steps":
@@ -135,6 +145,7 @@ class Extensions:
                 f"pA, got {self.background_current_pA:g}",
                 label="Extensions.background_current_pA",
             )  # fmt: skip
+        check_actuator(self.actuator, self.light_irradiance_mW_per_mm2)
         bleaching = self.bleaching_time_constant_steps
         if bleaching is not None and bleaching <= 0:
             raise ConfigError(
@@ -334,6 +345,7 @@ class EnvironmentEffects:
         )  # fmt: skip
         self.plain = not extensions.transforms_observation
         self.random_dynamics = extensions.random_dynamics
+        self.opsin = extensions.actuator == "chr2"
 
     def draw_inputs(
         self,
@@ -347,7 +359,7 @@ class EnvironmentEffects:
         """
         if release_uniforms is not None:
             release_uniforms[:] = rng.random(release_uniforms.shape[-1])
-        if input_mV is not None:
+        if input_mV is not None and self.background_rate > 0:
             counts = rng.poisson(self.background_rate, input_mV.shape[-1])
             input_mV[:] = counts * self.background_step_mV
 
@@ -355,7 +367,9 @@ class EnvironmentEffects:
         """Zeroed kernel inputs [batch, 1, n] for one step: (release uniforms, input_mV);
         None for an extension that is off."""
         release = np.zeros((batch, 1, n_neurons)) if self.stochastic_release else None
-        background = np.zeros((batch, 1, n_neurons)) if self.background_rate > 0 else None
+        background = (
+            np.zeros((batch, 1, n_neurons)) if self.background_rate > 0 or self.opsin else None
+        )  # the opsin's current enters as input too
         return release, background
 
     def observe(self, voltage: np.ndarray, steps: np.ndarray | int, noise: np.ndarray | None):
