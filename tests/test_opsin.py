@@ -146,31 +146,35 @@ def test_a_refractory_neuron_ignores_the_current_but_its_opsin_still_sees_light(
     assert lit_twice._opsin.o1[0, 0] > 0
 
 
-def test_single_and_vector_envs_give_identical_episodes():
-    for extensions in (CHR2, Extensions(actuator="chr2", light_irradiance_mW_per_mm2=20.0,
-                                        stochastic_release=True, background_rate=0.05)):  # fmt: skip
-        num_envs = 3
-        kwargs = {**SHORT, "extensions": extensions}
-        batched = NeuronControlVectorEnv(num_envs=num_envs, **kwargs)
-        sync = SyncVectorEnv([lambda: NeuronControlEnv(**kwargs) for _ in range(num_envs)],
-                             autoreset_mode=AutoresetMode.NEXT_STEP)  # fmt: skip
-        obs_a, info_a = batched.reset(seed=5)
-        obs_b, _ = sync.reset(seed=5)
-        rng = np.random.default_rng(8)
-        spikes = 0
-        for step in range(3 * 13 + 2):  # three episodes with their autoresets
-            for key in obs_a:
-                np.testing.assert_array_equal(obs_a[key], obs_b[key], err_msg=f"{step} {key}")
-            actions = np.array([rng.choice(np.flatnonzero(m)) - 1 for m in info_a["action_mask"]])
-            obs_a, rewards_a, _, _, info_a = batched.step(actions)
-            obs_b, rewards_b, _, _, info_b = sync.step(actions)
-            np.testing.assert_array_equal(rewards_a, rewards_b)
-            present = info_b.get("_spikes", np.zeros(num_envs, dtype=bool))
-            np.testing.assert_array_equal(info_a["_spikes"], present)
-            if present.any():
-                np.testing.assert_array_equal(info_a["spikes"][present], info_b["spikes"][present])
-                spikes += int(info_a["spikes"][present].sum())
-        assert spikes > 10  # the light drives the networks
+@pytest.mark.parametrize(
+    "extensions",
+    [CHR2, Extensions(actuator="chr2", light_irradiance_mW_per_mm2=20.0,
+                      stochastic_release=True, background_rate=0.05)],
+    ids=["chr2", "chr2+stochastic+background"],
+)  # fmt: skip
+def test_single_and_vector_envs_give_identical_episodes(extensions):
+    num_envs = 3
+    kwargs = {**SHORT, "extensions": extensions}
+    batched = NeuronControlVectorEnv(num_envs=num_envs, **kwargs)
+    sync = SyncVectorEnv([lambda: NeuronControlEnv(**kwargs) for _ in range(num_envs)],
+                         autoreset_mode=AutoresetMode.NEXT_STEP)  # fmt: skip
+    obs_a, info_a = batched.reset(seed=5)
+    obs_b, _ = sync.reset(seed=5)
+    rng = np.random.default_rng(8)
+    spikes = 0
+    for step in range(3 * 13 + 2):  # three episodes with their autoresets
+        for key in obs_a:
+            np.testing.assert_array_equal(obs_a[key], obs_b[key], err_msg=f"{step} {key}")
+        actions = np.array([rng.choice(np.flatnonzero(m)) - 1 for m in info_a["action_mask"]])
+        obs_a, rewards_a, _, _, info_a = batched.step(actions)
+        obs_b, rewards_b, _, _, info_b = sync.step(actions)
+        np.testing.assert_array_equal(rewards_a, rewards_b)
+        present = info_b.get("_spikes", np.zeros(num_envs, dtype=bool))
+        np.testing.assert_array_equal(info_a["_spikes"], present)
+        if present.any():
+            np.testing.assert_array_equal(info_a["spikes"][present], info_b["spikes"][present])
+            spikes += int(info_a["spikes"][present].sum())
+    assert spikes > 10  # the light drives the networks
 
 
 def test_the_opsin_changes_the_episodes_and_a_seed_repeats_them():
@@ -181,8 +185,8 @@ def test_the_opsin_changes_the_episodes_and_a_seed_repeats_them():
     np.testing.assert_array_equal(paper.actions, first.actions)
     assert not np.array_equal(paper.spikes, first.spikes)
     np.testing.assert_array_equal(first.spikes, again.spikes)
-    dark = evaluate_policy(test_set, RandomLegal(seed=1),
-                           extensions=Extensions(actuator="chr2", light_irradiance_mW_per_mm2=0))
+    unlit = Extensions(actuator="chr2", light_irradiance_mW_per_mm2=0)
+    dark = evaluate_policy(test_set, RandomLegal(seed=1), extensions=unlit)
     assert not dark.spikes.any()  # no light, no pulse: nothing ever spikes
 
 
