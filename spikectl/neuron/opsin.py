@@ -151,9 +151,9 @@ def photocurrent_pA(o1, o2, voltage_mV):
     return -G0_nS * (o1 + GAMMA * o2) * rectification
 
 
-def _euler_substep(c1, o1, o2, rates, dt):
-    """One forward Euler step of the occupancies (every derivative from the old values)."""
-    ga1, ga2, gf, gb = rates[0], rates[1], rates[2], rates[3]
+def _euler_substep(c1, o1, o2, ga1, ga2, gf, gb, dt):
+    """One forward Euler step of the occupancies (every derivative from the old values),
+    under the rates ``ga1``, ``ga2``, ``gf``, ``gb`` (1/ms) of the light then."""
     c2 = 1.0 - c1 - o1 - o2
     d_c1 = GD1_PER_ms * o1 + GR0_PER_ms * c2 - ga1 * c1
     d_o1 = ga1 * c1 + gb * o2 - (GD1_PER_ms + gf) * o1
@@ -188,20 +188,24 @@ def _illuminate_kernel(
     batch, n = c1.shape
     for b in range(batch):
         for j in range(n):
-            c1_j, o1_j, o2_j = c1[b, j], o1[b, j], o2[b, j]
-            drive = mV_per_pA * current_pA(o1_j, o2_j, voltage[b, j])
+            drive = mV_per_pA * current_pA(o1[b, j], o2[b, j], voltage[b, j])
             if accumulate:
                 out_mV[b, 0, j] += drive
             else:
                 out_mV[b, 0, j] = drive
-            on = lit[b] == j
-            # A resting opsin in the dark stays exactly at rest: skip its sub-steps.
-            if not on and o1_j == 0.0 and o2_j == 0.0 and c1_j == 1.0:
-                continue
-            rates = light_rates if on else dark_rates
-            for _ in range(substeps):
-                c1_j, o1_j, o2_j = euler_substep(c1_j, o1_j, o2_j, rates, dt)
-            c1[b, j], o1[b, j], o2[b, j] = c1_j, o1_j, o2_j
+        # Sub-step by sub-step over the network's neurons: their chains of dependent
+        # arithmetic interleave (one neuron's ten sub-steps in a row ran 5x slower).
+        for _ in range(substeps):
+            for j in range(n):
+                on = lit[b] == j
+                (c1[b, j], o1[b, j], o2[b, j]) = euler_substep(
+                    c1[b, j], o1[b, j], o2[b, j],
+                    light_rates[0] if on else dark_rates[0],
+                    light_rates[1] if on else dark_rates[1],
+                    light_rates[2] if on else dark_rates[2],
+                    light_rates[3] if on else dark_rates[3],
+                    dt,
+                )  # fmt: skip
 
 
 illuminate_kernel = numba.njit(cache=True, nogil=True)(_illuminate_kernel)
