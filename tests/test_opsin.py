@@ -93,6 +93,29 @@ def test_constant_light_reaches_the_steady_state_of_the_rate_equations():
     assert opsins.c1[0, 1] == 1  # the dark neuron never moved
 
 
+@pytest.mark.parametrize("irradiance", [0.0, 5.0, 1000.0])
+def test_a_step_is_ten_euler_substeps_of_the_rate_equations(irradiance):
+    """The composed map of a step equals ten explicit Euler sub-steps of 0.1 ms, whose
+    derivatives are the rate equations written out here."""
+    rates = opsin.light_rates(opsin.photon_flux(irradiance))
+    ga1, ga2, gf, gb = rates
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        state = rng.dirichlet(np.ones(4))  # C1, O1, O2, C2
+        c1, o1, o2, c2 = state
+        for _ in range(10):
+            c1, o1, o2, c2 = (
+                c1 + 0.1 * (0.105 * o1 + 0.00033 * c2 - ga1 * c1),
+                o1 + 0.1 * (ga1 * c1 + gb * o2 - (0.105 + gf) * o1),
+                o2 + 0.1 * (ga2 * c2 + gf * o1 - (0.0138 + gb) * o2),
+                c2 + 0.1 * (ga2 * -c2 + 0.0138 * o2 - 0.00033 * c2),
+            )
+        step_map = opsin.euler_step_map(rates, 0.1, 10)
+        mapped = step_map[:, :3] @ state[:3] + step_map[:, 3]
+        np.testing.assert_allclose(mapped, [c1, o1, o2], rtol=1e-12, atol=1e-15)
+        assert sum([c1, o1, o2, c2]) == pytest.approx(1.0, abs=1e-12)
+
+
 def test_occupancies_stay_in_the_unit_interval_and_sum_to_one():
     rng = np.random.default_rng(3)
     opsins = actuator(batch=5, n=4, irradiance=1000.0)  # saturating light, the hardest case

@@ -22,7 +22,8 @@ phi = epsilon T Irr / E_photon with ChR2's relative sensitivity epsilon = 1 at 4
 
 Integration, as Cleo's Brian 2 model does it: the occupancies take forward Euler steps
 of 0.1 ms (ChR2's 4.15/ms makes 1 ms steps unstable), the light of step t on during
-the ten sub-steps of step t; the membrane keeps its 1 ms Euler step, and the opsin
+the ten sub-steps of step t (applied as their composed affine map,
+:func:`euler_step_map`); the membrane keeps its 1 ms Euler step, and the opsin
 current it integrates over step t is the one computed once at the start of the step,
 from the occupancies and the potential then (Brian updates the summed current on the
 neurons' 1 ms clock, before their integration). So a pulse at step t drives the neuron
@@ -151,17 +152,31 @@ def photocurrent_pA(o1, o2, voltage_mV):
     return -G0_nS * (o1 + GAMMA * o2) * rectification
 
 
-def _euler_substep(c1, o1, o2, ga1, ga2, gf, gb, dt):
-    """One forward Euler step of the occupancies (every derivative from the old values),
-    under the rates ``ga1``, ``ga2``, ``gf``, ``gb`` (1/ms) of the light then."""
+def euler_substep(c1, o1, o2, rates, dt_ms):
+    """One forward Euler step of the occupancies under ``rates`` ([Ga1, Ga2, Gf, Gb] in
+    1/ms), every derivative from the old values: Cleo's scheme (Brian 2's ``euler``)."""
+    ga1, ga2, gf, gb = rates
     c2 = 1.0 - c1 - o1 - o2
     d_c1 = GD1_PER_ms * o1 + GR0_PER_ms * c2 - ga1 * c1
     d_o1 = ga1 * c1 + gb * o2 - (GD1_PER_ms + gf) * o1
     d_o2 = ga2 * c2 + gf * o1 - (GD2_PER_ms + gb) * o2
-    return c1 + dt * d_c1, o1 + dt * d_o1, o2 + dt * d_o2
+    return c1 + dt_ms * d_c1, o1 + dt_ms * d_o1, o2 + dt_ms * d_o2
 
 
-euler_substep = numba.njit(inline="always", cache=True, nogil=True)(_euler_substep)
+def euler_step_map(rates, dt_ms: float, substeps: int) -> np.ndarray:
+    """[3, 4] the affine map of ``substeps`` :func:`euler_substep` steps under constant
+    ``rates``: [C1, O1, O2] -> map[:, :3] @ [C1, O1, O2] + map[:, 3].
+
+    Each Euler step is affine in the occupancies (C2 = 1 - C1 - O1 - O2), and the rates
+    are constant within a 1 ms step (the light is on or off for all of it), so the ten
+    sub-steps compose into one map: the same scheme, applied in 12 multiply-adds instead
+    of ten dependent sub-steps (3x faster; results differ from the sub-steps in the last
+    bits, ~1e-14 relative after an episode)."""
+    points = np.vstack([np.zeros(3), np.eye(3)])  # the origin, then C1, O1, O2 alone
+    for _ in range(substeps):
+        points = np.stack(euler_substep(points[:, 0], points[:, 1], points[:, 2], rates,
+                                        dt_ms), axis=1)  # fmt: skip
+    return np.column_stack([(points[1:] - points[0]).T, points[0]])
 
 
 def _current_pA(o1, o2, v):
@@ -177,10 +192,8 @@ def _illuminate_kernel(
     o2,  # [B, n] float64 occupancy of O2, state
     voltage,  # [B, n] float64: the potentials at the start of the step
     lit,  # [B] int64: the neuron under light this step, -1 none
-    dark_rates,  # [4] the rates without light
-    light_rates,  # [4] the rates under the pulse's flux
-    substeps,  # int: Euler sub-steps per step
-    dt,  # float: their length in ms
+    dark_map,  # [3, 4] euler_step_map of a step without light
+    light_map,  # [3, 4] euler_step_map of a step under the pulse's light
     mV_per_pA,  # float: dt * 1 pA / C, a current's step in the potential
     out_mV,  # [B, 1, n] float64: gets (or, with accumulate, adds) each neuron's drive
     accumulate,  # bool: add to out_mV instead of overwriting it
@@ -188,24 +201,21 @@ def _illuminate_kernel(
     batch, n = c1.shape
     for b in range(batch):
         for j in range(n):
-            drive = mV_per_pA * current_pA(o1[b, j], o2[b, j], voltage[b, j])
+            x0, x1, x2 = c1[b, j], o1[b, j], o2[b, j]
+            drive = mV_per_pA * current_pA(x1, x2, voltage[b, j])
             if accumulate:
                 out_mV[b, 0, j] += drive
             else:
                 out_mV[b, 0, j] = drive
-        # Sub-step by sub-step over the network's neurons: their chains of dependent
-        # arithmetic interleave (one neuron's ten sub-steps in a row ran 5x slower).
-        for _ in range(substeps):
-            for j in range(n):
-                on = lit[b] == j
-                (c1[b, j], o1[b, j], o2[b, j]) = euler_substep(
-                    c1[b, j], o1[b, j], o2[b, j],
-                    light_rates[0] if on else dark_rates[0],
-                    light_rates[1] if on else dark_rates[1],
-                    light_rates[2] if on else dark_rates[2],
-                    light_rates[3] if on else dark_rates[3],
-                    dt,
-                )  # fmt: skip
+            on = lit[b] == j
+            # A resting opsin in the dark stays exactly at rest (the map's rounding would
+            # move C1 by an ulp).
+            if not on and x0 == 1.0 and x1 == 0.0 and x2 == 0.0:
+                continue
+            m = light_map if on else dark_map
+            c1[b, j] = m[0, 0] * x0 + m[0, 1] * x1 + m[0, 2] * x2 + m[0, 3]
+            o1[b, j] = m[1, 0] * x0 + m[1, 1] * x1 + m[1, 2] * x2 + m[1, 3]
+            o2[b, j] = m[2, 0] * x0 + m[2, 1] * x1 + m[2, 2] * x2 + m[2, 3]
 
 
 illuminate_kernel = numba.njit(cache=True, nogil=True)(_illuminate_kernel)
@@ -230,8 +240,8 @@ class OpsinActuator:
         self.substep_ms = dt_ms / self.substeps
         self.mV_per_pA = dt_ms / capacitance_pF
         self.flux = photon_flux(irradiance_mW_per_mm2)
-        self.dark_rates = light_rates(0.0)
-        self.light_rates = light_rates(self.flux)
+        self.dark_map = euler_step_map(light_rates(0.0), self.substep_ms, self.substeps)
+        self.light_map = euler_step_map(light_rates(self.flux), self.substep_ms, self.substeps)
         self.dark = np.full((batch, 1), -1, dtype=np.int64)  # the kernel's actions: no pulse
         self.accumulate = False  # whether illuminate adds its drive to the buffer's input
 
@@ -263,9 +273,8 @@ class OpsinActuator:
         advance the occupancies through the step, the neuron ``actions[b, 0]`` (-1: none)
         of network b under light. Returns the actions the simulator takes instead:
         none, the light being the only stimulus."""
-        illuminate_kernel(self.c1, self.o1, self.o2, voltage_mV, actions[:, 0],
-                          self.dark_rates, self.light_rates, self.substeps, self.substep_ms,
-                          self.mV_per_pA, out_mV, self.accumulate)  # fmt: skip
+        illuminate_kernel(self.c1, self.o1, self.o2, voltage_mV, actions[:, 0], self.dark_map,
+                          self.light_map, self.mV_per_pA, out_mV, self.accumulate)  # fmt: skip
         return self.dark
 
     @property
