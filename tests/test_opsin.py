@@ -242,3 +242,20 @@ def test_the_registered_variant_and_its_flat_twin():
     assert vector.extensions == Extensions(actuator="chr2")
     assert Extensions.from_dict(CHR2.to_dict(only_changed=True)) == CHR2
     assert Extensions().to_dict(only_changed=True) == {}
+
+
+def test_an_opsin_environment_pickles_mid_episode_and_continues_identically():
+    import pickle
+
+    env = NeuronControlEnv(**SHORT, extensions=CHR2)
+    _, info = env.reset(seed=2)
+    rng = np.random.default_rng(6)
+    actions = rng.choice(np.flatnonzero(info["action_mask"]) - 1, size=12)
+    for action in actions[:4]:
+        env.step(int(action))
+    twin = pickle.loads(pickle.dumps(env))
+    for action in actions[4:]:
+        first, second = env.step(int(action)), twin.step(int(action))
+        np.testing.assert_array_equal(first[0]["voltage"], second[0]["voltage"])
+        assert first[1] == second[1]
+    assert twin._opsin is not env._opsin and twin._opsin.o1.any()
