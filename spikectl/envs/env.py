@@ -31,6 +31,7 @@ from spikectl.envs.env_support import (
 )
 from spikectl.envs.latency import IN_FLIGHT_KEY, ActionDelay
 from spikectl.neuron.extensions import Extensions
+from spikectl.neuron.opsin import OpsinActuator
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, DrawnInputs, SimulatorState, advance
 
@@ -170,6 +171,7 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         self.render_mode = render_mode
         # The extensions' per-step draws, filled in place before each step.
         self._drawn = DrawnInputs(*self._effects.input_buffers(1, n))
+        self._opsin = OpsinActuator.for_environment(self.extensions, self.params, 1, n)
         self._plain = self._effects.plain  # observations are the potentials
         self._random_dynamics = self._effects.random_dynamics
         # Loop latency: the actions chosen but not yet applied (none without it).
@@ -231,6 +233,8 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         self._mask = self._legal.astype(np.int8)  # info["action_mask"]: Gymnasium's int8
         self.action_space.legal_mask = self._mask
         self._state = SimulatorState.at_rest(1, self.n_neurons, self.params)
+        if self._opsin is not None:
+            self._opsin.reset()
         self._action_history.fill(DO_NOTHING)
         self._spike_history.fill(False)
         self._delay.clear()
@@ -274,6 +278,8 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         actions[0, 0] = landing if observable is None or landing < 0 else observable[landing]
         if self._random_dynamics:
             self._effects.draw_inputs(self.np_random, *self._drawn)
+        if self._opsin is not None:  # the light's current is the stimulus, not the pulse
+            actions = self._opsin.illuminate(self._state.voltage_mV, actions, self._drawn.input_mV)
         advance(self._state, self._weights, actions, self.params, voltage, spikes,
                 self._neurons, self._drawn)  # fmt: skip
         spikes = self._spike_history[t]

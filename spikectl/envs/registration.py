@@ -60,6 +60,8 @@ VARIANTS.register("spikectl/NeuronControlRealistic-v0", {
         "background_rate": 0.005,
     }
 })  # fmt: skip
+# An optogenetic actuator: an action is a 1 ms light pulse on ChR2 (5 mW/mm^2 at the fibre).
+VARIANTS.register("spikectl/NeuronControlChR2-v0", {"extensions": {"actuator": "chr2"}})
 
 
 def flat_id(env_id: str) -> str:

@@ -44,6 +44,7 @@ from spikectl.envs.env_support import (
 from spikectl.envs.latency import IN_FLIGHT_KEY, ActionDelay
 from spikectl.files import check_fits_in_memory
 from spikectl.neuron.extensions import Extensions
+from spikectl.neuron.opsin import OpsinActuator
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import (
     DO_NOTHING,
@@ -80,11 +81,8 @@ class NeuronControlVectorEnv(VectorEnv):
     the single environment's order, so the batch still equals ``SyncVectorEnv``.
     """
 
-    metadata = {
-        "render_modes": RENDER_MODES,
-        "render_fps": RENDER_FPS,
-        "autoreset_mode": AutoresetMode.NEXT_STEP,
-    }
+    metadata = {"render_modes": RENDER_MODES, "render_fps": RENDER_FPS,
+                "autoreset_mode": AutoresetMode.NEXT_STEP}  # fmt: skip
     autoreset_mode = AutoresetMode.NEXT_STEP  # as Gymnasium's vector envs say it; TorchRL reads it
 
     def __init__(
@@ -115,6 +113,7 @@ class NeuronControlVectorEnv(VectorEnv):
                              "use fewer environments")  # fmt: skip
         # The extensions' per-step draws, filled in place before each step.
         self._drawn = DrawnInputs(*self._effects.input_buffers(batch, n))
+        self._opsin = OpsinActuator.for_environment(self.extensions, self.params, batch, n)
 
         self._delay = ActionDelay(batch, self.extensions.latency_steps)  # loop latency
         self.single_observation_space = observation_space(k, length, self._delay.steps)
@@ -217,7 +216,10 @@ class NeuronControlVectorEnv(VectorEnv):
             self._actions[:, 0] = landing
         if effects.random_dynamics:
             self._draw_inputs(np.flatnonzero(~autoreset))
-        advance(self._state, self._weights, self._actions, self.params, self._out_voltage,
+        # With the opsin (an extension) the light's current is the stimulus, not the pulse.
+        stimulus = self._actions if self._opsin is None else self._opsin.illuminate(
+            self._state.voltage_mV, self._actions, self._drawn.input_mV)  # fmt: skip
+        advance(self._state, self._weights, stimulus, self.params, self._out_voltage,
                 self._out_spikes, self._neurons, self._drawn)  # fmt: skip
         length = self.episode_length
         # Flat index of each env's current step into its [num_envs * N] tables; an env
@@ -298,11 +300,8 @@ class NeuronControlVectorEnv(VectorEnv):
         own generator in the single environment's order."""
         release, background = self._drawn
         for i in envs:
-            self._effects.draw_inputs(
-                self._rngs[i],
-                None if release is None else release[i, 0],
-                None if background is None else background[i, 0],
-            )
+            self._effects.draw_inputs(self._rngs[i], None if release is None else release[i, 0],
+                                      None if background is None else background[i, 0])  # fmt: skip
 
     def _noise(self, which: np.ndarray) -> np.ndarray | None:
         """Standard normal measurement noise [num_envs, k] for the marked envs (0 elsewhere)."""
@@ -351,6 +350,8 @@ class NeuronControlVectorEnv(VectorEnv):
         which = np.zeros(self.num_envs, dtype=bool)
         which[envs] = True
         self._state.reset(which, self.params)
+        if self._opsin is not None:
+            self._opsin.reset(which)
         self._next_step[envs] = 0
         self._last_action[envs] = DO_NOTHING
         self._voltage[envs] = self.params.v_rest_mV

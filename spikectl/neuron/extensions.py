@@ -29,6 +29,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from spikectl.config_errors import ConfigError, ConfigTypeError
+from spikectl.neuron.opsin import check_actuator
 from spikectl.neuron.params import NeuronParams
 
 CONTEXT_FIELDS = (
@@ -81,9 +82,13 @@ class Extensions:
     allow_target_action: bool = False
     """Environment level: stimulating the target neuron is a legal action."""
     latency_steps: int = 0
-    """Environment level: loop latency, an action chosen at step t stimulates at step
-    t + latency_steps (nothing is stimulated in an episode's first latency_steps steps);
-    the observation then carries the actions still in flight."""
+    """Environment level: loop latency L, an action chosen at step t stimulates at t + L."""
+    actuator: str = "pulse"
+    """Environment level: ``"pulse"``, the paper's current pulse for one step, or
+    ``"chr2"``, a 1 ms light pulse on a ChR2-expressing neuron (spikectl.neuron.opsin)."""
+    light_irradiance_mW_per_mm2: float = 5.0
+    """Environment level, with ``actuator="chr2"``: the fibre tip's irradiance in a pulse
+    (5 mW/mm^2: one pulse makes a resting neuron spike at the next step)."""
 
     CONTEXT_FIELDS: ClassVar[tuple[str, ...]] = CONTEXT_FIELDS
 
@@ -105,6 +110,8 @@ class Extensions:
             object.__setattr__(self, name, int(count))
         for field in fields(self):
             value = getattr(self, field.name)
+            if field.name == "actuator":  # checked with the irradiance below
+                continue
             if field.name in ("stochastic_release", "allow_target_action", "hidden_neurons",
                               "latency_steps"):  # fmt: skip
                 continue
@@ -144,6 +151,7 @@ class Extensions:
                 f"pA, got {self.background_current_pA:g}",
                 label="Extensions.background_current_pA",
             )  # fmt: skip
+        check_actuator(self.actuator, self.light_irradiance_mW_per_mm2)
         bleaching = self.bleaching_time_constant_steps
         if bleaching is not None and bleaching <= 0:
             raise ConfigError(
@@ -343,6 +351,7 @@ class EnvironmentEffects:
         )  # fmt: skip
         self.plain = not extensions.transforms_observation
         self.random_dynamics = extensions.random_dynamics
+        self.opsin = extensions.actuator == "chr2"
 
     def draw_inputs(
         self,
@@ -356,7 +365,7 @@ class EnvironmentEffects:
         """
         if release_uniforms is not None:
             release_uniforms[:] = rng.random(release_uniforms.shape[-1])
-        if input_mV is not None:
+        if input_mV is not None and self.background_rate > 0:
             counts = rng.poisson(self.background_rate, input_mV.shape[-1])
             input_mV[:] = counts * self.background_step_mV
 
@@ -364,7 +373,9 @@ class EnvironmentEffects:
         """Zeroed kernel inputs [batch, 1, n] for one step: (release uniforms, input_mV);
         None for an extension that is off."""
         release = np.zeros((batch, 1, n_neurons)) if self.stochastic_release else None
-        background = np.zeros((batch, 1, n_neurons)) if self.background_rate > 0 else None
+        background = (
+            np.zeros((batch, 1, n_neurons)) if self.background_rate > 0 or self.opsin else None
+        )  # the opsin's current enters as input too
         return release, background
 
     def observe(self, voltage: np.ndarray, steps: np.ndarray | int, noise: np.ndarray | None):
