@@ -47,3 +47,21 @@ def test_the_research_index_names_where_each_folders_scripts_live():
     for folder, scripts in rows:
         expected = f"`lab/results/{folder}/`" if (LAB / folder).is_dir() else "none"
         assert scripts == expected, f"index row {folder}: {scripts}, expected {expected}"
+
+
+def test_reference_baselines_table_is_what_the_committed_runs_say(capsys):
+    """docs/results/reference-baselines/README.md's table is table.py's output from the
+    committed runs (result.json, per-network CSVs), not edited by hand."""
+    import sys
+
+    script = LAB / "reference-baselines" / "table.py"
+    saved = sys.argv
+    sys.argv = [str(script)]
+    try:
+        printed = printed_rows(script, capsys)
+    finally:
+        sys.argv = saved
+    readme = (DATA / "reference-baselines" / "README.md").read_text().splitlines()
+    assert len(printed) >= 7  # header, rule and five algorithms
+    missing = [line for line in printed if line not in readme]
+    assert not missing, f"reference-baselines/README.md lacks printed rows: {missing[:3]}"
