@@ -16,6 +16,11 @@ stochastic release, where the plan misses the spike wanted at the next step, the
 known excitatory input with the highest release chance is stimulated even before its
 vesicles are back by the paper's rule (:meth:`DecisionSettings.under_release`; +0.008
 network by network on the ``stochastic`` sets, docs/results/unrested-inputs).
+
+Under loop latency L (docs/extensions.md) an action chosen at step s lands at s + L,
+after the L actions already in flight: the rule decides for that step, from the state
+the estimate predicts there (:meth:`DecisionSettings.state_met`), as the oracle does with
+the true network; with L = 0 that is the tracked state itself.
 """
 
 from __future__ import annotations
@@ -24,8 +29,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spikectl.neuron.simulator import DO_NOTHING
+from spikectl.neuron.simulator import DO_NOTHING, SimulatorState
 from spikectl.planning.beam import PlanningModel
+from spikectl.planning.in_flight import state_after
 from spikectl.planning.qmdp import QMDPSettings
 
 DEFAULT_HORIZON = 20
@@ -37,7 +43,8 @@ class Situation:
     """What one decision is taken on (the observation's episode facts).
 
     Attributes:
-        step: the episode step now.
+        step: the step the decided action stimulates at: the episode step now, plus the
+            loop's latency.
         target: the rewarded neuron.
         pattern: [N] bool the episode's target pattern.
         mask: [n + 1] bool the legal actions (do nothing first).
@@ -98,6 +105,16 @@ class DecisionSettings:
         return PlanningModel(weights[None].copy(), situation.target, situation.actions,
                              policy.params, policy.planned_neurons())  # fmt: skip
 
+    def state_met(self, policy, weights: np.ndarray) -> SimulatorState:
+        """The planning state an action chosen now meets when it lands: the present one
+        (``policy.planning_state()``) stepped through the actions in flight on the
+        planning ``weights``; the present one itself without latency."""
+        state, in_flight = policy.planning_state(), policy.reader.in_flight
+        if not in_flight.steps:
+            return state
+        return state_after(state, weights, in_flight.actions, policy.params,
+                           policy.planned_neurons())  # fmt: skip
+
     def under_release(self, policy, weights: np.ndarray, known: np.ndarray,
                       situation: Situation, action: int) -> int:  # fmt: skip
         """Under stochastic release, where the plan does not hit the spike wanted at the
@@ -111,7 +128,7 @@ class DecisionSettings:
         plan = policy.plan
         if offset < plan.rewards.shape[0] and plan.rewards[offset] > 0:
             return action
-        state = policy.reader.tracker.state
+        state = policy.observed_state_met()
         n = known.shape[0]  # weights also holds the relays where they are planned
         inputs = (known[:, target] & (weights[:n, target] > 0)
                   & (state.refractory_left[0] == 0) & situation.mask[1:])  # fmt: skip

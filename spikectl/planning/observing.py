@@ -27,6 +27,7 @@ from spikectl.planning.bayes import ObservationModel, release_chances
 from spikectl.planning.filtering import FilteredState, model_variance
 from spikectl.planning.heterogeneity import NeuronTracker, tracks_neurons
 from spikectl.planning.identify import ObservedState, residual_sd
+from spikectl.planning.in_flight import InFlight
 from spikectl.planning.release import exact_residuals, settled_releases
 
 
@@ -103,8 +104,9 @@ class Observation:
         rather than 0 (under noise that mean is noisy)."""
         return self.noise_mV == 0
 
-    def reader(self, n: int) -> Reader:
-        """A fresh reader for an episode on ``n`` observed neurons."""
+    def reader(self, n: int, latency_steps: int = 0) -> Reader:
+        """A fresh reader for an episode on ``n`` observed neurons in a loop of
+        ``latency_steps`` steps of latency."""
         settings, params, noise = self.settings, self.params, self.noise_mV
         if tracks_neurons(self.extensions, noise, params):
             tracker = NeuronTracker(n, params, self.extensions)
@@ -113,7 +115,7 @@ class Observation:
                                     model_variance(self.extensions))  # fmt: skip
         else:
             tracker = ObservedState(n, params, settings.spike_margin_sd * noise)
-        return Reader(self, tracker)
+        return Reader(self, tracker, InFlight(latency_steps, n))
 
 
 class Reader:
@@ -123,11 +125,21 @@ class Reader:
         tracker: the tracked state (``tracker.state``, ``tracker.spiked``).
         chances: [n] each spike's release chance at the last step (stochastic release;
             zeros otherwise).
+        in_flight: the loop's actions in flight (:class:`~spikectl.planning.in_flight.
+            InFlight`): under latency a step's evidence is read with the action that
+            landed at it, not the one chosen then.
     """
 
-    def __init__(self, observation: Observation, tracker: ObservedState) -> None:
+    def __init__(self, observation: Observation, tracker: ObservedState,
+                 in_flight: InFlight | None = None) -> None:  # fmt: skip
         self.observation, self.tracker = observation, tracker
         self.chances = np.zeros(tracker.spiked.shape[0])
+        self.in_flight = InFlight(0, tracker.spiked.shape[0]) if in_flight is None else in_flight
+
+    def read_landed(self, observation, voltage: np.ndarray, estimate) -> tuple:
+        """:meth:`read` of ``voltage`` with the action that landed at the step before
+        ``observation`` (its ``last_action`` without latency)."""
+        return self.read(voltage, self.in_flight.landed(observation), estimate)
 
     def read(self, voltage: np.ndarray, action: int, estimate) -> tuple:
         """The evidence of the observation after a step with ``action``

@@ -35,6 +35,7 @@ from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.composition import Composition
 from spikectl.planning.deciding import Situation
 from spikectl.planning.identify import KnownConnectivity
+from spikectl.planning.in_flight import first_neurons, latency_of
 from spikectl.planning.observing import Reader
 from spikectl.planning.probing import ready_neurons
 from spikectl.planning.qmdp import Episode, qmdp_action
@@ -126,6 +127,7 @@ class IdentifyAndPlan:
         self.replans = 0
         self._episodes = getattr(self, "_episodes", -1) + 1
         self.uniforms: tuple[np.ndarray, np.ndarray] | None = None
+        self._state_met = None  # the decision's state_met, computed once a step
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
         """The action for this observation (an agent index, -1 for do nothing)."""
@@ -139,15 +141,22 @@ class IdentifyAndPlan:
         if step == 0 or self.reader is None:
             if step != 0:
                 raise ValueError("IdentifyAndPlan must see the episode from its first step")
-            self._start_episode(n)
+            self._start_episode(n, latency_of(observation))
+            self.reader.in_flight.read(observation)
         else:
-            self.estimate.add(*self.reader.read(voltage, int(observation["last_action"]),
-                                                self.estimate))  # fmt: skip
+            self.estimate.add(*self.reader.read_landed(observation, voltage, self.estimate))
         pattern = np.asarray(observation["pattern"], dtype=bool)
         if step >= pattern.shape[0]:
             raise ValueError(f"the episode has ended (step {step}): reset before acting")
-        situation = Situation(step, int(observation["target"]), pattern, mask)
+        # Under latency the action chosen now lands (and is planned for) L steps later.
+        lands = step + self.reader.in_flight.steps
         weights, known = self.planning_weights()
+        landing_now = self.reader.in_flight.landing_now
+        if lands >= pattern.shape[0]:  # it would never land
+            self._predict(weights, landing_now)
+            return DO_NOTHING
+        situation = Situation(lands, int(observation["target"]), pattern, mask)
+        self._state_met = None
         surprised = self._predicted_spikes is not None and not np.array_equal(
             self._predicted_spikes, self.reader.tracker.spiked
         )
@@ -156,11 +165,11 @@ class IdentifyAndPlan:
             or surprised
             or not np.array_equal(weights, self._planned_weights)
             or not np.array_equal(self.planned_neurons(), self._planned_neurons)
-            or self._plan_remaining(step, pattern.shape[0])
+            or self._plan_remaining(lands, pattern.shape[0])
             < self.composition.decision.replan_margin
         ):
             self._replan(weights, situation)
-        offset = step - self.plan_start
+        offset = lands - self.plan_start
         action = int(self.plan.actions[offset])
         if action == DO_NOTHING and self._misses_wanted_spikes(pattern, offset):
             if self.composition.decision.gamble is not None:
@@ -170,14 +179,15 @@ class IdentifyAndPlan:
         if self.observation.stochastic_release:
             action = self.composition.decision.under_release(self, weights, known, situation,
                                                              action)  # fmt: skip
-        self._predict(weights, action)
+        self._predict(weights, action if landing_now is None else landing_now)
         return action
 
-    def _start_episode(self, n: int) -> None:
-        """Forget the last episode; a fresh reader and estimate for ``n`` neurons, and the
-        episode's uniforms where the decision rule draws networks."""
+    def _start_episode(self, n: int, latency_steps: int) -> None:
+        """Forget the last episode; a fresh reader (in a loop of ``latency_steps``) and
+        estimate for ``n`` neurons, and the episode's uniforms where the decision rule
+        draws networks."""
         self.reset()
-        self.reader = self.observation.reader(n)
+        self.reader = self.observation.reader(n, latency_steps)
         self.estimate = self._new_estimate(n)
         draws = self.composition.decision.draws
         if draws:
@@ -230,15 +240,32 @@ class IdentifyAndPlan:
             return relay_state(self.reader.tracker.state, self.params)
         return self.reader.tracker.state
 
+    def state_met(self):
+        """The planning state the action chosen now meets when it lands (the decision
+        rule's :meth:`~spikectl.planning.deciding.DecisionSettings.state_met`: under
+        latency the present one stepped through the actions in flight)."""
+        if self._state_met is None:
+            self._state_met = self.composition.decision.state_met(self, self.planning_weights()[0])
+        return self._state_met
+
+    def observed_state_met(self):
+        """:meth:`state_met` of the observed neurons alone (the tracked state without
+        latency)."""
+        if not self.reader.in_flight.steps:
+            return self.reader.tracker.state
+        n = self.reader.tracker.spiked.shape[0]
+        return first_neurons(self.state_met(), n)
+
     def ready(self) -> np.ndarray:
-        """[n] neurons that release if they spike now (not refractory, vesicles back)."""
-        return ready_neurons(self.reader.tracker.state, self.params)
+        """[n] neurons that release if they spike when the chosen action lands (not
+        refractory, vesicles back)."""
+        return ready_neurons(self.observed_state_met(), self.params)
 
     def _replan(self, weights: np.ndarray, situation: Situation) -> None:
         model = self._model(weights, situation)
         decision, step, pattern = self.composition.decision, situation.step, situation.pattern
         self.plan = beam_search(
-            model, self.planning_state(), pattern, step, decision.width, decision.horizon
+            model, self.state_met(), pattern, step, decision.width, decision.horizon
         )
         self.plan_start = step
         self._planned_weights = weights
@@ -281,7 +308,7 @@ class IdentifyAndPlan:
         action = qmdp_action(
             self.estimate.sample(self.known_sd, *uniforms),
             self.estimate.excitation_probability(target, self.known_sd),
-            self.reader.tracker.state, self.ready() & ~known[:, target], probe, episode,
+            self.observed_state_met(), self.ready() & ~known[:, target], probe, episode,
             situation.step, settings,
         )  # fmt: skip
         self.probes += action != DO_NOTHING
@@ -289,7 +316,8 @@ class IdentifyAndPlan:
         return action
 
     def _predict(self, weights: np.ndarray, action: int) -> None:
-        """The spikes the estimate predicts for the coming step (to detect surprises)."""
+        """The spikes the estimate predicts for the coming step, in which ``action``
+        lands (to detect surprises)."""
         state = self.planning_state().copy()
         m = weights.shape[0]  # the observed neurons, and their relays where planned
         voltage, spikes = np.empty((1, 1, m)), np.empty((1, 1, m), dtype=bool)
