@@ -11,7 +11,8 @@ neuron's threshold and leak are learned (:class:`~spikectl.planning.heterogeneit
 NeuronTracker`); under stochastic release each spike's release is read back from the next
 step's residuals where they are exact (:func:`~spikectl.planning.release.
 settled_releases`), else it enters at its release chance; with a synaptic spread known
-synapses are planned at their estimated strength.
+synapses are planned at their estimated strength. Under loop latency each step is read
+with the stimulation that landed at it (:class:`~spikectl.planning.in_flight.InFlight`).
 """
 
 from __future__ import annotations
