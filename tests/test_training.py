@@ -290,7 +290,7 @@ def test_learnability_on_one_easy_network(tmp_path, easy_network_config):
 
 LEARN_FAST_FLAGS = ("--n-step", "3", "--aux-voltage-weight", "1.0", "--explore-do-nothing",
                     "0.75", "--learning-rate-end-fraction", "0.1",
-                    "--sizes.target-voltage-in-input")  # fmt: skip
+                    "--sizes.inputs", "target", "target-voltage")  # fmt: skip
 
 
 # Slow tier (26 and 38 CPU s): three smoke runs each. An exact resume from a checkpoint

@@ -17,7 +17,7 @@ n8=${N8_RUNS:-runs/proximity}
 finetune() {  # finetune STAGE TASK SEED SOURCE [FLAGS...]
     local stage=$1 task=$2 seed=$3 source=$4; shift 4
     spikectl train guided --task "$task" --seed "$seed" --init-from "$source" \
-        --sizes.proximity-in-input --total-env-steps 66000 --epsilon-start 0.1 \
+        --sizes.inputs target proximity --total-env-steps 66000 --epsilon-start 0.1 \
         --learning-rate 5e-4 --eval-every-episodes 160 "$@" --run-dir "$runs/$stage-seed$seed"
     local out=$here/trials/$stage/seed=$seed
     mkdir -p "$out"

@@ -9,7 +9,7 @@ here=docs/results/proximity-input
 runs=${RUNS:-runs/proximity}
 train() {  # train SIZE SEED [FLAGS...]: the main job's preset with the proximity input
     local size=$1 seed=$2; shift 2
-    spikectl train guided --sizes.proximity-in-input --seed "$seed" "$@" \
+    spikectl train guided --sizes.inputs target proximity --seed "$seed" "$@" \
         --run-dir "$runs/$size-seed$seed"
     mkdir -p "$here/trials/$size/seed=$seed"
     cp "$runs/$size-seed$seed/config.json" "$runs/$size-seed$seed/metrics.csv" \

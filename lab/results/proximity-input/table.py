@@ -1,5 +1,5 @@
 """The tables of README.md: the guided learner with the target's proximity as an input
-(``--sizes.proximity-in-input``) against the same preset without it, by the validation
+(``--sizes.inputs target proximity``) against the same preset without it, by the validation
 return its metrics.csv records during training and the test return recorded at its best
 validation return (its best model).
 
