@@ -59,6 +59,7 @@ def init_from_probe(what: str, source: str, words: tuple[str, ...], *flags: str,
     return MessageProbe(f"train --init-from {what}", 1, setup, command, words=words,
                         absent=("new",))  # fmt: skip
 
+
 SHORT_ARRAY = (
     "python - <<'EOF'\n"
     "import numpy as np\n"
@@ -84,6 +85,14 @@ REHEADED_POLICY = (
     "    assert len(str(error)) < 400, f'{len(str(error))} characters: {str(error)[:200]}'\n"
     "    raise\n"
 )
+
+
+def _reheaded(what: str, change: str, words: tuple[str, ...]) -> MessageProbe:
+    """A compiled policy whose header says ``change`` over unchanged weights (its checksum
+    recomputed, so only the cross-check against the weights can catch it)."""
+    return MessageProbe(what, 6, "", REHEADED_POLICY.replace("CHANGE", change), words=words)
+
+
 SIGTERM_DURING_TRAIN = """
 import os, signal, subprocess, sys, time
 from pathlib import Path
@@ -121,14 +130,23 @@ print(bar[-80:], '|', wrote)
 
 PROBES = [
     # --init-from: every kind of file named, and the setting that differs with both values
-    init_from_probe("a run of another episode length", "RUN", ("episode length|episode_length",
-                    "20", "30"), "--episode-length", "30"),  # fmt: skip
+    init_from_probe(
+        "a run of another episode length",
+        "RUN",
+        ("episode length|episode_length", "20", "30"),
+        "--episode-length",
+        "30",
+    ),  # fmt: skip
     init_from_probe("a run of another architecture", "RUN", ("tdrqn", "ddrqn"), "--arch", "ddrqn"),
     init_from_probe("a compiled policy", "pol.npz", ("compiled policy", WHAT_INIT_FROM_TAKES)),
     init_from_probe("a context set", "ctx.npz", ("context set", WHAT_INIT_FROM_TAKES)),
     init_from_probe("a checkpoint.pt", "RUN/checkpoint.pt", ("checkpoint", WHAT_INIT_FROM_TAKES)),
-    init_from_probe("a text file", "notes.txt", ("notes.txt", WHAT_INIT_FROM_TAKES),
-                    setup="echo hello > notes.txt"),  # fmt: skip
+    init_from_probe(
+        "a text file",
+        "notes.txt",
+        ("notes.txt", WHAT_INIT_FROM_TAKES),
+        setup="echo hello > notes.txt",
+    ),  # fmt: skip
     MessageProbe(
         "realtime on a context set",
         1,
@@ -255,34 +273,22 @@ PROBES = [
     # SIGTERM, what Slurm and Docker send
     MessageProbe("SIGTERM during train", 5, "", SIGTERM_DURING_TRAIN, expect=RUN),
     # compiled-policy headers cross-checked against their weights (checksum recomputed)
-    MessageProbe(
+    _reheaded(
         "policy header lstm_hidden 64 over 128-wide weights",
-        6,
-        "",
-        REHEADED_POLICY.replace("CHANGE", "lstm_hidden=64"),
-        words=("lstm_hidden", "64", "128"),
-    ),  # fmt: skip
-    MessageProbe(
-        "policy header attn_layers 1 over 2 layers",
-        6,
-        "",
-        REHEADED_POLICY.replace("CHANGE", "attn_layers=1"),
-        words=("attn_layers", "1", "2"),
-    ),  # fmt: skip
-    MessageProbe(
+        "lstm_hidden=64",
+        ("lstm_hidden", "64", "128"),
+    ),
+    _reheaded(
+        "policy header attn_layers 1 over 2 layers", "attn_layers=1", ("attn_layers", "1", "2")
+    ),
+    _reheaded(
         "policy header architecture ddrqn over a TDRQN",
-        6,
-        "",
-        REHEADED_POLICY.replace("CHANGE", "architecture='ddrqn'"),
-        words=("architecture", "tdrqn", "ddrqn"),
-    ),  # fmt: skip
-    MessageProbe(
-        "policy header head_hidden [256] over [256, 128]",
-        6,
-        "",
-        REHEADED_POLICY.replace("CHANGE", "head_hidden=[256]"),
-        words=("head_hidden",),
-    ),  # fmt: skip
+        "architecture='ddrqn'",
+        ("architecture", "tdrqn", "ddrqn"),
+    ),
+    _reheaded(
+        "policy header head_hidden [256] over [256, 128]", "head_hidden=[256]", ("head_hidden",)
+    ),
     # what a training run shows and says it wrote
     MessageProbe(
         "train --progress: the latest evaluation, every file written",

@@ -34,17 +34,8 @@ from spikectl.agents import masked_q
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.training.agent_network import build_network
+from spikectl.training.learners import q_learning
 from spikectl.training.learners.pqn_config import PQNConfig
-from spikectl.training.learners.q_learning import (
-    QLearner,
-    batch_tensors,
-    build_predictor,
-    gradient_step,
-    next_voltage_loss,
-    online_forward,
-    set_learning_rate,
-    td_regression_loss,
-)
 from spikectl.training.replay import EpisodeBatchArrays
 
 
@@ -84,17 +75,19 @@ def pqn_losses(
     obs_seq, actions, rewards, legal = (
         tensors["obs_seq"], tensors["actions"], tensors["rewards"], tensors["legal"]
     )  # fmt: skip
-    q_values, features = online_forward(online, obs_seq, with_features=predictor is not None)
+    q_values, features = q_learning.online_forward(
+        online, obs_seq, with_features=predictor is not None
+    )
     q_taken = q_values[:, :-1].gather(2, (actions + 1)[..., None]).squeeze(2)  # [B, N]
     with torch.no_grad():
         # No target network: the bootstrap is the current network's own best legal value.
         bootstrap = masked_q(q_values.detach(), legal).max(dim=2).values  # [B, N+1]
         bootstrap[:, -1] = 0.0  # observation N follows the terminal step
         td_target = q_lambda_returns(rewards, bootstrap, settings.gamma, settings.q_lambda)
-    td = td_regression_loss(q_taken, td_target, settings.loss)  # td_target: [B, N]
+    td = q_learning.td_regression_loss(q_taken, td_target, settings.loss)  # td_target: [B, N]
     if predictor is None:
         return td, None
-    return td, next_voltage_loss(online, predictor, features, obs_seq, actions)
+    return td, q_learning.next_voltage_loss(online, predictor, features, obs_seq, actions)
 
 
 def episode_arrays(
@@ -124,7 +117,7 @@ def minibatch(arrays: EpisodeBatchArrays, index: np.ndarray) -> EpisodeBatchArra
     )
 
 
-class PQNLearner(QLearner):
+class PQNLearner(q_learning.QLearner):
     """One seed's parallel Q-learner without replay (``Experiment.learner`` a PQNConfig)."""
 
     metric_fields = ("epsilon", "aux_loss")
@@ -135,7 +128,7 @@ class PQNLearner(QLearner):
         self.device = config.train.device
         self.rng = rng
         self.network = build_network(config)
-        self.predictor = build_predictor(config, self.network)
+        self.predictor = q_learning.build_predictor(config, self.network)
         self.trained = list(self.network.parameters()) + (
             list(self.predictor.parameters()) if self.predictor is not None else []
         )
@@ -155,16 +148,18 @@ class PQNLearner(QLearner):
         settings, arrays = self.settings, self.round
         if arrays is None:
             return
-        set_learning_rate(self.optimizer, settings.learning_rate_at(episode, self.total_episodes))
+        q_learning.set_learning_rate(
+            self.optimizer, settings.learning_rate_at(episode, self.total_episodes)
+        )
         size = arrays.actions.shape[0]
         for _ in range(settings.epochs):
             order = self.rng.permutation(size)  # [E]: a fresh split into minibatches
             for start in range(0, size, settings.minibatch_size):
                 index = order[start : start + settings.minibatch_size]  # [M]
-                tensors = batch_tensors(minibatch(arrays, index), self.device)
+                tensors = q_learning.batch_tensors(minibatch(arrays, index), self.device)
                 td, aux = pqn_losses(self.network, tensors, settings, self.predictor)
                 loss = td if aux is None else td + settings.aux_voltage_weight * aux
-                gradient_step(self, loss)
+                q_learning.gradient_step(self, loss)
                 self.loss_sum += td.item()
                 self.aux_loss_sum += 0.0 if aux is None else aux.item()
         self.round = None  # no replay: the episodes are used up
