@@ -38,6 +38,8 @@ from spikectl.agents.features import (
     target_proximity,
 )
 from spikectl.agents.spikes import VISIBLE_SPIKE_LEVEL
+from spikectl.envs.latency import IN_FLIGHT_KEY
+from spikectl.neuron.extensions import MAX_LATENCY_STEPS
 from spikectl.registry import Registry
 
 FeatureFunction = Callable[[Mapping[str, torch.Tensor], torch.Tensor, torch.dtype], torch.Tensor]
@@ -118,6 +120,22 @@ def _others_spiking(obs: Mapping[str, torch.Tensor], voltage: torch.Tensor, dtyp
     return (spiking.sum(-1, keepdim=True) - spiking)[..., None]  # [..., n, 1]
 
 
+def _actions_in_flight(obs: Mapping[str, torch.Tensor], voltage: torch.Tensor, dtype: torch.dtype):
+    """Column j: 1 on the neuron the action landing j steps from now stimulates (slot j of
+    ``actions_in_flight``, oldest first); slots the loop does not have stay 0, so one
+    network reads every latency up to MAX_LATENCY_STEPS (and none)."""
+    n = voltage.shape[-1]
+    columns = voltage.new_zeros(*voltage.shape, MAX_LATENCY_STEPS, dtype=dtype)  # [..., n, 5]
+    in_flight = obs.get(IN_FLIGHT_KEY)
+    if in_flight is None:
+        return columns
+    latency = in_flight.shape[-1]
+    neurons = torch.arange(n, device=voltage.device)
+    lands_on = in_flight.long()[..., None, :] == neurons[:, None]  # [..., n, L]
+    columns[..., :latency] = lands_on.to(dtype)
+    return columns
+
+
 def _proximity(obs: Mapping[str, torch.Tensor], voltage: torch.Tensor, dtype: torch.dtype):
     positions = neuron_positions(obs, voltage.shape[-1], dtype)  # [..., n]
     return target_proximity(positions, obs["target"])[..., None]  # [..., n, 1]
@@ -137,4 +155,8 @@ INPUT_FEATURES.register("others-spiking", InputFeature(
 INPUT_FEATURES.register("proximity", InputFeature(
     1, _proximity, "the generator's prior of a synapse onto the target at their distance "
     "on the line (features.target_proximity; positions from obs['position'], else indices)",
+))  # fmt: skip
+INPUT_FEATURES.register("actions-in-flight", InputFeature(
+    MAX_LATENCY_STEPS, _actions_in_flight, "the actions in flight under loop latency: "
+    "column j is 1 on the neuron stimulated j steps from now (0 without latency)",
 ))  # fmt: skip

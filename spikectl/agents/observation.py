@@ -22,13 +22,16 @@ import torch
 OBS_KEYS = ("voltage", "target", "pattern", "step", "last_action")
 """Keys every observation batch must hold (extra keys are ignored)."""
 
-OPTIONAL_KEYS = ("position",)
+OPTIONAL_KEYS = ("position", "actions_in_flight")
 """Keys a network reads only when its sizes say so (``position``: float [n], each
 neuron's position on the generator's line, read by the ``proximity`` input feature,
-the neurons' indices where absent)."""
+the neurons' indices where absent; ``actions_in_flight``: int [L], the actions chosen
+but not landed yet under loop latency, read by the ``actions-in-flight`` feature)."""
 
 _INDEX_KEYS = ("target", "step", "last_action")
-"""The integer-valued keys (int64 once converted)."""
+"""The integer-valued keys of one value per observation (int64 once converted)."""
+_INTEGER_KEYS = (*_INDEX_KEYS, "actions_in_flight")
+"""Every integer-valued key (int64 once converted)."""
 
 
 def check_observation(
@@ -106,6 +109,17 @@ def check_observation(
                 f"{where}: obs['position'] must have the shape of obs['voltage'] "
                 f"{tuple(voltage.shape)} (one position per neuron), got {tuple(position.shape)}"
             )
+    in_flight = obs.get("actions_in_flight")
+    if in_flight is not None and (
+        not isinstance(in_flight, torch.Tensor)
+        or in_flight.is_floating_point() or in_flight.is_complex() or in_flight.dtype == torch.bool
+        or tuple(in_flight.shape[:-1]) != lead or in_flight.dim() != leading_dims + 1
+    ):  # fmt: skip
+        got = tuple(in_flight.shape) if isinstance(in_flight, torch.Tensor) else in_flight
+        raise ValueError(
+            f"{where}: obs['actions_in_flight'] must be an integer tensor of shape "
+            f"{lead + ('L',)} (the actions chosen and not landed yet), got {got}"
+        )
 
     # Inside vmap (stacked seed groups) values cannot be read without leaving the
     # transform; shapes and dtypes are still checked, and the trainer's inputs come
@@ -114,6 +128,8 @@ def check_observation(
         _check_range(obs["target"], 0, n - 1, "target", where)
         _check_range(obs["last_action"], -1, n - 1, "last_action", where)
         _check_range(obs["step"], 0, episode_length, "step", where)
+        if in_flight is not None and in_flight.numel() > 0:
+            _check_range(in_flight, -1, n - 1, "actions_in_flight", where)
         if position is not None and not bool(torch.isfinite(position).all()):
             raise ValueError(f"{where}: obs['position'] must be finite (one place per neuron)")
     return lead, n
@@ -173,7 +189,7 @@ def observation_batch(
             raise ValueError(f"observation_batch: an observation lacks key {error}") from None
     out: dict[str, torch.Tensor] = {}
     for key, array in arrays.items():
-        dtype = np.int64 if key in _INDEX_KEYS else np.float32
+        dtype = np.int64 if key in _INTEGER_KEYS else np.float32
         out[key] = torch.as_tensor(array.astype(dtype, copy=False), device=device)
     return out
 
@@ -181,6 +197,7 @@ def observation_batch(
 def long_indices(obs: Mapping[str, torch.Tensor]) -> dict[str, torch.Tensor]:
     """The observation with target / step / last_action as int64 (no copy if they are)."""
     out = {key: obs[key] for key in OBS_KEYS + OPTIONAL_KEYS if key in obs}
-    for key in _INDEX_KEYS:
-        out[key] = out[key].long()
+    for key in _INTEGER_KEYS:
+        if key in out:
+            out[key] = out[key].long()
     return out

@@ -259,8 +259,9 @@ The preset ({presets}; quick when none is given) sets every default, and
 the flags override them: `spikectl train paper --help` shows the paper's. --env picks
 a registered environment (spikectl/NeuronControlNoisy-v0, ...) whose settings become
 the defaults of --n-neurons, --params.* and --extensions.*. --task T trains on task T of
-the frozen benchmark suite (docs/benchmark.md): its environment, n and extensions, whose
-default context sets are the task's training and validation sets."""
+the benchmark suite (docs/benchmark.md; v1, or --suite 2 for the rig's loop): its
+environment, n and extensions, whose default context sets are the task's training and
+validation sets."""
 
 
 def _train_presets(env_id: str | None = None) -> Any:
@@ -300,25 +301,36 @@ def parse_train(argv: list[str], command_types: tuple[type, ...] = ()) -> TrainC
 
 
 def _expand_task_flag(argv: list[str]) -> list[str]:
-    """``--task T`` / ``--task=T`` replaced by the suite task's own flags (--env,
-    --n-neurons, --extensions.*, its set sizes and seed), placed right after the preset
-    so that every flag given on the command line still overrides them. One task at
-    most, and not beside a context file (the task's sets are its own)."""
-    tasks, rest = [], [argv[0]]
-    index = 1
+    """``--task T`` / ``--task=T`` (of suite version ``--suite N``, 1 when not given)
+    replaced by the suite task's own flags (--env, --n-neurons, --extensions.*, its set
+    sizes and seed), placed right after the preset so that every flag given on the
+    command line still overrides them. One task at most, and not beside a context file
+    (the task's sets are its own)."""
+    given: dict[str, list[str]] = {"--task": [], "--suite": []}
+    rest, index = [argv[0]], 1
     while index < len(argv):
         arg = argv[index]
-        if arg == "--task":
-            if index + 1 >= len(argv) or argv[index + 1].startswith("--"):
-                raise ValueError("--task: give a task of the benchmark suite, e.g. --task noise2")
-            tasks.append(argv[index + 1])
-            index += 2
-            continue
-        if arg.startswith("--task="):
-            tasks.append(arg.split("=", 1)[1])
-        else:
+        flag = arg.split("=", 1)[0]
+        if flag not in given:
             rest.append(arg)
+        elif "=" in arg:
+            given[flag].append(arg.split("=", 1)[1])
+        elif index + 1 >= len(argv) or argv[index + 1].startswith("--"):
+            raise ValueError(
+                "--task: give a task of the benchmark suite, e.g. --task noise2, "
+                "--task latency1 --suite 2"
+                if flag == "--task"
+                else "--suite: give a suite version, e.g. --suite 2"
+            )
+        else:
+            given[flag].append(argv[index + 1])
+            index += 1
         index += 1
+    tasks, versions = given["--task"], given["--suite"]
+    if versions and not tasks:
+        raise ValueError("--suite: give it with --task (the suite version the task is from)")
+    if len(versions) > 1:
+        raise ValueError(f"--suite: one version per run, got {', '.join(versions)}")
     if not tasks:
         return argv
     if len(tasks) > 1:
@@ -337,7 +349,11 @@ def _expand_task_flag(argv: list[str]) -> list[str]:
     from spikectl.experiments import suite
 
     try:
-        return [rest[0], *suite.train_arguments(tasks[0]), *rest[1:]]
+        version = int(versions[0]) if versions else suite.DEFAULT_SUITE
+    except ValueError:
+        raise ValueError(f"--suite: a suite version number (1, 2), got {versions[0]!r}") from None
+    try:
+        return [rest[0], *suite.train_arguments(tasks[0], version), *rest[1:]]
     except ValueError as error:
         raise ValueError(f"--task: {error}") from None
 

@@ -40,6 +40,10 @@ class EpisodeBatchArrays:
     """[B, n] int8 each observed neuron's synapse onto the target (-1, 0, +1), read from
     the training network's weights (privileged), in a buffer made with
     ``privileged=True``; None otherwise."""
+    latency_steps: int = 0
+    """L of the loop the episodes were played in (``Extensions.latency_steps``): the
+    observations' actions in flight are the L actions before each step
+    (:func:`~spikectl.training.learners.q_learning.sequence_observations`)."""
 
 
 NO_LABEL = -2
@@ -62,6 +66,7 @@ class EpisodeReplay:
         episode_length: int,
         labelled: bool = False,
         privileged: bool = False,
+        latency_steps: int = 0,
     ) -> None:
         if capacity < 1:
             raise ValueError(f"replay capacity must be >= 1 episode, got {capacity}")
@@ -80,6 +85,7 @@ class EpisodeReplay:
         self.capacity = capacity
         self.n_neurons = n_neurons
         self.episode_length = episode_length
+        self.latency_steps = latency_steps
         self.voltage = np.zeros((capacity, episode_length + 1, n_neurons), dtype=np.float32)
         self.actions = np.full((capacity, episode_length), DO_NOTHING, dtype=np.int16)
         self.rewards = np.zeros((capacity, episode_length), dtype=np.float32)
@@ -161,6 +167,7 @@ class EpisodeReplay:
             action_masks=self.action_masks[slots],
             labels=None if self.labels is None else self.labels[slots].astype(np.int64),
             target_inputs=None if self.target_inputs is None else self.target_inputs[slots],
+            latency_steps=self.latency_steps,
         )
 
     def state_dict(self) -> dict[str, np.ndarray | int]:

@@ -74,8 +74,10 @@ class SuiteVersion:
         """The task called ``name``; an unknown name is one RegistryError line listing
         this version's tasks."""
         if name not in self.tasks:
+            elsewhere = [v for v in SUITES if name in SUITES.load(v).tasks]
+            hint = f" ({name!r} is a task of suite v{elsewhere[0]})" if elsewhere else ""
             raise RegistryError(
-                f"unknown task {name!r} of benchmark suite v{self.number}; tasks: "
+                f"unknown task {name!r} of benchmark suite v{self.number}{hint}; tasks: "
                 f"{', '.join(self.tasks)}"
             )
         return self.tasks.load(name)

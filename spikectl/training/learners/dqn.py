@@ -64,8 +64,9 @@ class DQNLearner(QLearner):
         ]
         self.optimizer = torch.optim.Adam(self.trained, lr=self.settings.learning_rate)
         self.replay = EpisodeReplay(
-            self.settings.buffer_size, config.env.n_observed, config.env.episode_length
-        )
+            self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
+            latency_steps=config.env.extensions.latency_steps,
+        )  # fmt: skip
         self.targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
         self.patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
         self.updates, self.loss_count = 0, 0

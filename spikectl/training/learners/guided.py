@@ -101,6 +101,7 @@ class GuidedDQNLearner(DQNLearner):
         self.replay = EpisodeReplay(
             self.settings.buffer_size, config.env.n_observed, config.env.episode_length,
             labelled=True, privileged=self.stores_target_inputs,
+            latency_steps=config.env.extensions.latency_steps,
         )  # fmt: skip
         self.contexts = list(train_set)
         self.params = config.env.params

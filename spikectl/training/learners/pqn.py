@@ -91,10 +91,10 @@ def pqn_losses(
 
 
 def episode_arrays(
-    episodes: EpisodeBatch, targets: np.ndarray, patterns: np.ndarray
+    episodes: EpisodeBatch, targets: np.ndarray, patterns: np.ndarray, latency_steps: int = 0
 ) -> EpisodeBatchArrays:
-    """A round's episodes as the arrays the losses read (what the replay buffer would
-    hand out, here kept for one update only)."""
+    """A round's episodes, played with loop latency ``latency_steps``, as the arrays the
+    losses read (what the replay buffer would hand out, here kept for one update only)."""
     return EpisodeBatchArrays(
         voltage=episodes.voltage,
         actions=episodes.actions.astype(np.int64),
@@ -102,6 +102,7 @@ def episode_arrays(
         targets=targets,
         patterns=patterns,
         action_masks=episodes.action_mask,
+        latency_steps=latency_steps,
     )
 
 
@@ -114,6 +115,7 @@ def minibatch(arrays: EpisodeBatchArrays, index: np.ndarray) -> EpisodeBatchArra
         targets=arrays.targets[index],
         patterns=arrays.patterns[index],
         action_masks=arrays.action_masks[index],
+        latency_steps=arrays.latency_steps,
     )
 
 
@@ -135,6 +137,7 @@ class PQNLearner(q_learning.QLearner):
         self.optimizer = torch.optim.Adam(self.trained, lr=self.settings.learning_rate)
         self.targets = np.array([c.observed_target for c in train_set], dtype=np.int64)
         self.patterns = np.stack([c.pattern for c in train_set]).astype(np.int8)
+        self.latency_steps = config.env.extensions.latency_steps
         self.round: EpisodeBatchArrays | None = None
         """The episodes of the round being learned from (None between rounds: they are
         discarded after the update, so a checkpoint holds none)."""
@@ -142,7 +145,9 @@ class PQNLearner(q_learning.QLearner):
         self.loss_sum, self.aux_loss_sum = 0.0, 0.0
 
     def observe(self, episodes: EpisodeBatch, contexts: np.ndarray) -> None:
-        self.round = episode_arrays(episodes, self.targets[contexts], self.patterns[contexts])
+        self.round = episode_arrays(
+            episodes, self.targets[contexts], self.patterns[contexts], self.latency_steps
+        )
 
     def update(self, episode: int) -> None:
         settings, arrays = self.settings, self.round

@@ -170,7 +170,7 @@ def sequence_observations(batch: EpisodeBatchArrays, device: str) -> dict[str, t
     voltage = torch.as_tensor(batch.voltage, device=device)  # [B, N+1, n]
     actions = torch.as_tensor(batch.actions, device=device)  # [B, N]
     no_action = torch.full((size, 1), -1, dtype=torch.long, device=device)
-    return {
+    observations = {
         "voltage": voltage,
         "last_action": torch.cat([no_action, actions], dim=1),  # [B, N+1]
         "step": torch.arange(length + 1, device=device).expand(size, -1),  # [B, N+1]
@@ -179,6 +179,13 @@ def sequence_observations(batch: EpisodeBatchArrays, device: str) -> dict[str, t
             :, None
         ].expand(-1, length + 1, -1),  # [B, N+1, N]
     }
+    if batch.latency_steps > 0:
+        # Observation t carries the actions chosen at t - L .. t - 1 (-1 before the start).
+        latency = batch.latency_steps
+        before = torch.full((size, latency), -1, dtype=torch.long, device=device)
+        padded = torch.cat([before, actions], dim=1)  # [B, L + N]
+        observations["actions_in_flight"] = padded.unfold(1, latency, 1)  # [B, N+1, L]
+    return observations
 
 
 def batch_tensors(batch: EpisodeBatchArrays, device: str) -> dict[str, torch.Tensor]:

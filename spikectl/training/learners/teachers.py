@@ -16,6 +16,7 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from spikectl.contexts import Context
+from spikectl.envs.latency import IN_FLIGHT_KEY
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
@@ -99,6 +100,9 @@ def teacher_labels(
         info = {"action_mask": episodes.action_mask[s]}
         pattern = np.asarray(context.pattern, dtype=np.int8)
         target = context.observed_target
+        # With loop latency L, observation t carries the actions chosen at t - L .. t - 1.
+        latency = 0 if extensions is None else extensions.latency_steps
+        chosen = np.concatenate([np.full(latency, -1, np.int64), episodes.actions[s]])
         for t in range(length):
             observation = {
                 "voltage": episodes.voltage[s, t],
@@ -107,5 +111,7 @@ def teacher_labels(
                 "step": t,
                 "last_action": -1 if t == 0 else int(episodes.actions[s, t - 1]),
             }
+            if latency:
+                observation[IN_FLIGHT_KEY] = chosen[t : t + latency]
             labels[s, t] = policy.act(observation, info)
     return labels
