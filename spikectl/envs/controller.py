@@ -28,6 +28,7 @@ import numpy as np
 from spikectl.contexts import ContextSet
 from spikectl.contexts.generation import check_seed
 from spikectl.envs.env_support import random_legal_actions
+from spikectl.envs.sensing import SPIKES_KEY
 from spikectl.neuron.simulator import DO_NOTHING
 
 
@@ -68,7 +69,9 @@ def check_controller_input(
             f"{who}.act: observation and info must be dicts (as env.reset and env.step "
             f"return them), got {type(observation).__name__} and {type(info).__name__}"
         )
-    missing = [key for key in keys if key not in observation]
+    # Spikes-only sensing (an extension) observes spikes in place of the voltages.
+    missing = [key for key in keys if key not in observation
+               and not (key == "voltage" and SPIKES_KEY in observation)]  # fmt: skip
     if "action_mask" not in info:
         missing.append("info['action_mask']")
     if missing:

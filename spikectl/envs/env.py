@@ -29,7 +29,8 @@ from spikectl.envs.env_support import (
     observation_space,
     resolve_setup,
 )
-from spikectl.envs.latency import IN_FLIGHT_KEY, ActionDelay
+from spikectl.envs.latency import ActionDelay
+from spikectl.envs.sensing import make_observation
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.opsin import OpsinActuator
 from spikectl.neuron.params import NeuronParams
@@ -85,6 +86,10 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
     steps s - L .. s - 1 of the observation with step index s, oldest first, -1 before
     the episode. `last_action` stays the action chosen last; the action mask applies to
     the chosen action.
+
+    With spikes-only sensing (`extensions={"sensing": "spikes"}`) `voltage` is replaced by
+    `spikes` (`MultiBinary(n)`, int8): 1 for each neuron that spiked at the step just
+    simulated (all 0 after reset).
 
     ## Rewards
 
@@ -179,7 +184,8 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         self._latency = self._delay.steps
 
         self.action_space = LegalActionSpace(k)
-        self.observation_space = observation_space(k, length, self._latency)
+        self._spikes_only = self.extensions.spikes_only  # spikes observed, not potentials
+        self.observation_space = observation_space(k, length, self._latency, self._spikes_only)
         # Episode history, written by the simulator in place through per-step views.
         self._action_history = np.full((1, length), DO_NOTHING, dtype=np.int64)
         self._voltage_history = np.zeros((length, n), dtype=np.float64)
@@ -239,18 +245,16 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         self._spike_history.fill(False)
         self._delay.clear()
         self._next_step = 0
-        voltage = np.full(self.n_observed, self.params.v_rest_mV, dtype=np.float32)
-        if not self._plain:
-            voltage = self._observe(voltage, 0)
-        observation = {
-            "voltage": voltage,
-            "target": self._observed_target,
-            "pattern": self._pattern.copy(),
-            "step": 0,
-            "last_action": DO_NOTHING,
-        }
-        if self._latency:
-            observation[IN_FLIGHT_KEY] = self._delay.in_flight[0].copy()
+        if self._spikes_only:  # nothing has spiked yet
+            sensed = np.zeros(self.n_observed, dtype=np.int8)
+        else:
+            sensed = np.full(self.n_observed, self.params.v_rest_mV, dtype=np.float32)
+            if not self._plain:
+                sensed = self._observe(sensed, 0)
+        observation = make_observation(
+            sensed, self._spikes_only, self._observed_target, self._pattern.copy(), 0,
+            DO_NOTHING, self._delay.in_flight[0].copy() if self._latency else None,
+        )  # fmt: skip
         info = {"action_mask": self._mask.copy(), "context_index": self._context_index}
         return observation, info
 
@@ -289,15 +293,14 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         voltage = self._voltage_history[t]
         if observable is not None:
             voltage, spikes = voltage[observable], spikes[observable]
-        observation = {
-            "voltage": voltage.astype(np.float32) if self._plain else self._observe(voltage, t + 1),
-            "target": self._observed_target,
-            "pattern": self._pattern.copy(),
-            "step": t + 1,
-            "last_action": action,
-        }
-        if self._latency:
-            observation[IN_FLIGHT_KEY] = self._delay.in_flight[0].copy()
+        if self._spikes_only:
+            sensed = spikes.astype(np.int8)
+        else:
+            sensed = voltage.astype(np.float32) if self._plain else self._observe(voltage, t + 1)
+        observation = make_observation(
+            sensed, self._spikes_only, self._observed_target, self._pattern.copy(), t + 1,
+            action, self._delay.in_flight[0].copy() if self._latency else None,
+        )  # fmt: skip
         info = {
             "action_mask": self._mask.copy(),
             "context_index": self._context_index,

@@ -22,6 +22,7 @@ from gymnasium import spaces
 from spikectl.contexts import Context, ContextSet, make_splits
 from spikectl.contexts.generation import check_seed, check_size, is_int
 from spikectl.envs.latency import IN_FLIGHT_KEY, in_flight_space
+from spikectl.envs.sensing import sensed_key, sensed_space
 from spikectl.neuron.extensions import CONTEXT_FIELDS, EnvironmentEffects, Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, neuron_parameters
@@ -319,11 +320,14 @@ def as_action(action: Any) -> int:
         raise ValueError(f"action must be an integer, got {short_repr(action)}") from None
 
 
-def observation_space(n_neurons: int, episode_length: int, latency_steps: int = 0) -> spaces.Dict:
+def observation_space(
+    n_neurons: int, episode_length: int, latency_steps: int = 0, spikes_only: bool = False
+) -> spaces.Dict:
     """The observation space of one environment (docs/environment.md); the connectivity is
-    not in it. With loop latency (an extension) it has ``actions_in_flight`` too."""
+    not in it. With loop latency (an extension) it has ``actions_in_flight`` too; with
+    spikes-only sensing ``spikes`` in place of ``voltage``."""
     entries = {
-        "voltage": spaces.Box(-np.inf, np.inf, (n_neurons,), np.float32),
+        sensed_key(spikes_only): sensed_space(n_neurons, spikes_only),
         "target": spaces.Discrete(n_neurons),
         "pattern": spaces.MultiBinary(episode_length),
         "step": spaces.Discrete(episode_length + 1),

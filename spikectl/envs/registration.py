@@ -62,6 +62,8 @@ VARIANTS.register("spikectl/NeuronControlRealistic-v0", {
 })  # fmt: skip
 # An optogenetic actuator: an action is a 1 ms light pulse on ChR2 (5 mW/mm^2 at the fibre).
 VARIANTS.register("spikectl/NeuronControlChR2-v0", {"extensions": {"actuator": "chr2"}})
+# Spikes-only sensing: the agent observes which neurons spiked, not their potentials.
+VARIANTS.register("spikectl/NeuronControlSpikesOnly-v0", {"extensions": {"sensing": "spikes"}})
 
 
 def flat_id(env_id: str) -> str:

@@ -80,11 +80,12 @@ def run_episodes(
     rewards = np.zeros((size, length))
     spikes = np.zeros((size, length, n), dtype=bool)
     action_mask = infos["action_mask"].astype(bool)  # int8 in the infos
-    voltage[:, 0] = observations["voltage"]
+    # Spikes-only sensing (an extension) observes no potentials: NaN, not observed.
+    voltage[:, 0] = observations.get("voltage", np.nan)
     for t in range(length):
         actions[:, t] = act(observations, infos)
         observations, rewards[:, t], _, _, infos = env.step(actions[:, t])
-        voltage[:, t + 1] = observations["voltage"]
+        voltage[:, t + 1] = observations.get("voltage", np.nan)
         spikes[:, t] = infos["spikes"]
     return EpisodeBatch(
         voltage=voltage,

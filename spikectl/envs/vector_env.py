@@ -41,7 +41,8 @@ from spikectl.envs.env_support import (
     observation_space,
     resolve_setup,
 )
-from spikectl.envs.latency import IN_FLIGHT_KEY, ActionDelay
+from spikectl.envs.latency import ActionDelay
+from spikectl.envs.sensing import make_observation
 from spikectl.files import check_fits_in_memory
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.opsin import OpsinActuator
@@ -116,7 +117,9 @@ class NeuronControlVectorEnv(VectorEnv):
         self._opsin = OpsinActuator.for_environment(self.extensions, self.params, batch, n)
 
         self._delay = ActionDelay(batch, self.extensions.latency_steps)  # loop latency
-        self.single_observation_space = observation_space(k, length, self._delay.steps)
+        self._spikes_only = spikes_only = self.extensions.spikes_only  # not potentials
+        self._spikes = np.zeros((batch, k), dtype=np.int8)  # the last step's (spikes-only)
+        self.single_observation_space = observation_space(k, length, self._delay.steps, spikes_only)
         self.single_action_space = spaces.Discrete(k + 1, start=DO_NOTHING)
         self.observation_space = batch_space(self.single_observation_space, batch)
         self.action_space = LegalActionBatchSpace(batch, k)
@@ -255,6 +258,7 @@ class NeuronControlVectorEnv(VectorEnv):
             terminated[autoreset] = False
             target_spiked[autoreset] = False
             spikes[autoreset] = False
+        self._spikes[:] = spikes  # an autoreset environment's: none
         active = ~autoreset
         self._needs_reset = terminated.copy()
         self._any_needs_reset = bool(terminated.any())
@@ -313,16 +317,11 @@ class NeuronControlVectorEnv(VectorEnv):
         return noise
 
     def _observation(self, voltage: np.ndarray) -> dict[str, np.ndarray]:
-        observation = {
-            "voltage": voltage,
-            "target": self._observed_targets.copy(),
-            "pattern": self._patterns.copy(),
-            "step": self._next_step.copy(),
-            "last_action": self._last_action.copy(),
-        }
-        if self._delay.steps:
-            observation[IN_FLIGHT_KEY] = self._delay.in_flight.copy()
-        return observation
+        return make_observation(
+            self._spikes.copy() if self._spikes_only else voltage, self._spikes_only,
+            self._observed_targets.copy(), self._patterns.copy(), self._next_step.copy(),
+            self._last_action.copy(), self._delay.in_flight.copy() if self._delay.steps else None,
+        )  # fmt: skip
 
     def _reset_envs(self, envs: np.ndarray, choices: Sequence[int | Context | None]) -> None:
         """Put ``envs`` at rest with a new context each; draws go to each env's own generator."""
@@ -355,6 +354,7 @@ class NeuronControlVectorEnv(VectorEnv):
         self._next_step[envs] = 0
         self._last_action[envs] = DO_NOTHING
         self._voltage[envs] = self.params.v_rest_mV
+        self._spikes[envs] = 0
         if not self._effects.plain:
             noise = self._noise(which)
             self._voltage[envs] = self._effects.observe(

@@ -29,6 +29,8 @@ from typing import Any, ClassVar
 import numpy as np
 
 from spikectl.config_errors import ConfigError, ConfigTypeError
+# Re-exported: the context-level data lived here (its module is heterogeneity).
+from spikectl.neuron.heterogeneity import Heterogeneity, draw_hidden  # noqa: F401
 from spikectl.neuron.opsin import check_actuator
 from spikectl.neuron.params import NeuronParams
 
@@ -48,6 +50,8 @@ MAX_BACKGROUND_CURRENT_pA = 1e6
 """The largest spontaneous input current in pA, either sign (the default is 600)."""
 MAX_LATENCY_STEPS = 5
 """The longest loop latency in steps (a rig's round trip is 1-3 ms)."""
+SENSING_MODES = ("potentials", "spikes")
+"""What the agent observes of the neurons: the paper's potentials, or spikes only."""
 
 
 @dataclass(frozen=True)
@@ -89,6 +93,10 @@ class Extensions:
     light_irradiance_mW_per_mm2: float = 5.0
     """Environment level, with ``actuator="chr2"``: the fibre tip's irradiance in a pulse
     (5 mW/mm^2: one pulse makes a resting neuron spike at the next step)."""
+    sensing: str = "potentials"
+    """Environment level: ``"potentials"``, the paper's membrane potentials, or
+    ``"spikes"``, spikes-only sensing: the observation's ``spikes`` (which neurons spiked
+    at the last step) replaces its ``voltage``."""
 
     CONTEXT_FIELDS: ClassVar[tuple[str, ...]] = CONTEXT_FIELDS
 
@@ -110,7 +118,7 @@ class Extensions:
             object.__setattr__(self, name, int(count))
         for field in fields(self):
             value = getattr(self, field.name)
-            if field.name == "actuator":  # checked with the irradiance below
+            if field.name in ("actuator", "sensing"):  # checked below
                 continue
             if field.name in ("stochastic_release", "allow_target_action", "hidden_neurons",
                               "latency_steps"):  # fmt: skip
@@ -152,6 +160,7 @@ class Extensions:
                 label="Extensions.background_current_pA",
             )  # fmt: skip
         check_actuator(self.actuator, self.light_irradiance_mW_per_mm2)
+        self._check_sensing()
         bleaching = self.bleaching_time_constant_steps
         if bleaching is not None and bleaching <= 0:
             raise ConfigError(
@@ -159,7 +168,25 @@ class Extensions:
                 label="Extensions.bleaching_time_constant_steps",
             )  # fmt: skip
 
+    def _check_sensing(self) -> None:
+        if not isinstance(self.sensing, str) or self.sensing not in SENSING_MODES:
+            raise ConfigError("sensing", f"must be one of {', '.join(map(repr, SENSING_MODES))}"
+                              f", got {self.sensing!r}", label="Extensions.sensing")  # fmt: skip
+        # Noise and bleaching change observed potentials; spikes-only observes none, so
+        # either would silently do nothing.
+        if self.spikes_only and self.transforms_observation:
+            raise ConfigError(
+                "sensing", "'spikes' observes no potentials, so observation_noise_mV and "
+                "bleaching_time_constant_steps (which act on them) must be off",
+                label="Extensions.sensing",
+            )  # fmt: skip
+
     # -- which parts are on
+
+    @property
+    def spikes_only(self) -> bool:
+        """True when the agent observes spikes, not potentials (``sensing="spikes"``)."""
+        return self.sensing == "spikes"
 
     @property
     def heterogeneous(self) -> bool:
@@ -225,71 +252,6 @@ class Extensions:
         if isinstance(value, Mapping):
             return cls.from_dict(value)
         raise TypeError(f"extensions must be an Extensions, a dict or None, got {value!r}")
-
-
-@dataclass(frozen=True, eq=False)
-class Heterogeneity:
-    """Per-neuron and per-synapse parameters of one network (heterogeneous neurons)."""
-
-    thresholds_mV: np.ndarray
-    """[n] float64 spike threshold V_th of each neuron."""
-    time_constants_ms: np.ndarray
-    """[n] float64 membrane time constant R C of each neuron."""
-    synaptic_scale: np.ndarray
-    """[n, n] float64 factor on w_in of each synapse i -> j (1 where there is none)."""
-
-    def __post_init__(self) -> None:
-        thresholds = np.array(self.thresholds_mV, dtype=np.float64)
-        time_constants = np.array(self.time_constants_ms, dtype=np.float64)
-        scale = np.array(self.synaptic_scale, dtype=np.float64)
-        n = thresholds.shape[0] if thresholds.ndim == 1 else -1
-        if thresholds.ndim != 1 or time_constants.shape != (n,) or scale.shape != (n, n):
-            raise ValueError(
-                "heterogeneity needs thresholds_mV [n], time_constants_ms [n] and "
-                f"synaptic_scale [n, n]; got {thresholds.shape}, {time_constants.shape}, "
-                f"{scale.shape}"
-            )
-        for name, array in (("thresholds_mV", thresholds), ("time_constants_ms", time_constants),
-                            ("synaptic_scale", scale)):  # fmt: skip
-            if not np.isfinite(array).all():
-                raise ValueError(f"heterogeneity {name} must be finite")
-            array.flags.writeable = False
-            object.__setattr__(self, name, array)
-        if (time_constants <= 0).any() or (scale < 0).any():
-            raise ValueError("heterogeneity time constants must be > 0 and synaptic scales >= 0")
-
-    @property
-    def n_neurons(self) -> int:
-        """n, the number of neurons these values are drawn for."""
-        return self.thresholds_mV.shape[0]
-
-    def simulate_kwargs(self) -> dict[str, np.ndarray]:
-        """The keyword arguments of :func:`spikectl.simulate` for these neurons."""
-        return {
-            "thresholds_mV": self.thresholds_mV,
-            "membrane_time_constants_ms": self.time_constants_ms,
-            "synaptic_scale": self.synaptic_scale,
-        }
-
-    def __eq__(self, other: object) -> bool:
-        if not isinstance(other, Heterogeneity):
-            return NotImplemented
-        return all(
-            np.array_equal(getattr(self, name), getattr(other, name))
-            for name in ("thresholds_mV", "time_constants_ms", "synaptic_scale")
-        )
-
-    __hash__ = None
-
-
-def draw_hidden(
-    rng: np.random.Generator, n_neurons: int, target: int, count: int
-) -> np.ndarray | None:
-    """``count`` hidden neurons drawn uniformly among the non-targets, sorted; None for 0."""
-    if count == 0:
-        return None
-    candidates = np.delete(np.arange(n_neurons), target)
-    return np.sort(rng.choice(candidates, size=count, replace=False)).astype(np.int64)
 
 
 def draw_heterogeneity(

@@ -30,6 +30,7 @@ from gymnasium import spaces
 
 from spikectl.envs.env_arguments import TARGET_RULE, bad_actions_message
 from spikectl.envs.latency import IN_FLIGHT_KEY
+from spikectl.envs.sensing import SPIKES_KEY, sensed_key
 from spikectl.neuron.params import NEVER_RELEASES, NeuronParams
 
 DO_NOTHING = 0
@@ -114,6 +115,11 @@ class FlatObservation:
     | next L (k + 1) | with loop latency L > 0 only: the actions in flight,      |
     |                | oldest first, each one-hot over 0..k                      |
 
+    With spikes-only sensing (``spikes_only``, an extension) the first k entries are the
+    spikes, 1 for a neuron that spiked at the last step, else 0 (where the scaled voltage
+    would read >= 1 and < 1), and the ``Dict`` has ``spikes`` (int8) in place of
+    ``voltage``; the size and every other entry are as above.
+
     The pattern ahead repeats what pattern and step say, aligned with the current step,
     so that a policy without memory or attention can read the next wanted spikes.
     Every entry but the voltage lies in [0, 1] (the pattern ahead in [-1, 1]). With
@@ -131,11 +137,13 @@ class FlatObservation:
         stochastic_release: bool = False,
         flatten: bool = True,
         latency_steps: int = 0,
+        spikes_only: bool = False,
     ) -> None:
         self.k = k = n_observed
         self.N = length = episode_length
         self.flatten = flatten
         self.latency_steps = latency_steps
+        self.spikes_only = spikes_only
         self.v_rest_mV, self.v_threshold_mV = params.v_rest_mV, params.v_threshold_mV
         low, high = _float32_outward(*voltage_bounds_mV(params, n_neurons, stochastic_release))
         self.voltage_low_mV, self.voltage_high_mV = low, high
@@ -151,6 +159,9 @@ class FlatObservation:
             )
             if latency_steps:
                 self.space[IN_FLIGHT_KEY] = spaces.MultiDiscrete(np.full(latency_steps, k + 1))
+            if spikes_only:
+                del self.space.spaces["voltage"]
+                self.space[SPIKES_KEY] = spaces.MultiBinary(k)
             return
         # The paper's layout, then the actions in flight (none without latency).
         self.in_flight_column = 3 * k + 3 * length + 2
@@ -158,6 +169,8 @@ class FlatObservation:
         lows = np.zeros(size, dtype=np.float32)
         highs = np.ones(size, dtype=np.float32)
         lows[:k], highs[:k] = _float32_outward(self._scaled(low), self._scaled(high))
+        if spikes_only:  # the spikes' columns
+            lows[:k], highs[:k] = 0.0, 1.0
         lows[self.in_flight_column - length : self.in_flight_column] = -1.0
         self.space = spaces.Box(lows, highs, (size,), np.float32)
         self._constants = np.array(
@@ -170,16 +183,19 @@ class FlatObservation:
 
     def __call__(self, observation: dict[str, Any]) -> np.ndarray | dict[str, Any]:
         """The observation (or batch) of the base environment in this space."""
-        voltage = np.clip(
-            np.asarray(observation["voltage"], dtype=np.float32),
-            self.voltage_low_mV,
-            self.voltage_high_mV,
-        )
+        if self.spikes_only:
+            voltage = np.asarray(observation[SPIKES_KEY], dtype=np.int8)
+        else:
+            voltage = np.clip(
+                np.asarray(observation["voltage"], dtype=np.float32),
+                self.voltage_low_mV,
+                self.voltage_high_mV,
+            )
         last_action = from_env_action(np.asarray(observation["last_action"], dtype=np.int64))
         if not self.flatten:
             batched = voltage.ndim == 2
             converted = {
-                "voltage": voltage,
+                sensed_key(self.spikes_only): voltage,
                 "target": np.asarray(observation["target"], dtype=np.int64)
                 if batched
                 else int(observation["target"]),
@@ -202,8 +218,9 @@ class FlatObservation:
         self, voltage: np.ndarray, observation: dict[str, Any], last_action: np.ndarray
     ) -> np.ndarray:
         single = voltage.ndim == 1
+        spikes = voltage.reshape(-1, self.k) if self.spikes_only else None
         out = self.write(
-            voltage.reshape(-1, self.k),
+            np.zeros(spikes.shape) if self.spikes_only else voltage.reshape(-1, self.k),
             np.asarray(observation["target"], dtype=np.int64).reshape(-1),
             last_action.reshape(-1),
             np.asarray(observation["step"], dtype=np.int64).reshape(-1),
@@ -211,6 +228,7 @@ class FlatObservation:
             self._in_flight(observation).reshape(-1, self.latency_steps)
             if self.latency_steps
             else None,
+            spikes,
         )
         return out[0] if single else out
 
@@ -222,12 +240,16 @@ class FlatObservation:
         step: np.ndarray,
         pattern: np.ndarray,
         in_flight: np.ndarray | None = None,
+        spikes: np.ndarray | None = None,
     ) -> np.ndarray:
         """The flat observations [B, size] of a batch given as arrays: voltage [B, k] in mV,
         target, zero-based last action and step int64 [B], pattern int8 [B, N]; with
-        latency, the zero-based actions in flight int64 [B, L]."""
+        latency, the zero-based actions in flight int64 [B, L]; with spikes-only sensing,
+        the spikes [B, k] (0 or 1), written over the voltage's columns."""
         out = np.empty((voltage_mV.shape[0], self.size), dtype=np.float32)
         _write_flat(voltage_mV, target, last_action, step, pattern, self._constants, out)
+        if self.spikes_only:
+            out[:, : self.k] = spikes
         if self.latency_steps:
             # The compiled writer fills every row to its end (the pattern ahead's -1s run
             # into these columns): the one-hot blocks are written over them.
@@ -314,4 +336,5 @@ def observation_for(env: Any, flatten: bool) -> FlatObservation:
         env.extensions.stochastic_release,
         flatten,
         env.extensions.latency_steps,
+        env.extensions.spikes_only,
     )

@@ -135,6 +135,7 @@ class FlatNeuronControlVectorEnv(NeuronControlVectorEnv, VectorEnv):
         return self.observation_codec.write(
             voltage, self._observed_targets, self._last_action + 1, self._next_step,
             self._patterns, self._delay.in_flight + 1 if self._delay.steps else None,
+            self._spikes if self._spikes_only else None,
         )  # fmt: skip
 
     def _with_illegal(
