@@ -29,8 +29,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from spikectl.config_errors import ConfigError, ConfigTypeError
-# Re-exported: the context-level data lived here (its module is heterogeneity).
-from spikectl.neuron.heterogeneity import Heterogeneity, draw_hidden  # noqa: F401
+from spikectl.neuron.heterogeneity import Heterogeneity, draw_hidden  # noqa: F401 (lived here)
 from spikectl.neuron.opsin import check_actuator
 from spikectl.neuron.params import NeuronParams
 
