@@ -27,7 +27,7 @@ from typing import Any
 
 import numpy as np
 
-from spikectl.envs.controller import check_controller_input
+from spikectl.envs.controller import ControllerInputError, check_controller_input
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, advance, uniform_neuron_parameters
@@ -132,6 +132,11 @@ class IdentifyAndPlan:
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
         """The action for this observation (an agent index, -1 for do nothing)."""
         check_controller_input(observation, info, "IdentifyAndPlan")
+        if "voltage" not in observation:
+            raise ControllerInputError(
+                "IdentifyAndPlan.act: it identifies from the observed potentials, which "
+                "spikes-only sensing (extensions sensing='spikes') does not observe"
+            )
         step = int(observation["step"])
         voltage = np.asarray(observation["voltage"], dtype=np.float64)
         mask = np.asarray(info["action_mask"], dtype=bool)

@@ -31,6 +31,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from spikectl.config_errors import ConfigError
 from spikectl.envs.rollout import EpisodeBatch, run_episodes
 from spikectl.seeds import COLLECT_STREAM, EVAL_STREAM
 from spikectl.training.agent_network import check_initial_weights
@@ -126,6 +127,7 @@ def train_runs(
     for path in directories:
         check_run_path(path)
     check_group(configs, run_dirs)
+    check_sensing(configs)
     if stacked:
         check_stacked(configs)  # before any directory is made
     if not resume:
@@ -336,6 +338,18 @@ class Loop:
 
 
 SPLIT_FILES = {"train": TRAIN_FILE, "test": TEST_FILE, "validation": VAL_FILE}
+
+
+def check_sensing(configs: list[Experiment]) -> None:
+    """Refuse spikes-only sensing before any directory is made: the learners' inputs are
+    built from the observed potentials, which it does not observe."""
+    if any(config.env.extensions.spikes_only for config in configs):
+        raise ConfigError(
+            ("env", "extensions", "sensing"),
+            "'spikes' is not trainable yet: the learners' inputs read the observed "
+            "potentials (spikes-only sensing plays controllers: spikectl benchmark)",
+            label="--extensions.sensing",
+        )
 
 
 def context_checksums(seed_sets) -> dict[str, str]:
