@@ -184,6 +184,33 @@ def test_latency_settings_equal_the_environment_with_latency_steps(test_set, lat
                     np.testing.assert_array_equal(a[key], b[key], err_msg=f"{name} {key}")
 
 
+def test_spikes_only_equals_the_environment_with_spikes_only_sensing(test_set):
+    """Cleo's spikes-only setting (its ground-truth spike recorder) and spikectl's
+    extensions={"sensing": "spikes"}: the same observations (spikes, no voltage), actions,
+    target spikes and returns for the oracle and a random controller, over consecutive
+    episodes of one loop (the recorder's count restarts at each reset)."""
+    from spikectl.training.loaders import load_controller
+
+    env = NeuronControlEnv(contexts=test_set, extensions={"sensing": "spikes"})
+    loop = cleo_bridge.CleoLoop(test_set, cleo_bridge.SETTINGS["spikes-only"])
+    spiked = 0
+    for name, context in (("random", 0), ("oracle", 1), ("random", 2)):
+        ours = Recording(load_controller(name, env=env, seed=context))
+        actions, total = play_episode(env, ours, context)
+        spikes = env.unwrapped._spike_history[:, test_set[context].target].copy()
+        theirs = Recording(load_controller(name, env=env, seed=context))
+        episode = loop.play(theirs, context)
+        np.testing.assert_array_equal(episode.actions, actions, err_msg=f"{name} {context}")
+        np.testing.assert_array_equal(episode.target_spikes, spikes)
+        assert episode.total == total
+        for a, b in zip(ours.seen, theirs.seen, strict=True):
+            assert a.keys() == b.keys() and "voltage" not in a
+            for key in a:
+                np.testing.assert_array_equal(a[key], b[key], err_msg=f"{name} {key}")
+            spiked += int(b["spikes"].sum())
+    assert spiked > 0  # spikes were compared, not only zeros
+
+
 def test_noise_is_seeded_and_only_in_what_is_measured(test_set):
     """Noise of 1 mV moves the observed potentials (sd ~1 mV around the true ones),
     is the same for the same seed, and changes no dynamics: an open-loop controller
@@ -300,6 +327,8 @@ def test_chr2_agrees_with_the_environment_on_test_networks(test_set):
         ({"latency_ms": 1.5}, "latency_ms"),
         ({"noise_mV": float("nan")}, "noise_mV"),
         ({"opsin_dt_ms": 0.3}, "opsin_dt_ms"),
+        ({"sensing": "volts"}, "sensing"),
+        ({"sensing": "spikes", "noise_mV": 1.0}, "noise_mV must be 0 with sensing"),
     ],
 )
 def test_bad_settings_are_named(fields, problem):

@@ -15,7 +15,8 @@ pulse on one neuron for one 1 ms step, no latency — every action and return th
 ``NeuronControlEnv``'s on the same contexts (tests/test_bridge_cleo.py). The other
 settings swap in Cleo's devices: ChR2 (four-state) under an optic fibre per neuron
 instead of the pulse, the loop latency of Cleo's ``LatencyIOProcessor``, and Gaussian
-noise on the measured potentials.
+noise on the measured potentials, and spikes-only sensing with Cleo's ground-truth spike
+recorder.
 
 How the model maps onto Brian 2 (dt = 1 ms, Euler, as a controller step): a spike at
 step k sets the neuron's potential to V_r and holds it for ``refractory_steps`` steps,
@@ -47,6 +48,7 @@ import numpy as np
 # cleo_devices imports Cleo and Brian 2 behind the extra's one-line MissingExtraError.
 from spikectl.bridges.cleo_devices import (
     ControllerProcessor,
+    EpisodeSpikeRecorder,
     PotentialRecorder,
     PulseStimulator,
     b2,
@@ -58,6 +60,9 @@ from spikectl.envs.controller import Controller
 from spikectl.envs.env_support import ContextTables
 from spikectl.neuron.kernel import SINCE_RELEASE_CAP
 from spikectl.neuron.params import NeuronParams
+
+SENSING_MODES = ("potentials", "spikes")
+"""``potentials``: every neuron's membrane potential (ideal); ``spikes``: spikes only."""
 
 ACTUATIONS = ("pulse", "chr2")
 """``pulse``: the paper's current pulse (ideal); ``chr2``: Cleo's four-state ChR2 and light."""
@@ -94,6 +99,10 @@ class CleoSetting:
     opsin_dt_ms: float = 0.1
     """Integration step of the opsin and light (``chr2``): ChR2's fastest rate (4.15/ms)
     makes Euler steps of 1 ms unstable."""
+    sensing: str = "potentials"
+    """``potentials``: the recorder measures every membrane potential; ``spikes``: Cleo's
+    ground-truth spike recorder, and the controller observes spikes only (spikectl's
+    ``extensions={"sensing": "spikes"}``)."""
 
     def __post_init__(self) -> None:
         if self.actuation not in ACTUATIONS:
@@ -106,6 +115,11 @@ class CleoSetting:
             value = getattr(self, name)
             if not np.isfinite(value) or value < 0:
                 raise ConfigError(name, f"must be finite and >= 0, got {value!r}")
+        if self.sensing not in SENSING_MODES:
+            raise ConfigError("sensing", f"must be one of {SENSING_MODES}, got {self.sensing!r}")
+        if self.sensing == "spikes" and self.noise_mV:
+            raise ConfigError("noise_mV", "must be 0 with sensing 'spikes' (no potential is "
+                              "measured)")  # fmt: skip
         if not 0 < self.opsin_dt_ms <= 1.0 or not float(1.0 / self.opsin_dt_ms).is_integer():
             raise ConfigError(
                 "opsin_dt_ms", f"must divide 1 ms (0.1, 0.05, ...), got {self.opsin_dt_ms!r}"
@@ -122,6 +136,7 @@ SETTINGS: dict[str, CleoSetting] = {
     "noise1": CleoSetting(noise_mV=1.0),
     "chr2": CleoSetting(actuation="chr2"),
     "chr2-latency2-noise1": CleoSetting(actuation="chr2", latency_ms=2, noise_mV=1.0),
+    "spikes-only": CleoSetting(sensing="spikes"),
 }
 """The named settings of docs/cleo.md's table."""
 
@@ -176,7 +191,11 @@ class CleoLoop:
         self.neurons, self.synapses = brian_network(n, params)
         self._spikes = b2.SpikeMonitor(self.neurons, name="spikectl_spikes")
         self.simulator = cleo.CLSimulator(b2.Network(self.neurons, self.synapses, self._spikes))
-        self.recorder = PotentialRecorder(name="potentials", noise_mV=setting.noise_mV)
+        spikes_only = setting.sensing == "spikes"
+        if spikes_only:
+            self.recorder = EpisodeSpikeRecorder(name="spikes")
+        else:
+            self.recorder = PotentialRecorder(name="potentials", noise_mV=setting.noise_mV)
         self.simulator.inject(self.recorder, self.neurons)
         if setting.actuation == "pulse":
             stimulator = PulseStimulator(name="pulse", current_pA=params.stimulus_current_pA)
@@ -186,7 +205,7 @@ class CleoLoop:
             actuate = self._inject_chr2()
         self.processor = ControllerProcessor(
             sample_period=step, latency_ms=setting.latency_ms, actuate=actuate,
-            recorder="potentials",
+            recorder=self.recorder.name, spikes_only=spikes_only,
         )  # fmt: skip
         self.simulator.set_io_processor(self.processor, communication_period=step)
 
@@ -235,7 +254,8 @@ class CleoLoop:
         tables = self._tables
         weights = tables.weights[row]
         self.synapses.w[:] = weights[np.asarray(self.synapses.i), np.asarray(self.synapses.j)]
-        self.recorder.rng = np.random.default_rng([self.setting.noise_seed, row])
+        if isinstance(self.recorder, PotentialRecorder):
+            self.recorder.rng = np.random.default_rng([self.setting.noise_seed, row])
         target = int(tables.targets[row])
         self.processor.begin(
             controller, target, tables.patterns[row], tables.legal[row], row, self.params

@@ -16,6 +16,7 @@ try:  # the one guard of the Cleo extra: spikectl.bridges.cleo imports through h
     from attrs import define, field
     from cleo.base import Recorder, Stimulator
     from cleo.ioproc import LatencyIOProcessor
+    from cleo.recorders import GroundTruthSpikeRecorder
 except ImportError as _error:
     raise MissingExtraError(
         f"spikectl.bridges.cleo needs Cleo and Brian 2 ({_error}): "
@@ -24,6 +25,7 @@ except ImportError as _error:
 
 from spikectl.envs.controller import Controller
 from spikectl.envs.latency import IN_FLIGHT_KEY
+from spikectl.envs.sensing import SPIKES_KEY
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING
 
@@ -51,6 +53,17 @@ class PotentialRecorder(Recorder):
         if self.noise_mV > 0:
             voltage = voltage + self.rng.normal(0.0, self.noise_mV, voltage.shape)
         return {"voltage_mV": voltage, "spikes": spikes}
+
+
+@define(eq=False)
+class EpisodeSpikeRecorder(GroundTruthSpikeRecorder):
+    """Spike sensing: Cleo's ground-truth spike recorder (each neuron's spikes since the
+    last sample, from a Brian SpikeMonitor), counting from zero again after each
+    ``CLSimulator.reset`` (Cleo's own keeps its count across resets, while the reset
+    empties the monitor)."""
+
+    def reset(self, **kwargs) -> None:
+        self._num_spikes_seen = 0
 
 
 @define(eq=False)
@@ -87,7 +100,8 @@ class ControllerProcessor(LatencyIOProcessor):
     """Cleo's IOProcessor around a spikectl controller.
 
     At each 1 ms sample it turns the recorder's measurement into the observation
-    ``NeuronControlEnv`` would give (voltage float32 in mV, target, pattern, step,
+    ``NeuronControlEnv`` would give (voltage float32 in mV, or with ``spikes_only`` the
+    spike recorder's spikes as int8 ``spikes``; target, pattern, step,
     last action, and with latency the actions in flight, as ``extensions={"latency_steps":
     latency_ms}`` gives them) and ``info`` (action mask, context index, and after step 0
     the previous step's spikes), asks the controller for an action, and returns the
@@ -96,11 +110,12 @@ class ControllerProcessor(LatencyIOProcessor):
     """
 
     def __init__(self, sample_period, latency_ms: int, actuate: Callable[[int], dict],
-                 recorder: str) -> None:  # fmt: skip
+                 recorder: str, spikes_only: bool = False) -> None:  # fmt: skip
         super().__init__(sample_period)
         self.latency_ms = latency_ms
         self.actuate = actuate
         self.recorder = recorder
+        self.spikes_only = spikes_only
         self.controller: Controller | None = None
         self.actions: list[int] = []
 
@@ -115,8 +130,13 @@ class ControllerProcessor(LatencyIOProcessor):
     def process(self, state_dict: dict, t_samp) -> tuple[dict, Any]:
         step = len(self.actions)
         measured = state_dict[self.recorder]
+        if self.spikes_only:  # the spike recorder's counts since the last sample
+            measured = {"spikes": np.asarray(measured) > 0}
+            sensed = {SPIKES_KEY: measured["spikes"].astype(np.int8)}
+        else:
+            sensed = {"voltage": measured["voltage_mV"].astype(np.float32)}
         observation = {
-            "voltage": measured["voltage_mV"].astype(np.float32),
+            **sensed,
             "target": self.target,
             "pattern": self.pattern.copy(),
             "step": step,
