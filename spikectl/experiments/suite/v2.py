@@ -45,6 +45,8 @@ def _tasks() -> Registry[Task]:
               "an action lands 1 step (1 ms) after it is chosen"),
         _task("latency2", "spikectl/NeuronControlLatency2-v0",
               "an action lands 2 steps (2 ms) after it is chosen"),
+        _task("spikes-only", "spikectl/NeuronControlSpikesOnly-v0",
+              "the agent observes which neurons spiked, not their potentials"),
     ):  # fmt: skip
         tasks.register(task.name, task)
     return tasks

@@ -1,0 +1,130 @@
+"""Spikes-only sensing (docs/extensions.md, "Spikes-only sensing"): returns on the paper
+task's 100 unseen test networks with the potentials observed (the paper) and with spikes
+only, and, with --cleo, the agreement of spikectl's spikes-only environment with Cleo's
+``spikes-only`` setting.
+
+Rows: doing nothing, a seeded random controller, the oracle (which knows the network and
+plans open loop). Each value is the mean ± its standard error over the networks.
+identify-and-plan reads the potentials and refuses spikes-only sensing (one line), so it
+has a paper column alone. With --cleo (run in the Cleo virtualenv) every episode of the
+oracle and of random controllers seeded 0 .. --random-seeds - 1 is played in both and
+the observations, actions, target spikes and returns compared; the differences are
+counted. Seconds without --cleo, minutes with it:
+
+    python benchmarks/spikes_only.py [--cleo]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+
+from spikectl.envs.controller import DoNothing, RandomLegal, play_episode
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.envs.rollout import evaluate_policy
+from spikectl.experiments.suite import load_split
+from spikectl.neuron.extensions import Extensions
+from spikectl.planning.named import named_composition
+from spikectl.planning.oracle import OraclePlanner
+from spikectl.planning.policy import IdentifyAndPlan
+
+SPIKES = Extensions(sensing="spikes")
+
+
+def mean_and_error(returns: np.ndarray) -> str:
+    return f"{returns.mean():.4f} ± {returns.std(ddof=1) / np.sqrt(returns.size):.4f}"
+
+
+def scores(contexts) -> None:
+    """The table: each controller's mean return with potentials and with spikes only."""
+    n = contexts[0].n_neurons
+    print("| controller | potentials (paper) | spikes only | CPU s (spikes only) |")
+    print("|---|---:|---:|---:|")
+    for name, make in (
+        ("do nothing", DoNothing),
+        ("random (seed 0)", lambda: RandomLegal(seed=0)),
+        ("oracle", lambda: OraclePlanner(contexts, contexts.params)),
+    ):
+        paper = evaluate_policy(contexts, make(), seed=0).returns
+        started = time.process_time()
+        spikes = evaluate_policy(contexts, make(), extensions=SPIKES, seed=0).returns
+        seconds = time.process_time() - started
+        same = "identical per network" if np.array_equal(paper, spikes) else "differ"
+        print(f"| {name} | {mean_and_error(paper)} | {mean_and_error(spikes)} ({same}) "
+              f"| {seconds:.1f} |")  # fmt: skip
+    planner = IdentifyAndPlan(contexts.params, named_composition(Extensions(), n))
+    paper = evaluate_policy(contexts, planner, seed=0).returns
+    print(f"| identify-and-plan | {mean_and_error(paper)} | refuses (reads potentials) | |")
+
+
+class Recording:
+    """A controller that plays another and keeps every observation it was shown."""
+
+    def __init__(self, controller) -> None:
+        self.controller, self.seen = controller, []
+
+    def reset(self) -> None:
+        self.seen = []
+        self.controller.reset()
+
+    def act(self, observation, info) -> int:
+        self.seen.append(observation)
+        return self.controller.act(observation, info)
+
+
+def same_observations(a: list[dict], b: list[dict]) -> bool:
+    return len(a) == len(b) and all(
+        x.keys() == y.keys() and all(np.array_equal(x[key], y[key]) for key in x)
+        for x, y in zip(a, b, strict=True)
+    )
+
+
+def cleo_agreement(contexts, random_seeds: int) -> None:
+    """Every episode in spikectl and in Cleo: the differences, counted."""
+    from spikectl.bridges.cleo import SETTINGS, CleoLoop
+
+    env = NeuronControlEnv(contexts=contexts, extensions=SPIKES)
+    loop = CleoLoop(contexts, SETTINGS["spikes-only"])
+    makers = [("oracle", lambda seed: OraclePlanner(contexts, contexts.params))]
+    makers += [(f"random seed {s}", lambda seed, s=s: RandomLegal(seed=s))
+               for s in range(random_seeds)]  # fmt: skip
+    started = time.perf_counter()
+    print("| controller | episodes | different actions | different target spikes | "
+          "different returns | different observations | mean return (both) |")  # fmt: skip
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for name, make in makers:
+        counts = np.zeros(4, dtype=np.int64)
+        returns = []
+        for context in range(len(contexts)):
+            ours = Recording(make(context))
+            actions, total = play_episode(env, ours, context)
+            spikes = env._spike_history[:, contexts[context].target].copy()
+            theirs = Recording(make(context))
+            episode = loop.play(theirs, context)
+            counts += [
+                not np.array_equal(episode.actions, actions),
+                not np.array_equal(episode.target_spikes, spikes),
+                episode.total != total,
+                not same_observations(ours.seen, theirs.seen),
+            ]
+            returns.append(total)
+        print(f"| {name} | {len(contexts)} | " + " | ".join(map(str, counts))
+              + f" | {mean_and_error(np.array(returns))} |")  # fmt: skip
+    print(f"wall-clock: {time.perf_counter() - started:.0f} s")
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("--cleo", action="store_true", help="also compare with Cleo")
+    parser.add_argument("--random-seeds", type=int, default=2)
+    arguments = parser.parse_args()
+    contexts = load_split("paper", "test")
+    scores(contexts)
+    if arguments.cleo:
+        cleo_agreement(contexts, arguments.random_seeds)
+
+
+if __name__ == "__main__":
+    main()
