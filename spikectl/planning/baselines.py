@@ -24,6 +24,7 @@ from spikectl.envs.rollout import run_episodes
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.files import atomic_write_text
 from spikectl.neuron.extensions import CONTEXT_FIELDS, Extensions
+from spikectl.planning.lit_search import planned_light
 from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
 from spikectl.planning.policy import IdentifyAndPlan
 
@@ -125,7 +126,8 @@ def run_baselines(
     started = time.process_time()
     returns["identify_and_plan"] = play(policy)
     identify_seconds = (time.process_time() - started) / len(contexts)
-    oracle = OraclePlanner(contexts, params, oracle_width, env.extensions.allow_target_action)
+    oracle = OraclePlanner(contexts, params, oracle_width, env.extensions.allow_target_action,
+                           light_mW_per_mm2=planned_light(env.extensions))
     returns["oracle"] = play(oracle)
     oracle_seconds = oracle.plan_seconds / len(contexts)
     if all(context.witness is not None for context in contexts):

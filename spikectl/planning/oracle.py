@@ -11,6 +11,11 @@ it is chosen, so the oracle plans the stimulations that land: it simulates the n
 through the first L steps, in which nothing lands, searches the landing actions of steps
 L .. N - 1 from the state they meet, and chooses at step t the action that lands at
 t + L.
+
+With the ChR2 actuator (``light_mW_per_mm2``, docs/extensions.md) a light pulse opens
+channels that drive its neuron from the next step on for ~10 ms, so the oracle plans with
+the opsins' occupancies as part of the simulated state
+(:func:`~spikectl.planning.lit_search.lit_beam_search`).
 """
 
 from __future__ import annotations
@@ -27,6 +32,7 @@ from spikectl.envs.controller import check_controller_input
 from spikectl.envs.env_support import step_rewards
 from spikectl.envs.latency import IN_FLIGHT_KEY
 from spikectl.neuron.extensions import MAX_LATENCY_STEPS
+from spikectl.neuron.opsin import OpsinActuator
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import (
     DO_NOTHING,
@@ -36,6 +42,7 @@ from spikectl.neuron.simulator import (
     simulate,
 )
 from spikectl.planning.beam import PlanningModel, beam_search
+from spikectl.planning.lit_search import Occupancies, lit_beam_search, lit_spikes
 
 DEFAULT_ORACLE_WIDTH = 256
 """Beam width of :func:`plan_episode`: the narrowest width whose plans score as well as
@@ -67,6 +74,7 @@ def plan_episode(
     width: int = DEFAULT_ORACLE_WIDTH,
     allow_target_action: bool = False,
     latency_steps: int = 0,
+    light_mW_per_mm2: float | None = None,
 ) -> tuple[np.ndarray, float]:
     """Plan a whole episode of ``context`` knowing its weights (not its witness).
 
@@ -77,6 +85,10 @@ def plan_episode(
         width: beam width (distinct simulator states kept per step).
         allow_target_action: whether stimulating the target is legal (an extension).
         latency_steps: loop latency L: the action chosen at step t lands at t + L.
+        light_mW_per_mm2: None for the paper's current pulse; else the actuator is ChR2
+            lit at this fibre-tip irradiance (``Extensions(actuator="chr2")``), and the
+            search plays the opsin's state with the network's
+            (:mod:`spikectl.planning.lit_search`).
 
     Returns:
         ``(actions, ret)``: int64 [N] simulator actions to choose (neuron indices, -1 =
@@ -98,6 +110,8 @@ def plan_episode(
         )
     model = model_of_context(context, params, allow_target_action)
     length, latency = context.episode_length, int(latency_steps)
+    if light_mW_per_mm2 is not None:
+        return _plan_lit(context, model, int(width), latency, light_mW_per_mm2)
     chosen = np.full(length, DO_NOTHING, dtype=np.int64)
     if latency < length:
         start = _state_after_idle_steps(model, latency)
@@ -105,6 +119,25 @@ def plan_episode(
         chosen[: length - latency] = plan.actions
     landing = np.concatenate([np.full(latency, DO_NOTHING, dtype=np.int64), chosen])[:length]
     _, spikes = simulate(context.weights, landing, params, **context.simulate_kwargs())
+    reward_if_spike, reward_if_silent = step_rewards(context.pattern)
+    ret = float(np.where(spikes[:, context.target], reward_if_spike, reward_if_silent).sum())
+    return chosen, ret
+
+
+def _plan_lit(context: Context, model: PlanningModel, width: int, latency: int,
+              light_mW_per_mm2: float) -> tuple[np.ndarray, float]:  # fmt: skip
+    """:func:`plan_episode` through the ChR2 actuator (the opsins rest while nothing
+    lands, so the first landing light meets the idle network and resting channels)."""
+    length, params = context.episode_length, model.params
+    opsin = OpsinActuator(1, model.n_neurons, light_mW_per_mm2, params.dt_ms,
+                          params.capacitance_pF)  # fmt: skip
+    chosen = np.full(length, DO_NOTHING, dtype=np.int64)
+    if latency < length:
+        start = (_state_after_idle_steps(model, latency), Occupancies.at_rest(1, model.n_neurons))
+        chosen[: length - latency] = lit_beam_search(model, opsin, start, context.pattern,
+                                                     latency, width).actions  # fmt: skip
+    landing = np.concatenate([np.full(latency, DO_NOTHING, dtype=np.int64), chosen])[:length]
+    spikes = lit_spikes(model, opsin, landing)
     reward_if_spike, reward_if_silent = step_rewards(context.pattern)
     ret = float(np.where(spikes[:, context.target], reward_if_spike, reward_if_silent).sum())
     return chosen, ret
@@ -141,6 +174,9 @@ class OraclePlanner:
     ``latency_steps``: the loop latency it plans for; None (the default) reads it from
     the observation (the length of ``actions_in_flight``, 0 without it), so it plans for
     the loop it plays; 0 under latency is the latency-unaware oracle.
+    ``light_mW_per_mm2``: None plans for the paper's current pulse; else for the ChR2
+    actuator at that irradiance (:func:`~spikectl.planning.lit_search.planned_light` of
+    the environment's extensions).
     """
 
     def __init__(
@@ -150,8 +186,10 @@ class OraclePlanner:
         width: int = DEFAULT_ORACLE_WIDTH,
         allow_target_action: bool = False,
         latency_steps: int | None = None,
+        light_mW_per_mm2: float | None = None,
     ) -> None:
         self.contexts, self.params, self.width = contexts, params, width
+        self.light_mW_per_mm2 = light_mW_per_mm2
         self.allow_target_action = allow_target_action
         self.latency_steps = latency_steps
         self.plans: dict[tuple[int, int], np.ndarray] = {}
@@ -169,7 +207,8 @@ class OraclePlanner:
         if key not in self.plans:
             started = time.process_time()
             actions, _ = plan_episode(self.contexts[context], self.params, self.width,
-                                      self.allow_target_action, latency_steps)  # fmt: skip
+                                      self.allow_target_action, latency_steps,
+                                      self.light_mW_per_mm2)  # fmt: skip
             self.plans[key] = agent_actions(self.contexts[context], actions)
             self.plan_seconds += time.process_time() - started
         return self.plans[key]

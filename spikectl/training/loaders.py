@@ -31,6 +31,7 @@ from spikectl.envs.controller import Controller, DoNothing, RandomLegal, Witness
 from spikectl.file_kinds import FileKind, refuse_other_kinds
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
+from spikectl.planning.lit_search import planned_light
 from spikectl.planning.named import named_composition
 from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
 from spikectl.planning.policy import IdentifyAndPlan
@@ -98,7 +99,8 @@ def identify_and_plan(played: Played, seed: int) -> Controller:
 
 def oracle(played: Played, seed: int) -> Controller:
     return OraclePlanner(played.contexts, played.params, DEFAULT_ORACLE_WIDTH,
-                         played.extensions.allow_target_action)  # fmt: skip
+                         played.extensions.allow_target_action,
+                         light_mW_per_mm2=planned_light(played.extensions))  # fmt: skip
 
 
 def witness(played: Played, seed: int) -> Controller:

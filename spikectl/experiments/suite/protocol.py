@@ -153,12 +153,15 @@ def references(name: str, split: str = "test", version: int = DEFAULT_SUITE) -> 
     """(R_nothing, R_oracle): the mean returns of do nothing and of the oracle planner
     on a task's split under the protocol, the 0 and 1 of the normalised score."""
     from spikectl.envs.controller import DoNothing
+    from spikectl.planning.lit_search import planned_light
     from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
 
     contexts = load_split(name, split, version)
     nothing, _ = play(name, split, DoNothing(), version)
+    extensions = task(name, version).extensions
     oracle = OraclePlanner(contexts, contexts.params, DEFAULT_ORACLE_WIDTH,
-                           task(name, version).extensions.allow_target_action)  # fmt: skip
+                           extensions.allow_target_action,
+                           light_mW_per_mm2=planned_light(extensions))  # fmt: skip
     planned, _ = play(name, split, oracle, version)
     return float(nothing.mean()), float(planned.mean())
 
