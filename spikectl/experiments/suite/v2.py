@@ -47,6 +47,8 @@ def _tasks() -> Registry[Task]:
               "an action lands 2 steps (2 ms) after it is chosen"),
         _task("spikes-only", "spikectl/NeuronControlSpikesOnly-v0",
               "the agent observes which neurons spiked, not their potentials"),
+        _task("chr2", "spikectl/NeuronControlChR2-v0",
+              "an action is a 1 ms light pulse on ChR2 (5 mW/mm^2), not the current pulse"),
     ):  # fmt: skip
         tasks.register(task.name, task)
     return tasks
