@@ -136,3 +136,52 @@ def test_the_search_keeps_hypotheses_and_refuses_bad_settings():
         lit_beam_search(model, opsin_of(8), start, context.pattern, 0, 0)
     with pytest.raises(ValueError, match="start_step"):
         lit_beam_search(model, opsin_of(8), start, context.pattern, 60, 4)
+
+
+def test_identify_and_plan_reads_each_step_with_the_lights_current():
+    # The residual of every observed neuron is its synaptic input alone: released
+    # presynaptic neurons' weights, as under the pulse (the opsin's drive subtracted).
+    from spikectl.planning.named import named_composition
+    from spikectl.planning.policy import IdentifyAndPlan
+
+    contexts = load_split("paper", "test")[:2]
+    rng = np.random.default_rng(1)
+    for index, context in enumerate(contexts):
+        policy = IdentifyAndPlan(contexts.params, named_composition(CHR2, 8), extensions=CHR2)
+        reader = policy.observation.reader(8)
+        assert reader.opsin is not None
+        env = NeuronControlEnv(contexts=contexts, extensions=CHR2)
+        env.reset(options={"context": index})
+        model = model_of_context(context, PARAMS)
+        lights = 0
+        for _ in range(context.episode_length):
+            action = int(rng.choice(model.actions))
+            observation = env.step(action)[0]
+            released, residual, observed = reader.read(observation["voltage"], action, None)
+            expected = context.weights.T.astype(float) @ released
+            np.testing.assert_allclose(residual[observed], expected[observed], atol=1e-4)
+            lights += action >= 0
+        assert lights > 30 and reader.opsin.o1.max() > 0.1
+
+
+def test_identify_and_plan_plans_the_light_and_the_pulse_is_unchanged():
+    from spikectl.planning.named import named_composition
+    from spikectl.planning.policy import IdentifyAndPlan
+
+    contexts = load_split("paper", "test")[:4]
+    aware = IdentifyAndPlan(contexts.params, named_composition(CHR2, 8), extensions=CHR2)
+    assert aware.observation.light_mW_per_mm2 == 5.0
+    unaware = IdentifyAndPlan(contexts.params, named_composition(None, 8))
+    assert unaware.observation.light_mW_per_mm2 is None
+    lit = evaluate_policy(contexts, aware, extensions=CHR2, seed=0).returns
+    pulsed = evaluate_policy(contexts, unaware, extensions=CHR2, seed=0).returns
+    assert lit.mean() > pulsed.mean() + 0.15
+
+
+def test_the_light_is_read_by_the_papers_tracker_alone():
+    from spikectl.planning.observing import ObservationSettings
+
+    noisy = Extensions(actuator="chr2", observation_noise_mV=1.0)
+    observation = ObservationSettings(task_model=True, filter_voltage=True).bind(PARAMS, noisy)
+    with pytest.raises(ValueError, match="ChR2 actuator is read by the paper's tracker alone"):
+        observation.reader(8)

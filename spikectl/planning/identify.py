@@ -239,8 +239,11 @@ class ObservedState:
         # release reset them (what a correction of that step's reads needs).
         self._since_before_release = np.zeros(n_neurons, dtype=np.int64)
 
-    def observe(self, voltage: np.ndarray, action: int) -> tuple[np.ndarray, ...]:
+    def observe(self, voltage: np.ndarray, action: int,
+                drive_mV: np.ndarray | None = None) -> tuple[np.ndarray, ...]:  # fmt: skip
         """Take the observation after a step with ``action``; update the state.
+        ``drive_mV`` [n]: the step's known input instead of the action's pulse (the
+        opsin's current under the ChR2 actuator; the action then pulses nothing).
 
         Returns ``(released_before [n], residual [n] in units of w_in, observed [n])``:
         the evidence of this step for :meth:`ConnectivityEstimate.add`.
@@ -249,8 +252,8 @@ class ObservedState:
         voltage = np.asarray(voltage, dtype=np.float64)
         before = state.voltage_mV[0]
         refractory = state.refractory_left[0] > 0
-        stimulus = np.zeros_like(before)
-        if action != DO_NOTHING:
+        stimulus = np.zeros_like(before) if drive_mV is None else drive_mV
+        if action != DO_NOTHING and drive_mV is None:
             stimulus[action] = params.stimulus_step_mV
         # The potential without synaptic input; the residual is what the synapses added.
         predicted = integrate(before, params.v_rest_mV, self._leak(), stimulus)

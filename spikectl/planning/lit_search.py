@@ -164,6 +164,11 @@ def lit_beam_search(
     interval = int(min(model.params.min_release_interval_steps, 2**30))
     resting = model.params.v_rest_mV
     state, occupancies = start[0].copy(), start[1].copy()
+    if k > 1 and state.voltage_mV.shape[0] == 1:  # one start for every hypothesis
+        state, occupancies = (
+            _rows(state, np.zeros(k, np.int64)),
+            occupancies.take(np.zeros(k, np.int64)),
+        )
     score, size = np.zeros(1), 1
     parents, choices, step_rewards = [], [], []
     for t in range(start_step, end):
@@ -226,3 +231,20 @@ def lit_spikes(model: PlanningModel, opsin: OpsinActuator, landing: np.ndarray) 
         lit[0] = action
         raster[t] = lit_step(model, opsin, state, occupancies, lit, weights)[0]
     return raster
+
+
+def tracked_occupancies(opsin: OpsinActuator, m: int) -> Occupancies:
+    """An opsin's tracked occupancies (its first row's n neurons) as one row of ``m >= n``
+    neurons: the planner's virtual relay neurons, never lit, at rest."""
+    occupancies = Occupancies.at_rest(1, m)
+    n = opsin.c1.shape[1]
+    occupancies.c1[0, :n], occupancies.o1[0, :n] = opsin.c1[0], opsin.o1[0]
+    occupancies.o2[0, :n] = opsin.o2[0]
+    return occupancies
+
+
+def network_model(weights: np.ndarray, params, neurons: np.ndarray | None) -> PlanningModel:
+    """A :class:`PlanningModel` of one network's ``weights`` [m, m] to step (no target,
+    no actions: :func:`lit_step` and :func:`lit_state_after` read neither)."""
+    return PlanningModel(np.ascontiguousarray(weights[None]), 0, np.empty(0, dtype=np.int64),
+                         params, neurons)  # fmt: skip

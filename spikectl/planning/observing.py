@@ -23,12 +23,14 @@ import numpy as np
 
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.kernel import SINCE_RELEASE_CAP
+from spikectl.neuron.opsin import OpsinActuator
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning.bayes import ObservationModel, release_chances
 from spikectl.planning.filtering import FilteredState, model_variance
 from spikectl.planning.heterogeneity import NeuronTracker, tracks_neurons
 from spikectl.planning.identify import ObservedState, residual_sd
 from spikectl.planning.in_flight import InFlight
+from spikectl.planning.lit_search import planned_light
 from spikectl.planning.release import exact_residuals, settled_releases
 
 
@@ -98,6 +100,8 @@ class Observation:
             self.extensions, self.noise_mV
         )
         self.strengths = self.extensions is not None and self.extensions.synaptic_spread > 0
+        # The actuator is part of the loop whatever the composition reads (ChR2's light).
+        self.light_mW_per_mm2 = planned_light(extensions)
 
     @property
     def plan_mean(self) -> bool:
@@ -116,7 +120,16 @@ class Observation:
                                     model_variance(self.extensions))  # fmt: skip
         else:
             tracker = ObservedState(n, params, settings.spike_margin_sd * noise)
-        return Reader(self, tracker, InFlight(latency_steps, n))
+        reader = Reader(self, tracker, InFlight(latency_steps, n))
+        if self.light_mW_per_mm2 is not None:
+            if type(tracker) is not ObservedState:
+                raise ValueError(
+                    "the ChR2 actuator is read by the paper's tracker alone "
+                    "(no noise, heterogeneous neurons or filtering)"
+                )
+            reader.opsin = OpsinActuator(1, n, self.light_mW_per_mm2, params.dt_ms,
+                                         params.capacitance_pF)  # fmt: skip
+        return reader
 
 
 class Reader:
@@ -129,6 +142,9 @@ class Reader:
         in_flight: the loop's actions in flight (:class:`~spikectl.planning.in_flight.
             InFlight`): under latency a step's evidence is read with the action that
             landed at it, not the one chosen then.
+        opsin: under the ChR2 actuator, the opsins' occupancies tracked from the light
+            that landed (they depend on it alone); each step is read with their current,
+            computed from them and the tracked potentials. None for the pulse.
     """
 
     def __init__(self, observation: Observation, tracker: ObservedState,
@@ -136,6 +152,7 @@ class Reader:
         self.observation, self.tracker = observation, tracker
         self.chances = np.zeros(tracker.spiked.shape[0])
         self.in_flight = InFlight(0, tracker.spiked.shape[0]) if in_flight is None else in_flight
+        self.opsin: OpsinActuator | None = None
 
     def read_landed(self, observation, voltage: np.ndarray, estimate) -> tuple:
         """:meth:`read` of ``voltage`` with the action that landed at the step before
@@ -149,6 +166,10 @@ class Reader:
         since = tracker.state.steps_since_release[0].copy()
         if isinstance(tracker, FilteredState):
             evidence = tracker.observe(voltage, action, estimate.posterior())
+        elif self.opsin is not None:  # the light's current, as the environment drew it
+            drive = np.empty((1, 1, tracker.spiked.shape[0]))
+            self.opsin.illuminate(tracker.state.voltage_mV, np.array([[action]]), drive)
+            evidence = tracker.observe(voltage, action, drive[0, 0])
         else:
             evidence = tracker.observe(voltage, action)
         if self.observation.stochastic_release:

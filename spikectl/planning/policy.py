@@ -36,6 +36,13 @@ from spikectl.planning.composition import Composition
 from spikectl.planning.deciding import Situation
 from spikectl.planning.identify import KnownConnectivity
 from spikectl.planning.in_flight import first_neurons, latency_of
+from spikectl.planning.lit_search import (
+    lit_beam_search,
+    lit_state_after,
+    lit_step,
+    network_model,
+    tracked_occupancies,
+)
 from spikectl.planning.observing import Reader
 from spikectl.planning.probing import ready_neurons
 from spikectl.planning.qmdp import Episode, qmdp_action
@@ -128,6 +135,7 @@ class IdentifyAndPlan:
         self._episodes = getattr(self, "_episodes", -1) + 1
         self.uniforms: tuple[np.ndarray, np.ndarray] | None = None
         self._state_met = None  # the decision's state_met, computed once a step
+        self._occupancies_met = None  # ChR2: the opsins' state the light chosen now meets
 
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
         """The action for this observation (an agent index, -1 for do nothing)."""
@@ -249,6 +257,14 @@ class IdentifyAndPlan:
         """The planning state the action chosen now meets when it lands (the decision
         rule's :meth:`~spikectl.planning.deciding.DecisionSettings.state_met`: under
         latency the present one stepped through the actions in flight)."""
+        if self._state_met is None and self.reader.opsin is not None:
+            # ChR2: the light in flight lands on the tracked occupancies too.
+            weights, opsin = self.planning_weights()[0], self.reader.opsin
+            self._state_met, self._occupancies_met = lit_state_after(
+                network_model(weights, self.params, self.planned_neurons()), opsin,
+                self.planning_state(), tracked_occupancies(opsin, weights.shape[0]),
+                self.reader.in_flight.actions,
+            )  # fmt: skip
         if self._state_met is None:
             self._state_met = self.composition.decision.state_met(self, self.planning_weights()[0])
         return self._state_met
@@ -269,9 +285,14 @@ class IdentifyAndPlan:
     def _replan(self, weights: np.ndarray, situation: Situation) -> None:
         model = self._model(weights, situation)
         decision, step, pattern = self.composition.decision, situation.step, situation.pattern
-        self.plan = beam_search(
-            model, self.state_met(), pattern, step, decision.width, decision.horizon
-        )
+        if self.reader.opsin is not None:  # ChR2: plan the light with the opsins' state
+            start = self.state_met(), self._occupancies_met
+            self.plan = lit_beam_search(model, self.reader.opsin, start, pattern, step,
+                                        decision.width, decision.horizon)  # fmt: skip
+        else:
+            self.plan = beam_search(
+                model, self.state_met(), pattern, step, decision.width, decision.horizon
+            )
         self.plan_start = step
         self._planned_weights = weights
         self._planned_neurons = model.neurons
@@ -327,8 +348,14 @@ class IdentifyAndPlan:
         m = weights.shape[0]  # the observed neurons, and their relays where planned
         voltage, spikes = np.empty((1, 1, m)), np.empty((1, 1, m), dtype=bool)
         actions = np.array([[action]], dtype=np.int64)
-        advance(state, np.ascontiguousarray(weights[None]), actions, self.params, voltage, spikes,
-                self.planned_neurons())  # fmt: skip
+        opsin = self.reader.opsin
+        if opsin is not None:  # ChR2: the step's drive is the tracked opsins' current
+            spikes[0, 0] = lit_step(network_model(weights, self.params, self.planned_neurons()),
+                                    opsin, state, tracked_occupancies(opsin, m), actions[0],
+                                    np.ascontiguousarray(weights[None]))[0]  # fmt: skip
+        else:
+            advance(state, np.ascontiguousarray(weights[None]), actions, self.params, voltage,
+                    spikes, self.planned_neurons())  # fmt: skip
         self._predicted_spikes = spikes[0, 0, : self.reader.tracker.spiked.shape[0]]
 
     def spawn(self, index: int) -> IdentifyAndPlan:
