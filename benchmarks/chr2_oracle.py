@@ -79,7 +79,8 @@ def main() -> None:
           f"({seconds:.2f} CPU s / network)")  # fmt: skip
     print(f"ceiling - oracle, network by network: {gap.mean():+.4f} ± "
           f"{gap.std(ddof=1) / np.sqrt(gap.size):.4f}; the wider search higher on "
-          f"{int((gap > 1e-12).sum())}, lower on {int((gap < -1e-12).sum())} of {gap.size}")  # fmt: skip
+          f"{int((gap > 1e-12).sum())}, lower on {int((gap < -1e-12).sum())} "
+          f"of {gap.size}")  # fmt: skip
 
 
 if __name__ == "__main__":
