@@ -268,11 +268,14 @@ V2 = suite.suite_version(2)
 
 def test_v2_is_the_rigs_loop_on_1000_networks_beside_a_frozen_v1(fresh_cache):
     assert (V2.number, V2.frozen, V2.set_size, V2.env_seed) == (2, False, 1000, 0)
-    assert V2.names() == ("paper", "latency1", "latency2", "spikes-only")
-    assert [V2.task(name).extensions.latency_steps for name in V2.names()] == [0, 1, 2, 0]
+    assert V2.names() == ("paper", "latency1", "latency2", "spikes-only", "chr2")
+    assert [V2.task(name).extensions.latency_steps for name in V2.names()] == [0, 1, 2, 0, 0]
     assert [V2.task(name).extensions.sensing for name in V2.names()] == ["potentials"] * 3 + [
-        "spikes"
+        "spikes", "potentials"
     ]
+    assert [V2.task(name).extensions.actuator for name in V2.names()] == ["pulse"] * 4 + ["chr2"]
+    # The chr2 task plays the paper's networks (the same pinned checksums).
+    assert suite.load_split("chr2", "test", 2) == suite.load_split("paper", "test", 2)
     assert {V2.task(name).seed for name in V2.names()} == {2}
     sets = suite.load_splits("latency1", 2)  # checked against the pinned checksums
     assert [len(sets[split]) for split in suite.SPLITS] == [1000, 1000, 1000]
