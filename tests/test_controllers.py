@@ -13,6 +13,7 @@ import pytest
 
 import spikectl
 from spikectl import ContextSet, NeuronControlEnv, NeuronControlVectorEnv, make_splits
+from spikectl.agents.policy_file import PolicyFileError
 from spikectl.envs.controller import (
     BatchController,
     Controller,
@@ -170,7 +171,7 @@ def test_load_controller_refuses_what_it_cannot_build(tmp_path, contexts):
     with pytest.raises(TypeError, match="is not a controller"):
         batched(lambda observations, infos: None)
     (tmp_path / "policy.npz").write_bytes(b"not a zip")
-    with pytest.raises(spikectl.agents.compiled.PolicyFileError, match="not a readable"):
+    with pytest.raises(PolicyFileError, match="not a readable"):
         load_controller(tmp_path / "policy.npz")
     assert load_controller("witness", contexts=contexts).witnesses.shape == (4, 20)
     # The library's, first (a test may register more: tests/test_registries.py).
