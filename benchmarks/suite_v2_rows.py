@@ -26,7 +26,5 @@ if __name__ == "__main__":
     label = "-".join(args.tasks)
     for controller in CONTROLLERS:
         stem = args.out_dir / f"{controller}-{label}"
-        code = main(["benchmark", controller, "--suite", "2", "--task", *args.tasks,
-                     "--out", f"{stem}.csv", "--per-network", f"{stem}-per-network.csv"])  # fmt: skip
-        if code:
-            raise SystemExit(code)
+        outputs = ["--out", f"{stem}.csv", "--per-network", f"{stem}-per-network.csv"]
+        main(["benchmark", controller, "--suite", "2", "--task", *args.tasks, *outputs])
