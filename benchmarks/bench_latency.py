@@ -20,23 +20,29 @@ from spikectl.wrappers.flat_vector_env import FlatNeuronControlVectorEnv
 BATCH, ROUNDS, STEPS, LATENCY = 4096, 15, 20, 2
 
 
-def main() -> None:
+def step_seconds(settings: dict[str, dict]) -> dict[tuple[str, str], float]:
+    """Median seconds per step of the paper and flat vector envs under each named
+    ``extensions`` setting, the environments stepped in turn (interleaved rounds)."""
     envs = {}
     for cls, do_nothing in ((NeuronControlVectorEnv, -1), (FlatNeuronControlVectorEnv, 0)):
-        for latency in (0, LATENCY):
-            env = cls(BATCH, contexts={"n_train": 100, "n_test": 10},
-                      extensions={"latency_steps": latency})  # fmt: skip
+        for label, extensions in settings.items():
+            env = cls(BATCH, contexts={"n_train": 100, "n_test": 10}, extensions=extensions)
             env.reset(seed=0)
-            envs[cls.__name__, latency] = (env, np.full(BATCH, do_nothing, dtype=np.int64))
-    seconds: dict[tuple[str, int], list[float]] = {key: [] for key in envs}
+            envs[cls.__name__, label] = (env, np.full(BATCH, do_nothing, dtype=np.int64))
+    seconds: dict[tuple[str, str], list[float]] = {key: [] for key in envs}
     for _ in range(ROUNDS):
         for key, (env, actions) in envs.items():
             started = time.perf_counter()
             for _ in range(STEPS):
                 env.step(actions)
             seconds[key].append((time.perf_counter() - started) / STEPS)
+    return {key: float(np.median(values)) for key, values in seconds.items()}
+
+
+def main() -> None:
+    medians = step_seconds({"0": {"latency_steps": 0}, "L": {"latency_steps": LATENCY}})
     for name in ("NeuronControlVectorEnv", "FlatNeuronControlVectorEnv"):
-        plain, delayed = (float(np.median(seconds[name, latency])) for latency in (0, LATENCY))
+        plain, delayed = medians[name, "0"], medians[name, "L"]
         print(f"{name}: {plain * 1e6:.0f} us without latency, {delayed * 1e6:.0f} us with "
               f"latency_steps={LATENCY}: x{delayed / plain:.3f}")  # fmt: skip
 
