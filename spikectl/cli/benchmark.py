@@ -53,6 +53,9 @@ CSV_FIELDS = (
     "standard_error", "sd_over_seeds", "normalised", "do_nothing", "oracle", "cpu_seconds",
     "contexts", "trained_on", "composition",
 )  # fmt: skip
+REFERENCE_CONTROLLERS = ("do-nothing", "oracle")
+"""The registered controllers that are the normalised score's 0 and 1
+(:func:`~spikectl.experiments.suite.reference_scores`, in that order)."""
 PER_NETWORK_FIELDS = ("suite_version", "task", "split", "controller", "model", "context", "return",
                       "composition")  # fmt: skip
 """``composition``: the name of the composition a composed controller played on the task
@@ -107,11 +110,15 @@ def score_and_write(command: BenchmarkCommand) -> None:
           f"{'oracle':>9}{'CPU s':>9}")  # fmt: skip
     rows, per_network, normalised = [], [], {}
     for name in names:
-        played: list[Any] = []  # the controllers made, to name the composition they played
-        result = suite.score(name, command.split, recorded(make(name), played), seeds,
-                             version.number)
-        composition = composition_of(played[0])
-        composition = composition_of(played[0])
+        if command.controller in REFERENCE_CONTROLLERS:  # played once, for the references too
+            which = REFERENCE_CONTROLLERS.index(command.controller)
+            result = suite.reference_scores(name, command.split, version.number)[which]
+            composition = ""
+        else:
+            played: list[Any] = []  # the controllers made, to name the composition they played
+            result = suite.score(name, command.split, recorded(make(name), played), seeds,
+                                 version.number)
+            composition = composition_of(played[0])
         per_network += [
             {"suite_version": version.number, "task": name, "split": command.split,
              "controller": command.controller, "model": model_label(command),

@@ -25,6 +25,7 @@ from spikectl.experiments.suite.protocol import (
     mean_normalised,
     normalise,
     play,
+    reference_scores,
     references,
     score,
     standard_error,
@@ -51,7 +52,7 @@ from spikectl.experiments.suite.versions import (
 __all__ = [
     "DEFAULT_SUITE", "PER_NEURON_ARCHS", "SPLITS", "SUITES", "Score", "SuiteChecksumError",
     "SuiteVersion", "Task", "check_run_fits", "generate_splits", "load_split", "load_splits",
-    "mean_normalised", "normalise", "play", "references", "register_suite_version",
-    "register_task", "score", "standard_error", "suite_checksum", "suite_version", "task",
-    "train_arguments", "trained_on",
+    "mean_normalised", "normalise", "play", "reference_scores", "references",
+    "register_suite_version", "register_task", "score", "standard_error", "suite_checksum",
+    "suite_version", "task", "train_arguments", "trained_on",
 ]  # fmt: skip
