@@ -268,14 +268,20 @@ V2 = suite.suite_version(2)
 
 def test_v2_is_the_rigs_loop_on_1000_networks_beside_a_frozen_v1(fresh_cache):
     assert (V2.number, V2.frozen, V2.set_size, V2.env_seed) == (2, False, 1000, 0)
-    assert V2.names() == ("paper", "latency1", "latency2", "spikes-only", "chr2")
-    assert [V2.task(name).extensions.latency_steps for name in V2.names()] == [0, 1, 2, 0, 0]
+    assert V2.names() == ("paper", "latency1", "latency2", "spikes-only", "chr2", "rig")
+    assert [V2.task(name).extensions.latency_steps for name in V2.names()] == [0, 1, 2, 0, 0, 2]
     assert [V2.task(name).extensions.sensing for name in V2.names()] == ["potentials"] * 3 + [
-        "spikes", "potentials"
+        "spikes", "potentials", "spikes"
     ]
-    assert [V2.task(name).extensions.actuator for name in V2.names()] == ["pulse"] * 4 + ["chr2"]
-    # The chr2 task plays the paper's networks (the same pinned checksums).
+    assert [V2.task(name).extensions.actuator for name in V2.names()] == ["pulse"] * 4 + [
+        "chr2", "chr2"
+    ]
+    assert [V2.task(name).extensions.background_rate for name in V2.names()] == [0.0] * 5 + [
+        0.005
+    ]
+    # The chr2 and rig tasks play the paper's networks (the same pinned checksums).
     assert suite.load_split("chr2", "test", 2) == suite.load_split("paper", "test", 2)
+    assert suite.load_split("rig", "test", 2) == suite.load_split("paper", "test", 2)
     assert {V2.task(name).seed for name in V2.names()} == {2}
     sets = suite.load_splits("latency1", 2)  # checked against the pinned checksums
     assert [len(sets[split]) for split in suite.SPLITS] == [1000, 1000, 1000]
@@ -295,3 +301,28 @@ def test_benchmark_plays_a_v2_task_under_its_latency(capsys, tmp_path):
     (row,) = list(csv.DictReader(out.open()))
     assert (row["suite_version"], row["task"], row["contexts"]) == ("2", "latency2", "1000")
     assert float(row["mean_return"]) == 0.5  # doing nothing: half the pattern's steps right
+
+
+def test_a_benchmark_of_the_oracle_plays_it_once_and_reads_its_reference(
+    capsys, tmp_path, monkeypatch
+):
+    """The oracle's row and the normalised score's 1 are the same episodes: the task is
+    played once by each reference controller, never by the oracle a second time."""
+    played = []
+    real_play = protocol.play
+
+    def counting_play(name, split, controller, version=1):
+        played.append(type(controller).__name__)
+        return real_play(name, split, controller, version)
+
+    monkeypatch.setattr(protocol, "play", counting_play)
+    protocol.reference_scores.cache_clear()
+    out = tmp_path / "oracle.csv"
+    code, stdout, _ = run_main(["benchmark", "oracle", "--task", "paper", "--out", str(out)],
+                               capsys)  # fmt: skip
+    protocol.reference_scores.cache_clear()
+    assert code == 0, stdout
+    assert sorted(played) == ["DoNothing", "OraclePlanner"]
+    (row,) = list(csv.DictReader(out.open()))
+    assert row["mean_return"] == row["oracle"] and float(row["normalised"]) == 1.0
+    assert float(row["cpu_seconds"]) > 0

@@ -64,6 +64,17 @@ VARIANTS.register("spikectl/NeuronControlRealistic-v0", {
 VARIANTS.register("spikectl/NeuronControlChR2-v0", {"extensions": {"actuator": "chr2"}})
 # Spikes-only sensing: the agent observes which neurons spiked, not their potentials.
 VARIANTS.register("spikectl/NeuronControlSpikesOnly-v0", {"extensions": {"sensing": "spikes"}})
+# The rig's loop at once: ChR2 light, 2 steps of latency, spikes-only sensing, and the
+# spontaneous inputs that stand for the rig's noise (the realistic background rate:
+# measurement noise acts on potentials, which spikes-only sensing does not report).
+VARIANTS.register("spikectl/NeuronControlRig-v0", {
+    "extensions": {
+        "actuator": "chr2",
+        "latency_steps": 2,
+        "sensing": "spikes",
+        "background_rate": 0.005,
+    }
+})  # fmt: skip
 
 
 def flat_id(env_id: str) -> str:

@@ -10,8 +10,11 @@ their own, so no v2 network is one of v1's. The environment-level tasks play the
 networks of ``paper`` (hence its checksums), so a task's row against ``paper``'s is the
 cost of the loop alone.
 
-v2 is not frozen: tasks of the issue's rig (spikes-only sensing, the combined ``rig``)
-join it as they are built; a task's scores do not move when another task is added.
+``rig`` combines the loop's parts: ChR2 light, 2 steps of latency, spikes-only sensing and
+spontaneous background input (0.005 inputs per neuron per step, v1's ``background``), which
+stands for the rig's noise, since measurement noise acts on potentials that spikes-only
+sensing does not report. v2 is not frozen: a task's scores do not move when another
+task is added.
 """
 
 from __future__ import annotations
@@ -49,6 +52,8 @@ def _tasks() -> Registry[Task]:
               "the agent observes which neurons spiked, not their potentials"),
         _task("chr2", "spikectl/NeuronControlChR2-v0",
               "an action is a 1 ms light pulse on ChR2 (5 mW/mm^2), not the current pulse"),
+        _task("rig", "spikectl/NeuronControlRig-v0",
+              "the rig's loop: ChR2 light, 2 steps of latency, spikes only, background input"),
     ):  # fmt: skip
         tasks.register(task.name, task)
     return tasks
