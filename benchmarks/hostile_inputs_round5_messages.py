@@ -69,6 +69,14 @@ SHORT_ARRAY = (
     "EOF"
 )
 LOAD_BAD = "from spikectl.contexts import ContextSet\nContextSet.load('bad.npz')\n"
+
+
+def bad_array_probe(what: str, change: str, words: tuple[str, ...],
+                    command: str | list[str] = LOAD_BAD) -> MessageProbe:  # fmt: skip
+    """A context set whose arrays ``change`` breaks (``a`` is the dict of arrays), read by
+    ``command`` (the API's load by default): refused in one line saying ``words``."""
+    return MessageProbe(f"context set with {what}", 3, SHORT_ARRAY.replace("CHANGE", change),
+                        command, words=words)  # fmt: skip
 REHEADED_POLICY = (
     "import json, numpy as np\n"
     "from spikectl.agents.compiled import CompiledPolicy\n"
@@ -192,41 +200,16 @@ PROBES = [
         words=("pol.npz",),
     ),
     # context-set arrays, each checked and named
-    MessageProbe(
-        "context set with a short targets array (API)",
-        3,
-        SHORT_ARRAY.replace("CHANGE", "a['targets'] = a['targets'][:2]"),
-        LOAD_BAD,
-        words=("targets", "(3,)"),
-    ),  # fmt: skip
-    MessageProbe(
-        "context set with a short targets array (evaluate)",
-        3,
-        SHORT_ARRAY.replace("CHANGE", "a['targets'] = a['targets'][:2]"),
-        ["evaluate", "RUN", "--contexts", "bad.npz"],
-        words=("targets",),
-    ),
-    MessageProbe(
-        "context set with float patterns",
-        3,
-        SHORT_ARRAY.replace("CHANGE", "a['patterns'] = a['patterns'] * 0.5"),
-        LOAD_BAD,
-        words=("patterns", "bool"),
-    ),  # fmt: skip
-    MessageProbe(
-        "context set with witnesses of another length",
-        3,
-        SHORT_ARRAY.replace("CHANGE", "a['witnesses'] = a['witnesses'][:, :5]"),
-        LOAD_BAD,
-        words=("witnesses", "(3, 20)"),
-    ),  # fmt: skip
-    MessageProbe(
-        "context set with 1-D weights",
-        3,
-        SHORT_ARRAY.replace("CHANGE", "a['weights'] = a['weights'].reshape(-1)"),
-        LOAD_BAD,
-        words=("weights", "(3, 5, 5)"),
-    ),  # fmt: skip
+    bad_array_probe("a short targets array (API)", "a['targets'] = a['targets'][:2]",
+                    ("targets", "(3,)")),  # fmt: skip
+    bad_array_probe("a short targets array (evaluate)", "a['targets'] = a['targets'][:2]",
+                    ("targets",), ["evaluate", "RUN", "--contexts", "bad.npz"]),  # fmt: skip
+    bad_array_probe("float patterns", "a['patterns'] = a['patterns'] * 0.5",
+                    ("patterns", "bool")),  # fmt: skip
+    bad_array_probe("witnesses of another length", "a['witnesses'] = a['witnesses'][:, :5]",
+                    ("witnesses", "(3, 20)")),  # fmt: skip
+    bad_array_probe("1-D weights", "a['weights'] = a['weights'].reshape(-1)",
+                    ("weights", "(3, 5, 5)")),  # fmt: skip
     # the pair of sets of spikectl contexts
     MessageProbe(
         "contexts --out-dir with a dangling link as the test set",

@@ -164,24 +164,32 @@ def test_latency_settings_equal_the_environment_with_latency_steps(test_set, lat
     """Cleo's latency{L} and spikectl's extensions={"latency_steps": L}: the same
     observations (actions in flight included), actions, target spikes and returns, for the
     latency-aware oracle, a random controller and identify-and-plan (5 episodes each L)."""
-    from spikectl.training.loaders import load_controller
-
     env = NeuronControlEnv(contexts=test_set, extensions={"latency_steps": latency})
     loop = cleo_bridge.CleoLoop(test_set, cleo_bridge.SETTINGS[f"latency{latency}"])
     for name, contexts in (("oracle", (0, 1)), ("random", (0, 1)), ("identify-and-plan", (2,))):
         for context in contexts:
-            ours = Recording(load_controller(name, env=env, seed=context))
-            actions, total = play_episode(env, ours, context)
-            spikes = env.unwrapped._spike_history[:, test_set[context].target].copy()
-            theirs = Recording(load_controller(name, env=env, seed=context))
-            episode = loop.play(theirs, context)
-            np.testing.assert_array_equal(episode.actions, actions, err_msg=f"{name} {context}")
-            np.testing.assert_array_equal(episode.target_spikes, spikes)
-            assert episode.total == total
-            for a, b in zip(ours.seen, theirs.seen, strict=True):
-                assert a.keys() == b.keys()
-                for key in a:
-                    np.testing.assert_array_equal(a[key], b[key], err_msg=f"{name} {key}")
+            played_alike(env, loop, test_set, name, context)
+
+
+def played_alike(env, loop, test_set, name: str, context: int) -> list[dict]:
+    """Play the registered controller ``name`` on ``context`` in spikectl's environment
+    and in Cleo's loop, assert the same actions, target spikes, return and observations,
+    and return the observations Cleo's copy saw."""
+    from spikectl.training.loaders import load_controller
+
+    ours = Recording(load_controller(name, env=env, seed=context))
+    actions, total = play_episode(env, ours, context)
+    spikes = env.unwrapped._spike_history[:, test_set[context].target].copy()
+    theirs = Recording(load_controller(name, env=env, seed=context))
+    episode = loop.play(theirs, context)
+    np.testing.assert_array_equal(episode.actions, actions, err_msg=f"{name} {context}")
+    np.testing.assert_array_equal(episode.target_spikes, spikes)
+    assert episode.total == total
+    for a, b in zip(ours.seen, theirs.seen, strict=True):
+        assert a.keys() == b.keys()
+        for key in a:
+            np.testing.assert_array_equal(a[key], b[key], err_msg=f"{name} {key}")
+    return theirs.seen
 
 
 def test_spikes_only_equals_the_environment_with_spikes_only_sensing(test_set):
@@ -189,25 +197,13 @@ def test_spikes_only_equals_the_environment_with_spikes_only_sensing(test_set):
     extensions={"sensing": "spikes"}: the same observations (spikes, no voltage), actions,
     target spikes and returns for the oracle and a random controller, over consecutive
     episodes of one loop (the recorder's count restarts at each reset)."""
-    from spikectl.training.loaders import load_controller
-
     env = NeuronControlEnv(contexts=test_set, extensions={"sensing": "spikes"})
     loop = cleo_bridge.CleoLoop(test_set, cleo_bridge.SETTINGS["spikes-only"])
     spiked = 0
     for name, context in (("random", 0), ("oracle", 1), ("random", 2)):
-        ours = Recording(load_controller(name, env=env, seed=context))
-        actions, total = play_episode(env, ours, context)
-        spikes = env.unwrapped._spike_history[:, test_set[context].target].copy()
-        theirs = Recording(load_controller(name, env=env, seed=context))
-        episode = loop.play(theirs, context)
-        np.testing.assert_array_equal(episode.actions, actions, err_msg=f"{name} {context}")
-        np.testing.assert_array_equal(episode.target_spikes, spikes)
-        assert episode.total == total
-        for a, b in zip(ours.seen, theirs.seen, strict=True):
-            assert a.keys() == b.keys() and "voltage" not in a
-            for key in a:
-                np.testing.assert_array_equal(a[key], b[key], err_msg=f"{name} {key}")
-            spiked += int(b["spikes"].sum())
+        for seen in played_alike(env, loop, test_set, name, context):
+            assert "voltage" not in seen
+            spiked += int(seen["spikes"].sum())
     assert spiked > 0  # spikes were compared, not only zeros
 
 

@@ -19,7 +19,7 @@ from spikectl.envs.controller import DoNothing, play_episode
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.env_support import observation_space
 from spikectl.envs.latency import IN_FLIGHT_KEY, ActionDelay
-from spikectl.envs.registration import flat_id
+from spikectl.envs.registration import flat_id, registered_kwargs
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.extensions import Extensions
@@ -266,11 +266,19 @@ def test_the_flat_layout_appends_one_hot_actions_in_flight():
     assert as_dict.space[IN_FLIGHT_KEY] == gym.spaces.MultiDiscrete([9, 9])
 
 
-def test_the_flat_vector_env_equals_the_flat_env_with_latency():
-    kwargs = {**SHORT, "extensions": {"latency_steps": 2}}
+@pytest.mark.parametrize("extensions", [
+    {"latency_steps": 2},
+    {"sensing": "spikes", "latency_steps": 1},
+    registered_kwargs("spikectl/NeuronControlRig-v0")["extensions"],
+], ids=["latency2", "spikes-latency1", "rig"])  # fmt: skip
+def test_the_flat_vector_env_equals_the_flat_env_through_the_loop(extensions):
+    """The batched flat environment steps as the single ones, with the actions in flight
+    and spikes-only sensing in the flat layout (and the rig's ChR2 and background)."""
+    kwargs = {**SHORT, "extensions": extensions}
     num_envs = 3
     batched = FlatNeuronControlVectorEnv(num_envs, **kwargs)
     singles = [FlatNeuronControlEnv(**kwargs) for _ in range(num_envs)]
+    assert batched.single_observation_space == singles[0].observation_space
     obs_a, _ = batched.reset(seed=4)
     obs_b = [env.reset(seed=4 + i)[0] for i, env in enumerate(singles)]
     rng = np.random.default_rng(1)

@@ -30,7 +30,6 @@ from spikectl.neuron.simulator import DO_NOTHING
 from spikectl.planning import IdentifyAndPlan
 from spikectl.planning.oracle import OraclePlanner
 from spikectl.wrappers.flat_env import FlatEnv, FlatNeuronControlEnv
-from spikectl.wrappers.flat_vector_env import FlatNeuronControlVectorEnv
 
 SPIKES = {"sensing": "spikes"}
 SHORT = {"contexts": {"n_train": 6, "n_test": 2}, "episode_length": 12}
@@ -215,24 +214,6 @@ def test_the_flat_layout_holds_the_spikes_in_the_voltage_columns():
     assert as_dict.observation_space[SPIKES_KEY] == gym.spaces.MultiBinary(8)
     assert "voltage" not in as_dict.observation_space.spaces
     assert observation in as_dict.observation_space
-
-
-def test_the_flat_vector_env_equals_the_flat_env():
-    kwargs = {**SHORT, "extensions": {**SPIKES, "latency_steps": 1}}
-    num_envs = 3
-    batched = FlatNeuronControlVectorEnv(num_envs, **kwargs)
-    singles = [FlatNeuronControlEnv(**kwargs) for _ in range(num_envs)]
-    assert batched.single_observation_space == singles[0].observation_space
-    obs_a, _ = batched.reset(seed=4)
-    obs_b = [env.reset(seed=4 + i)[0] for i, env in enumerate(singles)]
-    rng = np.random.default_rng(1)
-    for _ in range(12):
-        np.testing.assert_array_equal(obs_a, np.stack(obs_b))
-        actions = rng.integers(0, 9, num_envs)  # illegal ones do nothing, in both
-        obs_a, rewards, *_ = batched.step(actions)
-        steps = [env.step(int(a)) for env, a in zip(singles, actions, strict=True)]
-        obs_b = [s[0] for s in steps]
-        np.testing.assert_array_equal(rewards, [s[1] for s in steps])
 
 
 def test_the_ids_are_registered_with_a_flat_twin():
