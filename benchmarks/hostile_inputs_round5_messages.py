@@ -48,6 +48,8 @@ class MessageProbe(Probe):
 
 
 SMOKE = ["train", "smoke", "--run-dir", "new"]
+SMALL_CONTEXTS = ["contexts", "--out-dir", "out", "--n-train", "3", "--n-test", "3",
+                  "--n-neurons", "5", "--episode-length", "20"]  # fmt: skip
 WHAT_INIT_FROM_TAKES = "run directory"
 
 
@@ -215,19 +217,7 @@ PROBES = [
         "contexts --out-dir with a dangling link as the test set",
         4,
         "mkdir out && ln -s ../nowhere/t.npz out/test_contexts.npz",
-        [
-            "contexts",
-            "--out-dir",
-            "out",
-            "--n-train",
-            "3",
-            "--n-test",
-            "3",
-            "--n-neurons",
-            "5",
-            "--episode-length",
-            "20",
-        ],
+        SMALL_CONTEXTS,
         words=("test_contexts.npz",),
         absent=("out/train_contexts.npz",),
     ),  # fmt: skip
@@ -235,20 +225,7 @@ PROBES = [
         "contexts --overwrite with a link as the test set",
         4,
         "echo kept > kept.npz && mkdir out && ln -s ../kept.npz out/test_contexts.npz",
-        [
-            "contexts",
-            "--out-dir",
-            "out",
-            "--n-train",
-            "3",
-            "--n-test",
-            "3",
-            "--n-neurons",
-            "5",
-            "--episode-length",
-            "20",
-            "--overwrite",
-        ],
+        [*SMALL_CONTEXTS, "--overwrite"],
         keep=("kept.npz",),
         words=("test_contexts.npz", "link"),
         absent=("out/train_contexts.npz",),

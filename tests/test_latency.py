@@ -21,6 +21,7 @@ from spikectl.envs.env_support import observation_space
 from spikectl.envs.latency import IN_FLIGHT_KEY, ActionDelay
 from spikectl.envs.registration import flat_id, registered_kwargs
 from spikectl.envs.rollout import evaluate_policy
+from spikectl.envs.sensing import SPIKES_KEY
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
@@ -184,19 +185,21 @@ def test_plan_episode_refuses_a_bad_latency():
 # -- the vector environment
 
 
-@pytest.mark.parametrize(
-    "extensions",
-    [
-        {"latency_steps": 1},
-        {"latency_steps": 3, "hidden_fraction": 0.25, "stochastic_release": True,
-         "observation_noise_mV": 1.0},
-    ],
-)  # fmt: skip
-def test_the_vector_env_equals_single_envs_with_latency(extensions):
-    """Batched latency gives the single environments' episodes, step for step, over
-    three episodes with their autoresets (the queues restart empty)."""
+@pytest.mark.parametrize("extensions", [
+    {"latency_steps": 1},
+    {"latency_steps": 3, "hidden_fraction": 0.25, "stochastic_release": True,
+     "observation_noise_mV": 1.0},
+    {"sensing": "spikes"},
+    {"sensing": "spikes", "latency_steps": 2, "hidden_neurons": 2},
+    registered_kwargs("spikectl/NeuronControlRig-v0")["extensions"],
+], ids=["latency1", "latency3-realistic", "spikes", "spikes-latency2-hidden", "rig"])  # fmt: skip
+def test_the_vector_env_equals_single_envs_through_the_loop(extensions):
+    """The batched loop (latency, spikes-only sensing, the rig) gives the single
+    environments' episodes, step for step, over three episodes with their autoresets
+    (the queues restart empty, the spikes cleared)."""
     num_envs = 4
     kwargs = {**SHORT, "extensions": extensions}
+    spikes_only = extensions.get("sensing") == "spikes"
     batched = NeuronControlVectorEnv(num_envs=num_envs, **kwargs)
     sync = SyncVectorEnv([lambda: NeuronControlEnv(**kwargs) for _ in range(num_envs)],
                          autoreset_mode=AutoresetMode.NEXT_STEP)  # fmt: skip
@@ -204,11 +207,15 @@ def test_the_vector_env_equals_single_envs_with_latency(extensions):
     obs_a, info_a = batched.reset(seed=7)
     obs_b, _ = sync.reset(seed=7)
     rng = np.random.default_rng(13)
+    spiked = 0
     for step in range(3 * 13 + 2):
-        assert set(obs_a) == set(obs_b) and IN_FLIGHT_KEY in obs_a
+        assert set(obs_a) == set(obs_b)
+        assert (IN_FLIGHT_KEY in obs_a) == bool(extensions.get("latency_steps"))
+        assert ("voltage" in obs_a) != spikes_only and (SPIKES_KEY in obs_a) == spikes_only
         for key in obs_a:
             np.testing.assert_array_equal(obs_a[key], obs_b[key], err_msg=f"{step} {key}")
         assert obs_a in batched.observation_space
+        spiked += int(obs_a[SPIKES_KEY].sum()) if spikes_only else 0
         actions = np.array([rng.choice(np.flatnonzero(m)) - 1 for m in info_a["action_mask"]])
         obs_a, rewards_a, terminated_a, _, info_a = batched.step(actions)
         obs_b, rewards_b, terminated_b, _, info_b = sync.step(actions)
@@ -218,6 +225,7 @@ def test_the_vector_env_equals_single_envs_with_latency(extensions):
         np.testing.assert_array_equal(info_a["_spikes"], present)
         if present.any():
             np.testing.assert_array_equal(info_a["spikes"][present], info_b["spikes"][present])
+    assert spiked > 0 or not spikes_only  # spikes were compared, not only zeros
 
 
 def test_the_vector_env_renders_the_actions_as_they_land():

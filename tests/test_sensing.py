@@ -11,7 +11,6 @@ import gymnasium as gym
 import numpy as np
 import pytest
 from gymnasium.utils.env_checker import check_env
-from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
 from spikectl.cli import main
 from spikectl.config_errors import ConfigError
@@ -23,7 +22,6 @@ from spikectl.envs.latency import IN_FLIGHT_KEY
 from spikectl.envs.registration import flat_id
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.envs.sensing import SPIKES_KEY
-from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING
@@ -148,33 +146,6 @@ def test_an_episode_pickled_mid_way_continues_identically():
 
 
 # -- the vector environment
-
-
-@pytest.mark.parametrize("extensions", [SPIKES, {**SPIKES, "latency_steps": 2,
-                                                 "hidden_neurons": 2}])  # fmt: skip
-def test_the_vector_env_equals_single_envs(extensions):
-    """Step for step over three episodes with their autoresets (spikes cleared)."""
-    num_envs = 4
-    kwargs = {**SHORT, "extensions": extensions}
-    batched = NeuronControlVectorEnv(num_envs=num_envs, **kwargs)
-    sync = SyncVectorEnv([lambda: NeuronControlEnv(**kwargs) for _ in range(num_envs)],
-                         autoreset_mode=AutoresetMode.NEXT_STEP)  # fmt: skip
-    assert batched.single_observation_space == sync.single_observation_space
-    obs_a, info_a = batched.reset(seed=7)
-    obs_b, _ = sync.reset(seed=7)
-    rng = np.random.default_rng(13)
-    spiked = 0
-    for step in range(3 * 13 + 2):
-        assert set(obs_a) == set(obs_b) and SPIKES_KEY in obs_a and "voltage" not in obs_a
-        for key in obs_a:
-            np.testing.assert_array_equal(obs_a[key], obs_b[key], err_msg=f"{step} {key}")
-        assert obs_a in batched.observation_space
-        spiked += int(obs_a[SPIKES_KEY].sum())
-        actions = np.array([rng.choice(np.flatnonzero(m)) - 1 for m in info_a["action_mask"]])
-        obs_a, rewards_a, _, _, info_a = batched.step(actions)
-        obs_b, rewards_b, _, _, _ = sync.step(actions)
-        np.testing.assert_array_equal(rewards_a, rewards_b)
-    assert spiked > 0  # the comparison saw spikes, not only zeros
 
 
 def test_evaluate_policy_gives_the_papers_returns():
