@@ -192,6 +192,32 @@ def played_alike(env, loop, test_set, name: str, context: int) -> list[dict]:
     return theirs.seen
 
 
+def test_every_setting_has_its_matching_extensions():
+    """The spikectl loop each Cleo setting models: latency in steps, the actuator at the
+    same irradiance, the sensing and the noise's sigma; the ideal one is the paper's."""
+    assert cleo_bridge.matching_extensions(cleo_bridge.IDEAL) == Extensions()
+    for name, setting in cleo_bridge.SETTINGS.items():
+        extensions = cleo_bridge.matching_extensions(setting)
+        assert extensions.latency_steps == setting.latency_ms, name
+        assert (extensions.actuator, extensions.sensing) == (setting.actuation, setting.sensing)
+        assert extensions.observation_noise_mV == setting.noise_mV
+    assert cleo_bridge.matching_extensions(cleo_bridge.SETTINGS["chr2-latency2-spikes"]) == (
+        Extensions(actuator="chr2", latency_steps=2, sensing="spikes")
+    )
+
+
+def test_the_rigs_loop_without_background_equals_the_environment(test_set):
+    """ChR2, 2 ms of latency and spikes-only sensing at once (suite v2's rig without its
+    background input): the oracle made for that loop and a random controller play as
+    they do in spikectl's environment with the matching extensions."""
+    setting = cleo_bridge.SETTINGS["chr2-latency2-spikes"]
+    env = NeuronControlEnv(contexts=test_set, extensions=cleo_bridge.matching_extensions(setting))
+    loop = cleo_bridge.CleoLoop(test_set, setting)
+    for name, context in (("oracle", 0), ("random", 1)):
+        for seen in played_alike(env, loop, test_set, name, context):
+            assert "voltage" not in seen and len(seen["actions_in_flight"]) == 2
+
+
 def test_spikes_only_equals_the_environment_with_spikes_only_sensing(test_set):
     """Cleo's spikes-only setting (its ground-truth spike recorder) and spikectl's
     extensions={"sensing": "spikes"}: the same observations (spikes, no voltage), actions,

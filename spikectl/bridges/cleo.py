@@ -58,6 +58,7 @@ from spikectl.config_errors import ConfigError
 from spikectl.contexts import ContextSet
 from spikectl.envs.controller import Controller
 from spikectl.envs.env_support import ContextTables
+from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.kernel import SINCE_RELEASE_CAP
 from spikectl.neuron.params import NeuronParams
 
@@ -126,6 +127,23 @@ class CleoSetting:
             )
 
 
+def matching_extensions(setting: CleoSetting) -> Extensions:
+    """The spikectl extensions of the loop ``setting`` models: ``latency_ms`` as
+    ``latency_steps`` (steps are 1 ms), the ChR2 actuation at the same irradiance,
+    spikes-only sensing, and the measurement noise's sigma. Controllers made for them
+    (``load_controller(name, env=NeuronControlEnv(extensions=...))``) plan the loop they
+    play; without noise, spikectl's environment with them plays as Cleo does, action for
+    action (the noise's draws differ: Cleo's generator is seeded per context)."""
+    light = {"light_irradiance_mW_per_mm2": float(setting.irradiance_mW_per_mm2)}
+    return Extensions(
+        latency_steps=int(setting.latency_ms),
+        actuator=setting.actuation,
+        sensing=setting.sensing,
+        observation_noise_mV=float(setting.noise_mV),
+        **(light if setting.actuation == "chr2" else {}),
+    )
+
+
 IDEAL = CleoSetting()
 
 SETTINGS: dict[str, CleoSetting] = {
@@ -137,6 +155,7 @@ SETTINGS: dict[str, CleoSetting] = {
     "chr2": CleoSetting(actuation="chr2"),
     "chr2-latency2-noise1": CleoSetting(actuation="chr2", latency_ms=2, noise_mV=1.0),
     "spikes-only": CleoSetting(sensing="spikes"),
+    "chr2-latency2-spikes": CleoSetting(actuation="chr2", latency_ms=2, sensing="spikes"),
 }
 """The named settings of docs/cleo.md's table."""
 
