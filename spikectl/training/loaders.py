@@ -28,7 +28,7 @@ from typing import Any
 
 from spikectl.contexts import ContextSet
 from spikectl.envs.controller import Controller, DoNothing, RandomLegal, Witness
-from spikectl.file_kinds import FileKind, refuse_other_kinds
+from spikectl.file_kinds import FileKind, identify, refuse_other_kinds
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning.lit_search import planned_light
@@ -121,7 +121,8 @@ register_controller("witness", witness, "replays each context's witness sequence
 def controller_sources() -> str:
     """What a controller source may be, for messages."""
     return (
-        "a controller is a run directory, a compiled policy file (.npz from export_policy) "
+        "a controller is a run directory, a compiled policy file (.npz from export_policy), "
+        "an amortised belief's weights (.pt: AmortisedController) "
         f"or one of {', '.join(CONTROLLERS)}"
     )
 
@@ -203,7 +204,9 @@ def load_controller(
     ``model="final"`` or ``"best"``; ``compiled=True`` for its compiled policy;
     ``per_environment=True`` to play each environment of a batch alone, with the actions
     the real-time rig takes on every CPU: ``GreedyController``), a
-    compiled policy file (.npz from ``spikectl.agents.export_policy``), or one of
+    compiled policy file (.npz from ``spikectl.agents.export_policy``), an amortised
+    belief's weights (a ``.pt`` state dict: the
+    :class:`~spikectl.agents.amortised_controller.AmortisedController` on it), or one of
     :data:`CONTROLLERS` (:func:`register_controller` adds one).
 
     The named ones are made from what is played (:class:`Played`): the neuron model,
@@ -235,6 +238,11 @@ def load_controller(
             f"not one of {', '.join(CONTROLLERS)}"
         )
     refuse_other_kinds(path, (FileKind.RUN_DIR, FileKind.POLICY), controller_sources())
+    if identify(path) is FileKind.TORCH_FILE:  # an amortised belief's weights (issue 61)
+        from spikectl.agents.amortised_controller import AmortisedController, load_belief
+
+        return AmortisedController(load_belief(path), _played_on(env, contexts, params).params,
+                                   seed=seed)  # fmt: skip
     if path.is_dir():
         network = load_agent(path, model=model)
         if not compiled:

@@ -1,0 +1,186 @@
+"""A controller on the amortised belief (issue 61): it reads the belief over the target's
+inputs every step and stimulates the neuron most likely to make the target spike when
+the pattern wants a spike next.
+
+Each step it turns the new observation into the belief's input row
+(:class:`~spikectl.agents.amortised_kernel.BeliefFeatureTracker`), runs one step of the
+trained belief in NumPy (:class:`~spikectl.agents.amortised_kernel.BeliefKernel`) and
+decides by :func:`choose_action`: when the pattern wants the target to spike at the next
+step, stimulate the neuron with the highest P(G[i, target] = +1) among those whose
+stimulation can land then (not refractory, its synapses rested: the vesicle rule,
+docs/model.md), under ``rule="greedy"``; under ``rule="thompson"`` (posterior sampling)
+the same among the neurons whose class, drawn from the belief, is excitatory. Otherwise
+it does nothing. A wanted step is the probe: a neuron that was not an input is seen not
+to be one, at no cost against doing nothing, and the belief moves on.
+
+It plans with the target's column alone: it never uses cascades through other neurons
+(identify-and-plan's beam search plans with all of G, docs/results/amortised-controller
+measures what that costs). The belief's weights come from a file
+(``lab/results/amortised-belief/train.py`` writes one); :func:`load_belief` refuses
+anything else with one :class:`BeliefWeightsError` line.
+"""
+
+from __future__ import annotations
+
+import copy
+import os
+import zipfile
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from spikectl.agents.amortised_belief import N_FEATURES, AmortisedBelief
+from spikectl.agents.amortised_kernel import BeliefFeatureTracker, BeliefKernel, target_prior
+from spikectl.envs.controller import ControllerInputError, check_controller_input
+from spikectl.neuron.params import NeuronParams
+from spikectl.neuron.simulator import DO_NOTHING
+
+RULES = ("greedy", "thompson")
+"""How :func:`choose_action` picks among the neurons that can land a spike in time."""
+BELIEF_HEADS = 4
+"""The attention heads of the trained beliefs (a state dict does not record them)."""
+
+
+class BeliefWeightsError(ValueError):
+    """A belief weights file that is missing, unreadable, or not an
+    :class:`~spikectl.agents.amortised_belief.AmortisedBelief`'s state dict."""
+
+
+def load_belief(path: str | os.PathLike, heads: int = BELIEF_HEADS) -> AmortisedBelief:
+    """The trained belief saved at ``path`` (``torch.save(model.state_dict())``, as
+    ``lab/results/amortised-belief/train.py`` writes it), on CPU, weights only; its width
+    and layer count are read from the tensors' shapes."""
+    import torch
+
+    path = Path(path)
+    if not path.is_file():
+        raise BeliefWeightsError(f"{path}: no amortised belief weights file there "
+                                 "(lab/results/amortised-belief/train.py --out DIR writes "
+                                 "DIR/belief.pt)")  # fmt: skip
+    try:
+        state = torch.load(path, map_location="cpu", weights_only=True)
+    except (RuntimeError, OSError, EOFError, ValueError, zipfile.BadZipFile,
+            Exception) as error:  # fmt: skip  # torch raises many kinds for a damaged file
+        first = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+        raise BeliefWeightsError(f"{path} is not a readable PyTorch weights file: {first}") from None
+    encode = state.get("encode.0.weight") if isinstance(state, dict) else None
+    if not isinstance(encode, torch.Tensor) or encode.ndim != 2 or encode.shape[1] != N_FEATURES:
+        raise BeliefWeightsError(f"{path} does not hold an amortised belief's weights (no "
+                                 f"encode.0.weight of [width, {N_FEATURES}])")  # fmt: skip
+    width = int(encode.shape[0])
+    layers = len({key.split(".")[1] for key in state if key.startswith("mix.")})
+    try:
+        model = AmortisedBelief(width, heads, layers)
+        model.load_state_dict(state)
+    except (RuntimeError, ValueError) as error:
+        raise BeliefWeightsError(f"{path} does not fit an amortised belief of width {width}, "
+                                 f"{layers} mixing layers: {str(error).splitlines()[0]}") from None  # fmt: skip
+    if not all(bool(torch.isfinite(value).all()) for value in state.values()):
+        raise BeliefWeightsError(f"{path} holds NaN or infinite weights")
+    return model.eval()
+
+
+def choose_action(
+    excitatory: np.ndarray,
+    can_land: np.ndarray,
+    want_spike: bool,
+    rule: str = "greedy",
+    rng: np.random.Generator | None = None,
+    sampled: np.ndarray | None = None,
+) -> int:
+    """The action for one step: ``excitatory`` [n] P(G[i, target] = +1) (0 for the
+    target), ``can_land`` [n] bool (legal, and stimulated now it releases onto the target
+    at the next step), ``want_spike`` (the pattern's next step). ``"greedy"``: the most
+    probable input that can land; ``"thompson"``: the most probable among those whose
+    drawn class ``sampled`` [n] (from ``rng`` when None) is excitatory. Ties go to the
+    lower index; nothing to stimulate is -1."""
+    if not want_spike:
+        return DO_NOTHING
+    score = np.where(can_land, excitatory, -1.0)
+    if rule == "thompson":
+        if sampled is None:
+            sampled = rng.random(excitatory.shape) < excitatory
+        score = np.where(sampled, score, -1.0)
+    best = int(np.argmax(score))
+    return best if score[best] > 0.0 else DO_NOTHING
+
+
+class AmortisedController:
+    """Greedy or posterior-sampling control on the amortised belief (module docstring).
+
+    Args:
+        belief: a trained :class:`~spikectl.agents.amortised_belief.AmortisedBelief`
+            (:func:`load_belief`), or any object with ``reset(prior [n])`` and
+            ``step(features [n, F]) -> logits [n, 3]`` (a
+            :class:`~spikectl.agents.amortised_kernel.BeliefKernel`'s interface).
+        params: the neuron model (None: the paper's).
+        rule: one of :data:`RULES`.
+        seed: seeds ``thompson``'s draws (one generator per controller; :meth:`spawn`'s
+            copies get ``seed + index``).
+    """
+
+    def __init__(self, belief: Any, params: NeuronParams | None = None, rule: str = "greedy",
+                 seed: int = 0) -> None:  # fmt: skip
+        if rule not in RULES:
+            raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
+        if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
+        self.kernel = BeliefKernel(belief) if isinstance(belief, AmortisedBelief) else belief
+        self.params = NeuronParams() if params is None else params
+        self.rule, self.seed = rule, int(seed)
+        self.rng = np.random.default_rng(self.seed)
+        self.tracker: BeliefFeatureTracker | None = None
+        self.excitatory = np.zeros(0)
+
+    def spawn(self, index: int) -> AmortisedController:
+        """A copy for sub-environment ``index`` of a vector environment (its own seed, and
+        its own belief state: the weights are shared, the GRU's memory is not)."""
+        return AmortisedController(copy.copy(self.kernel), self.params, self.rule,
+                                   self.seed + index)  # fmt: skip
+
+    def reset(self) -> None:
+        """Forget the episode (``act`` at step 0 also does)."""
+        self.tracker = None
+
+    def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
+        """The action for this observation (an agent index, -1 for do nothing)."""
+        check_controller_input(observation, info, "AmortisedController",
+                               ("voltage", "pattern", "target", "step"))  # fmt: skip
+        if "voltage" not in observation:
+            raise ControllerInputError("AmortisedController.act: the belief reads the observed "
+                                       "potentials, which spikes-only sensing does not give")  # fmt: skip
+        step = int(observation["step"])
+        voltage = np.asarray(observation["voltage"])
+        pattern = np.asarray(observation["pattern"])
+        mask = np.asarray(info["action_mask"], dtype=bool)
+        n, target = voltage.shape[0], int(observation["target"])
+        if mask.shape != (n + 1,) or not 0 <= target < n:
+            raise ControllerInputError(f"AmortisedController.act: action_mask must be [{n + 1}] "
+                                       f"and the target in 0..{n - 1}")  # fmt: skip
+        if step == 0 or self.tracker is None:
+            if step != 0:
+                raise ValueError("AmortisedController must see the episode from its first step")
+            self.tracker = BeliefFeatureTracker(n, target, self.params)
+            self.kernel.reset(target_prior(n, target))
+            self.excitatory = target_prior(n, target) * 0.8  # the prior's P(+1)
+        else:
+            row = self.tracker.row(voltage, int(observation.get("last_action", DO_NOTHING)))
+            logits = self.kernel.step(row).astype(np.float64)  # [n, 3]
+            logits -= logits.max(axis=1, keepdims=True)
+            probabilities = np.exp(logits)
+            self.excitatory = probabilities[:, 1] / probabilities.sum(axis=1)
+            self.excitatory[target] = 0.0
+        want = step + 1 < pattern.shape[0] and bool(pattern[step + 1])
+        return choose_action(self.excitatory, self.can_land(mask[1:]), want, self.rule, self.rng)
+
+    def can_land(self, legal: np.ndarray) -> np.ndarray:
+        """[n] bool: stimulated now, the neuron spikes and releases onto its targets at
+        the next step (legal, not refractory, at least the release interval since its
+        last release, and driven over threshold from its potential after the leak)."""
+        tracker, p = self.tracker, self.params
+        rested = tracker.since + 1 >= p.min_release_interval_steps
+        potential = (tracker.after_reset - (tracker.after_reset - p.v_rest_mV) * p.leak_per_step
+                     + p.stimulus_step_mV)  # fmt: skip
+        return legal & rested & (tracker.refractory_left == 0) & (potential >= p.v_spike_mV)
