@@ -9,9 +9,12 @@ decides by :func:`choose_action`: when the pattern wants the target to spike at 
 step, stimulate the neuron with the highest P(G[i, target] = +1) among those whose
 stimulation can land then (not refractory, its synapses rested: the vesicle rule,
 docs/model.md), under ``rule="greedy"``; under ``rule="thompson"`` (posterior sampling)
-the same among the neurons whose class, drawn from the belief, is excitatory. Otherwise
-it does nothing. A wanted step is the probe: a neuron that was not an input is seen not
-to be one, at no cost against doing nothing, and the belief moves on.
+the same among the neurons whose class, drawn from the belief, is excitatory. A wanted
+step is a free probe: a neuron that was not an input is seen not to be one, at no cost
+against doing nothing, and the belief moves on. On a quiet stretch (no spike wanted
+for the release interval ahead) while no input is yet likely (``probe_below``) it
+probes the likeliest neuron, at the cost of an unwanted spike when it is one, so that
+the next wanted step finds an input rested. Otherwise it does nothing.
 
 It plans with the target's column alone: it never uses cascades through other neurons
 (identify-and-plan's beam search plans with all of G, docs/results/amortised-controller
@@ -39,6 +42,9 @@ from spikectl.neuron.simulator import DO_NOTHING
 
 RULES = ("greedy", "thompson")
 """How :func:`choose_action` picks among the neurons that can land a spike in time."""
+PROBE_BELOW = 0.8
+"""Probe on quiet stretches while no input that can land is this certain (chosen on the
+``n16`` and ``n32`` validation sets: 0.5, 0.8 and 0.95, docs/results/amortised-controller)."""
 BELIEF_HEADS = 4
 """The attention heads of the trained beliefs (a state dict does not record them)."""
 
@@ -85,24 +91,36 @@ def load_belief(path: str | os.PathLike, heads: int = BELIEF_HEADS) -> Amortised
 def choose_action(
     excitatory: np.ndarray,
     can_land: np.ndarray,
-    want_spike: bool,
+    ahead: np.ndarray,
     rule: str = "greedy",
     rng: np.random.Generator | None = None,
-    sampled: np.ndarray | None = None,
+    probe_below: float = PROBE_BELOW,
 ) -> int:
-    """The action for one step: ``excitatory`` [n] P(G[i, target] = +1) (0 for the
-    target), ``can_land`` [n] bool (legal, and stimulated now it releases onto the target
-    at the next step), ``want_spike`` (the pattern's next step). ``"greedy"``: the most
-    probable input that can land; ``"thompson"``: the most probable among those whose
-    drawn class ``sampled`` [n] (from ``rng`` when None) is excitatory. Ties go to the
-    lower index; nothing to stimulate is -1."""
-    if not want_spike:
-        return DO_NOTHING
-    score = np.where(can_land, excitatory, -1.0)
+    """The action for one step.
+
+    Args:
+        excitatory: [n] P(G[i, target] = +1) (0 for the target).
+        can_land: [n] bool: legal, and stimulated now it releases at the next step.
+        ahead: bool, the pattern's next steps (from the next one on, up to the release
+            interval): whether the target should spike then.
+        rule: ``"greedy"``: on a wanted next step, the most probable input that can
+            land; ``"thompson"``: the most probable among those whose class, drawn from
+            the belief with ``rng``, is excitatory.
+        rng: the generator of ``thompson``'s draws.
+        probe_below: when nothing is wanted for the whole of ``ahead`` and no neuron that
+            can land is an input with at least this probability, probe the likeliest
+            one (0: never): the target's answer identifies it, and it is rested again
+            by the next wanted step.
+
+    Ties go to the lower index; nothing to stimulate is -1.
+    """
+    score = np.where(can_land, excitatory, -1.0)  # [n]
+    if ahead.size == 0 or not ahead[0]:
+        best = int(np.argmax(score))
+        probe = not ahead.any() and 0.0 < score[best] < probe_below
+        return best if probe else DO_NOTHING
     if rule == "thompson":
-        if sampled is None:
-            sampled = rng.random(excitatory.shape) < excitatory
-        score = np.where(sampled, score, -1.0)
+        score = np.where(rng.random(excitatory.shape) < excitatory, score, -1.0)
     best = int(np.argmax(score))
     return best if score[best] > 0.0 else DO_NOTHING
 
@@ -119,12 +137,16 @@ class AmortisedController:
         rule: one of :data:`RULES`.
         seed: seeds ``thompson``'s draws (one generator per controller; :meth:`spawn`'s
             copies get ``seed + index``).
+        probe_below: :func:`choose_action`'s (0: probe only on wanted steps).
     """
 
     def __init__(self, belief: Any, params: NeuronParams | None = None, rule: str = "greedy",
-                 seed: int = 0) -> None:  # fmt: skip
+                 seed: int = 0, probe_below: float = PROBE_BELOW) -> None:  # fmt: skip
         if rule not in RULES:
             raise ValueError(f"rule must be one of {RULES}, got {rule!r}")
+        if not 0.0 <= probe_below <= 1.0:
+            raise ValueError(f"probe_below must lie in [0, 1], got {probe_below!r}")
+        self.probe_below = float(probe_below)
         if isinstance(seed, bool) or not isinstance(seed, (int, np.integer)) or seed < 0:
             raise ValueError(f"seed must be a non-negative integer, got {seed!r}")
         self.kernel = BeliefKernel(belief) if isinstance(belief, AmortisedBelief) else belief
@@ -138,7 +160,7 @@ class AmortisedController:
         """A copy for sub-environment ``index`` of a vector environment (its own seed, and
         its own belief state: the weights are shared, the GRU's memory is not)."""
         return AmortisedController(copy.copy(self.kernel), self.params, self.rule,
-                                   self.seed + index)  # fmt: skip
+                                   self.seed + index, self.probe_below)  # fmt: skip
 
     def reset(self) -> None:
         """Forget the episode (``act`` at step 0 also does)."""
@@ -172,8 +194,9 @@ class AmortisedController:
             probabilities = np.exp(logits)
             self.excitatory = probabilities[:, 1] / probabilities.sum(axis=1)
             self.excitatory[target] = 0.0
-        want = step + 1 < pattern.shape[0] and bool(pattern[step + 1])
-        return choose_action(self.excitatory, self.can_land(mask[1:]), want, self.rule, self.rng)
+        ahead = pattern[step + 1:step + 1 + self.params.min_release_interval_steps]
+        return choose_action(self.excitatory, self.can_land(mask[1:]), ahead.astype(bool),
+                             self.rule, self.rng, self.probe_below)  # fmt: skip
 
     def can_land(self, legal: np.ndarray) -> np.ndarray:
         """[n] bool: stimulated now, the neuron spikes and releases onto its targets at
