@@ -13,7 +13,7 @@ the same among the neurons whose class, drawn from the belief, is excitatory. A 
 step is a free probe: a neuron that was not an input is seen not to be one, at no cost
 against doing nothing, and the belief moves on. On a quiet stretch (no spike wanted
 for the release interval ahead) while no input is yet likely (``probe_below``) it
-probes the likeliest neuron, at the cost of an unwanted spike when it is one, so that
+probes the likeliest neuron that can land, at the cost of an unwanted spike when it is one, so that
 the next wanted step finds an input rested. Otherwise it does nothing.
 
 It plans with the target's column alone: it never uses cascades through other neurons
@@ -45,6 +45,9 @@ RULES = ("greedy", "thompson")
 PROBE_BELOW = 0.8
 """Probe on quiet stretches while no input that can land is this certain (chosen on the
 ``n16`` and ``n32`` validation sets: 0.5, 0.8 and 0.95, docs/results/amortised-controller)."""
+PROBE_FLOOR = 0.02
+"""A neuron less likely than this to be an input is not worth a probe (the generator's
+base rate beyond 8 neurons apart is below it)."""
 BELIEF_HEADS = 4
 """The attention heads of the trained beliefs (a state dict does not record them)."""
 
@@ -107,17 +110,19 @@ def choose_action(
             land; ``"thompson"``: the most probable among those whose class, drawn from
             the belief with ``rng``, is excitatory.
         rng: the generator of ``thompson``'s draws.
-        probe_below: when nothing is wanted for the whole of ``ahead`` and no neuron that
-            can land is an input with at least this probability, probe the likeliest
-            one (0: never): the target's answer identifies it, and it is rested again
-            by the next wanted step.
+        probe_below: when nothing is wanted for the whole of ``ahead`` and no neuron is
+            an input with at least this probability, probe the likeliest one that can
+            land, if it is at least :data:`PROBE_FLOOR` likely (``probe_below`` 0:
+            never): the target's answer identifies it, and it is rested again by the
+            next wanted step.
 
     Ties go to the lower index; nothing to stimulate is -1.
     """
     score = np.where(can_land, excitatory, -1.0)  # [n]
     if ahead.size == 0 or not ahead[0]:
         best = int(np.argmax(score))
-        probe = not ahead.any() and 0.0 < score[best] < probe_below
+        probe = (not ahead.any() and excitatory.max() < probe_below
+                 and score[best] >= PROBE_FLOOR)  # fmt: skip
         return best if probe else DO_NOTHING
     if rule == "thompson":
         score = np.where(rng.random(excitatory.shape) < excitatory, score, -1.0)
