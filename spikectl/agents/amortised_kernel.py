@@ -1,22 +1,22 @@
-"""The amortised belief's step without PyTorch: what a controller runs every millisecond.
+"""The amortised belief's step compiled: what a controller runs every millisecond.
 
 :class:`AmortisedBelief.step <spikectl.agents.amortised_belief.AmortisedBelief.step>`
 in PyTorch's eager mode spends most of its 0.6-0.9 ms a step dispatching a few dozen
-tiny operators; the same arithmetic in NumPy on one network's [n, D] arrays takes a
-fraction of that (docs/results/amortised-controller). :class:`BeliefKernel` copies a
-trained belief's weights once and computes, step by step, the same logits
-(float32; equal to PyTorch's within rounding, ``tests/test_amortised_controller.py``).
+tiny operators. :class:`BeliefKernel` copies a trained belief's weights once and runs
+the same arithmetic on one network's [n, D] arrays in one Numba function (float32;
+equal to PyTorch's within rounding, ``tests/test_amortised_controller.py``).
 :class:`BeliefFeatureTracker` computes one step's row of
 :func:`~spikectl.agents.amortised_belief.belief_features` from that step's observation
 in O(n), where ``belief_features`` recomputes the whole history.
 
-Shapes in comments: n neurons, F features, D width, h heads.
+Shapes in comments: n neurons, F features, D width, L mixing layers.
 """
 
 from __future__ import annotations
 
 import math
 
+import numba
 import numpy as np
 
 from spikectl.agents.amortised_belief import AmortisedBelief
@@ -25,64 +25,172 @@ from spikectl.neuron.params import NeuronParams
 
 _LAYER_NORM_EPS = 1e-5  # PyTorch's TransformerEncoderLayer default
 _PRIOR_FLOOR = 1e-4  # prior_logits' clip
+_JIT = dict(cache=True, nogil=True, fastmath={"contract"}, error_model="numpy")
 
 
-def _erf(x: np.ndarray) -> np.ndarray:
-    """erf by Abramowitz and Stegun 7.1.26 (absolute error below 1.5e-7: far below
-    float32's rounding of the activations it feeds); NumPy has no erf of its own."""
-    sign = np.sign(x)
-    a = np.abs(x)
-    t = 1.0 / (1.0 + 0.3275911 * a)
-    poly = t * (0.254829592 + t * (-0.284496736 + t * (1.421413741 + t * (-1.453152027
-                                                                     + t * 1.061405429))))  # fmt: skip
-    return sign * (1.0 - poly * np.exp(-a * a))
+@numba.njit(**_JIT)
+def _linear(x, weight, bias, out):  # pragma: no cover (compiled)
+    """out [n, O] = x [n, I] @ weight [I, O] + bias [O]; the inner loop runs along O."""
+    for row in range(x.shape[0]):
+        out[row, :] = bias
+        for k in range(x.shape[1]):
+            value = x[row, k]
+            for j in range(weight.shape[1]):
+                out[row, j] += value * weight[k, j]
 
 
-def _gelu(x: np.ndarray) -> np.ndarray:
-    return 0.5 * x * (1.0 + _erf(x * np.float32(1.0 / math.sqrt(2.0))))
+@numba.njit(**_JIT)
+def _gelu(x):  # pragma: no cover (compiled)
+    """In place: GELU, erf form (PyTorch's nn.GELU default)."""
+    root_half = 1.0 / math.sqrt(2.0)
+    for row in range(x.shape[0]):
+        for j in range(x.shape[1]):
+            value = x[row, j]
+            x[row, j] = 0.5 * value * (1.0 + math.erf(value * root_half))
 
 
-def _layer_norm(x: np.ndarray, gamma: np.ndarray, beta: np.ndarray) -> np.ndarray:
-    mean = x.mean(axis=-1, keepdims=True)
-    centred = x - mean
-    variance = (centred * centred).mean(axis=-1, keepdims=True)
-    return centred / np.sqrt(variance + _LAYER_NORM_EPS) * gamma + beta
+@numba.njit(**_JIT)
+def _add_norm(x, residual, gamma, beta):  # pragma: no cover (compiled)
+    """In place: x = LayerNorm(x + residual) over the last axis."""
+    width = x.shape[1]
+    for row in range(x.shape[0]):
+        mean = 0.0
+        for j in range(width):
+            x[row, j] += residual[row, j]
+            mean += x[row, j]
+        mean /= width
+        variance = 0.0
+        for j in range(width):
+            variance += (x[row, j] - mean) ** 2
+        scale = 1.0 / math.sqrt(variance / width + _LAYER_NORM_EPS)
+        for j in range(width):
+            x[row, j] = (x[row, j] - mean) * scale * gamma[j] + beta[j]
 
 
-def _sigmoid(x: np.ndarray) -> np.ndarray:
-    return 1.0 / (1.0 + np.exp(-x))
+@numba.njit(**_JIT)
+def _attend(qkv, heads, out):  # pragma: no cover (compiled)
+    """out [n, D]: multi-head self-attention of qkv [n, 3D] (q, k, v side by side). The
+    keys are transposed first so that the scores' inner loop runs along contiguous memory."""
+    n, width = out.shape
+    size = width // heads
+    scale = 1.0 / math.sqrt(size)
+    keys = np.ascontiguousarray(qkv[:, width:2 * width].T)  # [D, n]
+    scores = np.empty((n, n), dtype=np.float32)
+    out[:, :] = 0.0
+    for head in range(heads):
+        base = head * size
+        scores[:, :] = 0.0
+        for i in range(n):
+            for c in range(base, base + size):
+                query = qkv[i, c] * scale
+                for j in range(n):
+                    scores[i, j] += query * keys[c, j]
+        for i in range(n):
+            top = scores[i].max()
+            norm = 0.0
+            for j in range(n):
+                scores[i, j] = math.exp(scores[i, j] - top)
+                norm += scores[i, j]
+            for j in range(n):
+                scores[i, j] /= norm
+        for i in range(n):
+            for j in range(n):
+                weight = scores[i, j]
+                for c in range(base, base + size):
+                    out[i, c] += weight * qkv[j, 2 * width + c]
+
+
+@numba.njit(**_JIT)
+def _step(features, hidden, heads, prior, w):  # pragma: no cover (compiled)
+    """Logits [n, 3] of one step; ``hidden`` [n, D] (the GRU's memory) updated in place.
+    ``w``: the weights as :meth:`BeliefKernel.__init__` packs them."""
+    (enc1_w, enc1_b, enc2_w, enc2_b, gi_w, gi_b, gh_w, gh_b, in_w, in_b, out_w, out_b,
+     ff1_w, ff1_b, ff2_w, ff2_b, norm1, norm2, head1_w, head1_b, head2_w, head2_b) = w
+    n, width = hidden.shape
+    f32 = np.float32
+    first = np.empty((n, width), dtype=f32)
+    _linear(features, enc1_w, enc1_b, first)
+    _gelu(first)
+    x = np.empty((n, width), dtype=f32)
+    _linear(first, enc2_w, enc2_b, x)
+    _gelu(x)
+    gates_x = np.empty((n, 3 * width), dtype=f32)
+    gates_h = np.empty((n, 3 * width), dtype=f32)
+    _linear(x, gi_w, gi_b, gates_x)
+    _linear(hidden, gh_w, gh_b, gates_h)
+    for i in range(n):
+        for j in range(width):
+            reset = 1.0 / (1.0 + math.exp(-(gates_x[i, j] + gates_h[i, j])))
+            update = 1.0 / (1.0 + math.exp(-(gates_x[i, width + j] + gates_h[i, width + j])))
+            new = math.tanh(gates_x[i, 2 * width + j] + reset * gates_h[i, 2 * width + j])
+            hidden[i, j] = (1.0 - update) * new + update * hidden[i, j]
+    joined = np.empty((n, 2 * width), dtype=f32)  # [memory, mixed]
+    joined[:, :width] = hidden
+    mixed = hidden.copy()
+    qkv = np.empty((n, 3 * width), dtype=f32)
+    attended = np.empty((n, width), dtype=f32)
+    projected = np.empty((n, width), dtype=f32)
+    inner = np.empty((n, ff1_w.shape[2]), dtype=f32)
+    for layer in range(in_w.shape[0]):
+        _linear(mixed, in_w[layer], in_b[layer], qkv)
+        _attend(qkv, heads, attended)
+        _linear(attended, out_w[layer], out_b[layer], projected)
+        _add_norm(mixed, projected, norm1[layer, 0], norm1[layer, 1])
+        _linear(mixed, ff1_w[layer], ff1_b[layer], inner)
+        for i in range(n):
+            for j in range(inner.shape[1]):
+                inner[i, j] = max(inner[i, j], 0.0)
+        _linear(inner, ff2_w[layer], ff2_b[layer], projected)
+        _add_norm(mixed, projected, norm2[layer, 0], norm2[layer, 1])
+    joined[:, width:] = mixed
+    head = np.empty((n, width), dtype=f32)
+    _linear(joined, head1_w, head1_b, head)
+    _gelu(head)
+    logits = np.empty((n, 3), dtype=f32)
+    _linear(head, head2_w, head2_b, logits)
+    return logits + prior
 
 
 class BeliefKernel:
-    """One network's belief, step by step, in NumPy: ``reset(n)`` at an episode's start,
-    then ``step(features [n, F]) -> logits [n, 3]`` over
+    """One network's belief, step by step, compiled: ``reset(prior [n])`` at an episode's
+    start, then ``step(features [n, F]) -> logits [n, 3]`` over
     :data:`~spikectl.agents.amortised_belief.CLASSES` (prior logits included), as
     ``AmortisedBelief.step`` with a batch of one."""
 
     def __init__(self, model: AmortisedBelief) -> None:
-        weights = {key: value.detach().cpu().numpy().astype(np.float32)
-                   for key, value in model.state_dict().items()}  # fmt: skip
+        state = {key: value.detach().cpu().numpy().astype(np.float32)
+                 for key, value in model.state_dict().items()}  # fmt: skip
         self.width, self.heads = model.width, model.heads
+        layers = range(model.mix_layers)
 
-        def linear(prefix: str, weight: str = "weight", bias: str = "bias"):
-            return weights[f"{prefix}.{weight}"].T.copy(), weights[f"{prefix}.{bias}"]
+        def transposed(name: str) -> np.ndarray:  # [out, in] -> [in, out]
+            return np.ascontiguousarray(state[name].T)
 
-        self.encode = (linear("encode.0"), linear("encode.2"))
-        self.gru_input = linear("memory", "weight_ih_l0", "bias_ih_l0")  # [D, 3D], [3D]
-        self.gru_hidden = linear("memory", "weight_hh_l0", "bias_hh_l0")
-        self.mix = [
-            {
-                "in": linear(f"mix.{k}.self_attn", "in_proj_weight", "in_proj_bias"),
-                "out": linear(f"mix.{k}.self_attn.out_proj"),
-                "ff1": linear(f"mix.{k}.linear1"),
-                "ff2": linear(f"mix.{k}.linear2"),
-                "norm1": (weights[f"mix.{k}.norm1.weight"], weights[f"mix.{k}.norm1.bias"]),
-                "norm2": (weights[f"mix.{k}.norm2.weight"], weights[f"mix.{k}.norm2.bias"]),
-            }
-            for k in range(model.mix_layers)
-        ]
-        self.head = (linear("head.0"), linear("head.2"))
-        self.hidden = self.prior = np.zeros((0, 0), dtype=np.float32)
+        def stacked(name: str, transpose: bool = True) -> np.ndarray:  # [L, ...]
+            shape = (0, self.width, self.width) if transpose else (0, self.width)
+            arrays = [transposed(f"mix.{k}.{name}") if transpose else state[f"mix.{k}.{name}"]
+                      for k in layers]  # fmt: skip
+            return np.ascontiguousarray(np.stack(arrays)) if arrays else np.zeros(shape, np.float32)
+
+        def norms(name: str) -> np.ndarray:  # [L, 2, D]: gamma, beta
+            pairs = [np.stack([state[f"mix.{k}.{name}.weight"], state[f"mix.{k}.{name}.bias"]])
+                     for k in layers]  # fmt: skip
+            return np.stack(pairs) if pairs else np.zeros((0, 2, self.width), np.float32)
+
+        self.weights = (
+            transposed("encode.0.weight"), state["encode.0.bias"],
+            transposed("encode.2.weight"), state["encode.2.bias"],
+            transposed("memory.weight_ih_l0"), state["memory.bias_ih_l0"],
+            transposed("memory.weight_hh_l0"), state["memory.bias_hh_l0"],
+            stacked("self_attn.in_proj_weight"), stacked("self_attn.in_proj_bias", False),
+            stacked("self_attn.out_proj.weight"), stacked("self_attn.out_proj.bias", False),
+            stacked("linear1.weight"), stacked("linear1.bias", False),
+            stacked("linear2.weight"), stacked("linear2.bias", False),
+            norms("norm1"), norms("norm2"),
+            transposed("head.0.weight"), state["head.0.bias"],
+            transposed("head.2.weight"), state["head.2.bias"],
+        )  # fmt: skip
+        self.hidden = self.prior = np.zeros((0, 3), dtype=np.float32)
 
     def reset(self, prior: np.ndarray) -> None:
         """A new episode whose prior [n] P(i -> target) is ``prior`` (0 for the target):
@@ -96,38 +204,8 @@ class BeliefKernel:
 
     def step(self, features: np.ndarray) -> np.ndarray:
         """features float32 [n, F] of this step -> logits float32 [n, 3]."""
-        (w1, b1), (w2, b2) = self.encode
-        x = _gelu(_gelu(features @ w1 + b1) @ w2 + b2)  # [n, D]
-        h = self.hidden
-        d = self.width
-        gates_x = x @ self.gru_input[0] + self.gru_input[1]  # [n, 3D]: r, z, new
-        gates_h = h @ self.gru_hidden[0] + self.gru_hidden[1]  # [n, 3D]
-        reset = _sigmoid(gates_x[:, :d] + gates_h[:, :d])
-        update = _sigmoid(gates_x[:, d:2 * d] + gates_h[:, d:2 * d])
-        new = np.tanh(gates_x[:, 2 * d:] + reset * gates_h[:, 2 * d:])
-        memory = (1.0 - update) * new + update * h  # [n, D]
-        self.hidden = memory
-        mixed = memory
-        for layer in self.mix:
-            mixed = self._mix(mixed, layer)
-        (w3, b3), (w4, b4) = self.head
-        joined = np.concatenate([memory, mixed], axis=1)  # [n, 2D]
-        return _gelu(joined @ w3 + b3) @ w4 + b4 + self.prior  # [n, 3]
-
-    def _mix(self, x: np.ndarray, layer: dict) -> np.ndarray:
-        """One post-norm transformer encoder layer (ReLU feed-forward), as PyTorch's."""
-        n, d, heads = x.shape[0], self.width, self.heads
-        per_head = d // heads
-        qkv = x @ layer["in"][0] + layer["in"][1]  # [n, 3D]
-        q, k, v = (qkv[:, i * d:(i + 1) * d].reshape(n, heads, per_head).transpose(1, 0, 2)
-                   for i in range(3))  # fmt: skip  # each [h, n, D/h]
-        scores = (q @ k.transpose(0, 2, 1)) * np.float32(1.0 / math.sqrt(per_head))  # [h, n, n]
-        scores = np.exp(scores - scores.max(axis=-1, keepdims=True))
-        attention = scores / scores.sum(axis=-1, keepdims=True)
-        attended = (attention @ v).transpose(1, 0, 2).reshape(n, d)  # [n, D]
-        x = _layer_norm(x + attended @ layer["out"][0] + layer["out"][1], *layer["norm1"])
-        hidden = np.maximum(x @ layer["ff1"][0] + layer["ff1"][1], 0.0)  # [n, 2D]
-        return _layer_norm(x + hidden @ layer["ff2"][0] + layer["ff2"][1], *layer["norm2"])
+        features = np.ascontiguousarray(features, dtype=np.float32)
+        return _step(features, self.hidden, self.heads, self.prior, self.weights)
 
 
 def target_prior(n_neurons: int, target: int) -> np.ndarray:
