@@ -107,7 +107,7 @@ def test_choose_action_by_hand():
     assert choose_action(excitatory, can_land, np.array([True])) == 1  # 2 cannot land
     assert choose_action(excitatory, can_land, np.array([False, True])) == -1  # wanted soon
     quiet = np.array([False] * 5)
-    assert choose_action(excitatory, can_land, quiet) == -1  # 2 is an input at 0.9 >= 0.8
+    assert choose_action(excitatory, can_land, quiet) == -1  # 2 is an input at 0.9 >= 0.5
     assert choose_action(excitatory, can_land, quiet, probe_below=0.95) == 1  # probes 0.6
     assert choose_action(excitatory * 0.1, can_land, quiet) == 1  # 0.06: still worth one
     assert choose_action(excitatory * 0.01, can_land, quiet) == -1  # 0.006: below the floor

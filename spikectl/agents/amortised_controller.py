@@ -36,15 +36,17 @@ import numpy as np
 
 from spikectl.agents.amortised_belief import N_FEATURES, AmortisedBelief
 from spikectl.agents.amortised_kernel import BeliefFeatureTracker, BeliefKernel, target_prior
+from spikectl.contexts.generation import EXCITATORY_PROBABILITY
 from spikectl.envs.controller import ControllerInputError, check_controller_input
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING
 
 RULES = ("greedy", "thompson")
 """How :func:`choose_action` picks among the neurons that can land a spike in time."""
-PROBE_BELOW = 0.8
-"""Probe on quiet stretches while no input that can land is this certain (chosen on the
-``n16`` and ``n32`` validation sets: 0.5, 0.8 and 0.95, docs/results/amortised-controller)."""
+PROBE_BELOW = 0.5
+"""Probe on quiet stretches while no neuron is an input this likely (chosen on the
+``n16`` and ``n32`` validation sets among 0, 0.5, 0.8 and 0.95: 0.5, 0.8 and 0.95 score
+within 0.003 of each other, 0.02-0.03 above 0; docs/results/amortised-controller)."""
 PROBE_FLOOR = 0.02
 """A neuron less likely than this to be an input is not worth a probe (the generator's
 base rate beyond 8 neurons apart is below it)."""
@@ -191,7 +193,7 @@ class AmortisedController:
                 raise ValueError("AmortisedController must see the episode from its first step")
             self.tracker = BeliefFeatureTracker(n, target, self.params)
             self.kernel.reset(target_prior(n, target))
-            self.excitatory = target_prior(n, target) * 0.8  # the prior's P(+1)
+            self.excitatory = target_prior(n, target) * EXCITATORY_PROBABILITY  # the prior's P(+1)
         else:
             row = self.tracker.row(voltage, int(observation.get("last_action", DO_NOTHING)))
             logits = self.kernel.step(row).astype(np.float64)  # [n, 3]

@@ -1,0 +1,149 @@
+"""Measure the controller on the amortised belief (issue 61, item 2), on one thread.
+
+    python lab/results/amortised-controller/measure.py sweep --belief belief.pt \
+        --out docs/results/amortised-controller/validation-sweep.csv
+    python lab/results/amortised-controller/measure.py paired \
+        --new docs/results/amortised-controller/test-per-network.csv \
+        --out docs/results/amortised-controller/paired.csv
+    python lab/results/amortised-controller/measure.py timing --belief belief.pt \
+        --out docs/results/amortised-controller/timing.csv
+
+``sweep``: the settings tried, on the suite's validation sets (n16, n32). ``paired``:
+network-by-network differences against identify-and-plan's committed test rows
+(docs/results/suite/identify-and-plan-per-network.csv). ``timing``: decisions timed by
+the real-time rig (``run_realtime`` at 1 kHz, wall clock from the frame's tick, as
+``spikectl realtime`` times them) and each decision's CPU time on its thread
+(``time.thread_time_ns``), on the generated test set of each size.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import os
+import time
+from collections import defaultdict
+from pathlib import Path
+
+import numpy as np
+
+REFERENCE = Path("docs/results/suite/identify-and-plan-per-network.csv")
+SETTINGS = (
+    ("greedy", 0.0), ("greedy", 0.5), ("greedy", 0.8), ("greedy", 0.95), ("thompson", 0.8),
+)  # fmt: skip
+"""(rule, probe_below) tried on validation: probe_below 0 never probes on quiet stretches."""
+
+
+def write(rows: list[dict], path: Path) -> None:
+    with open(path, "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(rows[0]), lineterminator="\n")
+        writer.writeheader()
+        writer.writerows(rows)
+    print(f"wrote {path}")
+
+
+def sweep(belief: Path, out: Path) -> None:
+    from spikectl.agents.amortised_controller import AmortisedController, load_belief
+    from spikectl.agents.amortised_kernel import BeliefKernel
+    from spikectl.experiments import suite
+
+    kernel = BeliefKernel(load_belief(belief))
+    rows = []
+    for rule, probe_below in SETTINGS:
+        for task in ("n16", "n32"):
+            started = time.process_time()
+            returns, _ = suite.play(task, "validation", AmortisedController(
+                kernel, rule=rule, probe_below=probe_below))  # fmt: skip
+            rows.append({"task": task, "split": "validation", "rule": rule,
+                         "probe_below": probe_below, "mean_return": f"{returns.mean():.6f}",
+                         "cpu_seconds": f"{time.process_time() - started:.2f}"})  # fmt: skip
+            print(rows[-1])
+    write(rows, out)
+
+
+def per_network(path: Path) -> dict[str, dict[int, float]]:
+    table: dict[str, dict[int, float]] = defaultdict(dict)
+    with open(path) as handle:
+        for row in csv.DictReader(handle):
+            table[row["task"]][int(row["context"])] = float(row["return"])
+    return table
+
+
+def paired(new: Path, out: Path) -> None:
+    from spikectl.experiments.stats import bootstrap_ci
+
+    ours, theirs = per_network(new), per_network(REFERENCE)
+    rows = []
+    for task, returns in ours.items():
+        contexts = sorted(returns)
+        difference = np.array([returns[c] - theirs[task][c] for c in contexts])
+        interval = bootstrap_ci(difference, statistic=np.mean, n_resamples=10_000, rng=0)
+        rows.append({
+            "task": task, "networks": len(contexts),
+            "amortised": f"{np.mean([returns[c] for c in contexts]):.6f}",
+            "identify_and_plan": f"{np.mean([theirs[task][c] for c in contexts]):.6f}",
+            "difference": f"{interval.estimate:.6f}", "low": f"{interval.low:.6f}",
+            "high": f"{interval.high:.6f}", "better": int((difference > 1e-12).sum()),
+            "worse": int((difference < -1e-12).sum()),
+        })  # fmt: skip
+        print(rows[-1])
+    write(rows, out)
+
+
+def timing(belief: Path, out: Path, sizes: list[int], episodes: int) -> None:
+    from spikectl.agents.amortised_controller import AmortisedController, load_belief
+    from spikectl.cli.baseline_policies import generated_split
+    from spikectl.envs.env import NeuronControlEnv
+    from spikectl.envs.realtime import run_realtime
+    from spikectl.neuron.extensions import Extensions
+
+    model = load_belief(belief)
+    rows = []
+    for n in sizes:
+        contexts = generated_split("test", n, Extensions().context_part(), 60, None)
+        env = NeuronControlEnv(contexts=contexts)
+        controller = AmortisedController(model)
+        run_realtime(env, controller, [0])  # warm-up: compiles the kernel
+        report = run_realtime(env, controller, range(episodes))
+        summary = report.summary()
+        cpu = []  # the same decisions again, each one's CPU time on this thread
+        for context in range(episodes):
+            controller.reset()
+            observation, info = env.reset(seed=context, options={"context": context})
+            for _ in range(env.episode_length):
+                started = time.thread_time_ns()
+                action = controller.act(observation, info)
+                cpu.append((time.thread_time_ns() - started) / 1e6)
+                observation, _, _, _, info = env.step(action)
+        rows.append({
+            "n_neurons": n, "episodes": episodes, "decisions": report.latencies_s.size,
+            "rig_p50_ms": f"{summary['median_ms']:.4f}", "rig_p99_ms": f"{summary['p99_ms']:.4f}",
+            "rig_max_ms": f"{summary['max_ms']:.4f}", "misses": summary["misses"],
+            "rig_mean_return": f"{summary['mean_return']:.6f}",
+            "cpu_p50_ms": f"{np.percentile(cpu, 50):.4f}",
+            "cpu_p99_ms": f"{np.percentile(cpu, 99):.4f}",
+            "load_average_1min": f"{os.getloadavg()[0]:.2f}",
+        })  # fmt: skip
+        print(rows[-1])
+    write(rows, out)
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("what", choices=("sweep", "paired", "timing"))
+    parser.add_argument("--belief", type=Path, default=Path("belief.pt"))
+    parser.add_argument("--new", type=Path)
+    parser.add_argument("--out", type=Path, required=True)
+    parser.add_argument("--sizes", type=int, nargs="+", default=[8, 16, 32, 64])
+    parser.add_argument("--episodes", type=int, default=100)
+    arguments = parser.parse_args()
+    if arguments.what == "sweep":
+        sweep(arguments.belief, arguments.out)
+    elif arguments.what == "paired":
+        paired(arguments.new, arguments.out)
+    else:
+        timing(arguments.belief, arguments.out, arguments.sizes, arguments.episodes)
+
+
+if __name__ == "__main__":
+    main()
