@@ -7,13 +7,16 @@
         --out docs/results/amortised-controller/paired.csv
     python lab/results/amortised-controller/measure.py timing --belief belief.pt \
         --out docs/results/amortised-controller/timing.csv
+    python lab/results/amortised-controller/measure.py truth \
+        --out docs/results/amortised-controller/told-the-column.csv
 
 ``sweep``: the settings tried, on the suite's validation sets (n16, n32). ``paired``:
 network-by-network differences against identify-and-plan's committed test rows
 (docs/results/suite/identify-and-plan-per-network.csv). ``timing``: decisions timed by
 the real-time rig (``run_realtime`` at 1 kHz, wall clock from the frame's tick, as
 ``spikectl realtime`` times them) and each decision's CPU time on its thread
-(``time.thread_time_ns``), on the generated test set of each size.
+(``time.thread_time_ns``), on the generated test set of each size. ``truth``: the same
+decision rule told each network's target column (no identification left to do).
 """
 
 from __future__ import annotations
@@ -128,9 +131,49 @@ def timing(belief: Path, out: Path, sizes: list[int], episodes: int) -> None:
     write(rows, out)
 
 
+class TrueColumns:
+    """A belief certain of each played network's target column (the truth, read from
+    ``info["context_index"]``-free order: the suite plays context i in sub-environment
+    i, so copy i of the controller is told context i's column)."""
+
+    def __init__(self, contexts, index: int = 0) -> None:
+        self.contexts, self.index = contexts, index
+
+    def reset(self, prior: np.ndarray) -> None:
+        context = self.contexts[self.index]
+        column = np.asarray(context.weights)[:, context.target]
+        self.classes = np.where(column > 0, 1, np.where(column < 0, 2, 0))
+
+    def step(self, features: np.ndarray) -> np.ndarray:
+        logits = np.full((self.classes.size, 3), -30.0, dtype=np.float32)
+        logits[np.arange(self.classes.size), self.classes] = 0.0
+        return logits
+
+
+def truth(out: Path) -> None:
+    """The same decision rule told each network's target column: what identification
+    alone could still add (the rest needs more than the column: cascades)."""
+    from spikectl.agents.amortised_controller import AmortisedController
+    from spikectl.experiments import suite
+
+    class Told(AmortisedController):
+        def spawn(self, index: int) -> AmortisedController:
+            return Told(TrueColumns(self.kernel.contexts, index), self.params)
+
+    rows = []
+    for task in ("paper", "n16", "n32"):
+        for split in ("validation", "test"):
+            contexts = suite.load_split(task, split)
+            returns, seconds = suite.play(task, split, Told(TrueColumns(contexts)))
+            rows.append({"task": task, "split": split, "controller": "told the column",
+                         "mean_return": f"{returns.mean():.6f}", "cpu_seconds": f"{seconds:.2f}"})  # fmt: skip
+            print(rows[-1])
+    write(rows, out)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("what", choices=("sweep", "paired", "timing"))
+    parser.add_argument("what", choices=("sweep", "paired", "timing", "truth"))
     parser.add_argument("--belief", type=Path, default=Path("belief.pt"))
     parser.add_argument("--new", type=Path)
     parser.add_argument("--out", type=Path, required=True)
@@ -139,6 +182,8 @@ def main() -> None:
     arguments = parser.parse_args()
     if arguments.what == "sweep":
         sweep(arguments.belief, arguments.out)
+    elif arguments.what == "truth":
+        truth(arguments.out)
     elif arguments.what == "paired":
         paired(arguments.new, arguments.out)
     else:
