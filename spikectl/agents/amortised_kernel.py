@@ -19,7 +19,7 @@ import math
 import numba
 import numpy as np
 
-from spikectl.agents.amortised_belief import AmortisedBelief
+from spikectl.agents.amortised_belief import N_FEATURES, AmortisedBelief
 from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
 from spikectl.neuron.params import NeuronParams
 
@@ -216,64 +216,108 @@ def target_prior(n_neurons: int, target: int) -> np.ndarray:
     return prior
 
 
+@numba.njit(**_JIT)
+def _track(voltage, action, target, state, sums, prior, constants, out):  # pragma: no cover
+    """One step of :class:`BeliefFeatureTracker`: ``state`` [4, n] (steps since the last
+    release, the potential after the last reset, refractory steps left, the releases of
+    the step before) and ``sums`` [5, n] (the running evidence) updated in place, the
+    step's features written to ``out`` [n, F]."""
+    v_spike, interval, v_rest, leak, stimulus, synaptic, refractory = constants
+    n = voltage.shape[0]
+    target_observed = 1.0 if state[2, target] == 0 else 0.0
+    target_residual = 0.0
+    if target_observed > 0:
+        after = state[1, target]
+        kick = stimulus if action == target else 0.0
+        target_residual = (voltage[target] - (after - (after - v_rest) * leak + kick)) / synaptic
+    released_total = 0.0
+    seen_residual_total = 0.0
+    residual = np.empty(n)
+    for i in range(n):
+        released_total += state[3, i]
+        after = state[1, i]
+        kick = stimulus if action == i else 0.0
+        residual[i] = 0.0
+        if state[2, i] == 0:
+            residual[i] = (voltage[i] - (after - (after - v_rest) * leak + kick)) / synaptic
+        seen_residual_total += residual[i]
+    for i in range(n):
+        before = state[3, i]
+        others = released_total - before
+        seen = before * target_observed
+        alone = seen if others == 0 else 0.0
+        sums[0, i] += alone
+        sums[1, i] += alone * target_residual
+        sums[2, i] += seen
+        sums[3, i] += seen * target_residual
+        sums[4, i] += seen * others
+        spiked = voltage[i] >= v_spike
+        out[i, 0] = 1.0 if action == i else 0.0
+        out[i, 1] = 1.0 if spiked else 0.0
+        out[i, 2] = min(max((voltage[i] - v_rest) / synaptic, -2.0), 3.0)
+        out[i, 3] = before
+        out[i, 4] = 1.0 if i == target else 0.0
+        out[i, 5] = prior[i]
+        out[i, 6] = target_residual
+        out[i, 7] = target_observed
+        out[i, 8] = before * target_residual
+        out[i, 9] = seen
+        out[i, 10] = others
+        out[i, 11] = before * min(max(seen_residual_total - residual[i], -4.0), 4.0)
+        out[i, 12] = min(sums[0, i], 3.0) / 3.0
+        out[i, 13] = min(max(sums[1, i] / max(sums[0, i], 1.0), -2.0), 2.0)
+        out[i, 14] = min(sums[2, i], 5.0) / 5.0
+        out[i, 15] = min(max(sums[3, i] / max(sums[2, i], 1.0), -4.0), 4.0)
+        out[i, 16] = min(sums[4, i] / max(sums[2, i], 1.0), 8.0) / 8.0
+        # The state for the next step: releases by the vesicle rule, resets, refractoriness.
+        since = min(state[0, i] + 1.0, interval)
+        released = spiked and since >= interval
+        state[0, i] = 0.0 if released else since
+        state[3, i] = 1.0 if released else 0.0
+        observed = state[2, i] == 0
+        state[1, i] = v_rest if (spiked or not observed) else voltage[i]
+        state[2, i] = refractory if spiked else max(state[2, i] - 1.0, 0.0)
+
+
 class BeliefFeatureTracker:
     """:func:`~spikectl.agents.amortised_belief.belief_features` one step at a time, for
     one episode: ``row(voltage [n], action)`` after each step gives that step's [n, F]
-    row, from the running state ``belief_features`` keeps over the whole history."""
+    row, from the running state ``belief_features`` keeps over the whole history
+    (compiled: O(n) a step)."""
 
     def __init__(self, n_neurons: int, target: int, params: NeuronParams) -> None:
-        self.params, self.n, self.target = params, n_neurons, target
-        self.neurons = np.arange(n_neurons)
-        interval = params.min_release_interval_steps
-        self.since = np.full(n_neurons, interval, dtype=np.int64)  # rested
-        self.after_reset = np.full(n_neurons, params.v_rest_mV)
-        self.refractory_left = np.zeros(n_neurons, dtype=np.int64)
-        self.released = np.zeros(n_neurons)  # this step's releases (float 0/1)
+        self.params, self.n, self.target = params, n_neurons, int(target)
+        self.state = np.zeros((4, n_neurons))  # since, after_reset, refractory_left, released
+        self.state[0] = params.min_release_interval_steps  # rested: the first spike releases
+        self.state[1] = params.v_rest_mV
         self.sums = np.zeros((5, n_neurons))  # alone count, alone sum, count, sum, others
-        self.static = np.zeros((n_neurons, 2))
-        self.static[target, 0] = 1.0  # is_target
-        self.static[:, 1] = target_prior(n_neurons, target)
-        self.last_spikes = np.zeros(n_neurons, dtype=bool)
+        self.prior = target_prior(n_neurons, target)
+        self.constants = (
+            float(params.v_spike_mV), float(params.min_release_interval_steps),
+            float(params.v_rest_mV), float(params.leak_per_step),
+            float(params.stimulus_step_mV), float(params.synaptic_step_mV),
+            float(params.refractory_steps),
+        )  # fmt: skip
+
+    @property
+    def since(self) -> np.ndarray:
+        """[n] steps since each neuron's last release (saturating at the interval)."""
+        return self.state[0]
+
+    @property
+    def after_reset(self) -> np.ndarray:
+        """[n] each neuron's potential after the last step's reset (mV)."""
+        return self.state[1]
+
+    @property
+    def refractory_left(self) -> np.ndarray:
+        """[n] refractory steps left: a neuron with any is held at rest this step."""
+        return self.state[2]
 
     def row(self, voltage: np.ndarray, action: int) -> np.ndarray:
         """float32 [n, F]: the features of the step whose action was ``action`` and
         whose observed potentials (after integration, before reset) are ``voltage``."""
-        p = self.params
-        voltage = np.asarray(voltage, dtype=np.float64)
-        spikes = voltage >= p.v_spike_mV
-        released_before = self.released
-        self.since = np.minimum(self.since + 1, p.min_release_interval_steps)
-        released = spikes & (self.since >= p.min_release_interval_steps)
-        self.since[released] = 0
-        self.released = released.astype(np.float64)
-        stimulated = (self.neurons == action).astype(np.float64)
-        predicted = (self.after_reset - (self.after_reset - p.v_rest_mV) * p.leak_per_step
-                     + stimulated * p.stimulus_step_mV)  # fmt: skip
-        observed = self.refractory_left == 0
-        residual = np.where(observed, (voltage - predicted) / p.synaptic_step_mV, 0.0)
-        self.after_reset = np.where(spikes | ~observed, p.v_rest_mV, voltage)
-        self.refractory_left = np.where(spikes, p.refractory_steps,
-                                        np.maximum(self.refractory_left - 1, 0))  # fmt: skip
-        self.last_spikes = spikes
-        t_observed = float(observed[self.target])
-        t_residual = residual[self.target] * t_observed
-        others = released_before.sum() - released_before
-        seen = released_before * t_observed
-        alone = seen * (others == 0)
-        self.sums += np.stack([alone, alone * t_residual, seen, seen * t_residual, seen * others])
-        alone_count, alone_sum, count, residual_sum, others_sum = self.sums
-        seen_residual = residual * observed
-        others_residual = seen_residual.sum() - seen_residual
-        n = self.n
-        columns = (
-            stimulated, spikes, np.clip((voltage - p.v_rest_mV) / p.synaptic_step_mV, -2.0, 3.0),
-            released_before, self.static[:, 0], self.static[:, 1], np.full(n, t_residual),
-            np.full(n, t_observed), released_before * t_residual, seen, others,
-            released_before * np.clip(others_residual, -4.0, 4.0),
-            np.minimum(alone_count, 3.0) / 3.0,
-            np.clip(alone_sum / np.maximum(alone_count, 1.0), -2.0, 2.0),
-            np.minimum(count, 5.0) / 5.0,
-            np.clip(residual_sum / np.maximum(count, 1.0), -4.0, 4.0),
-            np.minimum(others_sum / np.maximum(count, 1.0), 8.0) / 8.0,
-        )
-        return np.stack(columns, axis=-1).astype(np.float32)  # [n, F]
+        out = np.empty((self.n, N_FEATURES), dtype=np.float32)
+        _track(np.asarray(voltage, dtype=np.float64), int(action), self.target, self.state,
+               self.sums, self.prior, self.constants, out)  # fmt: skip
+        return out
