@@ -27,7 +27,6 @@ from __future__ import annotations
 
 import copy
 import os
-import zipfile
 from collections.abc import Mapping
 from pathlib import Path
 from typing import Any
@@ -72,10 +71,12 @@ def load_belief(path: str | os.PathLike, heads: int = BELIEF_HEADS) -> Amortised
                                  "DIR/belief.pt)")  # fmt: skip
     try:
         state = torch.load(path, map_location="cpu", weights_only=True)
-    except (RuntimeError, OSError, EOFError, ValueError, zipfile.BadZipFile,
-            Exception) as error:  # fmt: skip  # torch raises many kinds for a damaged file
-        first = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
-        raise BeliefWeightsError(f"{path} is not a readable PyTorch weights file: {first}") from None
+    except Exception as error:  # torch raises many kinds for a damaged file
+        text = str(error).strip()
+        first = text.splitlines()[0] if text else type(error).__name__
+        raise BeliefWeightsError(
+            f"{path} is not a readable PyTorch weights file: {first}"
+        ) from None
     encode = state.get("encode.0.weight") if isinstance(state, dict) else None
     if not isinstance(encode, torch.Tensor) or encode.ndim != 2 or encode.shape[1] != N_FEATURES:
         raise BeliefWeightsError(f"{path} does not hold an amortised belief's weights (no "
@@ -86,8 +87,11 @@ def load_belief(path: str | os.PathLike, heads: int = BELIEF_HEADS) -> Amortised
         model = AmortisedBelief(width, heads, layers)
         model.load_state_dict(state)
     except (RuntimeError, ValueError) as error:
-        raise BeliefWeightsError(f"{path} does not fit an amortised belief of width {width}, "
-                                 f"{layers} mixing layers: {str(error).splitlines()[0]}") from None  # fmt: skip
+        first = str(error).splitlines()[0]
+        raise BeliefWeightsError(
+            f"{path} does not fit an amortised belief of width {width}, {layers} mixing "
+            f"layers: {first}"
+        ) from None
     if not all(bool(torch.isfinite(value).all()) for value in state.values()):
         raise BeliefWeightsError(f"{path} holds NaN or infinite weights")
     return model.eval()
@@ -178,8 +182,10 @@ class AmortisedController:
         check_controller_input(observation, info, "AmortisedController",
                                ("voltage", "pattern", "target", "step"))  # fmt: skip
         if "voltage" not in observation:
-            raise ControllerInputError("AmortisedController.act: the belief reads the observed "
-                                       "potentials, which spikes-only sensing does not give")  # fmt: skip
+            raise ControllerInputError(
+                "AmortisedController.act: the belief reads the observed potentials, which "
+                "spikes-only sensing does not give"
+            )
         step = int(observation["step"])
         voltage = np.asarray(observation["voltage"])
         pattern = np.asarray(observation["pattern"])
@@ -201,7 +207,7 @@ class AmortisedController:
             probabilities = np.exp(logits)
             self.excitatory = probabilities[:, 1] / probabilities.sum(axis=1)
             self.excitatory[target] = 0.0
-        ahead = pattern[step + 1:step + 1 + self.params.min_release_interval_steps]
+        ahead = pattern[step + 1 : step + 1 + self.params.min_release_interval_steps]
         return choose_action(self.excitatory, self.can_land(mask[1:]), ahead.astype(bool),
                              self.rule, self.rng, self.probe_below)  # fmt: skip
 

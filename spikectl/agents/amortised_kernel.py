@@ -74,7 +74,7 @@ def _attend(qkv, heads, out):  # pragma: no cover (compiled)
     n, width = out.shape
     size = width // heads
     scale = 1.0 / math.sqrt(size)
-    keys = np.ascontiguousarray(qkv[:, width:2 * width].T)  # [D, n]
+    keys = np.ascontiguousarray(qkv[:, width : 2 * width].T)  # [D, n]
     scores = np.empty((n, n), dtype=np.float32)
     out[:, :] = 0.0
     for head in range(heads):
@@ -105,7 +105,7 @@ def _step(features, hidden, heads, prior, w):  # pragma: no cover (compiled)
     """Logits [n, 3] of one step; ``hidden`` [n, D] (the GRU's memory) updated in place.
     ``w``: the weights as :meth:`BeliefKernel.__init__` packs them."""
     (enc1_w, enc1_b, enc2_w, enc2_b, gi_w, gi_b, gh_w, gh_b, in_w, in_b, out_w, out_b,
-     ff1_w, ff1_b, ff2_w, ff2_b, norm1, norm2, head1_w, head1_b, head2_w, head2_b) = w
+     ff1_w, ff1_b, ff2_w, ff2_b, norm1, norm2, head1_w, head1_b, head2_w, head2_b) = w  # fmt: skip
     n, width = hidden.shape
     f32 = np.float32
     first = np.empty((n, width), dtype=f32)

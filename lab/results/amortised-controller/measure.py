@@ -166,7 +166,8 @@ def truth(out: Path) -> None:
             contexts = suite.load_split(task, split)
             returns, seconds = suite.play(task, split, Told(TrueColumns(contexts)))
             rows.append({"task": task, "split": split, "controller": "told the column",
-                         "mean_return": f"{returns.mean():.6f}", "cpu_seconds": f"{seconds:.2f}"})  # fmt: skip
+                         "mean_return": f"{returns.mean():.6f}",
+                         "cpu_seconds": f"{seconds:.2f}"})  # fmt: skip
             print(rows[-1])
     write(rows, out)
 
