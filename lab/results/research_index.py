@@ -23,7 +23,7 @@ CLAIM_CHARS = 220
 # another change): their claim as the commit that reported the result stated it.
 CLAIMS = {
     "amortised-controller": "a controller on the amortised belief (greedy on P(input), "
-    "probes on quiet stretches; compiled step, CPU p99 0.6-1.0 ms at n = 16-32 on the "
+    "probes on quiet stretches; compiled step, CPU p99 0.6-1.2 ms at n = 16-32 on the "
     "loaded machine): test 0.806 / 0.742 / 0.675 on paper / n16 / n32, -0.032 / -0.041 / "
     "-0.049 against identify-and-plan, all below 0; told the target's column the same "
     "rule scores 0.916 / 0.841 / 0.808: the gap is identification",
