@@ -16,7 +16,10 @@ for the release interval ahead) while no input is yet likely (``probe_below``) i
 probes the likeliest neuron that can land, at the cost of an unwanted spike when it is one, so that
 the next wanted step finds an input rested. Otherwise it does nothing.
 
-It plans with the target's column alone: it never uses cascades through other neurons
+It reads the paper's observation model (potentials seen exactly, no latency, every
+neuron observed), as the belief was trained: under the extensions that change it, its
+features mean something else. It plans with the target's column alone: it never uses
+cascades through other neurons
 (identify-and-plan's beam search plans with all of G, docs/results/amortised-controller
 measures what that costs). The belief's weights come from a file
 (``lab/results/amortised-belief/train.py`` writes one); :func:`load_belief` refuses
