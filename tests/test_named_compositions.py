@@ -52,6 +52,10 @@ HETEROGENEOUS = Extensions(threshold_spread=0.1, time_constant_spread=0.2)
         (HIDDEN, 8, False, "hidden"),
         (Extensions(hidden_neurons=1), 8, False, "hidden"),
         (HIDDEN, 32, False, "hidden-16"),
+        (Extensions(sensing="spikes"), 8, False, "spikes"),
+        (Extensions(sensing="spikes", latency_steps=1), 8, True, "spikes"),
+        (Extensions(sensing="spikes", stochastic_release=True), 8, False, "spikes"),
+        (Extensions(sensing="spikes"), 16, False, "spikes-16"),
     ],
 )
 def test_each_environment_gets_its_situations_composition(extensions, n, fast, name):
@@ -80,7 +84,8 @@ def test_the_declared_compositions_hold_what_was_chosen():
     assert fast.estimator == noise.estimator.__class__("bayes", KNOWN_SD_FAST_LARGE)
     assert fast.decision.gamble is None
     assert set(COMPOSITIONS) == {"paper", "noise", "stochastic", "background",
-                                 "heterogeneous", "hidden"}  # fmt: skip
+                                 "heterogeneous", "hidden", "spikes"}  # fmt: skip
+    assert composition("spikes").estimator.kind == "spikes"
 
 
 @pytest.mark.parametrize(

@@ -25,7 +25,7 @@ from spikectl.envs.sensing import SPIKES_KEY
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING
-from spikectl.planning import IdentifyAndPlan
+from spikectl.planning import IdentifyAndPlan, named_composition
 from spikectl.planning.oracle import OraclePlanner
 from spikectl.wrappers.flat_env import FlatEnv, FlatNeuronControlEnv
 
@@ -230,9 +230,10 @@ def test_the_cli_refuses_a_bad_sensing_and_training_on_spikes(tmp_path, capsys):
         assert not (tmp_path / value).exists()
 
 
-def test_the_oracle_plays_as_in_the_papers_setting_and_identify_and_plan_refuses():
+def test_the_oracle_plays_as_in_the_papers_setting_and_identify_and_plan_reads_spikes():
     """The oracle knows the network and plans open loop: the same actions, the same
-    returns. identify-and-plan reads potentials: one line saying so."""
+    returns. identify-and-plan built for potentials refuses spikes in one line; built
+    for the environment it plays them (tests/test_spike_filter.py)."""
     test_set = ContextSet.generate(4, n_neurons=8, seed=11)
     paper = evaluate_policy(test_set, OraclePlanner(test_set))
     spiking = evaluate_policy(test_set, OraclePlanner(test_set),
@@ -241,5 +242,8 @@ def test_the_oracle_plays_as_in_the_papers_setting_and_identify_and_plan_refuses
     np.testing.assert_array_equal(paper.rewards, spiking.rewards)
     env = NeuronControlEnv(contexts=test_set, extensions=SPIKES)
     observation, info = env.reset(seed=0)
-    with pytest.raises(ControllerInputError, match="spikes-only sensing"):
+    with pytest.raises(ControllerInputError, match="observes 'voltage'"):
         IdentifyAndPlan(test_set.params).act(observation, info)
+    spikes = Extensions(**SPIKES)
+    playing = IdentifyAndPlan(test_set.params, named_composition(spikes, 8), extensions=spikes)
+    assert playing.act(observation, info) in np.flatnonzero(info["action_mask"]) - 1

@@ -3,10 +3,11 @@ and the weights it plans with.
 
 The estimates themselves live in their own modules (:mod:`~spikectl.planning.identify`,
 :mod:`~spikectl.planning.bayes`, :mod:`~spikectl.planning.particles`,
-:mod:`~spikectl.planning.relays`); this part chooses one by name from
-:data:`ESTIMATORS` (a :class:`~spikectl.registry.Registry`: a plug-in registers another
-the public way) and turns it into the planner's network. Every estimate answers the
-:class:`ConnectivityBelief` protocol.
+:mod:`~spikectl.planning.relays`, :mod:`~spikectl.planning.spike_filter`); this part
+chooses one by name from :data:`ESTIMATORS` (a :class:`~spikectl.registry.Registry`: a
+plug-in registers another the public way) and turns it into the planner's network. Every
+estimate answers the :class:`ConnectivityBelief` protocol (the spike filter takes its own
+evidence, what spikes-only sensing gives).
 
 The planner plans known entries (posterior standard deviation below ``known_sd``) at
 their rounded value and, without measurement noise, the others at their posterior mean
@@ -29,6 +30,7 @@ from spikectl.planning.discrete import column_hypotheses_fit
 from spikectl.planning.identify import ConnectivityEstimate
 from spikectl.planning.particles import ParticleConnectivityEstimate
 from spikectl.planning.relays import RelayConnectivityEstimate, relay_weights
+from spikectl.planning.spike_filter import SpikeFilter
 from spikectl.registry import Registry
 
 PLANNED_MEAN_RESOLUTION = 2
@@ -93,12 +95,24 @@ def relays(n: int, residual_sd: float, model: ObservationModel, params: NeuronPa
     return RelayConnectivityEstimate(n, residual_sd)
 
 
+def spikes(n: int, residual_sd: float, model: ObservationModel, params: NeuronParams):
+    """:class:`~spikectl.planning.spike_filter.SpikeFilter`: the exact posterior from
+    spikes alone (spikes-only sensing) with each surviving column's potential, n <= 8."""
+    return SpikeFilter(n, params)
+
+
 ESTIMATORS: Registry[EstimateFactory] = Registry("estimator")
 """The estimates identify-and-plan can keep, by name (:class:`EstimatorSettings.kind`)."""
 ESTIMATORS.register("gaussian", gaussian)
 ESTIMATORS.register("bayes", bayes)
 ESTIMATORS.register("particles", particles)
 ESTIMATORS.register("relays", relays)
+ESTIMATORS.register("spikes", spikes)
+
+SPIKE_ESTIMATORS = {"spikes"}
+"""The estimators that identify from spikes alone (their evidence is what
+:class:`~spikectl.planning.spike_filter.SpikeState` reads) and set the tracked potentials;
+they play spikes-only sensing, the others potentials."""
 
 RELAY_ESTIMATORS = {"relays"}
 """The estimators whose estimate answers ``relay_signs`` and is planned with virtual relay
@@ -114,7 +128,8 @@ class EstimatorSettings:
         kind: ``"gaussian"`` (ridge regression, any n), ``"bayes"`` (the exact posterior
             under the task's observation model, n <= 11, else Gaussian),
             ``"particles"`` (the discrete posterior at any n), ``"relays"`` (the Gaussian
-            one with relays through hidden neurons), or a registered plug-in.
+            one with relays through hidden neurons), ``"spikes"`` (the exact posterior
+            from spikes alone, spikes-only sensing, n <= 8), or a registered plug-in.
         known_sd: an entry counts as known below this posterior standard deviation
             (units of w_in).
     """

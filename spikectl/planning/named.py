@@ -15,6 +15,10 @@ research record docs/research/identify-and-plan.md):
 - ``heterogeneous``: the task's observation model (each neuron's threshold and leak
   learned, known synapses planned at their estimated strength).
 - ``hidden``: with hidden neurons, the relays through them.
+- ``spikes``: under spikes-only sensing, the exact posterior from spikes alone and the
+  potentials it implies (:mod:`~spikectl.planning.spike_filter`, n <= 8; larger
+  networks are refused in one line). It comes first: the filter refuses in one line the
+  extensions it cannot read spikes under.
 
 From :data:`LARGE_FROM_NEURONS` neurons on, each is played with :data:`LARGE` on top
 (``-16``: QMDP where it would probe, ``known_sd`` :data:`KNOWN_SD_LARGE`); the paper's
@@ -73,19 +77,21 @@ COMPOSITIONS: dict[str, Composition] = {
         Composition("background", EstimatorSettings(known_sd=KNOWN_SD_BACKGROUND)),
         Composition("heterogeneous", observation=_TASK_MODEL),
         Composition("hidden", EstimatorSettings("relays")),
+        Composition("spikes", EstimatorSettings("spikes")),
     )
 }  # fmt: skip
 """The situations' compositions by name (before a size's overlay)."""
 
 SITUATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
+    ("spikes", ("spikes_only",)),
     ("noise", ("observation_noise_mV",)),
     ("stochastic", ("stochastic_release",)),
     ("background", ("background_rate",)),
     ("heterogeneous", ("threshold_spread", "time_constant_spread", "synaptic_spread")),
     ("hidden", ("hidden_neurons", "hidden_fraction")),
 )
-"""(composition, the extension fields that ask for it): an environment plays the first
-situation one of whose fields is set (nonzero); none: ``paper``."""
+"""(composition, the extension fields (or properties) that ask for it): an environment
+plays the first situation one of whose fields is set (true or nonzero); none: ``paper``."""
 
 LARGE = {"known_sd": KNOWN_SD_LARGE, "gamble": QMDPSettings(networks=GAMBLE_NETWORKS)}
 """The overlay from :data:`LARGE_FROM_NEURONS` neurons on (suffix ``-16``)."""

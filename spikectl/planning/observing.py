@@ -13,6 +13,8 @@ step's residuals where they are exact (:func:`~spikectl.planning.release.
 settled_releases`), else it enters at its release chance; with a synaptic spread known
 synapses are planned at their estimated strength. Under loop latency each step is read
 with the stimulation that landed at it (:class:`~spikectl.planning.in_flight.InFlight`).
+Under spikes-only sensing the spikes are read by :class:`~spikectl.planning.spike_filter.
+SpikeState`, whose potentials are the spike filter's (the ``"spikes"`` estimator).
 """
 
 from __future__ import annotations
@@ -32,6 +34,7 @@ from spikectl.planning.identify import ObservedState, residual_sd
 from spikectl.planning.in_flight import InFlight
 from spikectl.planning.lit_search import planned_light
 from spikectl.planning.release import exact_residuals, settled_releases
+from spikectl.planning.spike_filter import SpikeState
 
 
 @dataclass(frozen=True)
@@ -100,8 +103,12 @@ class Observation:
             self.extensions, self.noise_mV
         )
         self.strengths = self.extensions is not None and self.extensions.synaptic_spread > 0
-        # The actuator is part of the loop whatever the composition reads (ChR2's light).
+        # The actuator and the sensing are part of the loop whatever the composition
+        # reads (ChR2's light; spikes in place of potentials).
         self.light_mW_per_mm2 = planned_light(extensions)
+        self.spikes_only = extensions is not None and extensions.spikes_only
+        if self.spikes_only:
+            _check_spike_sensing(extensions)
 
     @property
     def plan_mean(self) -> bool:
@@ -113,6 +120,8 @@ class Observation:
         """A fresh reader for an episode on ``n`` observed neurons in a loop of
         ``latency_steps`` steps of latency."""
         settings, params, noise = self.settings, self.params, self.noise_mV
+        if self.spikes_only:
+            return Reader(self, SpikeState(n, params, 0.0), InFlight(latency_steps, n))
         if tracks_neurons(self.extensions, noise, params):
             tracker = NeuronTracker(n, params, self.extensions)
         elif settings.filter_voltage and noise > 0:
@@ -194,6 +203,12 @@ class Reader:
         since = np.minimum(since + 1, SINCE_RELEASE_CAP)
         return release_chances(spiking, since, self.observation.params)
 
+    def settle(self, estimate) -> None:
+        """After ``estimate`` took the step's evidence: a tracker whose potentials are the
+        estimate's (spikes-only sensing) takes them; the others keep what they read."""
+        if isinstance(self.tracker, SpikeState):
+            self.tracker.follow(estimate)
+
     def neurons(self) -> np.ndarray | None:
         """[1, 2, n] per-neuron kernel parameters to plan with where the tracker has its
         own (learned neurons; a threshold with a margin for the noise), else None (the
@@ -201,3 +216,22 @@ class Reader:
         if isinstance(self.tracker, (NeuronTracker, FilteredState)):
             return self.tracker.neurons()
         return None
+
+
+_SPIKE_FILTER_OFF = ("hidden_neurons", "hidden_fraction", "threshold_spread",
+                     "time_constant_spread", "synaptic_spread", "stochastic_release",
+                     "background_rate")  # fmt: skip
+"""The extension fields the spike filter cannot read spikes under: its columns imply the
+potentials of the paper's deterministic model of the observed neurons alone."""
+
+
+def _check_spike_sensing(extensions: Extensions) -> None:
+    """Refuse, in one line, what spikes-only identification cannot read."""
+    on = [name for name in _SPIKE_FILTER_OFF if getattr(extensions, name)]
+    if extensions.actuator != "pulse":
+        on.append(f"actuator={extensions.actuator!r}")
+    if on:
+        raise ValueError(
+            "identify-and-plan reads spikes-only sensing on the paper's deterministic model "
+            f"with the current pulse; it cannot with {', '.join(on)}"
+        )

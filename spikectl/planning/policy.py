@@ -28,12 +28,14 @@ from typing import Any
 import numpy as np
 
 from spikectl.envs.controller import ControllerInputError, check_controller_input
+from spikectl.envs.sensing import SPIKES_KEY, VOLTAGE_KEY
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, advance, uniform_neuron_parameters
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.composition import Composition
 from spikectl.planning.deciding import Situation
+from spikectl.planning.estimators import SPIKE_ESTIMATORS
 from spikectl.planning.identify import KnownConnectivity
 from spikectl.planning.in_flight import first_neurons, latency_of
 from spikectl.planning.lit_search import (
@@ -105,6 +107,16 @@ class IdentifyAndPlan:
         self.params, self.composition, self.seed = params, composition, int(seed)
         self.extensions, self.told_weights = extensions, told_weights
         self.observation = composition.observation.bind(params, extensions)
+        spike_filter = composition.estimator.kind in SPIKE_ESTIMATORS
+        if self.observation.spikes_only != spike_filter or (
+            spike_filter and told_weights is not None
+        ):
+            raise ValueError(
+                "identify-and-plan identifies from spikes alone with the 'spikes' estimator "
+                "(without told weights), and from potentials with the others; composition "
+                f"{composition.name!r} keeps {composition.estimator.kind!r} on an environment "
+                f"that observes {'spikes' if self.observation.spikes_only else 'potentials'}"
+            )
         self.known_sd = composition.estimator.known_sd
         self.noise_mV = self.observation.noise_mV
         self.reset()
@@ -140,15 +152,17 @@ class IdentifyAndPlan:
     def act(self, observation: Mapping[str, Any], info: Mapping[str, Any]) -> int:
         """The action for this observation (an agent index, -1 for do nothing)."""
         check_controller_input(observation, info, "IdentifyAndPlan")
-        if "voltage" not in observation:
+        sensed_key = SPIKES_KEY if self.observation.spikes_only else VOLTAGE_KEY
+        if sensed_key not in observation:
             raise ControllerInputError(
-                "IdentifyAndPlan.act: it identifies from the observed potentials, which "
-                "spikes-only sensing (extensions sensing='spikes') does not observe"
+                f"IdentifyAndPlan.act: it was built for an environment that observes "
+                f"{sensed_key!r}, and this observation has none (pass the environment's "
+                "extensions: sensing='spikes' observes spikes in place of potentials)"
             )
         step = int(observation["step"])
-        voltage = np.asarray(observation["voltage"], dtype=np.float64)
+        sensed = np.asarray(observation[sensed_key], dtype=np.float64)
         mask = np.asarray(info["action_mask"], dtype=bool)
-        n = voltage.shape[0]
+        n = sensed.shape[0]
         if mask.shape != (n + 1,):
             raise ValueError(f"action_mask must have shape [{n + 1}], got {mask.shape}")
         if step == 0 or self.reader is None:
@@ -157,7 +171,8 @@ class IdentifyAndPlan:
             self._start_episode(n, latency_of(observation))
             self.reader.in_flight.read(observation)
         else:
-            self.estimate.add(*self.reader.read_landed(observation, voltage, self.estimate))
+            self.estimate.add(*self.reader.read_landed(observation, sensed, self.estimate))
+            self.reader.settle(self.estimate)
         pattern = np.asarray(observation["pattern"], dtype=bool)
         if step >= pattern.shape[0]:
             raise ValueError(f"the episode has ended (step {step}): reset before acting")
