@@ -38,7 +38,9 @@ the planner starts from, each neuron's posterior mean over its surviving columns
 from __future__ import annotations
 
 import itertools
+import math
 
+import numba
 import numpy as np
 
 from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
@@ -82,9 +84,11 @@ class SpikeFilter(DiscreteConnectivityEstimate):
         potentials: float64 [n (post), M] the potential (after reset) each column implies.
     """
 
-    # (agreement [n, S, M] float64, column prior b [n, M], sign log-prior [S], signs
+    # (agreement [n, M, S] uint8, column prior b [n, M], sign log-prior [S], signs
     # [S, n]) of each size, built once (an episode starts a fresh filter).
     _TABLES: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
+    # (Z_j(s) [n, S], log_weights [n, M]) of the prior of each size.
+    _PRIORS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
     def __init__(self, n_neurons: int, params: NeuronParams) -> None:
         if not spike_filter_fits(n_neurons):
@@ -103,10 +107,18 @@ class SpikeFilter(DiscreteConnectivityEstimate):
         )
         self.alive = np.ones(self.log_weights.shape, dtype=bool)
         self.potentials = np.full(self.log_weights.shape, float(params.v_rest_mV))
-        self._column_mass = np.empty((n_neurons, self._signs.shape[0]))  # Z_j(s)
-        for j in range(n_neurons):
-            self._column_mass[j] = self._agreement[j] @ self._column_prior[j]
-        self._update_posterior()
+        # Each column's surviving hypotheses (what the posterior sums over: its cost
+        # falls as columns are dropped).
+        self._surviving = [np.arange(self.log_weights.shape[1])] * n_neurons
+        if n_neurons not in self._PRIORS:
+            self._column_mass = np.empty((n_neurons, self._signs.shape[0]))  # Z_j(s)
+            for j in range(n_neurons):
+                _column_mass(self._agreement[j], self._surviving[j], self._column_prior[j],
+                             self._column_mass[j])  # fmt: skip
+            self._update_posterior()
+            self._PRIORS[n_neurons] = (self._column_mass, self.log_weights)
+        self._column_mass = self._PRIORS[n_neurons][0].copy()
+        self.log_weights = self._PRIORS[n_neurons][1].copy()
 
     def add(self, released: np.ndarray, drive_mV: np.ndarray, spiked: np.ndarray,
             observed: np.ndarray) -> None:  # fmt: skip
@@ -142,7 +154,9 @@ class SpikeFilter(DiscreteConnectivityEstimate):
         self.observations += int(rows.size)
         if changed.size:
             for j in changed:
-                self._column_mass[j] = self._agreement[j] @ (self._column_prior[j] * self.alive[j])
+                self._surviving[j] = np.flatnonzero(self.alive[j])
+                _column_mass(self._agreement[j], self._surviving[j], self._column_prior[j],
+                             self._column_mass[j])  # fmt: skip
             self._update_posterior()
             self.version += 1
             self._cache = None
@@ -150,51 +164,85 @@ class SpikeFilter(DiscreteConnectivityEstimate):
     def _update_posterior(self) -> None:
         """Each column's posterior weight (``log_weights``, what the marginals and the
         draws read) from the surviving columns and the row signs' posterior."""
-        with np.errstate(divide="ignore"):
-            log_mass = np.log(self._column_mass)  # [n, S]
-        log_signs = self._sign_log_prior + log_mass.sum(axis=0)  # [S]
-        signs = np.exp(log_signs - log_signs.max())
+        log_mass = portable.log(self._column_mass)  # [n, S]
+        log_signs = self._sign_log_prior.copy()
+        for j in range(self.n_neurons):  # summed in index order: the same bits everywhere
+            log_signs += log_mass[j]
+        signs = portable.exp(log_signs - log_signs.max())
         signs /= signs.sum()
         share = np.divide(signs[None, :], self._column_mass,
                           out=np.zeros_like(self._column_mass),
                           where=self._column_mass > 0)  # [n, S]: P(s) / Z_j(s)
         weights = np.empty(self.log_weights.shape)
         for j in range(self.n_neurons):
-            weights[j] = self._column_prior[j] * self.alive[j] * (share[j] @ self._agreement[j])
-        with np.errstate(divide="ignore"):
-            self.log_weights = np.log(weights / weights.sum(axis=1, keepdims=True))
+            _column_weights(self._agreement[j], self._surviving[j], self._column_prior[j],
+                            share[j], weights[j])  # fmt: skip
+        self.log_weights = portable.log(weights / weights.sum(axis=1, keepdims=True))
 
     def column_weights(self) -> np.ndarray:
         """[n (post), M] each column's posterior probability (0 for a dropped one)."""
-        return np.exp(self.log_weights)
+        return portable.exp(self.log_weights)
 
     def mean_potentials(self) -> np.ndarray:
-        """[n] each neuron's posterior mean potential (after reset)."""
-        return np.einsum("jm,jm->j", self.column_weights(), self.potentials)
+        """[n] each neuron's posterior mean potential (after reset), as V_r plus the mean
+        distance from it (exactly V_r where every surviving column is at rest)."""
+        rest = self.params.v_rest_mV
+        distance = portable.matmul(self.column_weights()[:, None, :],
+                                   (self.potentials - rest)[:, :, None])[:, 0, 0]  # fmt: skip
+        return rest + distance
 
     def _apply_dale(self) -> None:
         """Nothing to do: Dale's law is in the posterior exactly (the row signs)."""
 
 
 def _tables(hypotheses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(agreement [n, S, M]: column h of neuron j agrees with the sign vector s;
+    """(agreement [n, M, S]: column h of neuron j agrees with the sign vector s;
     connection prior b [n, M]; log-prior of each sign vector [S]; the sign vectors
     [S, n]) for ``hypotheses`` [n (post), M, n (pre)]."""
     n = hypotheses.shape[0]
     signs = np.array(list(itertools.product((-1, 1), repeat=n)), dtype=np.int8)  # [S, n]
-    agreement = np.empty((n, signs.shape[0], hypotheses.shape[1]))
+    agreement = np.empty((n, hypotheses.shape[1], signs.shape[0]), dtype=np.uint8)
     for j in range(n):
-        h = hypotheses[j][None]  # [1, M, n]
-        agreement[j] = ((h == 0) | (h == signs[:, None, :])).all(axis=2)
+        h = hypotheses[j][:, None, :]  # [M, 1, n]
+        agreement[j] = ((h == 0) | (h == signs[None])).all(axis=2)
     index = np.arange(n)
     probability = connection_probability(np.abs(index[:, None] - index[None, :]))
     np.fill_diagonal(probability, 0.0)  # no self-connections: h[j, :, j] is always 0
-    connected = hypotheses != 0  # [post, M, pre]
-    p = probability.T[:, None, :]  # [post, 1, pre]
-    column_prior = np.where(connected, p, 1.0 - p).prod(axis=2)  # [post, M]
-    sign_log_prior = np.where(signs > 0, np.log(EXCITATORY_PROBABILITY),
-                              np.log1p(-EXCITATORY_PROBABILITY)).sum(axis=1)  # fmt: skip
+    column_prior = np.ones(hypotheses.shape[:2])
+    sign_log_prior = np.zeros(signs.shape[0])
+    for i in range(n):  # products and sums in index order: the same bits everywhere
+        p = probability[i][:, None]  # [post, 1]: P(i -> j)
+        column_prior *= np.where(hypotheses[:, :, i] != 0, p, 1.0 - p)
+        sign_log_prior += np.where(signs[:, i] > 0, math.log(EXCITATORY_PROBABILITY),
+                                   math.log1p(-EXCITATORY_PROBABILITY))  # fmt: skip
     return agreement, column_prior, sign_log_prior, signs
+
+
+_JIT = {"cache": True, "fastmath": False, "nogil": True}
+
+
+@numba.njit(**_JIT)
+def _column_mass(agreement, surviving, prior, out):
+    """out[s] = Z_j(s): the prior mass of the ``surviving`` columns (ascending) that
+    agree with sign vector s (``agreement`` uint8 [M, S], ``prior`` [M])."""
+    out[:] = 0.0
+    for m in surviving:
+        for s in range(out.shape[0]):
+            if agreement[m, s]:
+                out[s] += prior[m]
+
+
+@numba.njit(**_JIT)
+def _column_weights(agreement, surviving, prior, share, out):
+    """out[m] = b_m sum_s [m agrees with s] P(s) / Z_j(s) for the ``surviving`` columns,
+    0 for the others."""
+    out[:] = 0.0
+    for m in surviving:
+        total = 0.0
+        for s in range(share.shape[0]):
+            if agreement[m, s]:
+                total += share[s]
+        out[m] = prior[m] * total
 
 
 class SpikeState(ObservedState):
