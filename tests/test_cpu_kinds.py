@@ -50,8 +50,9 @@ def recording_act(self, observation, info):
 policy.IdentifyAndPlan.act = recording_act
 result = {}
 for name, task, count, settings in cases:
-    spec = suite.task(task)
-    contexts = suite.load_split(task, "test")[:count]
+    version = settings.get("suite", 1)
+    spec = suite.task(task, version)
+    contexts = suite.load_split(task, "test", version)[:count]
     # As load_controller builds the named controller, with the case's parts on top.
     composition = named_composition(spec.extensions, spec.n_observed)
     if "estimator" in settings:
@@ -79,6 +80,7 @@ CASES = [
     ("particles-qmdp", "paper", 3, {"estimator": "particles", "gamble_networks": 4}),
     ("stochastic-release", "stochastic", 4, {}),
     ("relays", "hidden25", 4, {}),
+    ("spikes", "spikes-only", 4, {"suite": 2}),
 ]
 
 

@@ -84,9 +84,9 @@ class SpikeFilter(DiscreteConnectivityEstimate):
         potentials: float64 [n (post), M] the potential (after reset) each column implies.
     """
 
-    # (agreement [n, M, S] uint8, column prior b [n, M], sign log-prior [S], signs
-    # [S, n]) of each size, built once (an episode starts a fresh filter).
-    _TABLES: dict[int, tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]] = {}
+    # (hypotheses as floats [n, M, n], agreement [n, M, S] uint8, column prior b [n, M],
+    # sign log-prior [S], signs [S, n]) of each size, built once (read only).
+    _TABLES: dict[int, tuple[np.ndarray, ...]] = {}
     # (Z_j(s) [n, S], log_weights [n, M]) of the prior of each size.
     _PRIORS: dict[int, tuple[np.ndarray, np.ndarray]] = {}
 
@@ -99,10 +99,10 @@ class SpikeFilter(DiscreteConnectivityEstimate):
             )
         super().__init__(n_neurons, 1.0)  # the residual noise is unused: spikes are exact
         self.params = params
-        self._values = self.hypotheses.astype(np.float64)  # [post, M, pre]
         if n_neurons not in self._TABLES:
             self._TABLES[n_neurons] = _tables(self.hypotheses)
-        self._agreement, self._column_prior, self._sign_log_prior, self._signs = (
+        # Shared by every filter of this size (a vector environment keeps one per network).
+        self._values, self._agreement, self._column_prior, self._sign_log_prior, self._signs = (
             self._TABLES[n_neurons]
         )
         self.alive = np.ones(self.log_weights.shape, dtype=bool)
@@ -195,8 +195,8 @@ class SpikeFilter(DiscreteConnectivityEstimate):
         """Nothing to do: Dale's law is in the posterior exactly (the row signs)."""
 
 
-def _tables(hypotheses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """(agreement [n, M, S]: column h of neuron j agrees with the sign vector s;
+def _tables(hypotheses: np.ndarray) -> tuple[np.ndarray, ...]:
+    """(the hypotheses as floats; agreement [n, M, S]: column h of neuron j agrees with s;
     connection prior b [n, M]; log-prior of each sign vector [S]; the sign vectors
     [S, n]) for ``hypotheses`` [n (post), M, n (pre)]."""
     n = hypotheses.shape[0]
@@ -215,7 +215,10 @@ def _tables(hypotheses: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray,
         column_prior *= np.where(hypotheses[:, :, i] != 0, p, 1.0 - p)
         sign_log_prior += np.where(signs[:, i] > 0, math.log(EXCITATORY_PROBABILITY),
                                    math.log1p(-EXCITATORY_PROBABILITY))  # fmt: skip
-    return agreement, column_prior, sign_log_prior, signs
+    tables = (hypotheses.astype(np.float64), agreement, column_prior, sign_log_prior, signs)
+    for table in tables:
+        table.flags.writeable = False
+    return tables
 
 
 _JIT = {"cache": True, "fastmath": False, "nogil": True}
