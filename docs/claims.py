@@ -210,7 +210,7 @@ def claims() -> Iterator[Claim]:
         yield Claim(benchmark, suite2_row(task))
     yield Claim(benchmark, "| `spikes-only` | {suite2/do-nothing/spikes-only/mean_return:.3f} "
                 "(0) | {suite2/random/spikes-only/mean_return:.3f} "
-                "({suite2/random/spikes-only/normalised:.3f}) | not yet: it reads potentials | "
+                "({suite2/random/spikes-only/normalised:.3f}) | plays it; not yet in these CSVs | "
                 "{suite2/oracle/spikes-only/mean_return:.3f} ± "
                 "{suite2/oracle/spikes-only/standard_error:.3f} (1) |")  # fmt: skip
     yield Claim(benchmark, "| **mean normalised** | {summary/do-nothing:.3f} | "
