@@ -196,3 +196,26 @@ def test_identify_and_plan_hits_a_chain_from_spikes():
     spiking = evaluate_policy(test_set, controller, extensions=SPIKES, seed=0)
     potentials = evaluate_policy(test_set, IdentifyAndPlan(PARAMS), seed=0)
     assert spiking.returns[0] >= potentials.returns[0] - 1e-12
+
+
+def test_under_latency_the_truth_survives_with_the_stimulations_that_landed():
+    """With one step of latency the evidence is read with the action that landed, not
+    the one chosen: every true column survives whole episodes of identify-and-plan."""
+    extensions = Extensions(sensing="spikes", latency_steps=1)
+    test_set = ContextSet.generate(3, n_neurons=8, seed=5)
+    env = NeuronControlEnv(contexts=test_set, extensions=extensions)
+    controller = IdentifyAndPlan(test_set.params, named_composition(extensions, 8),
+                                 extensions=extensions)  # fmt: skip
+    for index in range(len(test_set)):
+        observation, info = env.reset(seed=index, options={"context": index})
+        controller.reset()
+        done = False
+        while not done:
+            action = controller.act(observation, info)
+            observation, _, terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+        estimate, weights = controller.estimate, test_set[index].weights
+        for j in range(8):
+            truth = (estimate.hypotheses[j] == weights[:, j]).all(axis=1)
+            assert estimate.alive[j][truth].all() and truth.any()
+        assert estimate.alive.sum() < estimate.alive.size
