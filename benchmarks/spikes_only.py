@@ -9,9 +9,11 @@ plans open loop), and identify-and-plan (its named composition for each sensing:
 value is the mean ± its standard error over the networks. With --cleo (run in the Cleo virtualenv) every episode of the
 oracle and of random controllers seeded 0 .. --random-seeds - 1 is played in both and
 the observations, actions, target spikes and returns compared; the differences are
-counted. Seconds without --cleo, minutes with it:
+counted. With --decisions N, identify-and-plan's decision times (wall-clock around each
+``act``) and CPU seconds on the first N networks of suite v2's ``spikes-only`` test set.
+Seconds without --cleo, minutes with it:
 
-    python benchmarks/spikes_only.py [--cleo]
+    python benchmarks/spikes_only.py [--cleo] [--decisions 1000]
 """
 
 from __future__ import annotations
@@ -121,11 +123,48 @@ def cleo_agreement(contexts, random_seeds: int) -> None:
     print(f"wall-clock: {time.perf_counter() - started:.0f} s")
 
 
+def decision_times(networks: int) -> None:
+    """identify-and-plan on suite v2's ``spikes-only``: its mean return, CPU seconds and
+    the percentiles of its decision times."""
+    from spikectl.experiments.suite import suite_version, task
+
+    contexts = load_split("spikes-only", "test", 2)[:networks]
+    extensions = task("spikes-only", 2).extensions
+    times: list[float] = []
+
+    class Timed(IdentifyAndPlan):
+        def act(self, observation, info) -> int:
+            started = time.perf_counter()
+            action = super().act(observation, info)
+            times.append(time.perf_counter() - started)
+            return action
+
+        def spawn(self, index: int) -> Timed:  # one per network of the batch, timed too
+            return Timed(self.params, self.composition, extensions=self.extensions,
+                         seed=self.seed + index)  # fmt: skip
+
+    controller = Timed(contexts.params, named_composition(extensions, contexts.n_observed),
+                       extensions=extensions)  # fmt: skip
+    started = time.process_time()
+    returns = evaluate_policy(contexts, controller, extensions=extensions,
+                              seed=suite_version(2).env_seed).returns  # fmt: skip
+    seconds = time.process_time() - started
+    ms = np.array(times) * 1e3
+    print(f"identify-and-plan on spikes-only (suite v2, {networks} test networks): "
+          f"{mean_and_error(returns)}, {seconds:.1f} CPU s, {ms.size} decisions, "
+          f"median {np.percentile(ms, 50):.2f} ms, 99th percentile {np.percentile(ms, 99):.2f} ms")
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--cleo", action="store_true", help="also compare with Cleo")
     parser.add_argument("--random-seeds", type=int, default=2)
+    parser.add_argument("--decisions", type=int, default=0,
+                        help="time identify-and-plan's decisions on this many v2 networks")
     arguments = parser.parse_args()
+    if arguments.decisions:
+        decision_times(arguments.decisions)
+        return
     contexts = load_split("paper", "test")
     scores(contexts)
     if arguments.cleo:
