@@ -6,11 +6,12 @@ only, and, with --cleo, the agreement of spikectl's spikes-only environment with
 Rows: doing nothing, a seeded random controller, the oracle (which knows the network and
 plans open loop), and identify-and-plan (its named composition for each sensing: the
 ``spikes`` one identifies from spikes alone, spikectl/planning/spike_filter.py). Each
-value is the mean ± its standard error over the networks. With --cleo (run in the Cleo virtualenv) every episode of the
-oracle and of random controllers seeded 0 .. --random-seeds - 1 is played in both and
-the observations, actions, target spikes and returns compared; the differences are
-counted. With --decisions N, identify-and-plan's decision times (wall-clock around each
-``act``) and CPU seconds on the first N networks of suite v2's ``spikes-only`` test set.
+value is the mean ± its standard error over the networks. With --cleo (run in the Cleo
+virtualenv) every episode of the oracle and of random controllers seeded 0 ..
+--random-seeds - 1 is played in both and the observations, actions, target spikes and
+returns compared; the differences are counted. With --decisions N, identify-and-plan's
+decision times (wall-clock around each ``act``) and CPU seconds on the first N networks
+of suite v2's ``spikes-only`` test set.
 Seconds without --cleo, minutes with it:
 
     python benchmarks/spikes_only.py [--cleo] [--decisions 1000]
@@ -152,7 +153,8 @@ def decision_times(networks: int) -> None:
     ms = np.array(times) * 1e3
     print(f"identify-and-plan on spikes-only (suite v2, {networks} test networks): "
           f"{mean_and_error(returns)}, {seconds:.1f} CPU s, {ms.size} decisions, "
-          f"median {np.percentile(ms, 50):.2f} ms, 99th percentile {np.percentile(ms, 99):.2f} ms")
+          f"median {np.percentile(ms, 50):.2f} ms, "
+          f"99th percentile {np.percentile(ms, 99):.2f} ms")  # fmt: skip
 
 
 def main() -> None:
@@ -160,7 +162,7 @@ def main() -> None:
     parser.add_argument("--cleo", action="store_true", help="also compare with Cleo")
     parser.add_argument("--random-seeds", type=int, default=2)
     parser.add_argument("--decisions", type=int, default=0,
-                        help="time identify-and-plan's decisions on this many v2 networks")
+                        help="time identify-and-plan's decisions on N v2 networks")  # fmt: skip
     arguments = parser.parse_args()
     if arguments.decisions:
         decision_times(arguments.decisions)

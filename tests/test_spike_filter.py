@@ -33,7 +33,7 @@ def feed(n: int, spikes: np.ndarray, actions: np.ndarray) -> tuple[SpikeFilter, 
     """A filter and its tracker after the steps of ``spikes`` [T, n] under ``actions`` [T]
     (what identify-and-plan does each step: read, add, follow)."""
     estimate, tracker = SpikeFilter(n, PARAMS), SpikeState(n, PARAMS, 0.0)
-    for step_spikes, action in zip(spikes, actions):
+    for step_spikes, action in zip(spikes, actions, strict=True):
         estimate.add(*tracker.observe(step_spikes.astype(np.int8), int(action)))
         tracker.follow(estimate)
     return estimate, tracker

@@ -172,7 +172,7 @@ class SpikeFilter(DiscreteConnectivityEstimate):
         signs /= signs.sum()
         share = np.divide(signs[None, :], self._column_mass,
                           out=np.zeros_like(self._column_mass),
-                          where=self._column_mass > 0)  # [n, S]: P(s) / Z_j(s)
+                          where=self._column_mass > 0)  # fmt: skip  # [n, S]: P(s) / Z_j(s)
         weights = np.empty(self.log_weights.shape)
         for j in range(self.n_neurons):
             _column_weights(self._agreement[j], self._surviving[j], self._column_prior[j],
