@@ -206,13 +206,8 @@ def claims() -> Iterator[Claim]:
     for task in TASKS:
         yield Claim(benchmark, suite_row(task))
         yield Claim(benchmark, learned_row(task))
-    for task in ("paper", "latency1", "latency2"):
+    for task in ("paper", "latency1", "latency2", "spikes-only"):
         yield Claim(benchmark, suite2_row(task))
-    yield Claim(benchmark, "| `spikes-only` | {suite2/do-nothing/spikes-only/mean_return:.3f} "
-                "(0) | {suite2/random/spikes-only/mean_return:.3f} "
-                "({suite2/random/spikes-only/normalised:.3f}) | plays it; not yet in these CSVs | "
-                "{suite2/oracle/spikes-only/mean_return:.3f} ± "
-                "{suite2/oracle/spikes-only/standard_error:.3f} (1) |")  # fmt: skip
     yield Claim(benchmark, "| **mean normalised** | {summary/do-nothing:.3f} | "
                 "{summary/random:.3f} | **{summary/identify-and-plan:.3f}** | "
                 "{summary/oracle:.3f} |")  # fmt: skip
