@@ -42,6 +42,7 @@ from spikectl.agents.policy_file import (
 from spikectl.agents.policy_header import check_policy_checksum, header_differences, parse_header
 from spikectl.agents.policy_kernel import _decide, _layout
 from spikectl.envs.controller import ControllerInputError, check_controller_input
+from spikectl.envs.sensing import with_sensed_potentials
 from spikectl.file_kinds import FileKind, refuse_other_kinds
 from spikectl.files import NotARegularFileError, npz_size_problem, open_regular_file
 
@@ -176,9 +177,13 @@ class CompiledPolicy:
 
         ``observation`` is the single environment's dict (voltage [n], target, pattern
         [N], step, last_action), ``info["action_mask"]`` bool [n + 1]. Step 0 starts a
-        new episode (zero state); a step other than 0 continues the current one.
+        new episode (zero state); a step other than 0 continues the current one. Under
+        spikes-only sensing (``spikes`` [n] in place of ``voltage``) each spike is read
+        as a potential at threshold, as the PyTorch network reads it.
         """
         check_controller_input(observation, info, "CompiledPolicy")
+        spec = self.spec
+        observation = with_sensed_potentials(observation, spec.v_rest_mV, spec.v_threshold_mV)
         voltage = np.ascontiguousarray(observation["voltage"], dtype=np.float32)
         pattern = np.ascontiguousarray(observation["pattern"], dtype=np.int8)
         mask = np.ascontiguousarray(info["action_mask"], dtype=np.bool_)

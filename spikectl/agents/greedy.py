@@ -17,6 +17,10 @@ two Q-values can fall the other way than when the environment is played alone.
 batch of one, exactly as ``act`` runs it: the same actions as the real-time rig, in a
 batch of any size, on every CPU (docs/realtime.md). For a decision in microseconds,
 export the network to a :class:`~spikectl.agents.compiled.CompiledPolicy`.
+
+Under spikes-only sensing the network reads each spike as a potential at threshold
+(:func:`~spikectl.envs.sensing.with_sensed_potentials`, at the network's own V_r and
+V_th): its normalised potential is the spike, as in the episodes it was trained on.
 """
 
 from __future__ import annotations
@@ -30,6 +34,7 @@ import torch
 from spikectl.agents.heads import greedy_action
 from spikectl.agents.observation import observation_batch
 from spikectl.envs.controller import check_controller_input
+from spikectl.envs.sensing import with_sensed_potentials
 
 
 class GreedyController:
@@ -60,7 +65,7 @@ class GreedyController:
         """int64 [S]: the actions of one batched forward over every row."""
         if self.state is not None and not np.any(observations["step"]):
             self.state = None  # a new batch of episodes
-        obs = observation_batch(observations, self.device)
+        obs = observation_batch(self._read(observations), self.device)
         scores, self.state = self.network.step(obs, self.state)  # [S, n + 1]
         legal = torch.as_tensor(action_mask, device=scores.device)
         return greedy_action(scores, legal).cpu().numpy()  # [S]
@@ -94,7 +99,13 @@ class GreedyController:
         """(action, new state) of one environment as a batch of one, from fresh copies
         of its arrays: ``act`` and each row of ``act_batch`` run this same computation."""
         observations = {key: np.array(value)[None] for key, value in observation.items()}
-        obs = observation_batch(observations, self.device)
+        obs = observation_batch(self._read(observations), self.device)
         scores, state = self.network.step(obs, state)  # [1, n + 1]
         legal = torch.as_tensor(mask[None], device=scores.device)
         return int(greedy_action(scores, legal)[0]), state
+
+    def _read(self, observations: Mapping[str, Any]) -> Mapping[str, Any]:
+        """What the network reads of the observations: spikes as potentials at threshold
+        under spikes-only sensing, the observations themselves otherwise."""
+        network = self.network
+        return with_sensed_potentials(observations, network.v_rest_mV, network.v_threshold_mV)

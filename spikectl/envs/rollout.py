@@ -4,7 +4,10 @@ What plays is a controller (:mod:`spikectl.envs.controller`: ``reset()`` and
 ``act_batch(observations, infos)``; one without a batched form plays a copy per
 sub-environment), or a bare *policy* function ``policy(observations, action_mask) ->
 actions`` on batches ([num_envs, ...] arrays in, int [num_envs] out), as the learners'
-exploration policies are.
+exploration policies are. A controller gets the observations as the environment gives
+them; a bare policy, like the episodes' stored ``voltage``, reads them as a
+potential-reading agent does (under spikes-only sensing, each spike as a potential at
+threshold: :func:`~spikectl.envs.sensing.with_sensed_potentials`).
 """
 
 from __future__ import annotations
@@ -16,6 +19,7 @@ import numpy as np
 
 from spikectl.contexts import ContextSet
 from spikectl.envs.controller import Controller, batched
+from spikectl.envs.sensing import VOLTAGE_KEY, with_sensed_potentials
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.extensions import Extensions
 
@@ -28,7 +32,9 @@ class EpisodeBatch:
     """One episode in each sub-environment of a vector environment."""
 
     voltage: np.ndarray
-    """[S, N + 1, n] float32 observed potentials before each step and after the last."""
+    """[S, N + 1, n] float32 observed potentials before each step and after the last
+    (under spikes-only sensing the spikes as potentials: V_th where a neuron spiked at
+    the step just simulated, V_r elsewhere)."""
     actions: np.ndarray
     """[S, N] int64 actions taken."""
     rewards: np.ndarray
@@ -46,18 +52,19 @@ class EpisodeBatch:
         return self.rewards.sum(axis=1)
 
 
-def _batch_actor(policy: Controller | Policy) -> Callable[[dict, dict], np.ndarray]:
-    """(observations, infos) -> actions of a controller (reset here) or a bare policy."""
+def _batch_actor(policy: Controller | Policy) -> Callable[[dict, dict, dict], np.ndarray]:
+    """(observations, what an agent reads of them, infos) -> actions of a controller
+    (reset here; it gets the observations) or a bare policy (it gets what an agent reads)."""
     if isinstance(policy, Controller):
         controller = batched(policy)
         controller.reset()
-        return controller.act_batch
+        return lambda observations, read, infos: controller.act_batch(observations, infos)
     if not callable(policy):
         raise TypeError(
             f"{type(policy).__name__} is neither a controller (reset() and act(observation, "
             "info)) nor a policy function (observations, action_mask) -> actions"
         )
-    return lambda observations, infos: policy(observations, infos["action_mask"].astype(bool))
+    return lambda observations, read, infos: policy(read, infos["action_mask"].astype(bool))
 
 
 def run_episodes(
@@ -80,12 +87,14 @@ def run_episodes(
     rewards = np.zeros((size, length))
     spikes = np.zeros((size, length, n), dtype=bool)
     action_mask = infos["action_mask"].astype(bool)  # int8 in the infos
-    # Spikes-only sensing (an extension) observes no potentials: NaN, not observed.
-    voltage[:, 0] = observations.get("voltage", np.nan)
+    rest, threshold = env.params.v_rest_mV, env.params.v_threshold_mV
+    read = with_sensed_potentials(observations, rest, threshold)
+    voltage[:, 0] = read[VOLTAGE_KEY]
     for t in range(length):
-        actions[:, t] = act(observations, infos)
+        actions[:, t] = act(observations, read, infos)
         observations, rewards[:, t], _, _, infos = env.step(actions[:, t])
-        voltage[:, t + 1] = observations.get("voltage", np.nan)
+        read = with_sensed_potentials(observations, rest, threshold)
+        voltage[:, t + 1] = read[VOLTAGE_KEY]
         spikes[:, t] = infos["spikes"]
     return EpisodeBatch(
         voltage=voltage,

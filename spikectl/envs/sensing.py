@@ -11,6 +11,7 @@ environments.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
 from typing import Any
 
 import numpy as np
@@ -57,3 +58,31 @@ def make_observation(
     if in_flight is not None:
         observation[IN_FLIGHT_KEY] = in_flight
     return observation
+
+
+def with_sensed_potentials(
+    observations: Mapping[str, Any], v_rest_mV: float, v_threshold_mV: float
+) -> Mapping[str, Any]:
+    """The observation (one, or a batch) as a potential-reading agent reads it.
+
+    Under spikes-only sensing a spike is what the paper's observation shows as a potential
+    at threshold: the result adds ``voltage`` (float32, the shape of ``spikes``), V_th
+    where a neuron spiked and V_r elsewhere, so that the agents' normalised potential
+    (V - V_r) / (V_th - V_r) is the spike itself (0 or 1, exactly), as the flat ids'
+    voltage columns hold it. An observation with ``voltage`` (the paper's sensing) comes
+    back unchanged, the very object. The agents read it; controllers that identify
+    from spikes read :func:`as_sensed` of it.
+    """
+    if VOLTAGE_KEY in observations or SPIKES_KEY not in observations:
+        return observations
+    spiked = np.asarray(observations[SPIKES_KEY]) != 0
+    voltage = np.where(spiked, np.float32(v_threshold_mV), np.float32(v_rest_mV))
+    return {VOLTAGE_KEY: voltage.astype(np.float32, copy=False), **observations}
+
+
+def as_sensed(observations: Mapping[str, Any]) -> Mapping[str, Any]:
+    """The observation as the environment gave it: without the ``voltage`` that
+    :func:`with_sensed_potentials` added beside ``spikes`` (unchanged otherwise)."""
+    if SPIKES_KEY in observations and VOLTAGE_KEY in observations:
+        return {key: value for key, value in observations.items() if key != VOLTAGE_KEY}
+    return observations

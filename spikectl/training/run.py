@@ -31,7 +31,6 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from spikectl.config_errors import ConfigError
 from spikectl.envs.rollout import EpisodeBatch, run_episodes
 from spikectl.seeds import COLLECT_STREAM, EVAL_STREAM
 from spikectl.training.agent_network import check_initial_weights
@@ -40,7 +39,7 @@ from spikectl.training.checkpoint import RunState, load_checkpoint, save_checkpo
 from spikectl.training.config import Experiment
 from spikectl.training.greedy_scores import greedy_returns
 from spikectl.training.group import check_group, prepare_group, seed_dirs
-from spikectl.training.learners import check_stacked, make_learners
+from spikectl.training.learners import check_environment, check_stacked, make_learners
 from spikectl.training.learners.protocol import LossDiverged
 from spikectl.training.loop_envs import baselines, collection_env, evaluation_envs
 from spikectl.training.machine import record_machine
@@ -127,7 +126,7 @@ def train_runs(
     for path in directories:
         check_run_path(path)
     check_group(configs, run_dirs)
-    check_sensing(configs)
+    check_environment(configs)  # e.g. a teacher that cannot play it
     if stacked:
         check_stacked(configs)  # before any directory is made
     if not resume:
@@ -338,18 +337,6 @@ class Loop:
 
 
 SPLIT_FILES = {"train": TRAIN_FILE, "test": TEST_FILE, "validation": VAL_FILE}
-
-
-def check_sensing(configs: list[Experiment]) -> None:
-    """Refuse spikes-only sensing before any directory is made: the learners' inputs are
-    built from the observed potentials, which it does not observe."""
-    if any(config.env.extensions.spikes_only for config in configs):
-        raise ConfigError(
-            ("env", "extensions", "sensing"),
-            "'spikes' is not trainable yet: the learners' inputs read the observed "
-            "potentials (spikes-only sensing plays controllers: spikectl benchmark)",
-            label="--extensions.sensing",
-        )
 
 
 def context_checksums(seed_sets) -> dict[str, str]:

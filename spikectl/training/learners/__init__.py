@@ -23,7 +23,9 @@ How to add a learner (three files of spikectl, nothing outside this package):
    settings from :class:`~spikectl.training.learners.q_settings.QSettings`.
 2. ``NAME.py``: the learner (:class:`~spikectl.training.learners.protocol.Learner`), made
    as ``Learner(config, train_set, rng)``; a Q-learner builds on
-   :mod:`~spikectl.training.learners.q_learning`.
+   :mod:`~spikectl.training.learners.q_learning`. A learner that cannot train on some
+   environments refuses them in a classmethod ``check_environment(config)`` (raising a
+   ConfigError), which the loop calls before any directory is made.
 3. One ``register(...)`` line below. The config tree (``Experiment.learner``,
    config.json), the loop, the presets, ``spikectl train NAME``, sweeps and checkpoints
    then know it; add its row to the table above.
@@ -85,6 +87,16 @@ def check_stacked(configs) -> None:
         )
 
 
+def check_environment(configs) -> None:
+    """Refuse, before a run starts, a learner that cannot train on its environment: the
+    learner class's ``check_environment(config)`` where it has one (the guided learner's
+    refuses a teacher that cannot play the environment). The configs of a group differ
+    only in seed and training-set size, so the first speaks for all."""
+    check = getattr(entry_of(configs[0]).learner_class(), "check_environment", None)
+    if check is not None:
+        check(configs[0])
+
+
 def make_learners(configs, train_sets, rngs, stacked: bool = False) -> LearnerGroup:
     """The learners of K seeds (one per config, training set and generator) as the
     group the loop drives: looped (each seed exactly as alone) or, with ``stacked``,
@@ -100,6 +112,6 @@ def make_learners(configs, train_sets, rngs, stacked: bool = False) -> LearnerGr
 
 
 __all__ = ["DQNConfig", "GuidedConfig", "LearnerConfig", "LearnerEntry", "PQNConfig", "Preset",
-           "check_stacked", "entry_of", "learner_config_type", "learner_configs",
-           "learner_entries", "learner_entry", "make_learner", "make_learners",
-           "register"]  # fmt: skip
+           "check_environment", "check_stacked", "entry_of", "learner_config_type",
+           "learner_configs", "learner_entries", "learner_entry", "make_learner",
+           "make_learners", "register"]  # fmt: skip

@@ -30,13 +30,18 @@ import torch
 import torch.nn.functional as F
 
 from spikectl.agents import make_connectivity_predictor, masked_q
+from spikectl.config_errors import ConfigError
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.planning import Composition, IdentifyAndPlan, named_composition
 from spikectl.seeds import CONNECTIVITY_HEAD_STREAM, torch_seed
 from spikectl.training.learners.dqn import DQNLearner, losses_on_tensors
 from spikectl.training.learners.q_learning import batch_tensors
-from spikectl.training.learners.teachers import TeacherMixedPolicy, teacher_labels
+from spikectl.training.learners.teachers import (
+    TeacherMixedPolicy,
+    teacher_labels,
+    teacher_refusal,
+)
 from spikectl.training.replay import EpisodeReplay
 
 
@@ -78,6 +83,15 @@ def connectivity_loss(
     return F.cross_entropy(logits.flatten(0, 2), classes.flatten())
 
 
+def teacher_composition(config) -> Composition:
+    """The identify teacher's composition for an Experiment: the named controller's on
+    its environment, in the form whose every decision is fast (it labels every step),
+    or the paper's (``teacher_settings``)."""
+    if config.learner.teacher_settings == "task":
+        return named_composition(config.env.extensions, config.env.n_observed, fast=True)
+    return Composition()
+
+
 class GuidedDQNLearner(DQNLearner):
     """One seed's teacher-guided learner (``Experiment.learner`` a GuidedConfig)."""
 
@@ -106,13 +120,7 @@ class GuidedDQNLearner(DQNLearner):
         self.contexts = list(train_set)
         self.params = config.env.params
         self.extensions = config.env.extensions
-        # The identify teacher's composition: the named controller's on this environment,
-        # in the form whose every decision is fast (it labels every step), or the paper's.
-        self.teacher_composition = (
-            named_composition(config.env.extensions, config.env.n_observed, fast=True)
-            if self.settings.teacher_settings == "task"
-            else Composition()
-        )
+        self.teacher_composition = teacher_composition(config)
         if (
             self.settings.teacher == "told-weights"
             and config.env.n_observed != config.env.n_neurons
@@ -131,6 +139,23 @@ class GuidedDQNLearner(DQNLearner):
         self.target_inputs = np.stack(
             [np.sign(c.weights[c.observable, c.target]) for c in train_set]
         ).astype(np.int8)
+
+    @classmethod
+    def check_environment(cls, config) -> None:
+        """Refuse a run whose teacher cannot play its environment, in one line, before
+        any directory is made (a run that never teaches is not refused)."""
+        settings = config.learner
+        if not settings.teaches:
+            return
+        problem = teacher_refusal(config.env, settings.teacher, settings.teacher_width,
+                                  teacher_composition(config))  # fmt: skip
+        if problem is not None:
+            raise ConfigError(
+                ("learner", "teacher"),
+                f"{settings.teacher!r} cannot teach on this environment ({problem}); "
+                "train without a teacher (--imitation-weight 0 --imitation-weight-end 0, "
+                "or the quick preset)",
+            )
 
     def build_connectivity_head(self, config) -> torch.nn.Module | None:
         """The privileged connectivity head when ``connectivity_weight > 0``, seeded from

@@ -100,6 +100,16 @@ class GuidedConfig(DQNConfig):
         same = composition_name(env.extensions, env.n_observed, fast=True) == "paper"
         return {"teacher_settings": "task" if same else "defaults"}
 
+    @property
+    def teaches(self) -> bool:
+        """Whether the teacher labels or plays any episode: an imitation weight or a
+        teacher's share above 0 at some point of the run."""
+        if self.imitation_weight_end > 0:
+            return True
+        return self.imitation_anneal_fraction > 0 and (
+            self.imitation_weight > 0 or self.teacher_episodes > 0
+        )
+
     def teacher_share_at(self, episode: int, total_episodes: int) -> float:
         """The share of episodes the teacher plays after ``episode`` episodes: linear from
         teacher_episodes to 0 over the imitation anneal (0 without an anneal)."""

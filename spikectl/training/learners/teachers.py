@@ -6,6 +6,8 @@ every observation the agent saw, including the action the agent actually took (t
 observation's ``last_action``), and says what it would have done at each step: the
 label. Labelling after the episode is exact because the controller's choice depends
 on nothing but those observations (and, for the privileged teacher, the weights).
+Under spikes-only sensing the teacher sees what the environment showed, the spikes (the
+agent reads them as potentials at threshold: ``envs.sensing``).
 """
 
 from __future__ import annotations
@@ -15,9 +17,10 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-from spikectl.contexts import Context
-from spikectl.envs.latency import IN_FLIGHT_KEY
+from spikectl.contexts import Context, ContextSet
 from spikectl.envs.rollout import EpisodeBatch
+from spikectl.envs.sensing import as_sensed, make_observation
+from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning import Composition, IdentifyAndPlan
@@ -66,6 +69,7 @@ class TeacherMixedPolicy:
     def __call__(self, observations: dict[str, np.ndarray], action_mask: np.ndarray) -> np.ndarray:
         actions = self.student(observations, action_mask)  # [S]
         started = time.process_time()
+        observations = as_sensed(observations)  # what the environment showed
         for s, teacher in self.teachers.items():
             observation = {key: value[s] for key, value in observations.items()}
             actions[s] = teacher.act(observation, {"action_mask": action_mask[s]})
@@ -103,15 +107,39 @@ def teacher_labels(
         # With loop latency L, observation t carries the actions chosen at t - L .. t - 1.
         latency = 0 if extensions is None else extensions.latency_steps
         chosen = np.concatenate([np.full(latency, -1, np.int64), episodes.actions[s]])
+        # Spikes-only sensing shows the spikes of the step just simulated (none at 0).
+        spikes_only = extensions is not None and extensions.spikes_only
+        if spikes_only:
+            shown = np.concatenate([np.zeros_like(episodes.spikes[s, :1]), episodes.spikes[s]])
         for t in range(length):
-            observation = {
-                "voltage": episodes.voltage[s, t],
-                "target": target,
-                "pattern": pattern,
-                "step": t,
-                "last_action": -1 if t == 0 else int(episodes.actions[s, t - 1]),
-            }
-            if latency:
-                observation[IN_FLIGHT_KEY] = chosen[t : t + latency]
+            observation = make_observation(
+                shown[t].astype(np.int8) if spikes_only else episodes.voltage[s, t],
+                spikes_only, target, pattern, t,
+                -1 if t == 0 else int(episodes.actions[s, t - 1]),
+                chosen[t : t + latency] if latency else None,
+            )  # fmt: skip
             labels[s, t] = policy.act(observation, info)
     return labels
+
+
+def teacher_refusal(
+    env, teacher: str, width: int, composition: Composition | None = None
+) -> str | None:
+    """Why ``teacher`` cannot play the environment of ``env`` (an ``EnvConfig``), or None
+    where it can: the teacher is made as a run makes it, for one context of that
+    environment, and takes its first decision on the environment's first observation
+    (identify-and-plan refuses there, in one line, what it cannot read)."""
+    contexts = ContextSet.generate(1, env.n_neurons, env.episode_length, env.context_seed,
+                                   env.params, env.extensions)  # fmt: skip
+    played = NeuronControlVectorEnv(1, contexts=contexts,
+                                    extensions=env.extensions.environment_part())  # fmt: skip
+    observations, infos = played.reset(options={"context": [0]})
+    played.close()
+    observation = {key: value[0] for key, value in observations.items()}
+    try:
+        policy = make_teacher(teacher, contexts[0], contexts.params, env.extensions, width,
+                              composition)  # fmt: skip
+        policy.act(observation, {"action_mask": infos["action_mask"][0].astype(bool)})
+    except ValueError as error:  # ControllerInputError among them
+        return " ".join(str(error).split())
+    return None
