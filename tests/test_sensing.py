@@ -150,13 +150,13 @@ def test_an_episode_pickled_mid_way_continues_identically():
 
 def test_evaluate_policy_gives_the_papers_returns():
     """A controller that does not read the potentials scores the same either way; the
-    episodes' potentials are not observed (NaN)."""
+    episodes' potentials are the spikes as an agent reads them (tests/test_spikes_learners.py)."""
     test_set = ContextSet.generate(6, n_neurons=8, seed=3)
     paper = evaluate_policy(test_set, RandomLegal(seed=1))
     spiking = evaluate_policy(test_set, RandomLegal(seed=1), extensions=Extensions(**SPIKES))
     np.testing.assert_array_equal(paper.rewards, spiking.rewards)
     np.testing.assert_array_equal(paper.spikes, spiking.spikes)
-    assert np.isnan(spiking.voltage).all()
+    assert set(np.unique(spiking.voltage)) == {-70.0, -50.0}  # V_r, and V_th at a spike
 
 
 # -- the flat wrappers
@@ -218,16 +218,15 @@ def test_transforms_of_unobserved_potentials_are_refused(other):
     assert "\n" not in str(error.value)
 
 
-def test_the_cli_refuses_a_bad_sensing_and_training_on_spikes(tmp_path, capsys):
-    for value, message in (("volts", "must be one of 'potentials', 'spikes'"),
-                           ("spikes", "not trainable yet")):  # fmt: skip
-        with pytest.raises(SystemExit) as exit_info:
-            main(["train", "smoke", "--extensions.sensing", value, "--total-env-steps", "320",
-                  "--run-dir", str(tmp_path / value)])  # fmt: skip
-        assert exit_info.value.code == 2
-        error = capsys.readouterr().err.strip()
-        assert message in error and len(error.splitlines()) == 1
-        assert not (tmp_path / value).exists()
+def test_the_cli_refuses_a_bad_sensing(tmp_path, capsys):
+    """(Training on spikes: tests/test_spikes_learners.py.)"""
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", "smoke", "--extensions.sensing", "volts", "--total-env-steps", "320",
+              "--run-dir", str(tmp_path / "volts")])  # fmt: skip
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err.strip()
+    assert "must be one of 'potentials', 'spikes'" in error and len(error.splitlines()) == 1
+    assert not (tmp_path / "volts").exists()
 
 
 def test_the_oracle_plays_as_in_the_papers_setting_and_identify_and_plan_reads_spikes():
