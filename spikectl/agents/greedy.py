@@ -34,7 +34,7 @@ import torch
 from spikectl.agents.heads import greedy_action
 from spikectl.agents.observation import observation_batch
 from spikectl.envs.controller import check_controller_input
-from spikectl.envs.sensing import with_sensed_potentials
+from spikectl.envs.sensing import VOLTAGE_KEY, with_sensed_potentials
 
 
 class GreedyController:
@@ -105,7 +105,15 @@ class GreedyController:
         return int(greedy_action(scores, legal)[0]), state
 
     def _read(self, observations: Mapping[str, Any]) -> Mapping[str, Any]:
-        """What the network reads of the observations: spikes as potentials at threshold
-        under spikes-only sensing, the observations themselves otherwise."""
+        """What the network reads of the observations: spikes as potentials at its
+        threshold under spikes-only sensing, the observations themselves otherwise (a
+        network need not carry a voltage range until it plays spikes)."""
+        if VOLTAGE_KEY in observations:
+            return observations
         network = self.network
+        if not hasattr(network, "v_rest_mV") or not hasattr(network, "v_threshold_mV"):
+            raise TypeError(
+                f"GreedyController: {type(network).__name__} has no v_rest_mV and "
+                "v_threshold_mV, which reading spikes as potentials needs"
+            )
         return with_sensed_potentials(observations, network.v_rest_mV, network.v_threshold_mV)
