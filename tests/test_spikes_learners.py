@@ -27,7 +27,7 @@ from spikectl.envs.rollout import evaluate_policy
 from spikectl.envs.sensing import SPIKES_KEY, as_sensed, with_sensed_potentials
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
-from spikectl.training.learners import GuidedConfig, check_environment
+from spikectl.training.learners import GuidedConfig, PQNConfig, check_environment
 from spikectl.training.learners.guided import teacher_composition
 from spikectl.training.learners.teachers import teacher_refusal
 from spikectl.training.presets import PRESETS, SMOKE
@@ -180,6 +180,29 @@ def test_a_run_on_spikes_trains_and_resumes_exactly(tmp_path, interrupt_after_ro
     restore()
     resumed = train(SHORT, tmp_path / "stopped", resume=True)
     assert without_clocks(resumed) == without_clocks(whole)
+
+
+def learner_config(name: str):
+    """SHORT with learner ``name``, its shared settings kept (the guided one untaught:
+    no teacher plays spikes-only sensing today)."""
+    if name == "dqn":
+        return SHORT
+    if name == "guided":
+        return guided(SHORT, imitation_weight=0.0, imitation_weight_end=0.0)
+    shared = {f.name for f in dataclasses.fields(PQNConfig)}
+    settings = {k: v for k, v in dataclasses.asdict(SHORT.learner).items() if k in shared}
+    sizes = dataclasses.replace(SHORT.agent.sizes, layer_norm=True)
+    return dataclasses.replace(SHORT, agent=dataclasses.replace(SHORT.agent, sizes=sizes),
+                               learner=PQNConfig(**settings))  # fmt: skip
+
+
+@pytest.mark.parametrize("name", ["dqn", "pqn", "guided"])
+def test_every_learner_trains_on_spikes(tmp_path, name):
+    config = learner_config(name)
+    assert config.learner.name == name and config.env.extensions.spikes_only
+    rows = train(config, tmp_path / name)
+    assert rows[-1]["updates"] > 0 and rows[-1]["env_steps"] == SHORT.train.total_env_steps
+    assert all(math.isfinite(row["loss"]) for row in rows[1:])
 
 
 def test_the_cli_trains_on_the_spikes_only_task_and_benchmarks_the_run(tmp_path, capsys):
