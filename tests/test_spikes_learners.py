@@ -229,10 +229,12 @@ def test_the_cli_trains_on_the_spikes_only_task_and_benchmarks_the_run(tmp_path,
 def test_a_guided_run_is_refused_in_one_line_while_its_teacher_cannot_play(tmp_path):
     """Whatever teacher cannot play spikes-only sensing refuses the run before any
     directory, in one line that says why; the privileged teacher (told the weights,
-    which identify-and-plan plays from potentials) never can."""
+    which identify-and-plan plays from potentials) never can. Identify-and-plan plays
+    spikes at this size and teaches (not refused)."""
     for teacher in ("told-weights", "identify"):
         config = guided(SHORT, teacher=teacher)
-        problem = teacher_refusal(config.env, teacher, 4, teacher_composition(config))
+        width = config.learner.teacher_width
+        problem = teacher_refusal(config.env, teacher, width, teacher_composition(config))
         if teacher == "told-weights":
             assert problem is not None
         if problem is None:  # identify-and-plan identifies from spikes here
