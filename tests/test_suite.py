@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import importlib
 import json
 import shutil
 from pathlib import Path
@@ -326,3 +327,43 @@ def test_a_benchmark_of_the_oracle_plays_it_once_and_reads_its_reference(
     (row,) = list(csv.DictReader(out.open()))
     assert row["mean_return"] == row["oracle"] and float(row["normalised"]) == 1.0
     assert float(row["cpu_seconds"]) > 0
+
+
+def test_a_task_the_controller_cannot_play_is_refused_before_any_episode(capsys, tmp_path):
+    """Named, a task the controller refuses (identify-and-plan on the rig's spikes with
+    ChR2 and background input) is one line, exit 2, before anything is played or written."""
+    out = tmp_path / "rows.csv"
+    code, stdout, stderr = run_main(["benchmark", "identify-and-plan", "--suite", "2", "--task",
+                                     "paper", "rig", "--out", str(out)], capsys)  # fmt: skip
+    assert code == 2 and not out.exists()
+    (line,) = stderr.strip().splitlines()
+    assert "cannot play task 'rig'" in line and "background_rate" in line
+
+
+def test_all_tasks_skips_those_the_controller_cannot_play(capsys, tmp_path, monkeypatch):
+    """Under --task all a task the controller cannot play is skipped with its reason, and
+    the others are played and written."""
+    benchmark = importlib.import_module("spikectl.cli.benchmark")
+
+    def refuse_all_but_paper(make, name, split, version):
+        return None if name == "paper" else f"cannot read {name}"
+
+    monkeypatch.setattr(benchmark, "task_refusal", refuse_all_but_paper)
+    out = tmp_path / "rows.csv"
+    code, stdout, _ = run_main(["benchmark", "do-nothing", "--task", "all", "--out", str(out)],
+                               capsys)  # fmt: skip
+    assert code == 0, stdout
+    assert [row["task"] for row in csv.DictReader(out.open())] == ["paper"]
+    assert "n16            skipped: do-nothing cannot play it (cannot read n16)" in stdout
+
+
+def test_the_first_decision_says_why_a_controller_cannot_play():
+    from spikectl.envs.controller import DoNothing, first_decision_refusal
+    from spikectl.envs.env import NeuronControlEnv
+    from spikectl.planning import IdentifyAndPlan
+
+    env = NeuronControlEnv(contexts={"n_train": 2, "n_test": 2},
+                           extensions={"sensing": "spikes"})  # fmt: skip
+    assert first_decision_refusal(env, DoNothing()) is None
+    why = first_decision_refusal(env, IdentifyAndPlan(env.params))  # made for potentials
+    assert why is not None and "\n" not in why and "spikes" in why

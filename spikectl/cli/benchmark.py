@@ -99,6 +99,16 @@ def score_and_write(command: BenchmarkCommand) -> None:
     for name in names:
         version.task(name)  # an unknown task is refused before anything is played
     make = controller_factory(command, names)
+    # A task the controller cannot play is found before any episode: named, it is refused
+    # in one line; under "all" it is skipped with that line, and the other tasks are played.
+    skipped = {}
+    for name in names:
+        why = task_refusal(make, name, command.split, version.number)
+        if why is not None and "all" not in command.task:
+            raise ValueError(f"{command.controller} cannot play task {name!r}: {why}")
+        if why is not None:
+            skipped[name] = why
+    names = [name for name in names if name not in skipped]
     origin = training_task(command)
     seeds = command.random_seeds if stochastic(command.controller) else 1
     print(f"benchmark suite v{version.number}, {command.split} sets "
@@ -108,6 +118,8 @@ def score_and_write(command: BenchmarkCommand) -> None:
           + (f"; trained on task {origin!r}" if origin else ""))  # fmt: skip
     print(f"{'task':<15}{'mean return':>18}{'normalised':>12}{'do nothing':>12}"
           f"{'oracle':>9}{'CPU s':>9}")  # fmt: skip
+    for name, why in skipped.items():
+        print(f"{name:<15}skipped: {command.controller} cannot play it ({why})")
     rows, per_network, normalised = [], [], {}
     for name in names:
         if command.controller in REFERENCE_CONTROLLERS:  # played once, for the references too
@@ -154,6 +166,23 @@ def score_and_write(command: BenchmarkCommand) -> None:
     for path in written:
         print(f"wrote {path}")
     print.finish()
+
+
+def task_refusal(make: Any, name: str, split: str, version: int) -> str | None:
+    """Why the controller ``make(name)`` makes cannot play task ``name``, or None: it is
+    made and takes its first decision on the task's first network (a controller refuses
+    there, in one line, what it cannot read)."""
+    from spikectl.envs.controller import first_decision_refusal
+    from spikectl.envs.env import NeuronControlEnv
+    from spikectl.experiments import suite
+
+    try:
+        controller = make(name)(0)
+    except ValueError as error:  # ConfigError and ControllerInputError among them
+        return " ".join(str(error).split())
+    env = NeuronControlEnv(contexts=suite.load_split(name, split, version),
+                           extensions=suite.task(name, version).extensions)  # fmt: skip
+    return first_decision_refusal(env, controller)
 
 
 def training_task(command: BenchmarkCommand) -> str | None:

@@ -264,7 +264,24 @@ def play_episode(env: Any, controller: Controller, context: int, seed: int | Non
     return np.array(actions, dtype=np.int64), total
 
 
+def first_decision_refusal(env: Any, controller: Controller) -> str | None:
+    """Why ``controller`` cannot play the single environment ``env``, or None where it
+    can: it takes its first decision on the first context's first observation (a
+    controller refuses there, in one line, an observation it cannot read). The controller
+    is reset before and after."""
+    controller.reset()
+    observation, info = env.reset(options={"context": 0})
+    try:
+        controller.act(observation, info)
+    except ValueError as error:  # ControllerInputError among them
+        return " ".join(str(error).split())
+    finally:
+        controller.reset()
+    return None
+
+
 __all__ = [
     "BatchController", "Controller", "ControllerInputError", "Copies", "DoNothing",
-    "RandomLegal", "Witness", "batched", "check_controller_input", "play_episode",
+    "RandomLegal", "Witness", "batched", "check_controller_input", "first_decision_refusal",
+    "play_episode",
 ]  # fmt: skip
