@@ -8,8 +8,8 @@ and the light; ``random`` is seeded per network) and play the paper task's first
 the mean return in each, the largest difference of one episode's returns, and in how
 many episodes the two chose the same actions; writes one row per episode to --out
 (if given).
-A controller that refuses a setting (identify-and-plan under spikes-only sensing reads
-potentials) is reported as such. Runs in the Cleo virtualenv:
+A controller that refuses a setting (identify-and-plan identifies from spikes without
+ChR2 only) is reported with its one line. Runs in the Cleo virtualenv:
 
     PYTHONPATH=$PWD /tmp/venv-cleo/bin/python benchmarks/cleo_agreement.py \
         --settings latency1 latency2 chr2 spikes-only --networks 100
@@ -25,7 +25,7 @@ from pathlib import Path
 import numpy as np
 
 from spikectl.bridges.cleo import SETTINGS, CleoLoop, matching_extensions
-from spikectl.envs.controller import ControllerInputError, play_episode
+from spikectl.envs.controller import play_episode
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.experiments.suite import load_split
 from spikectl.training.loaders import load_controller
@@ -54,6 +54,17 @@ def agreement(setting: str, name: str, networks: int, contexts) -> list[dict]:
     return rows
 
 
+def write_rows(rows: list[dict], out: Path) -> None:
+    """Every episode so far, one row each, written whole (a temporary file, then renamed)."""
+    out.parent.mkdir(parents=True, exist_ok=True)
+    partial = out.with_name(out.name + ".partial")
+    with open(partial, "w", newline="") as file:
+        writer = csv.DictWriter(file, FIELDS)
+        writer.writeheader()
+        writer.writerows(rows)
+    partial.replace(out)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--settings", nargs="+", default=["latency1", "latency2", "chr2"],
@@ -71,10 +82,12 @@ def main() -> None:
         for name in arguments.controllers:
             try:
                 played = agreement(setting, name, arguments.networks, contexts)
-            except ControllerInputError as error:
+            except ValueError as error:  # ControllerInputError, ConfigError among them
                 print(f"| `{setting}` | {name} | refused: {error} | | | | |", flush=True)
                 continue
             rows += played
+            if arguments.out is not None:  # what was played is kept if a later one fails
+                write_rows(rows, arguments.out)
             ours = np.array([float(row["spikectl_return"]) for row in played])
             theirs = np.array([float(row["cleo_return"]) for row in played])
             same = sum(row["same_actions"] for row in played)
@@ -82,13 +95,6 @@ def main() -> None:
             print(f"| `{setting}` | {name} | {ours.mean():.4f} | {theirs.mean():.4f} | "
                   f"{np.abs(ours - theirs).max():.1e} | {same}/{len(played)} | {seconds:.0f} |",
                   flush=True)  # fmt: skip
-    if arguments.out is None:
-        return
-    arguments.out.parent.mkdir(parents=True, exist_ok=True)
-    with open(arguments.out, "w", newline="") as file:
-        writer = csv.DictWriter(file, FIELDS)
-        writer.writeheader()
-        writer.writerows(rows)
 
 
 if __name__ == "__main__":

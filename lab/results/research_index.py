@@ -22,6 +22,13 @@ CLAIM_CHARS = 220
 # Folders whose first commits' subjects name something else (a folder committed beside
 # another change): their claim as the commit that reported the result stated it.
 CLAIMS = {
+    "amortised-belief": "an amortised belief over the target's inputs (neurons as tokens, "
+    "trained 18 CPU-minutes on generated episodes, sizes 8-32): at n = 32 it removes 51 % "
+    "of the base rate's cross-entropy after 50 steps (identify-and-plan's Gaussian estimate "
+    "74 %); at n = 8 within 8 % of the exact posterior's NLL over the episode",
+    "cleo-agreement": "controllers made for each loop (latency, ChR2, spikes only, the rig "
+    "without background) in Cleo and in spikectl with the matching extensions: every "
+    "action and return equal, 100 networks per setting and controller",
     "amortised-controller": "a controller on the amortised belief (greedy on P(input), "
     "probes on quiet stretches; compiled step, CPU p99 0.6-1.2 ms at n = 16-32 on the "
     "loaded machine): test 0.806 / 0.742 / 0.675 on paper / n16 / n32, -0.032 / -0.041 / "
