@@ -364,6 +364,9 @@ def test_the_first_decision_says_why_a_controller_cannot_play():
 
     env = NeuronControlEnv(contexts={"n_train": 2, "n_test": 2},
                            extensions={"sensing": "spikes"})  # fmt: skip
-    assert first_decision_refusal(env, DoNothing()) is None
-    why = first_decision_refusal(env, IdentifyAndPlan(env.params))  # made for potentials
+    assert first_decision_refusal(env, DoNothing) is None
+    why = first_decision_refusal(env, lambda: IdentifyAndPlan(env.params))  # for potentials
     assert why is not None and "\n" not in why and "spikes" in why
+    rig = suite.task("rig", 2).extensions
+    why = first_decision_refusal(env, lambda: IdentifyAndPlan(env.params, extensions=rig))
+    assert why is not None and "\n" not in why and "actuator='chr2'" in why

@@ -169,20 +169,15 @@ def score_and_write(command: BenchmarkCommand) -> None:
 
 
 def task_refusal(make: Any, name: str, split: str, version: int) -> str | None:
-    """Why the controller ``make(name)`` makes cannot play task ``name``, or None: it is
-    made and takes its first decision on the task's first network (a controller refuses
-    there, in one line, what it cannot read)."""
+    """Why the controller ``make(name)`` makes cannot play task ``name``, or None
+    (:func:`~spikectl.envs.controller.first_decision_refusal` on the task's set)."""
     from spikectl.envs.controller import first_decision_refusal
     from spikectl.envs.env import NeuronControlEnv
     from spikectl.experiments import suite
 
-    try:
-        controller = make(name)(0)
-    except ValueError as error:  # ConfigError and ControllerInputError among them
-        return " ".join(str(error).split())
     env = NeuronControlEnv(contexts=suite.load_split(name, split, version),
                            extensions=suite.task(name, version).extensions)  # fmt: skip
-    return first_decision_refusal(env, controller)
+    return first_decision_refusal(env, lambda: make(name)(0))
 
 
 def training_task(command: BenchmarkCommand) -> str | None:

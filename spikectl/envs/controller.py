@@ -20,7 +20,7 @@ controllers (docs/environment.md, "Controllers").
 from __future__ import annotations
 
 import copy
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -264,19 +264,18 @@ def play_episode(env: Any, controller: Controller, context: int, seed: int | Non
     return np.array(actions, dtype=np.int64), total
 
 
-def first_decision_refusal(env: Any, controller: Controller) -> str | None:
-    """Why ``controller`` cannot play the single environment ``env``, or None where it
-    can: it takes its first decision on the first context's first observation (a
-    controller refuses there, in one line, an observation it cannot read). The controller
-    is reset before and after."""
-    controller.reset()
+def first_decision_refusal(env: Any, make: Callable[[], Controller]) -> str | None:
+    """Why the controller ``make()`` makes cannot play the single environment ``env``, or
+    None where it can: it is made and takes its first decision on the first context's
+    first observation (a controller refuses, in one line, what it cannot be made for or
+    cannot read: a ValueError, ControllerInputError and ConfigError among them)."""
     observation, info = env.reset(options={"context": 0})
     try:
-        controller.act(observation, info)
-    except ValueError as error:  # ControllerInputError among them
-        return " ".join(str(error).split())
-    finally:
+        controller = make()
         controller.reset()
+        controller.act(observation, info)
+    except ValueError as error:
+        return " ".join(str(error).split())
     return None
 
 

@@ -18,9 +18,10 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from spikectl.contexts import Context, ContextSet
+from spikectl.envs.controller import first_decision_refusal
+from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.envs.sensing import as_sensed, make_observation
-from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning import Composition, IdentifyAndPlan
@@ -127,19 +128,10 @@ def teacher_refusal(
 ) -> str | None:
     """Why ``teacher`` cannot play the environment of ``env`` (an ``EnvConfig``), or None
     where it can: the teacher is made as a run makes it, for one context of that
-    environment, and takes its first decision on the environment's first observation
-    (identify-and-plan refuses there, in one line, what it cannot read)."""
+    environment (:func:`~spikectl.envs.controller.first_decision_refusal`)."""
     contexts = ContextSet.generate(1, env.n_neurons, env.episode_length, env.context_seed,
                                    env.params, env.extensions)  # fmt: skip
-    played = NeuronControlVectorEnv(1, contexts=contexts,
-                                    extensions=env.extensions.environment_part())  # fmt: skip
-    observations, infos = played.reset(options={"context": [0]})
-    played.close()
-    observation = {key: value[0] for key, value in observations.items()}
-    try:
-        policy = make_teacher(teacher, contexts[0], contexts.params, env.extensions, width,
-                              composition)  # fmt: skip
-        policy.act(observation, {"action_mask": infos["action_mask"][0].astype(bool)})
-    except ValueError as error:  # ControllerInputError among them
-        return " ".join(str(error).split())
-    return None
+    played = NeuronControlEnv(contexts=contexts, extensions=env.extensions.environment_part())
+    return first_decision_refusal(played, lambda: make_teacher(
+        teacher, contexts[0], contexts.params, env.extensions, width, composition
+    ))  # fmt: skip
