@@ -184,7 +184,7 @@ def test_a_run_on_spikes_trains_and_resumes_exactly(tmp_path, interrupt_after_ro
 
 def learner_config(name: str):
     """SHORT with learner ``name``, its shared settings kept (the guided one untaught:
-    no teacher plays spikes-only sensing today)."""
+    its teacher's labels on spikes are checked on their own below, at a test's cost)."""
     if name == "dqn":
         return SHORT
     if name == "guided":
@@ -272,3 +272,35 @@ def test_the_main_jobs_teacher_plays_the_papers_environment():
     composition = teacher_composition(config)
     assert teacher_refusal(config.env, learner.teacher, learner.teacher_width, composition) is None
     check_environment([config])
+
+
+def test_the_teachers_labels_and_its_own_episodes_on_spikes_are_its_actions():
+    """The guided learner's teacher, identify-and-plan made for spikes-only sensing, says
+    what it did when labelling its own episodes (it sees the spikes the environment
+    showed, not the potentials the agent reads), and plays them alike as the collection
+    policy's teacher (the agent's added voltage taken away)."""
+    from spikectl.envs.controller import batched
+    from spikectl.envs.rollout import run_episodes
+    from spikectl.envs.vector_env import NeuronControlVectorEnv
+    from spikectl.planning import IdentifyAndPlan, named_composition
+    from spikectl.training.learners.teachers import TeacherMixedPolicy, teacher_labels
+
+    contexts = ContextSet.generate(3, n_neurons=6, seed=4)
+    extensions = Extensions(sensing="spikes")
+    composition = named_composition(extensions, 6, fast=True)
+    assert composition.name == "spikes"
+
+    def make():
+        return IdentifyAndPlan(contexts.params, composition, extensions=extensions)
+
+    episodes = evaluate_policy(contexts, batched(make()), extensions=extensions, seed=1)
+    labels = teacher_labels(episodes, list(contexts), "identify", contexts.params, extensions,
+                            composition=composition)  # fmt: skip
+    np.testing.assert_array_equal(labels, episodes.actions)
+    assert (episodes.actions != -1).any()  # it acted, so the labels say something
+    env = NeuronControlVectorEnv(num_envs=3, contexts=contexts, extensions=extensions)
+    env.reset(seed=1)
+    student = lambda observations, mask: np.full(len(mask), -1)  # noqa: E731
+    mixed = TeacherMixedPolicy(student, np.ones(3, dtype=bool), make)
+    np.testing.assert_array_equal(run_episodes(env, np.arange(3), mixed).actions,
+                                  episodes.actions)  # fmt: skip
