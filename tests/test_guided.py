@@ -215,7 +215,7 @@ def test_config_checks_and_round_trip():
     assert again == config and type(again.learner) is GuidedConfig
     assert config.to_dict()["learner"]["name"] == "guided"
     with pytest.raises(ConfigError, match="teacher"):
-        GuidedConfig(teacher="oracle")
+        GuidedConfig(teacher="witness")
     with pytest.raises(ConfigError, match="imitation_margin"):
         GuidedConfig(imitation_margin=-1.0)
     with pytest.raises(ConfigError, match="imitation_anneal_fraction"):
@@ -287,7 +287,7 @@ def test_cli_guided_preset_flags_and_errors(capsys):
     from spikectl.cli import main
 
     with pytest.raises(SystemExit) as exit_info:
-        main(["train", "guided", "--teacher", "oracle", "--run-dir", "unused"])
+        main(["train", "guided", "--teacher", "witness", "--run-dir", "unused"])
     assert exit_info.value.code == 2
     assert "identify" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exit_info:

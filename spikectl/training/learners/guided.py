@@ -39,6 +39,8 @@ from spikectl.training.learners.dqn import DQNLearner, losses_on_tensors
 from spikectl.training.learners.q_learning import batch_tensors
 from spikectl.training.learners.teachers import (
     TeacherMixedPolicy,
+    make_oracle_teacher,
+    oracle_labels,
     teacher_labels,
     teacher_refusal,
 )
@@ -129,6 +131,10 @@ class GuidedDQNLearner(DQNLearner):
                 "learner.teacher 'told-weights' needs every neuron observed; "
                 f"{config.env.id} hides some (use teacher 'identify')"
             )
+        self.oracle = None
+        if self.settings.teacher == "oracle":
+            self.oracle = make_oracle_teacher(self.contexts, self.params, self.extensions,
+                                              self.settings.teacher_width)  # fmt: skip
         self.teacher_seconds = 0.0
         self.num_envs = config.train.num_envs
         self.mixed_policy: TeacherMixedPolicy | None = None
@@ -150,11 +156,12 @@ class GuidedDQNLearner(DQNLearner):
         problem = teacher_refusal(config.env, settings.teacher, settings.teacher_width,
                                   teacher_composition(config))  # fmt: skip
         if problem is not None:
+            oracle = "" if settings.teacher == "oracle" else "train with --teacher oracle, or "
             raise ConfigError(
                 ("learner", "teacher"),
                 f"{settings.teacher!r} cannot teach on this environment ({problem}); "
-                "train without a teacher (--imitation-weight 0 --imitation-weight-end 0, "
-                "or the quick preset)",
+                f"{oracle}train without a teacher (--imitation-weight 0 "
+                "--imitation-weight-end 0, or the quick preset)",
             )
 
     def build_connectivity_head(self, config) -> torch.nn.Module | None:
@@ -196,11 +203,14 @@ class GuidedDQNLearner(DQNLearner):
         labels = None
         if self.imitation_weight(self.replay.added) > 0:
             started = time.process_time()
-            labels = teacher_labels(
-                episodes, [self.contexts[i] for i in contexts], self.settings.teacher,
-                self.params, self.extensions, self.settings.teacher_width,
-                played=played, composition=self.teacher_composition,
-            )  # fmt: skip
+            if self.oracle is not None:  # the training networks' plans, each made once
+                labels = oracle_labels(self.oracle, contexts, self.extensions)
+            else:
+                labels = teacher_labels(
+                    episodes, [self.contexts[i] for i in contexts], self.settings.teacher,
+                    self.params, self.extensions, self.settings.teacher_width,
+                    played=played, composition=self.teacher_composition,
+                )  # fmt: skip
             self.teacher_seconds += time.process_time() - started
         told = self.target_inputs[contexts] if self.stores_target_inputs else None
         self.replay.add(

@@ -17,10 +17,13 @@ from spikectl.config_errors import ConfigError
 from spikectl.training.learners.dqn_config import DQNConfig
 from spikectl.training.learners.registry import Preset
 
-TEACHERS = ("identify", "told-weights")
+TEACHERS = ("identify", "told-weights", "oracle")
 """``identify``: identify-and-plan, which sees only what the agent sees (realisable);
 ``told-weights``: the same loop told the network's true weights (privileged: a student
-cannot copy what it cannot infer, the imitation gap; docs/training.md)."""
+cannot copy what it cannot infer, the imitation gap; docs/training.md); ``oracle``: the
+oracle planner's open-loop plan of the played network (privileged; it plans for the
+loop's latency and actuator and reads nothing of the episode, so it teaches where no
+loop that identifies can play, e.g. the rig's loop)."""
 
 
 @dataclass(frozen=True)
@@ -31,10 +34,12 @@ class GuidedConfig(DQNConfig):
     name: ClassVar[str] = "guided"
     """The learner's name in config.json (``"learner": {"name": "guided", ...}``)."""
 
-    teacher: Literal["identify", "told-weights"] = "identify"
-    """Who labels the visited states: identify-and-plan or the same loop told the weights."""
+    teacher: Literal["identify", "told-weights", "oracle"] = "identify"
+    """Who labels the visited states: identify-and-plan, the same loop told the weights,
+    or the oracle planner's open-loop plan of the played network."""
     teacher_width: int = 32
-    """Beam width of the teacher's plans (identify-and-plan's default)."""
+    """Beam width of the teacher's plans (identify-and-plan's default; the oracle's too,
+    in place of its reference width 256, whose plan of a network costs 8 times more)."""
     teacher_settings: Literal["task", "defaults"] = "task"
     """The ``identify`` teacher's other settings. ``task``: those the named
     ``identify-and-plan`` plays on the training environment, in the form whose every

@@ -1,10 +1,11 @@
 """Teachers' labels for the agent's own episodes (DAgger-style relabelling).
 
-A teacher is a closed-loop controller that reads only the observation and the legal
-actions (``IdentifyAndPlan``'s interface). Played *beside* a finished episode it sees
-every observation the agent saw, including the action the agent actually took (the
-observation's ``last_action``), and says what it would have done at each step: the
-label. Labelling after the episode is exact because the controller's choice depends
+A teacher is a controller that reads only the observation and the legal actions
+(``IdentifyAndPlan``'s interface), or the oracle planner, which reads nothing of the
+episode but its step and replays its plan of the played network. Played *beside* a
+finished episode it sees every observation the agent saw, including the action the agent
+actually took (the observation's ``last_action``), and says what it would have done at
+each step: the label. Labelling after the episode is exact because the controller's choice depends
 on nothing but those observations (and, for the privileged teacher, the weights).
 Under spikes-only sensing the teacher sees what the environment showed, the spikes (the
 agent reads them as potentials at threshold: ``envs.sensing``).
@@ -18,13 +19,15 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from spikectl.contexts import Context, ContextSet
-from spikectl.envs.controller import first_decision_refusal
+from spikectl.envs.controller import Controller, first_decision_refusal
 from spikectl.envs.env import NeuronControlEnv
 from spikectl.envs.rollout import EpisodeBatch
 from spikectl.envs.sensing import as_sensed, make_observation
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.planning import Composition, IdentifyAndPlan
+from spikectl.planning.lit_search import planned_light
+from spikectl.planning.oracle import OraclePlanner
 
 
 def make_teacher(
@@ -34,12 +37,13 @@ def make_teacher(
     extensions: Extensions | None,
     width: int,
     composition: Composition | None = None,
-) -> IdentifyAndPlan:
+) -> Controller:
     """A fresh teacher for one episode on ``context`` in an environment with
     ``extensions``: identify-and-plan (``"identify"``, playing ``composition``, e.g. the
     environment's :func:`~spikectl.planning.named.named_composition` with ``fast=True``;
-    None: the paper's) or the paper's composition told the context's weights
-    (``"told-weights"``), each planning at beam ``width``."""
+    None: the paper's), the paper's composition told the context's weights
+    (``"told-weights"``) or the oracle planner of the context alone (``"oracle"``; its
+    ``info["context_index"]`` is 0), each planning at beam ``width``."""
     if teacher == "identify":
         return IdentifyAndPlan(params, (composition or Composition()).with_width(width),
                                extensions=extensions)  # fmt: skip
@@ -51,7 +55,29 @@ def make_teacher(
             )
         return IdentifyAndPlan(params, Composition().with_width(width), extensions=extensions,
                                told_weights=context.weights)  # fmt: skip
-    raise ValueError(f"unknown teacher {teacher!r}: 'identify' or 'told-weights'")
+    if teacher == "oracle":  # it reads the latency from the observation's actions in flight
+        return make_oracle_teacher([context], params, extensions, width)
+    raise ValueError(f"unknown teacher {teacher!r}: 'identify', 'told-weights' or 'oracle'")
+
+
+def make_oracle_teacher(
+    contexts: Sequence[Context], params: NeuronParams, extensions: Extensions | None, width: int
+) -> OraclePlanner:
+    """The oracle teacher of ``contexts``: the oracle planner at beam ``width``, planning
+    for the environment's actuator (each context's plan is made once and kept)."""
+    target_action = extensions is not None and extensions.allow_target_action
+    return OraclePlanner(contexts, params, width, target_action,
+                         light_mW_per_mm2=planned_light(extensions))  # fmt: skip
+
+
+def oracle_labels(
+    oracle: OraclePlanner, indices: Sequence[int], extensions: Extensions | None
+) -> np.ndarray:
+    """[S, N] int16: the oracle teacher's plan of each of its contexts ``indices[s]``, in
+    the agent's indexing, for the environment's loop latency: the label of step t is the
+    action it chooses at t (which lands at t + L), whatever the episode did."""
+    latency = 0 if extensions is None else extensions.latency_steps
+    return np.stack([oracle.plan(int(i), latency) for i in indices]).astype(np.int16)
 
 
 class TeacherMixedPolicy:
@@ -61,7 +87,7 @@ class TeacherMixedPolicy:
     still steps on every observation (its draws and recurrent state stay those of a
     round without a teacher); the teacher's actions replace its own where it plays."""
 
-    def __init__(self, student, teacher_plays: np.ndarray, make: Callable[[], IdentifyAndPlan]):
+    def __init__(self, student, teacher_plays: np.ndarray, make: Callable[[], Controller]):
         self.student, self.teacher_plays = student, teacher_plays
         self.teachers = {int(s): make() for s in np.flatnonzero(teacher_plays)}
         self.teacher_seconds = 0.0
@@ -96,13 +122,16 @@ def teacher_labels(
     count, length = episodes.actions.shape
     if len(contexts) != count:
         raise ValueError(f"{count} episodes but {len(contexts)} contexts")
+    if teacher == "oracle":  # open loop: its labels do not depend on the episode
+        oracle = make_oracle_teacher(contexts, params, extensions, width)
+        return oracle_labels(oracle, range(count), extensions)
     labels = np.empty((count, length), dtype=np.int16)
     for s, context in enumerate(contexts):
         if played is not None and played[s]:
             labels[s] = episodes.actions[s]
             continue
         policy = make_teacher(teacher, context, params, extensions, width, composition)
-        info = {"action_mask": episodes.action_mask[s]}
+        info = {"action_mask": episodes.action_mask[s], "context_index": 0}
         pattern = np.asarray(context.pattern, dtype=np.int8)
         target = context.observed_target
         # With loop latency L, observation t carries the actions chosen at t - L .. t - 1.
