@@ -28,6 +28,7 @@ from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING
 from spikectl.planning import IdentifyAndPlan, named_composition
 from spikectl.planning.oracle import OraclePlanner
+from spikectl.training.loaders import load_controller
 from spikectl.training.presets import SMOKE
 from spikectl.training.run import train
 from spikectl.wrappers.conventions import observation_for
@@ -399,6 +400,13 @@ def test_a_learner_trains_on_a_recorded_subset(tmp_path):
             "checkpoint_every_episodes": 16,
         })  # fmt: skip
         rows = train(config, tmp_path / "run")
+        assert rows[-1]["updates"] > 0 and all(math.isfinite(row["loss"]) for row in rows[1:])
+        # The trained network and its compiled policy play the environment it trained on.
+        env = config.env
+        contexts = ContextSet.generate(3, env.n_neurons, env.episode_length, seed=5)
+        for compiled in (False, True):
+            controller = load_controller(tmp_path / "run", compiled=compiled)
+            episodes = evaluate_policy(contexts, controller, extensions=env.extensions)
+            assert ((episodes.returns >= 0) & (episodes.returns <= 1)).all()
     finally:
         torch.set_num_threads(threads)
-    assert rows[-1]["updates"] > 0 and all(math.isfinite(row["loss"]) for row in rows[1:])
