@@ -15,6 +15,7 @@ import torch
 from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
+from spikectl.cli import main
 from spikectl.config_errors import ConfigError, ConfigTypeError
 from spikectl.contexts import Context, ContextSet
 from spikectl.envs.controller import RandomLegal, first_decision_refusal
@@ -350,6 +351,16 @@ def test_a_count_needs_spikes_and_at_most_the_observed_neurons():
             make(**SHORT, extensions={**SPIKES, "recorded_neurons": 9})
         with pytest.raises(ConfigError, match="must be at most the 6 observed neurons, got 7"):
             make(**SHORT, extensions={**SPIKES, "recorded_neurons": 7, "hidden_neurons": 2})
+
+
+def test_the_cli_refuses_a_bad_count_in_one_line(tmp_path, capsys):
+    with pytest.raises(SystemExit) as exit_info:
+        main(["train", "smoke", "--extensions.sensing", "spikes", "--extensions.recorded-neurons",
+              "0", "--run-dir", str(tmp_path / "run")])  # fmt: skip
+    assert exit_info.value.code == 2
+    error = capsys.readouterr().err.strip()
+    assert "--extensions.recorded-neurons must be >= 1" in error and len(error.splitlines()) == 1
+    assert not (tmp_path / "run").exists()
 
 
 # -- who plays it
