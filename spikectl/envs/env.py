@@ -30,7 +30,7 @@ from spikectl.envs.env_support import (
     resolve_setup,
 )
 from spikectl.envs.latency import ActionDelay
-from spikectl.envs.sensing import make_observation
+from spikectl.envs.sensing import Recording, make_observation
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.opsin import OpsinActuator
 from spikectl.neuron.params import NeuronParams
@@ -89,7 +89,9 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
 
     With spikes-only sensing (`extensions={"sensing": "spikes"}`) `voltage` is replaced by
     `spikes` (`MultiBinary(n)`, int8): 1 for each neuron that spiked at the step just
-    simulated (all 0 after reset).
+    simulated (all 0 after reset). With `recorded_neurons` m as well, only m neurons are
+    recorded per episode (the target and m - 1 drawn at reset): the others' spikes read 0,
+    and `recorded` (`MultiBinary(n)`, int8) marks the recorded ones.
 
     ## Rewards
 
@@ -185,7 +187,10 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
 
         self.action_space = LegalActionSpace(k)
         self._spikes_only = self.extensions.spikes_only  # spikes observed, not potentials
-        self.observation_space = observation_space(k, length, self._latency, self._spikes_only)
+        self._recording = Recording.of(self.extensions, 1, k)  # None: every neuron recorded
+        self.observation_space = observation_space(
+            k, length, self._latency, self._spikes_only, self._recording is not None
+        )
         # Episode history, written by the simulator in place through per-step views.
         self._action_history = np.full((1, length), DO_NOTHING, dtype=np.int64)
         self._voltage_history = np.zeros((length, n), dtype=np.float64)
@@ -245,6 +250,8 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         self._spike_history.fill(False)
         self._delay.clear()
         self._next_step = 0
+        if self._recording is not None:  # drawn after the context, from the same generator
+            self._recording.draw([self.np_random], np.zeros(1, np.int64), [self._observed_target])
         if self._spikes_only:  # nothing has spiked yet
             sensed = np.zeros(self.n_observed, dtype=np.int8)
         else:
@@ -254,6 +261,7 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         observation = make_observation(
             sensed, self._spikes_only, self._observed_target, self._pattern.copy(), 0,
             DO_NOTHING, self._delay.in_flight[0].copy() if self._latency else None,
+            self._recorded(),
         )  # fmt: skip
         info = {"action_mask": self._mask.copy(), "context_index": self._context_index}
         return observation, info
@@ -294,12 +302,14 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         if observable is not None:
             voltage, spikes = voltage[observable], spikes[observable]
         if self._spikes_only:
-            sensed = spikes.astype(np.int8)
+            recording = self._recording
+            sensed = spikes.astype(np.int8) if recording is None else recording.sense(spikes, 0)
         else:
             sensed = voltage.astype(np.float32) if self._plain else self._observe(voltage, t + 1)
         observation = make_observation(
             sensed, self._spikes_only, self._observed_target, self._pattern.copy(), t + 1,
             action, self._delay.in_flight[0].copy() if self._latency else None,
+            self._recorded(),
         )  # fmt: skip
         info = {
             "action_mask": self._mask.copy(),
@@ -308,6 +318,10 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
             "target_spiked": target_spiked,
         }
         return observation, reward, t + 1 == self.episode_length, False, info
+
+    def _recorded(self) -> np.ndarray | None:
+        """The observation's ``recorded`` (int8 [k]), or None without a recorded subset."""
+        return None if self._recording is None else self._recording.mask[0].copy()
 
     def _observe(self, voltage: np.ndarray, step: int) -> np.ndarray:
         """Observed potentials with measurement noise / photobleaching (extensions)."""
@@ -329,14 +343,8 @@ class NeuronControlEnv(gym.Env[dict[str, Any], int]):
         """The episode so far: text for ``render_mode="ansi"``, an RGB array for
         ``"rgb_array"``; ``None`` with a warning without a render mode.
         """
-        if self.render_mode is None:
-            gym.logger.warn(
-                "render() called without a render_mode; pass render_mode='ansi' or "
-                "'rgb_array' to the constructor (or to gymnasium.make)"
-            )
+        if not rendering.can_render(self.render_mode, self._state is not None, "gymnasium.make"):
             return None
-        if self._state is None:
-            raise ResetNeeded("call reset() before render()")
         actions, spikes = self._action_history[0], self._spike_history
         if self._observable is not None:  # what the agent sees: the observable neurons
             actions, spikes = (

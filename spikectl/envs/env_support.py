@@ -22,7 +22,7 @@ from gymnasium import spaces
 from spikectl.contexts import Context, ContextSet, make_splits
 from spikectl.contexts.generation import check_seed, check_size, is_int
 from spikectl.envs.latency import IN_FLIGHT_KEY, in_flight_space
-from spikectl.envs.sensing import sensed_key, sensed_space
+from spikectl.envs.sensing import RECORDED_KEY, sensed_key, sensed_space
 from spikectl.neuron.extensions import CONTEXT_FIELDS, EnvironmentEffects, Extensions
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING, neuron_parameters
@@ -321,11 +321,16 @@ def as_action(action: Any) -> int:
 
 
 def observation_space(
-    n_neurons: int, episode_length: int, latency_steps: int = 0, spikes_only: bool = False
+    n_neurons: int,
+    episode_length: int,
+    latency_steps: int = 0,
+    spikes_only: bool = False,
+    recorded: bool = False,
 ) -> spaces.Dict:
     """The observation space of one environment (docs/environment.md); the connectivity is
     not in it. With loop latency (an extension) it has ``actions_in_flight`` too; with
-    spikes-only sensing ``spikes`` in place of ``voltage``."""
+    spikes-only sensing ``spikes`` in place of ``voltage``; with a recorded subset
+    (``recorded``) the int8 mask ``recorded``."""
     entries = {
         sensed_key(spikes_only): sensed_space(n_neurons, spikes_only),
         "target": spaces.Discrete(n_neurons),
@@ -335,6 +340,8 @@ def observation_space(
     }
     if latency_steps:
         entries[IN_FLIGHT_KEY] = in_flight_space(n_neurons + 1, latency_steps)
+    if recorded:
+        entries[RECORDED_KEY] = spaces.MultiBinary(n_neurons)
     return spaces.Dict(entries)
 
 

@@ -19,7 +19,9 @@ from __future__ import annotations
 import functools
 from typing import NamedTuple
 
+import gymnasium as gym
 import numpy as np
+from gymnasium.error import ResetNeeded
 
 DO_NOTHING = -1
 
@@ -78,6 +80,19 @@ class _Episode(NamedTuple):
     n_neurons: int
     target: int
     step: int
+
+
+def can_render(render_mode: str | None, started: bool, maker: str) -> bool:
+    """Whether an environment's ``render()`` draws: False, with Gymnasium's warning,
+    without a render mode (``maker`` names the call that takes one); ``ResetNeeded``
+    before the first reset (``started`` False)."""
+    if render_mode is None:
+        gym.logger.warn("render() called without a render_mode; pass render_mode='ansi' or "
+                        f"'rgb_array' to the constructor (or to {maker})")  # fmt: skip
+        return False
+    if not started:
+        raise ResetNeeded("call reset() before render()")
+    return True
 
 
 def render(

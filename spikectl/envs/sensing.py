@@ -7,12 +7,19 @@ neuron that spiked at the step just simulated, all 0 after reset) in place of
 shows as a potential at or above the threshold, so spikes-only sees a function of what
 the paper's agent sees. With the default, ``"potentials"``, nothing here changes the
 environments.
+
+With ``recorded_neurons`` m (a recording of a subset, ``Extensions(sensing="spikes",
+recorded_neurons=m)``) only m of the k observable neurons are recorded in an episode: the
+target and m - 1 others drawn at reset from the environment's own generator
+(:class:`Recording`). The others report no spike, and the observation's ``recorded``
+(int8 [k], 1 = recorded) says which are which. Without it there is no such key and
+nothing is drawn.
 """
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from typing import Any
+from collections.abc import Mapping, Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 from gymnasium import spaces
@@ -23,6 +30,8 @@ SPIKES_KEY = "spikes"
 """The observation key of the spikes (present only with spikes-only sensing)."""
 VOLTAGE_KEY = "voltage"
 """The observation key of the potentials (absent with spikes-only sensing)."""
+RECORDED_KEY = "recorded"
+"""The observation key of the recorded neurons (present only with ``recorded_neurons``)."""
 
 
 def sensed_key(spikes_only: bool) -> str:
@@ -45,9 +54,11 @@ def make_observation(
     step: Any,
     last_action: Any,
     in_flight: np.ndarray | None = None,
+    recorded: np.ndarray | None = None,
 ) -> dict[str, Any]:
     """One observation (or a batch): what is sensed under its key, then the paper's
-    other keys in the paper's order, then the actions in flight (with latency only)."""
+    other keys in the paper's order, then the actions in flight (with latency only), then
+    the recorded neurons (with ``recorded_neurons`` only)."""
     observation = {
         sensed_key(spikes_only): sensed,
         "target": target,
@@ -57,6 +68,8 @@ def make_observation(
     }
     if in_flight is not None:
         observation[IN_FLIGHT_KEY] = in_flight
+    if recorded is not None:
+        observation[RECORDED_KEY] = recorded
     return observation
 
 
@@ -86,3 +99,60 @@ def as_sensed(observations: Mapping[str, Any]) -> Mapping[str, Any]:
     if SPIKES_KEY in observations and VOLTAGE_KEY in observations:
         return {key: value for key, value in observations.items() if key != VOLTAGE_KEY}
     return observations
+
+
+class Sensing(NamedTuple):
+    """What an environment's observation shows of its neurons (the flat codec's switch)."""
+
+    spikes_only: bool = False
+    """Spikes in place of potentials (``sensing="spikes"``)."""
+    recorded: bool = False
+    """A recorded subset, marked by the observation's ``recorded`` (``recorded_neurons``)."""
+
+    @classmethod
+    def of(cls, extensions: Any) -> Sensing:
+        """The sensing of an environment's (effective) ``Extensions``."""
+        return cls(extensions.spikes_only, extensions.recorded_neurons is not None)
+
+
+class Recording:
+    """The recorded neurons of a batch of B environments (``recorded_neurons`` = m).
+
+    ``mask`` int8 [B, k] (1 = recorded) is what the observations' ``recorded`` shows.
+    At each reset an environment records its target and m - 1 of its other k - 1 observed
+    neurons, uniformly: it draws ``rng.random(k)`` from its own generator (after its
+    context), and the others with the m - 1 smallest numbers are recorded. With m = k
+    every neuron is recorded and nothing is drawn.
+    """
+
+    def __init__(self, batch: int, n_observed: int, count: int) -> None:
+        self.count = int(count)
+        self.mask = np.ones((batch, n_observed), dtype=np.int8)
+
+    @classmethod
+    def of(cls, extensions: Any, batch: int, n_observed: int) -> Recording | None:
+        """The recording of ``extensions`` for B environments of k observed neurons, or
+        None without ``recorded_neurons`` (a ConfigError when it exceeds k)."""
+        count = extensions.recorded_count(n_observed)
+        return None if count is None else cls(batch, n_observed, count)
+
+    def draw(
+        self, rngs: Sequence[np.random.Generator], envs: np.ndarray, targets: np.ndarray
+    ) -> None:
+        """New recorded neurons for ``envs`` (their episodes start), each from its own
+        generator in ``rngs`` (one per env), the targets (agent indices) among them."""
+        k = self.mask.shape[1]
+        if self.count == k or len(envs) == 0:
+            return
+        uniforms = np.stack([rng.random(k) for rng in rngs])  # [m, k]
+        rows = np.arange(len(envs))
+        uniforms[rows, targets] = -1.0  # below every draw: the target comes first
+        chosen = np.argsort(uniforms, axis=1, kind="stable")[:, : self.count]
+        mask = np.zeros_like(uniforms, dtype=np.int8)
+        mask[rows[:, None], chosen] = 1
+        self.mask[envs] = mask
+
+    def sense(self, spikes: np.ndarray, which: slice | int = slice(None)) -> np.ndarray:
+        """int8 spikes [..., k] as recorded: each unrecorded neuron's as 0 (``which``:
+        the environments ``spikes`` belongs to)."""
+        return np.multiply(spikes, self.mask[which], dtype=np.int8)

@@ -11,7 +11,6 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
@@ -42,7 +41,7 @@ from spikectl.envs.env_support import (
     resolve_setup,
 )
 from spikectl.envs.latency import ActionDelay
-from spikectl.envs.sensing import make_observation
+from spikectl.envs.sensing import Recording, make_observation
 from spikectl.files import check_fits_in_memory
 from spikectl.neuron.extensions import Extensions
 from spikectl.neuron.opsin import OpsinActuator
@@ -119,7 +118,10 @@ class NeuronControlVectorEnv(VectorEnv):
         self._delay = ActionDelay(batch, self.extensions.latency_steps)  # loop latency
         self._spikes_only = spikes_only = self.extensions.spikes_only  # not potentials
         self._spikes = np.zeros((batch, k), dtype=np.int8)  # the last step's (spikes-only)
-        self.single_observation_space = observation_space(k, length, self._delay.steps, spikes_only)
+        self._recording = Recording.of(self.extensions, batch, k)  # None: all recorded
+        self.single_observation_space = observation_space(
+            k, length, self._delay.steps, spikes_only, self._recording is not None
+        )
         self.single_action_space = spaces.Discrete(k + 1, start=DO_NOTHING)
         self.observation_space = batch_space(self.single_observation_space, batch)
         self.action_space = LegalActionBatchSpace(batch, k)
@@ -258,7 +260,8 @@ class NeuronControlVectorEnv(VectorEnv):
             terminated[autoreset] = False
             target_spiked[autoreset] = False
             spikes[autoreset] = False
-        self._spikes[:] = spikes  # an autoreset environment's: none
+        # An autoreset environment's: none; an unrecorded neuron's (an extension): none.
+        self._spikes[:] = spikes if self._recording is None else self._recording.sense(spikes)
         active = ~autoreset
         self._needs_reset = terminated.copy()
         self._any_needs_reset = bool(terminated.any())
@@ -321,6 +324,7 @@ class NeuronControlVectorEnv(VectorEnv):
             self._spikes.copy() if self._spikes_only else voltage, self._spikes_only,
             self._observed_targets.copy(), self._patterns.copy(), self._next_step.copy(),
             self._last_action.copy(), self._delay.in_flight.copy() if self._delay.steps else None,
+            None if self._recording is None else self._recording.mask.copy(),
         )  # fmt: skip
 
     def _reset_envs(self, envs: np.ndarray, choices: Sequence[int | Context | None]) -> None:
@@ -346,6 +350,8 @@ class NeuronControlVectorEnv(VectorEnv):
             tables = ContextTables.build([context], self.extensions.allow_target_action,
                                          self.params)  # fmt: skip
             self._load(np.array([i]), tables, 0)
+        if self._recording is not None:  # each env's draw after its context, as the single's
+            self._recording.draw([self._rngs[i] for i in envs], envs, self._observed_targets[envs])
         which = np.zeros(self.num_envs, dtype=bool)
         which[envs] = True
         self._state.reset(which, self.params)
@@ -386,14 +392,8 @@ class NeuronControlVectorEnv(VectorEnv):
 
     def render(self) -> tuple[str, ...] | tuple[np.ndarray, ...] | None:
         """One frame (or text raster) per sub-environment, as Gymnasium's vector wrappers expect."""
-        if self.render_mode is None:
-            gym.logger.warn(
-                "render() called without a render_mode; pass render_mode='ansi' or "
-                "'rgb_array' to the constructor (or to gymnasium.make_vec)"
-            )
+        if not rendering.can_render(self.render_mode, self._all_reset, "gymnasium.make_vec"):
             return None
-        if not self._all_reset:
-            raise ResetNeeded("call reset() before render()")
         return rendering.render_batch(
             self.render_mode, self._patterns, self._action_history, self._spike_history,
             self._observed_targets, self._next_step,

@@ -96,6 +96,10 @@ class Extensions:
     """Environment level: ``"potentials"``, the paper's membrane potentials, or
     ``"spikes"``, spikes-only sensing: the observation's ``spikes`` (which neurons spiked
     at the last step) replaces its ``voltage``."""
+    recorded_neurons: int | None = None
+    """Environment level, with ``sensing="spikes"``: the number of observed neurons whose
+    spikes are recorded, drawn per episode, the target always among them (the others
+    report none; the observation's ``recorded`` marks which); None records every one."""
 
     CONTEXT_FIELDS: ClassVar[tuple[str, ...]] = CONTEXT_FIELDS
 
@@ -117,7 +121,7 @@ class Extensions:
             object.__setattr__(self, name, int(count))
         for field in fields(self):
             value = getattr(self, field.name)
-            if field.name in ("actuator", "sensing"):  # checked below
+            if field.name in ("actuator", "sensing", "recorded_neurons"):  # checked below
                 continue
             if field.name in ("stochastic_release", "allow_target_action", "hidden_neurons",
                               "latency_steps"):  # fmt: skip
@@ -179,6 +183,20 @@ class Extensions:
                 "bleaching_time_constant_steps (which act on them) must be off",
                 label="Extensions.sensing",
             )  # fmt: skip
+        recorded = self.recorded_neurons
+        if recorded is None:
+            return
+        label = "Extensions.recorded_neurons"
+        if isinstance(recorded, (bool, np.bool_)) or not isinstance(recorded, (int, np.integer)):
+            raise ConfigTypeError("recorded_neurons", f"must be an integer or None, got "
+                                  f"{recorded!r}", label=label)  # fmt: skip
+        if recorded < 1:
+            raise ConfigError("recorded_neurons", f"must be >= 1 (the target is always "
+                              f"recorded) or None, got {recorded}", label=label)  # fmt: skip
+        if not self.spikes_only:
+            raise ConfigError("recorded_neurons", "records spikes: it needs sensing='spikes', "
+                              f"got sensing={self.sensing!r}", label=label)  # fmt: skip
+        object.__setattr__(self, "recorded_neurons", int(recorded))
 
     # -- which parts are on
 
@@ -210,6 +228,17 @@ class Extensions:
                 f"{count} hidden neurons of {n_neurons} leave fewer than 2 observable ones "
                 "(the target and one neuron to stimulate)"
             )
+        return count
+
+    def recorded_count(self, n_observed: int) -> int | None:
+        """How many of ``n_observed`` neurons are recorded per episode; None: every one,
+        the option off. More than ``n_observed`` is a ConfigError naming the field."""
+        count = self.recorded_neurons
+        if count is not None and count > n_observed:
+            raise ConfigError(
+                "recorded_neurons", f"must be at most the {n_observed} observed neurons, "
+                f"got {count}", label="Extensions.recorded_neurons",
+            )  # fmt: skip
         return count
 
     def context_part(self) -> Extensions:

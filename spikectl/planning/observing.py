@@ -220,9 +220,10 @@ class Reader:
 
 _SPIKE_FILTER_OFF = ("hidden_neurons", "hidden_fraction", "threshold_spread",
                      "time_constant_spread", "synaptic_spread", "stochastic_release",
-                     "background_rate")  # fmt: skip
+                     "background_rate", "recorded_neurons")  # fmt: skip
 """The extension fields the spike filter cannot read spikes under: its columns imply the
-potentials of the paper's deterministic model of the observed neurons alone."""
+potentials of the paper's deterministic model of the observed neurons alone, every one
+of them recorded."""
 
 
 def _check_spike_sensing(extensions: Extensions) -> None:

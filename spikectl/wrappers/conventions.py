@@ -30,7 +30,7 @@ from gymnasium import spaces
 
 from spikectl.envs.env_arguments import TARGET_RULE, bad_actions_message
 from spikectl.envs.latency import IN_FLIGHT_KEY
-from spikectl.envs.sensing import SPIKES_KEY, sensed_key
+from spikectl.envs.sensing import RECORDED_KEY, SPIKES_KEY, Sensing, sensed_key
 from spikectl.neuron.params import NEVER_RELEASES, NeuronParams
 
 DO_NOTHING = 0
@@ -114,11 +114,16 @@ class FlatObservation:
     | next N         | pattern ahead: pattern[t + j], -1 past the end            |
     | next L (k + 1) | with loop latency L > 0 only: the actions in flight,      |
     |                | oldest first, each one-hot over 0..k                      |
+    | next k         | with a recorded subset only: 1 for each recorded neuron   |
 
     With spikes-only sensing (``spikes_only``, an extension) the first k entries are the
     spikes, 1 for a neuron that spiked at the last step, else 0 (where the scaled voltage
     would read >= 1 and < 1), and the ``Dict`` has ``spikes`` (int8) in place of
-    ``voltage``; the size and every other entry are as above.
+    ``voltage``; the size and every other entry are as above. ``sensing`` is a
+    :class:`~spikectl.envs.sensing.Sensing` (a bool: spikes only or not); with its
+    ``recorded`` (``recorded_neurons``, an extension) an unrecorded neuron's spike columns
+    read 0, the vector ends with k entries more (the ``recorded`` mask) and the ``Dict``
+    has int8 ``recorded``.
 
     The pattern ahead repeats what pattern and step say, aligned with the current step,
     so that a policy without memory or attention can read the next wanted spikes.
@@ -137,13 +142,15 @@ class FlatObservation:
         stochastic_release: bool = False,
         flatten: bool = True,
         latency_steps: int = 0,
-        spikes_only: bool = False,
+        sensing: Sensing | bool = False,
     ) -> None:
         self.k = k = n_observed
         self.N = length = episode_length
         self.flatten = flatten
         self.latency_steps = latency_steps
-        self.spikes_only = spikes_only
+        sensing = sensing if isinstance(sensing, Sensing) else Sensing(bool(sensing))
+        self.spikes_only = spikes_only = sensing.spikes_only
+        self.recorded = sensing.recorded
         self.v_rest_mV, self.v_threshold_mV = params.v_rest_mV, params.v_threshold_mV
         low, high = _float32_outward(*voltage_bounds_mV(params, n_neurons, stochastic_release))
         self.voltage_low_mV, self.voltage_high_mV = low, high
@@ -162,10 +169,14 @@ class FlatObservation:
             if spikes_only:
                 del self.space.spaces["voltage"]
                 self.space[SPIKES_KEY] = spaces.MultiBinary(k)
+            if self.recorded:
+                self.space[RECORDED_KEY] = spaces.MultiBinary(k)
             return
-        # The paper's layout, then the actions in flight (none without latency).
+        # The paper's layout, then the actions in flight (none without latency), then the
+        # recorded neurons (none without a recorded subset).
         self.in_flight_column = 3 * k + 3 * length + 2
-        self.size = size = self.in_flight_column + latency_steps * (k + 1)
+        self.recorded_column = self.in_flight_column + latency_steps * (k + 1)
+        self.size = size = self.recorded_column + (k if self.recorded else 0)
         lows = np.zeros(size, dtype=np.float32)
         highs = np.ones(size, dtype=np.float32)
         lows[:k], highs[:k] = _float32_outward(self._scaled(low), self._scaled(high))
@@ -207,6 +218,8 @@ class FlatObservation:
             }
             if self.latency_steps:
                 converted[IN_FLIGHT_KEY] = self._in_flight(observation)
+            if self.recorded:
+                converted[RECORDED_KEY] = np.asarray(observation[RECORDED_KEY], dtype=np.int8)
             return converted
         return self._flat(voltage, observation, last_action)
 
@@ -229,6 +242,7 @@ class FlatObservation:
             if self.latency_steps
             else None,
             spikes,
+            np.asarray(observation[RECORDED_KEY]).reshape(-1, self.k) if self.recorded else None,
         )
         return out[0] if single else out
 
@@ -241,11 +255,13 @@ class FlatObservation:
         pattern: np.ndarray,
         in_flight: np.ndarray | None = None,
         spikes: np.ndarray | None = None,
+        recorded: np.ndarray | None = None,
     ) -> np.ndarray:
         """The flat observations [B, size] of a batch given as arrays: voltage [B, k] in mV,
         target, zero-based last action and step int64 [B], pattern int8 [B, N]; with
         latency, the zero-based actions in flight int64 [B, L]; with spikes-only sensing,
-        the spikes [B, k] (0 or 1), written over the voltage's columns."""
+        the spikes [B, k] (0 or 1), written over the voltage's columns; with a recorded
+        subset, the recorded mask [B, k] (0 or 1)."""
         out = np.empty((voltage_mV.shape[0], self.size), dtype=np.float32)
         _write_flat(voltage_mV, target, last_action, step, pattern, self._constants, out)
         if self.spikes_only:
@@ -258,6 +274,8 @@ class FlatObservation:
             offsets = np.arange(self.latency_steps) * (self.k + 1)
             rows = np.arange(out.shape[0])[:, None]
             blocks[rows, offsets + in_flight] = 1.0
+        if self.recorded:  # after the pattern ahead's -1s and the blocks, as they run here
+            out[:, self.recorded_column :] = recorded
         return out
 
 
@@ -336,5 +354,5 @@ def observation_for(env: Any, flatten: bool) -> FlatObservation:
         env.extensions.stochastic_release,
         flatten,
         env.extensions.latency_steps,
-        env.extensions.spikes_only,
+        Sensing.of(env.extensions),
     )

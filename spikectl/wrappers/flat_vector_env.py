@@ -136,6 +136,7 @@ class FlatNeuronControlVectorEnv(NeuronControlVectorEnv, VectorEnv):
             voltage, self._observed_targets, self._last_action + 1, self._next_step,
             self._patterns, self._delay.in_flight + 1 if self._delay.steps else None,
             self._spikes if self._spikes_only else None,
+            None if self._recording is None else self._recording.mask,
         )  # fmt: skip
 
     def _with_illegal(
