@@ -1,0 +1,73 @@
+"""The named identify-and-plan on suite v2's ``chr2`` TEST set, played once after the
+choice on the validation set: the rows ``spikectl benchmark identify-and-plan --suite 2
+--task chr2 --out ... --per-network ...`` writes, normalised against the do-nothing and
+oracle references already in docs/results/suite-v2/identify-and-plan.csv (the CLI would
+plan the oracle's 1 000 episodes again, ~1 300 CPU s, for the same numbers), and the
+paired difference against the per-network returns there.
+
+    python lab/results/iap-chr2/test_row.py OUT_DIR
+"""
+
+from __future__ import annotations
+
+import csv
+import sys
+from pathlib import Path
+
+import numpy as np
+
+from spikectl.envs.env import NeuronControlEnv
+from spikectl.experiments import suite
+from spikectl.experiments.stats import paired_difference_cells
+from spikectl.training.loaders import load_controller
+
+TASK, SPLIT, VERSION = "chr2", "test", 2
+OLD = Path("docs/results/suite-v2")
+
+
+def old_rows() -> tuple[dict, np.ndarray]:
+    with open(OLD / "identify-and-plan.csv") as handle:
+        row = next(r for r in csv.DictReader(handle) if r["task"] == TASK)
+    with open(OLD / "identify-and-plan-per-network.csv") as handle:
+        per = [r for r in csv.DictReader(handle) if r["task"] == TASK]
+    return row, np.array([float(r["return"]) for r in sorted(per, key=lambda r: int(r["context"]))])
+
+
+def main(out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    old, old_returns = old_rows()
+    contexts = suite.load_split(TASK, SPLIT, VERSION)
+    extensions = suite.task(TASK, VERSION).extensions
+    env = NeuronControlEnv(contexts=contexts, extensions=extensions)
+    played = []
+
+    def make(seed: int):
+        controller = load_controller("identify-and-plan", env=env, seed=seed)
+        played.append(controller)
+        return controller
+
+    result = suite.score(TASK, SPLIT, make, 1, VERSION)
+    composition = played[0].composition.name
+    nothing, oracle = float(old["do_nothing"]), float(old["oracle"])
+    row = dict(old, mean_return=f"{result.mean_return:.6f}",
+               standard_error=f"{result.standard_error:.6f}",
+               normalised=f"{suite.normalise(result.mean_return, nothing, oracle):.6f}",
+               cpu_seconds=f"{result.cpu_seconds:.3f}", composition=composition)
+    with open(out / "identify-and-plan-chr2.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(row))
+        writer.writeheader()
+        writer.writerow(row)
+    with open(out / "identify-and-plan-chr2-per-network.csv", "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["suite_version", "task", "split", "controller", "model", "context",
+                         "return", "composition"])  # fmt: skip
+        writer.writerows([VERSION, TASK, SPLIT, "identify-and-plan", "", index,
+                          repr(float(value)), composition]
+                         for index, value in enumerate(result.returns))  # fmt: skip
+    print(f"chr2 test: {result.mean_return:.4f} ± {result.standard_error:.4f} "
+          f"(before {old_returns.mean():.4f}); {result.cpu_seconds:.1f} CPU s; {composition}")
+    print(f"new − before, network by network: {paired_difference_cells(result.returns - old_returns)}")
+
+
+if __name__ == "__main__":
+    main(Path(sys.argv[1]))
