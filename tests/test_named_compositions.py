@@ -15,6 +15,7 @@ from spikectl.neuron.extensions import Extensions
 from spikectl.planning import Composition, IdentifyAndPlan, composition_name, named_composition
 from spikectl.planning.named import (
     COMPOSITIONS,
+    FAST_AS_PAPER,
     KNOWN_SD_BACKGROUND,
     KNOWN_SD_FAST_LARGE,
     KNOWN_SD_LARGE,
@@ -27,6 +28,7 @@ NOISY = Extensions(observation_noise_mV=2.0)
 STOCHASTIC = Extensions(stochastic_release=True)
 HIDDEN = Extensions(hidden_fraction=0.25)
 HETEROGENEOUS = Extensions(threshold_spread=0.1, time_constant_spread=0.2)
+CHR2 = Extensions(actuator="chr2")
 
 
 @pytest.mark.parametrize(
@@ -56,6 +58,13 @@ HETEROGENEOUS = Extensions(threshold_spread=0.1, time_constant_spread=0.2)
         (Extensions(sensing="spikes", latency_steps=1), 8, True, "spikes"),
         (Extensions(sensing="spikes", stochastic_release=True), 8, False, "spikes"),
         (Extensions(sensing="spikes"), 16, False, "spikes-16"),
+        (CHR2, 8, False, "chr2"),
+        (Extensions(actuator="chr2", latency_steps=2), 8, False, "chr2"),
+        (CHR2, 16, False, "chr2-16"),
+        (CHR2, 8, True, "paper"),  # the teacher keeps the paper's composition
+        (CHR2, 16, True, "paper-16-fast"),
+        (Extensions(actuator="chr2", observation_noise_mV=1.0), 8, False, "noise"),
+        (Extensions(actuator="chr2", sensing="spikes"), 8, False, "spikes"),
     ],
 )
 def test_each_environment_gets_its_situations_composition(extensions, n, fast, name):
@@ -84,8 +93,11 @@ def test_the_declared_compositions_hold_what_was_chosen():
     assert fast.estimator == noise.estimator.__class__("bayes", KNOWN_SD_FAST_LARGE)
     assert fast.decision.gamble is None
     assert set(COMPOSITIONS) == {"paper", "noise", "stochastic", "background",
-                                 "heterogeneous", "hidden", "spikes"}  # fmt: skip
+                                 "heterogeneous", "hidden", "spikes", "chr2"}  # fmt: skip
     assert composition("spikes").estimator.kind == "spikes"
+    chr2 = composition("chr2")
+    assert chr2 == Composition("chr2", chr2.estimator.__class__("bayes"))  # the rest: paper's
+    assert FAST_AS_PAPER == ("chr2",)
 
 
 @pytest.mark.parametrize(
@@ -161,3 +173,32 @@ def test_the_oracle_replays_its_committed_mean_return(task):
     returns, _ = suite.play(task, "test", load_controller("oracle", contexts=contexts))
     (row,) = _committed("oracle.csv", task)
     assert f"{np.mean(returns):.6f}" == row["mean_return"]
+
+
+SUITE_V2 = SUITE.parent / "suite-v2"
+REPLAYED_V2 = {"paper": 50, "latency2": 50, "spikes-only": 10, "chr2": 20}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize(("task", "count"), list(REPLAYED_V2.items()))
+def test_the_named_controller_replays_suite_v2s_committed_returns(task, count):
+    """Suite v2's committed identify-and-plan returns, network by network, on the first
+    test networks (the environments draw nothing on these tasks): the ``chr2`` row is
+    the ``chr2`` composition's, the others unchanged by it."""
+    from spikectl.envs.env import NeuronControlEnv
+    from spikectl.envs.rollout import evaluate_policy
+    from spikectl.experiments import suite
+    from spikectl.training.loaders import load_controller
+
+    contexts = suite.load_split(task, "test", 2)[:count]
+    extensions = suite.task(task, 2).extensions
+    controller = load_controller(
+        "identify-and-plan", env=NeuronControlEnv(contexts=contexts, extensions=extensions)
+    )
+    returns = evaluate_policy(contexts, controller, extensions=extensions,
+                              seed=suite.suite_version(2).env_seed).returns  # fmt: skip
+    with open(SUITE_V2 / "identify-and-plan-per-network.csv", newline="") as handle:
+        rows = [row for row in csv.DictReader(handle) if row["task"] == task]
+    rows = sorted(rows, key=lambda row: int(row["context"]))[:count]
+    assert [repr(float(value)) for value in returns] == [row["return"] for row in rows]
+    assert {row["composition"] for row in rows} == {controller.composition.name}

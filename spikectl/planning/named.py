@@ -15,6 +15,12 @@ research record docs/research/identify-and-plan.md):
 - ``heterogeneous``: the task's observation model (each neuron's threshold and leak
   learned, known synapses planned at their estimated strength).
 - ``hidden``: with hidden neurons, the relays through them.
+- ``chr2``: through the ChR2 actuator (and nothing else of the table below), the exact
+  posterior (``"bayes"``): a light pulse drives its neuron for ~10 ms, so the bursts of
+  neurons lit a few steps apart overlap and a step's residual sums several rows, which
+  the posterior over {-1, 0, +1} takes apart from fewer steps than the Gaussian one
+  (the research record lab/results/iap-chr2). Its fast form stays the paper's
+  composition (:data:`FAST_AS_PAPER`).
 - ``spikes``: under spikes-only sensing, the exact posterior from spikes alone and the
   potentials it implies (:mod:`~spikectl.planning.spike_filter`, n <= 8; larger
   networks are refused in one line). It comes first: the filter refuses in one line the
@@ -26,7 +32,8 @@ situation from :data:`PARTICLES_FROM_NEURONS` on with the particle posterior as 
 (``paper-32``). ``fast`` forms are what the guided learner's teacher plays (its labels
 cover every step of training, so every decision must be fast): the same but for QMDP and
 the particles, replaced from :data:`LARGE_FROM_NEURONS` on by :data:`KNOWN_SD_FAST_LARGE`
-alone (``-16-fast``). Below that size the fast form is the named composition itself.
+alone (``-16-fast``). Below that size the fast form is the named composition itself
+(the paper's for the situations of :data:`FAST_AS_PAPER`).
 """
 
 from __future__ import annotations
@@ -64,6 +71,11 @@ KNOWN_SD_STOCHASTIC_RELEASE = 0.4
 KNOWN_SD_BACKGROUND = 0.35
 """``known_sd`` (w_in) under background input (the ``background`` validation set)."""
 
+FAST_AS_PAPER = ("chr2",)
+"""Situations whose fast form (the guided learner's teacher) is the paper's composition:
+the ``chr2`` teacher's labels stay those its learners were trained on, at the Gaussian
+estimate's CPU time."""
+
 _TASK_MODEL = ObservationSettings(task_model=True)
 
 COMPOSITIONS: dict[str, Composition] = {
@@ -78,6 +90,7 @@ COMPOSITIONS: dict[str, Composition] = {
         Composition("heterogeneous", observation=_TASK_MODEL),
         Composition("hidden", EstimatorSettings("relays")),
         Composition("spikes", EstimatorSettings("spikes")),
+        Composition("chr2", EstimatorSettings("bayes")),
     )
 }  # fmt: skip
 """The situations' compositions by name (before a size's overlay)."""
@@ -89,9 +102,11 @@ SITUATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("background", ("background_rate",)),
     ("heterogeneous", ("threshold_spread", "time_constant_spread", "synaptic_spread")),
     ("hidden", ("hidden_neurons", "hidden_fraction")),
+    ("chr2", ("actuator",)),
 )
 """(composition, the extension fields (or properties) that ask for it): an environment
-plays the first situation one of whose fields is set (true or nonzero); none: ``paper``."""
+plays the first situation one of whose fields is set (true or nonzero; the actuator when
+it is not the paper's pulse); none: ``paper``."""
 
 LARGE = {"known_sd": KNOWN_SD_LARGE, "gamble": QMDPSettings(networks=GAMBLE_NETWORKS)}
 """The overlay from :data:`LARGE_FROM_NEURONS` neurons on (suffix ``-16``)."""
@@ -105,9 +120,14 @@ def situation(extensions: Extensions | None) -> str:
     """The situation of an environment with ``extensions`` (:data:`SITUATIONS`)."""
     if extensions is not None:
         for name, fields in SITUATIONS:
-            if any(getattr(extensions, field) for field in fields):
+            if any(_is_set(extensions, field) for field in fields):
                 return name
     return "paper"
+
+
+def _is_set(extensions: Extensions, field: str) -> bool:
+    value = getattr(extensions, field)
+    return value != "pulse" if field == "actuator" else bool(value)
 
 
 def composition_name(extensions: Extensions | None, n_neurons: int | None = None,
@@ -116,6 +136,8 @@ def composition_name(extensions: Extensions | None, n_neurons: int | None = None
     ``extensions`` and ``n_neurons`` observed neurons (``fast``: the teacher's form):
     the situation's, with the size's suffix (``-16``, ``-16-fast``, ``-32``)."""
     name = situation(extensions)
+    if fast and name in FAST_AS_PAPER:
+        name = "paper"
     if n_neurons is None or n_neurons < LARGE_FROM_NEURONS:
         return name
     if fast:
