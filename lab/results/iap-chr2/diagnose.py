@@ -23,10 +23,13 @@ from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
-from spikectl.planning import EstimatorSettings, IdentifyAndPlan
+from spikectl.planning import (
+    DEFAULT_ORACLE_WIDTH,
+    EstimatorSettings,
+    IdentifyAndPlan,
+    OraclePlanner,
+)
 from spikectl.planning.named import composition
-from spikectl.planning.lit_search import planned_light
-from spikectl.planning.oracle import DEFAULT_ORACLE_WIDTH, OraclePlanner
 
 SPLIT, VERSION = "validation", 2
 TASK = sys.argv[3] if len(sys.argv) > 3 else "chr2"
@@ -46,6 +49,11 @@ def play(contexts: ContextSet, controller) -> tuple[np.ndarray, float]:
                                extensions=suite.task(TASK, VERSION).extensions,
                                seed=suite.suite_version(VERSION).env_seed)  # fmt: skip
     return np.asarray(episodes.returns), time.process_time() - started
+
+
+def light(extensions) -> float | None:
+    """The irradiance the oracle plans the light of (None: the current pulse)."""
+    return extensions.light_irradiance_mW_per_mm2 if extensions.actuator == "chr2" else None
 
 
 class Checked(IdentifyAndPlan):
@@ -71,8 +79,15 @@ class Checked(IdentifyAndPlan):
             known_off = known & off
             right = (signs[known_off] == truth[known_off]).mean() if known_off.any() else 1.0
             planned = np.round(self.planning_weights()[0])
-            self.record.append((step, known_off.sum() / off.sum(), right,
-                                (planned[off] == truth[off]).mean(), self.probes))
+            self.record.append(
+                (
+                    step,
+                    known_off.sum() / off.sum(),
+                    right,
+                    (planned[off] == truth[off]).mean(),
+                    self.probes,
+                )
+            )
         return action
 
 
@@ -82,15 +97,26 @@ def main(out: Path, networks: int) -> None:
     named = composition("paper")  # what the named controller played on chr2 before
     oracle = OraclePlanner(contexts, contexts.params, DEFAULT_ORACLE_WIDTH,
                            extensions.allow_target_action,
-                           light_mW_per_mm2=planned_light(extensions))  # fmt: skip
+                           light_mW_per_mm2=light(extensions))  # fmt: skip
     records: dict[str, list] = {"paper's (Gaussian)": [], "exact posterior (bayes)": []}
-    results = {"identify-and-plan (named)": play(contexts, Checked(
-        contexts, records["paper's (Gaussian)"], composition=named, extensions=extensions))}
+    results = {
+        "identify-and-plan (named)": play(
+            contexts,
+            Checked(
+                contexts, records["paper's (Gaussian)"], composition=named, extensions=extensions
+            ),
+        )
+    }
     exact = named.but("bayes", estimator=EstimatorSettings("bayes"))
-    results["the exact posterior"] = play(contexts, Checked(
-        contexts, records["exact posterior (bayes)"], composition=exact, extensions=extensions))
-    results["told the true weights"] = play(contexts, Told(contexts, composition=named,
-                                                           extensions=extensions))
+    results["the exact posterior"] = play(
+        contexts,
+        Checked(
+            contexts, records["exact posterior (bayes)"], composition=exact, extensions=extensions
+        ),
+    )
+    results["told the true weights"] = play(
+        contexts, Told(contexts, composition=named, extensions=extensions)
+    )
     results["oracle"] = play(contexts, oracle)
     base = results["identify-and-plan (named)"][0]
     print(f"{TASK} validation, first {networks} networks, network by network:\n")
@@ -99,16 +125,20 @@ def main(out: Path, networks: int) -> None:
     for label, (values, cpu) in results.items():
         print(f"| {label} | {values.mean():.3f} | {paired_difference_cells(values - base)} "
               f"| {cpu:.1f} |")  # fmt: skip
-    print("\nThe estimate (off the diagonal): share known / share of those right / "
-          "planning weights equal to the truth / probes so far\n")
+    print(
+        "\nThe estimate (off the diagonal): share known / share of those right / "
+        "planning weights equal to the truth / probes so far\n"
+    )
     print("| estimate | step | known | right | planned = truth | probes |")
     print("|---|---:|---:|---:|---:|---:|")
     for label, record in records.items():
         rec = np.array(record)
         for step in CHECKED_STEPS:
             at = rec[rec[:, 0] == step]
-            print(f"| {label} | {step} | {at[:, 1].mean():.2f} | {at[:, 2].mean():.3f} | "
-                  f"{at[:, 3].mean():.3f} | {at[:, 4].mean():.2f} |")
+            print(
+                f"| {label} | {step} | {at[:, 1].mean():.2f} | {at[:, 2].mean():.3f} | "
+                f"{at[:, 3].mean():.3f} | {at[:, 4].mean():.2f} |"
+            )
     with open(out / f"diagnose-{TASK}-per-network.csv", "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["controller", "split", "context", "return"])

@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from spikectl.envs.env import NeuronControlEnv
+from spikectl import NeuronControlEnv
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
 from spikectl.training.loaders import load_controller
@@ -49,10 +49,14 @@ def main(out: Path) -> None:
     result = suite.score(TASK, SPLIT, make, 1, VERSION)
     composition = played[0].composition.name
     nothing, oracle = float(old["do_nothing"]), float(old["oracle"])
-    row = dict(old, mean_return=f"{result.mean_return:.6f}",
-               standard_error=f"{result.standard_error:.6f}",
-               normalised=f"{suite.normalise(result.mean_return, nothing, oracle):.6f}",
-               cpu_seconds=f"{result.cpu_seconds:.3f}", composition=composition)
+    row = dict(
+        old,
+        mean_return=f"{result.mean_return:.6f}",
+        standard_error=f"{result.standard_error:.6f}",
+        normalised=f"{suite.normalise(result.mean_return, nothing, oracle):.6f}",
+        cpu_seconds=f"{result.cpu_seconds:.3f}",
+        composition=composition,
+    )
     with open(out / "identify-and-plan-chr2.csv", "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=list(row))
         writer.writeheader()
@@ -64,9 +68,13 @@ def main(out: Path) -> None:
         writer.writerows([VERSION, TASK, SPLIT, "identify-and-plan", "", index,
                           repr(float(value)), composition]
                          for index, value in enumerate(result.returns))  # fmt: skip
-    print(f"chr2 test: {result.mean_return:.4f} ± {result.standard_error:.4f} "
-          f"(before {old_returns.mean():.4f}); {result.cpu_seconds:.1f} CPU s; {composition}")
-    print(f"new − before, network by network: {paired_difference_cells(result.returns - old_returns)}")
+    print(
+        f"chr2 test: {result.mean_return:.4f} ± {result.standard_error:.4f} "
+        f"(before {old_returns.mean():.4f}); {result.cpu_seconds:.1f} CPU s; {composition}"
+    )
+    print(
+        f"new − before, network by network: {paired_difference_cells(result.returns - old_returns)}"
+    )
 
 
 if __name__ == "__main__":

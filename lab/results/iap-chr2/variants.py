@@ -24,14 +24,11 @@ from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
-from spikectl.neuron.simulator import DO_NOTHING
-from spikectl.planning import IdentifyAndPlan
+from spikectl.planning import DecisionSettings, IdentifyAndPlan, PlanningModel, ProberSettings
 from spikectl.planning.named import composition
-from spikectl.planning.beam import PlanningModel
-from spikectl.planning.deciding import DecisionSettings
-from spikectl.planning.probing import ProberSettings
 
 TASK, SPLIT, VERSION = "chr2", "validation", 2
+DO_NOTHING = -1  # the simulator's action for no stimulation
 
 
 @dataclasses.dataclass(frozen=True)
@@ -72,15 +69,20 @@ class SampledInputs(DecisionSettings):
         return self.hypotheses
 
     def planning_model(self, policy, weights, situation) -> PlanningModel:
-        target, n = situation.target, weights.shape[0]
+        target = situation.target
         drawn = policy.estimate.sample(policy.known_sd, *policy.uniforms)[:, :, target]
         unknown = ~policy.planning_weights()[1][:, target]
         columns = np.where(unknown[None], drawn, weights[None, :, target])
         columns = np.unique(columns, axis=0)
         networks = np.repeat(weights[None], columns.shape[0], axis=0)
         networks[:, :, target] = columns
-        return PlanningModel(np.ascontiguousarray(networks, dtype=np.float64), target,
-                             situation.actions, policy.params, policy.planned_neurons())
+        return PlanningModel(
+            np.ascontiguousarray(networks, dtype=np.float64),
+            target,
+            situation.actions,
+            policy.params,
+            policy.planned_neurons(),
+        )
 
 
 def variants() -> dict:
@@ -105,8 +107,10 @@ def variants() -> dict:
     for width in (16, 64):
         table[f"width={width}"] = decision(width=width)
     table["kind=bayes,width=64"] = named.but(
-        "x", estimator=dataclasses.replace(named.estimator, kind="bayes"),
-        decision=dataclasses.replace(named.decision, width=64))
+        "x",
+        estimator=dataclasses.replace(named.estimator, kind="bayes"),
+        decision=dataclasses.replace(named.decision, width=64),
+    )
     for k in (4, 8, 16):
         table[f"sampled-inputs={k}"] = named.but("x", decision=SampledInputs(hypotheses=k))
     table["never-probe"] = named.but("x", prober=NeverProbe())
@@ -157,14 +161,19 @@ def report(out: Path) -> None:
             rows.setdefault(row["variant"], {})[int(row["context"])] = float(row["return"])
             cpu[row["variant"]] = float(row["cpu_s"])
     base = rows["named"]
-    print(f"\n| variant | networks | mean return | − named [95% CI] | better / worse | CPU s a network |")
+    print(
+        "\n| variant | networks | mean return | − named [95% CI] | better / worse "
+        "| CPU s a network |"
+    )
     print("|---|---:|---:|---|---|---:|")
     for name, values in rows.items():
         common = sorted(set(values) & set(base))
         mine = np.array([values[i] for i in common])
         theirs = np.array([base[i] for i in common])
-        print(f"| {name} | {len(common)} | {mine.mean():.4f} | "
-              f"{paired_difference_cells(mine - theirs)} | {cpu[name]:.3f} |")
+        print(
+            f"| {name} | {len(common)} | {mine.mean():.4f} | "
+            f"{paired_difference_cells(mine - theirs)} | {cpu[name]:.3f} |"
+        )
 
 
 if __name__ == "__main__":
