@@ -16,11 +16,10 @@ research record docs/research/identify-and-plan.md):
   learned, known synapses planned at their estimated strength).
 - ``hidden``: with hidden neurons, the relays through them.
 - ``chr2``: through the ChR2 actuator (and nothing else of the table below), the exact
-  posterior (``"bayes"``): a light pulse drives its neuron for ~10 ms, so the bursts of
-  neurons lit a few steps apart overlap and a step's residual sums several rows, which
-  the posterior over {-1, 0, +1} takes apart from fewer steps than the Gaussian one
-  (the research record lab/results/iap-chr2). Its fast form stays the paper's
-  composition (:data:`FAST_AS_PAPER`).
+  posterior (``"bayes"``): with the light's ~10 ms of drive it knows more of the network
+  at each step than the Gaussian estimate, with fewer probes (the research record
+  lab/results/iap-chr2). Its fast form stays the paper's composition
+  (:data:`FAST_AS_PAPER`).
 - ``spikes``: under spikes-only sensing, the exact posterior from spikes alone and the
   potentials it implies (:mod:`~spikectl.planning.spike_filter`, n <= 8; larger
   networks are refused in one line). It comes first: the filter refuses in one line the
