@@ -4,7 +4,7 @@ VALIDATION set (never the test set), network by network, the named controller as
 now), the same loop told the true weights, and the oracle; and how much of the network
 each estimate knows, and how rightly, at steps 10, 30 and 59.
 
-    python lab/results/iap-chr2/diagnose.py lab/results/iap-chr2 [NETWORKS [TASK]]
+    python lab/results/iap-chr2/diagnose.py docs/results/iap-chr2 [NETWORKS [TASK]]
 
 (TASK: ``chr2``, or ``paper`` for the same networks through the current pulse.)
 """
