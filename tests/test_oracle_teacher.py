@@ -10,7 +10,6 @@ import math
 
 import numpy as np
 import pytest
-import torch
 
 from spikectl.cli import main
 from spikectl.config_errors import ConfigError
@@ -30,14 +29,6 @@ RIG_ID = "spikectl/NeuronControlRig-v0"
 RIG = Extensions(actuator="chr2", latency_steps=2, sensing="spikes", background_rate=0.005)
 WIDTH = 8
 """A narrow beam keeps the plans cheap; the labels' properties do not depend on it."""
-
-
-@pytest.fixture(autouse=True)
-def one_thread():
-    threads = torch.get_num_threads()
-    torch.set_num_threads(1)  # the machine's cores are shared
-    yield
-    torch.set_num_threads(threads)
 
 
 @pytest.fixture(scope="module")
