@@ -255,3 +255,20 @@ def run_main(argv: list[str], capsys) -> tuple[int, str, str]:
         code = exit_.code
     captured = capsys.readouterr()
     return code, captured.out, captured.err
+
+
+def step_alike(batched, sync, actions):
+    """Step a ``NeuronControlVectorEnv`` and a ``SyncVectorEnv`` of single environments
+    with the same ``actions``, asserting equal rewards, terminations and ``info``'s
+    spikes where the single environments report them; (obs_a, info_a, obs_b)."""
+    import numpy as np
+
+    obs_a, rewards_a, terminated_a, _, info_a = batched.step(actions)
+    obs_b, rewards_b, terminated_b, _, info_b = sync.step(actions)
+    np.testing.assert_array_equal(rewards_a, rewards_b)
+    np.testing.assert_array_equal(terminated_a, terminated_b)
+    present = info_b.get("_spikes", np.zeros(len(actions), dtype=bool))
+    np.testing.assert_array_equal(info_a["_spikes"], present)
+    if present.any():
+        np.testing.assert_array_equal(info_a["spikes"][present], info_b["spikes"][present])
+    return obs_a, info_a, obs_b

@@ -10,6 +10,7 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import step_alike
 from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
@@ -217,14 +218,7 @@ def test_the_vector_env_equals_single_envs_through_the_loop(extensions):
         assert obs_a in batched.observation_space
         spiked += int(obs_a[SPIKES_KEY].sum()) if spikes_only else 0
         actions = np.array([rng.choice(np.flatnonzero(m)) - 1 for m in info_a["action_mask"]])
-        obs_a, rewards_a, terminated_a, _, info_a = batched.step(actions)
-        obs_b, rewards_b, terminated_b, _, info_b = sync.step(actions)
-        np.testing.assert_array_equal(rewards_a, rewards_b)
-        np.testing.assert_array_equal(terminated_a, terminated_b)
-        present = info_b.get("_spikes", np.zeros(num_envs, dtype=bool))
-        np.testing.assert_array_equal(info_a["_spikes"], present)
-        if present.any():
-            np.testing.assert_array_equal(info_a["spikes"][present], info_b["spikes"][present])
+        obs_a, info_a, obs_b = step_alike(batched, sync, actions)
     assert spiked > 0 or not spikes_only  # spikes were compared, not only zeros
 
 
