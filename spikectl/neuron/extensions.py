@@ -206,6 +206,12 @@ class Extensions:
         return self.sensing == "spikes"
 
     @property
+    def lit(self) -> bool:
+        """True when an action is a light pulse on an opsin, not the paper's current pulse
+        (``actuator="chr2"``)."""
+        return self.actuator != "pulse"
+
+    @property
     def heterogeneous(self) -> bool:
         """True when neurons differ (any spread > 0)."""
         return bool(self.threshold_spread or self.time_constant_spread or self.synaptic_spread)
@@ -341,7 +347,7 @@ class EnvironmentEffects:
         )  # fmt: skip
         self.plain = not extensions.transforms_observation
         self.random_dynamics = extensions.random_dynamics
-        self.opsin = extensions.actuator == "chr2"
+        self.opsin = extensions.lit
 
     def draw_inputs(
         self,

@@ -249,7 +249,7 @@ class OpsinActuator:
     def for_environment(cls, extensions, params, batch: int, n_neurons: int):
         """The opsins of ``batch`` networks at rest for an environment's ``Extensions``
         and ``NeuronParams``, or None when its actuator is the paper's pulse."""
-        if extensions.actuator != "chr2":
+        if not extensions.lit:
             return None
         actuator = cls(batch, n_neurons, extensions.light_irradiance_mW_per_mm2, params.dt_ms,
                        params.capacitance_pF)  # fmt: skip

@@ -72,7 +72,7 @@ class Occupancies:
 def planned_light(extensions: Extensions | None) -> float | None:
     """The fibre-tip irradiance (mW/mm^2) a planner plans the light of, for an environment
     with ``extensions``: None where the actuator is the paper's pulse."""
-    if extensions is None or extensions.actuator != "chr2":
+    if extensions is None or not extensions.lit:
         return None
     return float(extensions.light_irradiance_mW_per_mm2)
 

@@ -18,7 +18,7 @@ research record docs/research/identify-and-plan.md):
 - ``chr2``: through the ChR2 actuator (and nothing else of the table below), the exact
   posterior (``"bayes"``): with the light's ~10 ms of drive it knows more of the network
   at each step than the Gaussian estimate, with fewer probes (the research record
-  lab/results/iap-chr2). Its fast form stays the paper's composition
+  docs/results/iap-chr2). Its fast form stays the paper's composition
   (:data:`FAST_AS_PAPER`).
 - ``spikes``: under spikes-only sensing, the exact posterior from spikes alone and the
   potentials it implies (:mod:`~spikectl.planning.spike_filter`, n <= 8; larger
@@ -101,11 +101,10 @@ SITUATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("background", ("background_rate",)),
     ("heterogeneous", ("threshold_spread", "time_constant_spread", "synaptic_spread")),
     ("hidden", ("hidden_neurons", "hidden_fraction")),
-    ("chr2", ("actuator",)),
+    ("chr2", ("lit",)),
 )
 """(composition, the extension fields (or properties) that ask for it): an environment
-plays the first situation one of whose fields is set (true or nonzero; the actuator when
-it is not the paper's pulse); none: ``paper``."""
+plays the first situation one of whose fields is set (true or nonzero); none: ``paper``."""
 
 LARGE = {"known_sd": KNOWN_SD_LARGE, "gamble": QMDPSettings(networks=GAMBLE_NETWORKS)}
 """The overlay from :data:`LARGE_FROM_NEURONS` neurons on (suffix ``-16``)."""
@@ -119,14 +118,9 @@ def situation(extensions: Extensions | None) -> str:
     """The situation of an environment with ``extensions`` (:data:`SITUATIONS`)."""
     if extensions is not None:
         for name, fields in SITUATIONS:
-            if any(_is_set(extensions, field) for field in fields):
+            if any(getattr(extensions, field) for field in fields):
                 return name
     return "paper"
-
-
-def _is_set(extensions: Extensions, field: str) -> bool:
-    value = getattr(extensions, field)
-    return value != "pulse" if field == "actuator" else bool(value)
 
 
 def composition_name(extensions: Extensions | None, n_neurons: int | None = None,

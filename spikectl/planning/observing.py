@@ -229,7 +229,7 @@ of them recorded."""
 def _check_spike_sensing(extensions: Extensions) -> None:
     """Refuse, in one line, what spikes-only identification cannot read."""
     on = [name for name in _SPIKE_FILTER_OFF if getattr(extensions, name)]
-    if extensions.actuator != "pulse":
+    if extensions.lit:
         on.append(f"actuator={extensions.actuator!r}")
     if on:
         raise ValueError(
