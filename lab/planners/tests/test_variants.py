@@ -114,3 +114,23 @@ def test_release_chance_evidence_never_settles_a_release():
     observation = ReleaseChanceEvidence(task_model=True).bind(IdentifyAndPlan().params, stochastic)
     assert observation.stochastic_release and not observation.settles
     assert ObservationSettings(task_model=True).bind(IdentifyAndPlan().params, stochastic).settles
+
+
+def test_the_recording_controller_plays_as_the_core_and_records_what_it_knows():
+    """The research record's diagnostic (lab/planners/recording.py) acts exactly as the
+    controller it wraps and records one row at each checked step of each episode: what
+    its estimate calls known only grows, and at the end of a noiseless episode every
+    weight it calls known is the network's."""
+    from lab.planners.recording import RecordingIdentifyAndPlan
+
+    _, contexts = make_splits(1, 3, 6, seed=5)
+    record: list = []
+    played = evaluate_policy(contexts, RecordingIdentifyAndPlan(contexts, record), seed=0)
+    core = evaluate_policy(contexts, IdentifyAndPlan(), seed=0)
+    np.testing.assert_array_equal(played.actions, core.actions)
+    rows = np.array(record)
+    assert rows.shape == (3 * len(RecordingIdentifyAndPlan.checked_steps), 3)
+    by_step = rows.reshape(3, 3, 3)  # [step, episode, field]: the batch steps together
+    assert list(by_step[:, 0, 0]) == list(RecordingIdentifyAndPlan.checked_steps)
+    assert np.all(np.diff(by_step[:, :, 1], axis=0) >= 0) and np.all(by_step[-1, :, 1] > 0)
+    assert np.all(rows[:, 2] == 1.0)

@@ -19,6 +19,8 @@ from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
+from lab.planners.recording import RecordingIdentifyAndPlan
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
@@ -33,7 +35,7 @@ from spikectl.planning.named import composition
 
 SPLIT, VERSION = "validation", 2
 TASK = sys.argv[3] if len(sys.argv) > 3 else "chr2"
-CHECKED_STEPS = (10, 30, 59)
+CHECKED_STEPS = RecordingIdentifyAndPlan.checked_steps
 
 
 def subset(networks: int) -> ContextSet:
@@ -56,39 +58,17 @@ def light(extensions) -> float | None:
     return extensions.light_irradiance_mW_per_mm2 if extensions.actuator == "chr2" else None
 
 
-class Checked(IdentifyAndPlan):
+class Checked(RecordingIdentifyAndPlan):
     """Records, at :data:`CHECKED_STEPS`, the share of off-diagonal weights its estimate
     calls known, the share of those that are right, and the share of all off-diagonal
-    planning weights (rounded) that equal the truth (a diagnostic: the policy never
-    sees the truth), and the probes it took."""
+    planning weights (rounded) that equal the truth, and the probes it took."""
 
-    def __init__(self, contexts, record: list, **settings) -> None:
-        super().__init__(**settings)
-        self.contexts, self.record = contexts, record
-
-    def spawn(self, index: int) -> IdentifyAndPlan:
-        return copy.copy(self)
-
-    def act(self, observation, info) -> int:
-        action = super().act(observation, info)
-        step = int(observation["step"])
-        if step in CHECKED_STEPS:
-            signs, known = self.estimate.weights(self.known_sd)
-            truth = self.contexts[int(info["context_index"])].weights
-            off = ~np.eye(known.shape[0], dtype=bool)
-            known_off = known & off
-            right = (signs[known_off] == truth[known_off]).mean() if known_off.any() else 1.0
-            planned = np.round(self.planning_weights()[0])
-            self.record.append(
-                (
-                    step,
-                    known_off.sum() / off.sum(),
-                    right,
-                    (planned[off] == truth[off]).mean(),
-                    self.probes,
-                )
-            )
-        return action
+    def measure(self, step, signs, known, truth) -> tuple:
+        off = ~np.eye(known.shape[0], dtype=bool)
+        right = (signs[known] == truth[known]).mean() if known.any() else 1.0
+        planned = np.round(self.planning_weights()[0])
+        agree = (planned[off] == truth[off]).mean()
+        return step, known.sum() / off.sum(), right, agree, self.probes
 
 
 def main(out: Path, networks: int) -> None:

@@ -12,7 +12,6 @@ Writes ``validation-per-network.csv`` and prints the tables of ``validation-tabl
 
 from __future__ import annotations
 
-import copy
 import csv
 import sys
 from pathlib import Path
@@ -21,37 +20,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
 from lab.planners import ReleaseChanceEvidence
+from lab.planners.recording import RecordingIdentifyAndPlan as Checked
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
-from spikectl.planning import EstimatorSettings, IdentifyAndPlan, named_composition
+from spikectl.planning import EstimatorSettings, named_composition
 
 TASK = "stochastic"
 SPLITS = ("train", "validation")
-CHECKED_STEPS = (10, 30, 59)
-
-
-class Checked(IdentifyAndPlan):
-    """Records, at :data:`CHECKED_STEPS`, the share of off-diagonal weights its estimate
-    calls known and the share of those that are the network's (read from the set by
-    the environment's context index: a diagnostic, the policy never sees it)."""
-
-    def __init__(self, contexts, record: list, **settings) -> None:
-        super().__init__(**settings)
-        self.contexts, self.record = contexts, record
-
-    def spawn(self, index: int) -> IdentifyAndPlan:
-        return copy.copy(self)
-
-    def act(self, observation, info) -> int:
-        action = super().act(observation, info)
-        step = int(observation["step"])
-        if step in CHECKED_STEPS:
-            signs, known = self.estimate.weights(self.known_sd)
-            truth = self.contexts[int(info["context_index"])].weights
-            known = known & ~np.eye(known.shape[0], dtype=bool)
-            right = (signs[known] == truth[known]).mean() if known.any() else 1.0
-            self.record.append((step, known.mean(), right))
-        return action
+CHECKED_STEPS = Checked.checked_steps
 
 
 def main(out: Path) -> None:
