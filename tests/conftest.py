@@ -272,3 +272,31 @@ def step_alike(batched, sync, actions):
     if present.any():
         np.testing.assert_array_equal(info_a["spikes"][present], info_b["spikes"][present])
     return obs_a, info_a, obs_b
+
+
+def assert_flat_vector_env_steps_as_singles(vector_class, single_class, kwargs, steps,
+                                            num_envs=3):  # fmt: skip
+    """A flat vector environment and ``num_envs`` single ones built from the same
+    ``kwargs`` observe, reward and terminate alike for ``steps`` random actions (illegal
+    ones do nothing, in both), through the vector env's next-step autoresets."""
+    import numpy as np
+
+    batched = vector_class(num_envs, **kwargs)
+    singles = [single_class(**kwargs) for _ in range(num_envs)]
+    assert batched.single_observation_space == singles[0].observation_space
+    obs_a, _ = batched.reset(seed=4)
+    obs_b = [env.reset(seed=4 + i)[0] for i, env in enumerate(singles)]
+    rng = np.random.default_rng(1)
+    ended = [False] * num_envs
+    for _ in range(steps):
+        np.testing.assert_array_equal(obs_a, np.stack(obs_b))
+        actions = rng.integers(0, 9, num_envs)
+        obs_a, rewards, terminated, *_ = batched.step(actions)
+        stepped = []
+        for i, (env, action) in enumerate(zip(singles, actions, strict=True)):
+            # The vector env's next-step autoreset: the step after the last resets.
+            stepped.append((env.reset()[0], 0.0, False) if ended[i] else env.step(int(action)))
+            ended[i] = stepped[-1][2]
+        obs_b = [s[0] for s in stepped]
+        np.testing.assert_array_equal(rewards, [s[1] for s in stepped])
+        np.testing.assert_array_equal(terminated, [s[2] for s in stepped])

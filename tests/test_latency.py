@@ -10,7 +10,7 @@ import warnings
 import gymnasium as gym
 import numpy as np
 import pytest
-from conftest import step_alike
+from conftest import assert_flat_vector_env_steps_as_singles, step_alike
 from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
@@ -277,20 +277,8 @@ def test_the_flat_vector_env_equals_the_flat_env_through_the_loop(extensions):
     """The batched flat environment steps as the single ones, with the actions in flight
     and spikes-only sensing in the flat layout (and the rig's ChR2 and background)."""
     kwargs = {**SHORT, "extensions": extensions}
-    num_envs = 3
-    batched = FlatNeuronControlVectorEnv(num_envs, **kwargs)
-    singles = [FlatNeuronControlEnv(**kwargs) for _ in range(num_envs)]
-    assert batched.single_observation_space == singles[0].observation_space
-    obs_a, _ = batched.reset(seed=4)
-    obs_b = [env.reset(seed=4 + i)[0] for i, env in enumerate(singles)]
-    rng = np.random.default_rng(1)
-    for _ in range(12):
-        np.testing.assert_array_equal(obs_a, np.stack(obs_b))
-        actions = rng.integers(0, 9, num_envs)  # illegal ones do nothing, in both
-        obs_a, rewards, *_ = batched.step(actions)
-        steps = [env.step(int(a)) for env, a in zip(singles, actions, strict=True)]
-        obs_b = [s[0] for s in steps]
-        np.testing.assert_array_equal(rewards, [s[1] for s in steps])
+    assert_flat_vector_env_steps_as_singles(FlatNeuronControlVectorEnv, FlatNeuronControlEnv,
+                                            kwargs, 12)  # fmt: skip
 
 
 def test_the_latency_ids_are_registered_with_flat_twins():

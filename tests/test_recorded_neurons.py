@@ -12,7 +12,7 @@ import warnings
 import numpy as np
 import pytest
 import torch
-from conftest import step_alike
+from conftest import assert_flat_vector_env_steps_as_singles, step_alike
 from gymnasium.utils.env_checker import check_env
 from gymnasium.vector import AutoresetMode, SyncVectorEnv
 
@@ -299,26 +299,8 @@ def test_the_flat_layout_ends_with_the_recorded_mask():
 
 def test_the_flat_vector_env_equals_the_flat_env_with_autoresets():
     kwargs = {**SHORT, "extensions": {**RECORDED, "latency_steps": 1}}
-    num_envs = 3
-    batched = FlatNeuronControlVectorEnv(num_envs, **kwargs)
-    singles = [FlatNeuronControlEnv(**kwargs) for _ in range(num_envs)]
-    assert batched.single_observation_space == singles[0].observation_space
-    obs_a, _ = batched.reset(seed=4)
-    obs_b = [env.reset(seed=4 + i)[0] for i, env in enumerate(singles)]
-    rng = np.random.default_rng(1)
-    ended = [False] * num_envs
-    for _ in range(2 * 13 + 1):
-        np.testing.assert_array_equal(obs_a, np.stack(obs_b))
-        actions = rng.integers(0, 9, num_envs)  # illegal ones do nothing, in both
-        obs_a, rewards, terminated, *_ = batched.step(actions)
-        steps = []
-        for i, (env, action) in enumerate(zip(singles, actions, strict=True)):
-            # The vector env's next-step autoreset: the step after the last resets.
-            steps.append((env.reset()[0], 0.0, False) if ended[i] else env.step(int(action)))
-            ended[i] = steps[-1][2]
-        obs_b = [s[0] for s in steps]
-        np.testing.assert_array_equal(rewards, [s[1] for s in steps])
-        np.testing.assert_array_equal(terminated, [s[2] for s in steps])
+    assert_flat_vector_env_steps_as_singles(FlatNeuronControlVectorEnv, FlatNeuronControlEnv,
+                                            kwargs, 2 * 13 + 1)  # fmt: skip
 
 
 # -- bad inputs
