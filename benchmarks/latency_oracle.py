@@ -1,5 +1,6 @@
 """The oracle under loop latency (docs/extensions.md, "Loop latency"): mean returns on the
-paper task's 100 unseen test networks for latency_steps 0, 1, 2 (or --latencies).
+paper task's unseen test networks for latency_steps 0, 1, 2 (or --latencies): suite v1's
+100 networks, or suite v2's 1 000 with ``--suite 2``.
 
 Rows: doing nothing; the latency-unaware oracle (``OraclePlanner(latency_steps=0)``, its
 latency-0 plan landing late); the latency-aware oracle (``OraclePlanner``, which reads the
@@ -7,9 +8,10 @@ latency from the observation); and the ceiling, the return of meeting every want
 a loop of that latency can reach (none at steps 0 .. L: nothing lands before step L and
 the target, never stimulated, spikes one step after its input at the earliest). Each
 value is the mean ± its standard error over the networks; "normalised" is
-(R - do nothing) / (ceiling - do nothing). A few CPU seconds:
+(R - do nothing) / (ceiling - do nothing). A few CPU seconds (about a minute with
+``--suite 2``):
 
-    python benchmarks/latency_oracle.py
+    python benchmarks/latency_oracle.py [--suite 2]
 """
 
 from __future__ import annotations
@@ -36,8 +38,10 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--latencies", type=int, nargs="+", default=[0, 1, 2])
     parser.add_argument("--width", type=int, default=DEFAULT_ORACLE_WIDTH)
+    parser.add_argument("--suite", type=int, choices=[1, 2], default=1,
+                        help="whose test networks: suite v1's (100) or v2's (1 000)")
     arguments = parser.parse_args()
-    contexts = load_split("paper", "test")
+    contexts = load_split("paper", "test", version=arguments.suite)
     aware = OraclePlanner(contexts, contexts.params, arguments.width)
     unaware = OraclePlanner(contexts, contexts.params, arguments.width, latency_steps=0)
     print("| latency | do nothing | unaware oracle | aware oracle | ceiling | aware, normalised |")
