@@ -10,7 +10,7 @@ import pytest
 
 from spikectl.contexts import make_splits
 from spikectl.envs.env import NeuronControlEnv
-from spikectl.envs.realtime import run_realtime
+from spikectl.envs.realtime import decision_times, run_realtime
 
 
 @pytest.fixture(scope="module")
@@ -76,3 +76,42 @@ def test_bad_arguments_are_refused(env):
         run_realtime(env, Recorder(), [0], on_miss="skip")
     with pytest.raises(ValueError, match="at least one"):
         run_realtime(env, Recorder(), [])
+
+
+class Spinner(Recorder):
+    """Busy for ``spin_s`` of CPU on every ``slow_every``-th step, asleep for ``sleep_s``
+    on every step: the decision clock counts the first and not the second."""
+
+    def __init__(self, slow_every: int, spin_s: float, sleep_s: float = 0.0) -> None:
+        super().__init__()
+        self.slow_every, self.spin_s, self.sleep_s = slow_every, spin_s, sleep_s
+
+    def act(self, observation, info) -> int:
+        if int(observation["step"]) % self.slow_every == 0:
+            until = time.thread_time() + self.spin_s
+            while time.thread_time() < until:
+                pass
+        time.sleep(self.sleep_s)
+        return super().act(observation, info)
+
+
+def test_decision_times_count_each_decision_s_own_cpu(env):
+    """One time per decision (episodes x steps); a decision that spins 3 ms of CPU takes
+    at least that; 2 ms of sleep is not CPU and is not counted."""
+    times = decision_times(env, Spinner(slow_every=5, spin_s=3e-3, sleep_s=2e-3), [0, 1])
+    assert times.shape == (2 * env.episode_length,)
+    slow = np.zeros(env.episode_length, dtype=bool)
+    slow[::5] = True
+    slow = np.tile(slow, 2)
+    assert times[slow].min() >= 3e-3
+    assert np.median(times[~slow]) < 1e-3  # the sleep: 2 ms of wall time each
+
+
+def test_decision_times_play_the_episodes_the_rig_plays(env):
+    """Unpaced, the same actions and resets as the rig's episodes on the same contexts."""
+    timed, paced = Recorder(), Recorder()
+    decision_times(env, timed, [2, 0], seed=7)
+    run_realtime(env, paced, [2, 0], rate_hz=200.0, seed=7)
+    assert timed.seen == paced.seen and timed.resets == paced.resets == 2
+    with pytest.raises(ValueError, match="contexts must name at least one context index"):
+        decision_times(env, Recorder(), [])

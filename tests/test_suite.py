@@ -370,3 +370,25 @@ def test_the_first_decision_says_why_a_controller_cannot_play():
     rig = suite.task("rig", 2).extensions
     why = first_decision_refusal(env, lambda: IdentifyAndPlan(env.params, extensions=rig))
     assert why is not None and "\n" not in why and "actuator='chr2'" in why
+
+
+def test_a_benchmark_row_carries_its_decision_times(capsys, tmp_path):
+    """decision_p50_ms / decision_p99_ms: each decision of --decision-episodes episodes
+    timed alone (0 ≤ p50 ≤ p99); 0 episodes leaves the columns empty; more episodes than
+    the set has networks is one line, exit 2, before anything is played."""
+    timed, untimed = tmp_path / "timed.csv", tmp_path / "untimed.csv"
+    for out, episodes in ((timed, "3"), (untimed, "0")):
+        code, stdout, _ = run_main(["benchmark", "identify-and-plan", "--task", "paper",
+                                    "--decision-episodes", episodes, "--out", str(out)],
+                                   capsys)  # fmt: skip
+        assert code == 0, stdout
+    (row,) = list(csv.DictReader(timed.open()))
+    assert 0 < float(row["decision_p50_ms"]) <= float(row["decision_p99_ms"])
+    (bare,) = list(csv.DictReader(untimed.open()))
+    assert bare["decision_p50_ms"] == bare["decision_p99_ms"] == ""
+    assert bare["mean_return"] == row["mean_return"]  # timing plays apart from the score
+    code, _, stderr = run_main(["benchmark", "do-nothing", "--task", "paper",
+                                "--decision-episodes", "101"], capsys)  # fmt: skip
+    assert code == 2
+    (line,) = stderr.strip().splitlines()
+    assert "--decision-episodes must be an integer in 0..100" in line and "101" in line

@@ -37,6 +37,10 @@ class BenchmarkCommand:
     other controllers are deterministic and play once."""
     torch_threads: int = 1
     """PyTorch threads of a run's network (CPU seconds are counted over all threads)."""
+    decision_episodes: int = 10
+    """Episodes on the set's first networks, after one untimed warm-up episode, whose every
+    decision is timed alone on one environment by the deciding thread's CPU clock: the
+    rows' decision_p50_ms and decision_p99_ms (0: not timed, those columns stay empty)."""
     out: Path | None = None
     """Write one CSV row per task (raw, normalised, references, CPU seconds) here."""
     per_network: Path | None = None
@@ -51,7 +55,7 @@ MAX_RANDOM_SEEDS = 1000
 CSV_FIELDS = (
     "suite_version", "task", "split", "controller", "model", "seeds", "mean_return",
     "standard_error", "sd_over_seeds", "normalised", "do_nothing", "oracle", "cpu_seconds",
-    "contexts", "trained_on", "composition",
+    "contexts", "trained_on", "composition", "decision_p50_ms", "decision_p99_ms",
 )  # fmt: skip
 REFERENCE_CONTROLLERS = ("do-nothing", "oracle")
 """The registered controllers that are the normalised score's 0 and 1
@@ -96,6 +100,9 @@ def score_and_write(command: BenchmarkCommand) -> None:
     names = list(version.names()) if "all" in command.task else list(dict.fromkeys(command.task))
     if not names:
         raise ValueError("--task: give at least one task, or all")
+    if not 0 <= command.decision_episodes <= version.set_size:
+        raise ValueError(f"--decision-episodes must be an integer in 0..{version.set_size} "
+                         f"(the set's networks), got {command.decision_episodes}")  # fmt: skip
     for name in names:
         version.task(name)  # an unknown task is refused before anything is played
     make = controller_factory(command, names)
@@ -117,7 +124,7 @@ def score_and_write(command: BenchmarkCommand) -> None:
           + (f" (mean over seeds 0..{seeds - 1})" if seeds > 1 else "")
           + (f"; trained on task {origin!r}" if origin else ""))  # fmt: skip
     print(f"{'task':<15}{'mean return':>18}{'normalised':>12}{'do nothing':>12}"
-          f"{'oracle':>9}{'CPU s':>9}")  # fmt: skip
+          f"{'oracle':>9}{'CPU s':>9}{'p50 ms':>9}{'p99 ms':>9}")  # fmt: skip
     for name, why in skipped.items():
         print(f"{name:<15}skipped: {command.controller} cannot play it ({why})")
     rows, per_network, normalised = [], [], {}
@@ -141,8 +148,9 @@ def score_and_write(command: BenchmarkCommand) -> None:
         normalised[name] = suite.normalise(result.mean_return, nothing, oracle)
         sd = float(result.seed_means.std(ddof=1)) if seeds > 1 else float("nan")
         raw = f"{result.mean_return:.3f}" + (f" +- {sd:.3f}" if seeds > 1 else "")
+        p50, p99 = decision_percentiles(make, name, command, version.number)
         print(f"{name:<15}{raw:>18}{normalised[name]:>12.3f}{nothing:>12.3f}{oracle:>9.3f}"
-              f"{result.cpu_seconds:>9.2f}")  # fmt: skip
+              f"{result.cpu_seconds:>9.2f}{p50 or '-':>9}{p99 or '-':>9}")  # fmt: skip
         rows.append({
             "suite_version": version.number, "task": name, "split": command.split,
             "controller": command.controller, "model": model_label(command), "seeds": seeds,
@@ -152,7 +160,7 @@ def score_and_write(command: BenchmarkCommand) -> None:
             "normalised": f"{normalised[name]:.6f}", "do_nothing": f"{nothing:.6f}",
             "oracle": f"{oracle:.6f}", "cpu_seconds": f"{result.cpu_seconds:.3f}",
             "contexts": len(result.returns), "trained_on": origin or "",
-            "composition": composition,
+            "composition": composition, "decision_p50_ms": p50, "decision_p99_ms": p99,
         })  # fmt: skip
     if len(names) > 1:
         print(f"mean normalised score over {len(names)} tasks: "
@@ -178,6 +186,30 @@ def task_refusal(make: Any, name: str, split: str, version: int) -> str | None:
     env = NeuronControlEnv(contexts=suite.load_split(name, split, version),
                            extensions=suite.task(name, version).extensions)  # fmt: skip
     return first_decision_refusal(env, lambda: make(name)(0))
+
+
+def decision_percentiles(make: Any, name: str, command: BenchmarkCommand,
+                         version: int) -> tuple[str, str]:  # fmt: skip
+    """The median and 99th percentile (ms, as written) of the CPU time of each decision of
+    ``make(name)(0)`` over ``command.decision_episodes`` episodes of task ``name``, one
+    environment, unpaced (:func:`~spikectl.envs.realtime.decision_times`); ("", "") when
+    not timed."""
+    if command.decision_episodes == 0:
+        return "", ""
+    import numpy as np
+
+    from spikectl.envs.env import NeuronControlEnv
+    from spikectl.envs.realtime import decision_times
+    from spikectl.experiments import suite
+
+    env = NeuronControlEnv(contexts=suite.load_split(name, command.split, version),
+                           extensions=suite.task(name, version).extensions)  # fmt: skip
+    seed = suite.suite_version(version).env_seed
+    controller = make(name)(0)
+    decision_times(env, controller, [0], seed)  # warm-up: compilation, first allocations
+    ms = decision_times(env, controller, range(command.decision_episodes), seed) * 1e3
+    env.close()
+    return f"{np.percentile(ms, 50):.4f}", f"{np.percentile(ms, 99):.4f}"
 
 
 def training_task(command: BenchmarkCommand) -> str | None:

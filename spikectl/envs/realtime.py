@@ -114,6 +114,34 @@ def run_realtime(
     )
 
 
+def decision_times(
+    env: Any, controller: Controller, contexts: Sequence[int], seed: int = 0
+) -> np.ndarray:
+    """[decisions] the CPU seconds each of ``controller``'s decisions takes, unpaced: one
+    episode per context index of ``env`` (a single ``NeuronControlEnv``; episode i resets
+    with ``seed + i``), each ``act`` timed alone by the deciding thread's CPU clock.
+
+    On an idle core that is the decision's wall time; on a busy machine it leaves out the
+    time other processes hold the core, so the numbers of one controller compare across
+    runs (a controller's own worker threads are not counted: time it with one thread, as
+    the rig does). :func:`run_realtime` measures what a paced loop adds to it."""
+    contexts = list(contexts)
+    if not contexts:
+        raise ValueError("contexts must name at least one context index")
+    times: list[int] = []
+    for episode, context in enumerate(contexts):
+        controller.reset()
+        observation, info = env.reset(seed=seed + episode, options={"context": int(context)})
+        done = False
+        while not done:
+            started = time.thread_time_ns()
+            action = controller.act(observation, info)
+            times.append(time.thread_time_ns() - started)
+            observation, _, terminated, truncated, info = env.step(action)
+            done = terminated or truncated
+    return np.array(times, dtype=np.float64) * 1e-9
+
+
 def _wait_until(tick_ns: int) -> None:
     while time.perf_counter_ns() < tick_ns:
         pass
