@@ -3,8 +3,10 @@ whose rows were written before the benchmark timed decisions, without playing th
 again: for each row of a registered controller (do-nothing, random, oracle,
 identify-and-plan, ...), the same timing the benchmark now does (one environment, the
 task's first 10 networks after a warm-up episode, each decision's CPU time;
-``spikectl.cli.benchmark.decision_percentiles``). Every other column stays as it was;
-rows of run directories are left empty (their weights are not committed).
+``spikectl.cli.benchmark.decision_percentiles``). A row of a run directory (its
+weights are not committed) is timed with the network its ``config.json`` beside the CSV
+describes, built for the task's size at fresh weights: a forward pass costs the same
+whatever the weights. Every other column stays as it was.
 
     python lab/results/suite/decision_times.py docs/results/suite/oracle.csv ...
 """
@@ -25,18 +27,52 @@ from spikectl.cli.benchmark import (
 from spikectl.training.loaders import CONTROLLERS
 
 
+def architecture_factory(config_dir: Path, model: str, version: int):
+    """task name -> (seed -> the greedy controller of a fresh network of the run's
+    architecture, built for the task's observed n; its compiled policy where the row's
+    ``model`` says so)."""
+    import torch
+
+    from spikectl.agents import make_agent
+    from spikectl.agents.greedy import GreedyController
+    from spikectl.experiments import suite
+    from spikectl.training.run_files import read_config
+
+    config = read_config(config_dir)
+    torch.set_num_threads(1)
+
+    def make(name: str):
+        with torch.random.fork_rng(devices=[]):
+            torch.manual_seed(0)
+            network = make_agent(config.agent.arch, suite.task(name, version).n_observed,
+                                 config.env.episode_length, config.agent.sizes,
+                                 params=config.env.params)  # fmt: skip
+        if "compiled" in model:
+            from spikectl.agents.compiled import CompiledPolicy
+
+            policy = CompiledPolicy.from_network(network)
+            return lambda seed: policy
+        controller = GreedyController(network, per_environment="per-environment" in model)
+        return lambda seed: controller
+
+    return make
+
+
 def timed_rows(path: Path, episodes: int) -> list[dict]:
     """The rows of ``path`` with their decision-time columns filled."""
     rows = list(csv.DictReader(path.open()))
     for row in rows:
-        if row.get("decision_p99_ms") or row["controller"] not in CONTROLLERS:
+        registered = row["controller"] in CONTROLLERS
+        learned = (path.parent / "config.json").is_file() and not registered
+        if row.get("decision_p99_ms") or not (registered or learned):
             row.setdefault("decision_p50_ms", "")
             row.setdefault("decision_p99_ms", "")
             continue
-        command = BenchmarkCommand(row["controller"], task=(row["task"],),
-                                   suite=int(row["suite_version"]), split=row["split"],
-                                   decision_episodes=episodes)  # fmt: skip
-        make = controller_factory(command, [row["task"]])
+        command = BenchmarkCommand(row["controller"] if registered else "do-nothing",
+                                   task=(row["task"],), suite=int(row["suite_version"]),
+                                   split=row["split"], decision_episodes=episodes)  # fmt: skip
+        make = (controller_factory(command, [row["task"]]) if registered
+                else architecture_factory(path.parent, row["model"], command.suite))
         row["decision_p50_ms"], row["decision_p99_ms"] = decision_percentiles(
             make, row["task"], command, command.suite)
         print(f"{path.name} {row['task']}: p50 {row['decision_p50_ms']} ms, "
