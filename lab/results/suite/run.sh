@@ -14,6 +14,8 @@ done
 # result tables compare learners with: lab/results/result_tables.py's PLANNER_TEST).
 spikectl benchmark identify-and-plan --task all --out "$out/identify-and-plan.csv" \
     --per-network "$out/identify-and-plan-per-network.csv" --overwrite
+# (Every row carries decision_p50_ms / decision_p99_ms; the committed rows before those
+# columns were given them by: python lab/results/suite/decision_times.py CSV...)
 # Identify-and-plan's CPU seconds per episode and per-decision CPU-time percentiles.
 python lab/results/bayes-identify/sweep.py --split test --settings '{"named": true}' \
     --tasks paper noise1 noise2 noise4 hidden25 stochastic heterogeneous background n16 n32 \
