@@ -65,3 +65,25 @@ def test_reference_baselines_table_is_what_the_committed_runs_say(capsys):
     assert len(printed) >= 7  # header, rule and five algorithms
     missing = [line for line in printed if line not in readme]
     assert not missing, f"reference-baselines/README.md lacks printed rows: {missing[:3]}"
+
+
+def test_decision_times_fill_only_the_two_columns(tmp_path):
+    """lab/results/suite/decision_times.py on a CSV written before the columns existed:
+    a registered controller's row and a run's row (timed with the architecture of the
+    config.json beside it) gain positive p50 <= p99; nothing else changes."""
+    import csv
+    import shutil
+
+    script = runpy.run_path(str(LAB / "suite" / "decision_times.py"))
+    run = DATA / "suite" / "trained" / "guided-upr24" / "noise2" / "seed=0"
+    shutil.copy(run / "config.json", tmp_path / "config.json")
+    fields = ["suite_version", "task", "split", "controller", "model", "mean_return"]
+    rows = [["1", "noise2", "test", "runs/gone/seed=0", "best", "0.7"],
+            ["1", "paper", "test", "do-nothing", "", "0.5"]]  # fmt: skip
+    path = tmp_path / "benchmark.csv"
+    with path.open("w", newline="") as handle:
+        csv.writer(handle).writerows([fields, *rows])
+    written = script["timed_rows"](path, 1)
+    assert [[row[field] for field in fields] for row in written] == rows
+    for row in written:
+        assert 0 < float(row["decision_p50_ms"]) <= float(row["decision_p99_ms"])
