@@ -81,6 +81,12 @@ FAST_AS_PAPER = ("chr2",)
 the ``chr2`` teacher's labels stay those its learners were trained on, at the Gaussian
 estimate's CPU time."""
 
+FAST_AS_EXACT_SPIKES = ("rig",)
+"""Situations whose fast form is the exact spike filter's ``spikes`` composition, which
+refuses them in one line: the ``rig`` composition costs about 1 CPU second an episode
+(docs/results/iap-rig), too slow to label every step of training, so the guided
+learner's identify teacher stays refused there (train with ``--teacher oracle``)."""
+
 _TASK_MODEL = ObservationSettings(task_model=True)
 
 COMPOSITIONS: dict[str, Composition] = {
@@ -146,6 +152,8 @@ def composition_name(extensions: Extensions | None, n_neurons: int | None = None
     name = situation(extensions)
     if fast and name in FAST_AS_PAPER:
         name = "paper"
+    if fast and name in FAST_AS_EXACT_SPIKES:
+        name = "spikes"
     if n_neurons is None or n_neurons < LARGE_FROM_NEURONS:
         return name
     if fast:
