@@ -76,7 +76,8 @@ def test_an_unexplained_spike_costs_the_background_chance():
     # neuron 0 at -70 + 20 = -50 mV, a spike; it stays silent.
     estimate.add(*state.observe(np.array([0, 0, 0], dtype=np.int8), DO_NOTHING))
     excited = estimate.hypotheses[0][:, 1] == 1
-    np.testing.assert_allclose(estimate.log_likelihood[0][excited], np.log(1e-3) - np.log1p(-0.01))
+    silent = np.log1p(np.expm1(-0.01))  # no spontaneous input in the step
+    np.testing.assert_allclose(estimate.log_likelihood[0][excited], np.log(1e-3) - silent)
     assert (estimate.log_likelihood[0][~excited] == 0).all()
     assert estimate.column_weights()[0][excited].sum() < np.exp(prior[0][excited]).sum() / 100
 
@@ -93,7 +94,7 @@ def drive_episode(extensions: Extensions, weights: np.ndarray, seed: int, steps:
     env = NeuronControlEnv(contexts=contexts, extensions=extensions)
     observation = ObservationSettings(task_model=True).bind(PARAMS, extensions)
     reader = observation.reader(n, 0)
-    estimate = SpikeLikelihoodFilter(n, PARAMS, observation.model.background_probability)
+    estimate = SpikeLikelihoodFilter(n, PARAMS, extensions.background_rate)
     obs, info = env.reset(seed=seed, options={"context": 0})
     for _ in range(steps - 1):
         action = int(rng.integers(0, n - 1)) if rng.random() < 0.3 else DO_NOTHING
@@ -172,3 +173,19 @@ def test_identify_and_plan_plays_a_short_rig_episode_legally():
     assert ((first.returns >= 0) & (first.returns <= 1)).all()
     np.testing.assert_array_equal(first.actions, second.actions)
     np.testing.assert_array_equal(first.returns, second.returns)
+
+
+def test_an_unexplained_spike_costs_the_poisson_tail_of_the_inputs_it_needs():
+    """By hand: at rate r the chance of k or more spontaneous inputs, at least the floor;
+    silence its complement; without background input, impossible and certain."""
+    from spikectl.planning.spike_likelihood import _poisson_tails
+
+    r = 0.01
+    spike, silent = _poisson_tails(r, 0.0)
+    one, two = 1 - np.exp(-r), 1 - np.exp(-r) * (1 + r)
+    np.testing.assert_allclose(np.exp(spike[1:3]), [one, two], rtol=1e-9)
+    np.testing.assert_allclose(np.exp(silent[1:3]), [1 - one, 1 - two], rtol=1e-9)
+    floored = np.exp(_poisson_tails(r, one)[0])
+    np.testing.assert_allclose(floored[1:], one, rtol=1e-12)  # the default: one input's chance
+    spike, silent = _poisson_tails(0.0, 0.0)
+    assert (spike[1:] == -np.inf).all() and (silent[1:] == 0.0).all()

@@ -18,6 +18,7 @@ released together; under noise that mean is noisy and unknown entries are planne
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
@@ -107,7 +108,8 @@ def spike_likelihood(n: int, residual_sd: float, model: ObservationModel,
     """:class:`~spikectl.planning.spike_likelihood.SpikeLikelihoodFilter`: the posterior
     from spikes under the task's background input (``model``) and the ChR2 light, each
     column weighed by the likelihood of the spikes, n <= 8."""
-    return SpikeLikelihoodFilter(n, params, model.background_probability)
+    rate = -math.log1p(-model.background_probability)
+    return SpikeLikelihoodFilter(n, params, rate, model.background_step * params.synaptic_step_mV)
 
 
 ESTIMATORS: Registry[EstimateFactory] = Registry("estimator")

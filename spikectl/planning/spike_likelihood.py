@@ -13,14 +13,17 @@ likelihood of the spikes instead of dropping it:
   each column's drive is the current they pass at *that column's* potential, computed by
   the environment's own compiled :func:`~spikectl.neuron.opsin.current_pA`, so the
   potential a column implies is the one the environment's kernel computes for it;
-- **a spike the column does not predict** costs the chance that background input
-  caused it, ``background_probability`` (one spontaneous input of 20 mV takes a neuron at
-  or above rest over the threshold); a silent step where the column predicts none costs
-  its complement;
+- **a spike the column does not predict** costs the chance that spontaneous inputs
+  caused it: P(N >= k) for the k inputs of the task's size the column's potential is
+  short of the threshold (N Poisson at the background rate), at least
+  ``unexplained_floor`` (by default the chance of one input, whatever k: one spontaneous
+  input of 20 mV takes a neuron at or above rest over the threshold, and an earlier
+  unseen input may have left the neuron closer than its column implies); a silent step
+  where the column predicts none costs the complement;
 - **a missed spike** (the column predicts one and none came) cannot come from a
-  depolarising background input: it costs :data:`MISS_PROBABILITY` (not zero, so that the
-  ~1e-3 mV the opsin's rectification returns to a column whose neuron took an unseen
-  sub-threshold input cannot rule the truth out);
+  depolarising input: it costs :data:`MISS_PROBABILITY`, not zero, as a guard (after an
+  unseen input the true column's potential is below the neuron's, and the opsin passes
+  more current at a lower potential);
 - the potentials resynchronise at every observed spike (the neuron resets to V_r, as in
   the exact filter), so an unseen input is forgotten at the neuron's next spike.
 
@@ -55,7 +58,7 @@ from spikectl.planning.spike_filter import (
 
 MISS_PROBABILITY = 1e-3
 """The likelihood of a silent step for a column that predicts a spike, under background
-input (chosen on the ``rig`` validation set, docs/results/iap-rig)."""
+input (1e-2 scored the same on the ``rig`` validation networks, docs/results/iap-rig)."""
 PRUNE_NATS = 16.0
 """A column is dropped once its log-likelihood is this far below its neuron's best
 (three unexplained spikes at the ``rig`` task's background rate)."""
@@ -65,30 +68,38 @@ class SpikeLikelihoodFilter(SpikeFilter):
     """The posterior over G from spikes under the opsin and background input, with each
     kept column's current potential.
 
-    ``add(released, drive_mV, spiked, observed, open_fractions)``: as
-    :meth:`SpikeFilter.add`, with ``open_fractions`` [2, n] the opsins' O1 and O2 at the
-    step's start (None: the current pulse, no opsin) and ``mV_per_pA`` the actuator's.
+    ``background_rate``: spontaneous inputs per neuron and step (Poisson), each of
+    ``background_step_mV`` (default: a synapse's, 20 mV). ``add(released, drive_mV,
+    spiked, observed, open_fractions)``: as :meth:`SpikeFilter.add`, with
+    ``open_fractions`` [2, n] the opsins' O1 and O2 at the step's start (None: the current
+    pulse, no opsin).
 
     Attributes:
         log_likelihood: float64 [n (post), M] each column's log-likelihood of the spikes
             so far, relative to its neuron's best (-inf: dropped).
     """
 
-    def __init__(self, n_neurons: int, params: NeuronParams, background_probability: float,
-                 miss_probability: float = MISS_PROBABILITY,
-                 prune_nats: float = PRUNE_NATS) -> None:  # fmt: skip
-        for name, value in (("background_probability", background_probability),
-                            ("miss_probability", miss_probability)):  # fmt: skip
-            if not 0.0 <= value < 1.0:
-                raise ValueError(f"{name} must lie in [0, 1), got {value!r}")
+    def __init__(self, n_neurons: int, params: NeuronParams, background_rate: float,
+                 background_step_mV: float | None = None,
+                 miss_probability: float = MISS_PROBABILITY, prune_nats: float = PRUNE_NATS,
+                 unexplained_floor: float | None = None) -> None:  # fmt: skip
+        if not 0.0 <= background_rate < 1.0:
+            raise ValueError(f"background_rate must lie in [0, 1), got {background_rate!r}")
+        if not 0.0 <= miss_probability < 1.0:
+            raise ValueError(f"miss_probability must lie in [0, 1), got {miss_probability!r}")
         if not prune_nats > 0:
             raise ValueError(f"prune_nats must be > 0, got {prune_nats!r}")
         super().__init__(n_neurons, params)
-        # Without background input the model is the paper's: a mismatch is impossible.
-        miss = miss_probability if background_probability > 0 else 0.0
-        self._log_unexplained = _log(background_probability)
-        self._log_silent = math.log1p(-background_probability)
-        self._log_missed = _log(miss)
+        step = params.synaptic_step_mV if background_step_mV is None else background_step_mV
+        if background_rate > 0 and not step > 0:
+            raise ValueError(f"the background input must depolarise, got {step!r} mV")
+        chance = -math.expm1(-background_rate)  # at least one spontaneous input
+        floor = chance if unexplained_floor is None else unexplained_floor
+        # log P(a spike | k inputs needed to reach the threshold), k = 1 .. len - 1, and of
+        # silence; without background input the model is the paper's: no mismatch at all.
+        self._log_spike, self._log_silent = _poisson_tails(background_rate, floor)
+        self._background_step = step
+        self._log_missed = _log(miss_probability if background_rate > 0 else 0.0)
         self.prune_nats = float(prune_nats)
         self.mV_per_pA = params.dt_ms / params.capacitance_pF
         self.log_likelihood = np.zeros(self.log_weights.shape)
@@ -114,10 +125,14 @@ class SpikeLikelihoodFilter(SpikeFilter):
         potential = integrate(self.potentials[rows], params.v_rest_mV, params.leak_per_step,
                               drive)  # fmt: skip
         fires = potential >= params.v_spike_mV  # [k, M]
+        # The spontaneous inputs a silent column needs to reach the threshold (>= 1).
+        needed = np.ceil((params.v_spike_mV - potential) / self._background_step)
+        needed = np.clip(np.nan_to_num(needed, nan=1.0), 1, self._log_spike.size - 1)
+        needed = needed.astype(np.int64)
         step = np.where(
             spiked[rows, None],
-            np.where(fires, 0.0, self._log_unexplained),
-            np.where(fires, self._log_missed, self._log_silent),
+            np.where(fires, 0.0, self._log_spike[needed]),
+            np.where(fires, self._log_missed, self._log_silent[needed]),
         )
         self.potentials[rows] = np.where(spiked[rows, None], params.v_rest_mV, potential)
         self.observations += int(rows.size)
@@ -176,6 +191,25 @@ class SpikeLikelihoodFilter(SpikeFilter):
 
 def _log(probability: float) -> float:
     return math.log(probability) if probability > 0 else -math.inf
+
+
+_MOST_INPUTS = 8
+"""Spontaneous inputs counted in one step (more: the same tail)."""
+
+
+def _poisson_tails(rate: float, floor: float) -> tuple[np.ndarray, np.ndarray]:
+    """(log P(spike), log P(silence)) [_MOST_INPUTS + 1] for a column k = 1 .. spontaneous
+    inputs short of the threshold: P(N >= k), N ~ Poisson(``rate``), at least ``floor``
+    (an earlier unseen input may have left the neuron closer than its column implies);
+    index 0 unused."""
+    spike = np.empty(_MOST_INPUTS + 1)
+    below, term = 0.0, math.exp(-rate)  # P(N < k), P(N = k - 1)
+    for k in range(1, _MOST_INPUTS + 1):
+        below += term
+        term *= rate / k
+        spike[k] = max(1.0 - below, floor) if rate > 0 else 0.0
+    spike[0] = spike[1]
+    return np.array([_log(p) for p in spike]), np.log1p(-spike)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import csv
 import dataclasses
+import math
 import sys
 import time
 from pathlib import Path
@@ -33,13 +34,18 @@ from spikectl.planning.spike_likelihood import MISS_PROBABILITY, PRUNE_NATS, Spi
 TASK, SPLIT, VERSION = "rig", "validation", 2
 
 
-def likelihood(miss: float = MISS_PROBABILITY, prune: float = PRUNE_NATS, scale: float = 1.0):
-    """A spike-likelihood estimator with other settings: ``scale`` multiplies the chance
-    an unexplained spike is charged (the background's)."""
+def likelihood(miss: float = MISS_PROBABILITY, prune: float = PRUNE_NATS, scale: float = 1.0,
+               floor: float | None = None):
+    """A spike-likelihood estimator with other settings: ``scale`` multiplies the
+    background rate it assumes; ``floor`` (a multiple of the chance of one spontaneous
+    input) is the least an unexplained spike is charged (None: that chance, whatever
+    the distance to the threshold)."""
 
     def new(n, residual_sd, model, params):
-        chance = min(model.background_probability * scale, 0.5)
-        return SpikeLikelihoodFilter(n, params, chance, miss_probability=miss, prune_nats=prune)
+        rate = -math.log1p(-model.background_probability) * scale
+        least = None if floor is None else floor * -math.expm1(-rate)
+        step_mV = model.background_step * params.synaptic_step_mV
+        return SpikeLikelihoodFilter(n, params, rate, step_mV, miss, prune, least)
 
     return new
 
@@ -63,6 +69,8 @@ def variants() -> dict:
         table[f"prune={prune:g}"] = estimator(f"sl-prune{prune:g}", likelihood(prune=prune))
     for scale in (0.2, 4.0):
         table[f"scale={scale:g}"] = estimator(f"sl-scale{scale:g}", likelihood(scale=scale))
+    for floor in (0.1, 0.01):
+        table[f"floor={floor:g}"] = estimator(f"sl-floor{floor:g}", likelihood(floor=floor))
     for sd in (0.15, 0.35):
         table[f"known_sd={sd}"] = estimator("spike-likelihood", known_sd=sd)
     for width in (16, 64):
