@@ -189,3 +189,14 @@ def test_an_unexplained_spike_costs_the_poisson_tail_of_the_inputs_it_needs():
     np.testing.assert_allclose(floored[1:], one, rtol=1e-12)  # the default: one input's chance
     spike, silent = _poisson_tails(0.0, 0.0)
     assert (spike[1:] == -np.inf).all() and (silent[1:] == 0.0).all()
+
+
+def test_kept_to_the_true_columns_the_posterior_is_the_network():
+    weights = generate_topology(5, np.random.default_rng(7))
+    estimate = SpikeLikelihoodFilter(5, PARAMS, 0.005)
+    estimate.keep_only(weights)
+    signs, known = estimate.weights(0.25)
+    np.testing.assert_array_equal(signs, weights)
+    assert known.all() and estimate.alive.sum() == 5
+    with pytest.raises(ValueError, match="column 0 of weights is no hypothesis"):
+        estimate.keep_only(np.eye(5, dtype=np.int8))

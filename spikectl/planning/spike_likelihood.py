@@ -163,6 +163,28 @@ class SpikeLikelihoodFilter(SpikeFilter):
             self.version += 1
             self._cache = None
 
+    def keep_only(self, weights: np.ndarray) -> None:
+        """Keep each neuron's true input column alone, column j of ``weights`` [n, n] in
+        {-1, 0, +1}: the posterior is then that network, and the potentials are still read
+        from spikes (a diagnostic: the loop told the weights, docs/results/iap-rig)."""
+        weights = np.asarray(weights)
+        if weights.shape != (self.n_neurons, self.n_neurons):
+            raise ValueError(f"weights must be [{self.n_neurons}, {self.n_neurons}], got "
+                             f"shape {weights.shape}")  # fmt: skip
+        for j in range(self.n_neurons):
+            truth = (self.hypotheses[j] == weights[:, j]).all(axis=1)
+            if not truth.any():
+                raise ValueError(f"column {j} of weights is no hypothesis (a self-connection "
+                                 "or a value outside {-1, 0, +1})")  # fmt: skip
+            self.log_likelihood[j] = np.where(truth, 0.0, -np.inf)
+            self.alive[j] = truth
+            self._surviving[j] = np.flatnonzero(truth)
+            _column_mass(self._agreement[j], self._surviving[j], self._weighted_prior(j),
+                         self._column_mass[j])  # fmt: skip
+        self._update_posterior()
+        self.version += 1
+        self._cache = None
+
     def _weighted_prior(self, j: int) -> np.ndarray:
         """Column j's prior times its likelihood (relative to its best column)."""
         return self._column_prior[j] * portable.exp(self.log_likelihood[j])

@@ -27,23 +27,8 @@ from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
 from spikectl.planning import IdentifyAndPlan
 from spikectl.planning.named import composition
-from spikectl.planning.spike_filter import _column_mass
 
 TASK, SPLIT, VERSION = "rig", "validation", 2
-
-
-def tell(estimate, weights: np.ndarray) -> None:
-    """Restrict a fresh spike likelihood to each neuron's true input column."""
-    for j in range(weights.shape[0]):
-        truth = (estimate.hypotheses[j] == weights[:, j]).all(axis=1)
-        estimate.log_likelihood[j] = np.where(truth, 0.0, -np.inf)
-        estimate.alive[j] = truth
-        estimate._surviving[j] = np.flatnonzero(truth)
-        _column_mass(estimate._agreement[j], estimate._surviving[j],
-                     estimate._weighted_prior(j), estimate._column_mass[j])  # fmt: skip
-    estimate._update_posterior()
-    estimate.version += 1
-    estimate._cache = None
 
 
 class Told(IdentifyAndPlan):
@@ -64,7 +49,7 @@ class Told(IdentifyAndPlan):
 
     def _new_estimate(self, n: int):
         estimate = super()._new_estimate(n)
-        tell(estimate, self._weights)
+        estimate.keep_only(self._weights)
         return estimate
 
 
