@@ -206,12 +206,8 @@ def claims() -> Iterator[Claim]:
     for task in TASKS:
         yield Claim(benchmark, suite_row(task))
         yield Claim(benchmark, learned_row(task))
-    for task in ("paper", "latency1", "latency2", "spikes-only", "chr2"):
+    for task in ("paper", "latency1", "latency2", "spikes-only", "chr2", "rig"):
         yield Claim(benchmark, suite2_row(task))
-    yield Claim(benchmark, "| `rig` | {suite2/do-nothing/rig/mean_return:.3f} (0) | "
-                "{suite2/random/rig/mean_return:.3f} ({suite2/random/rig/normalised:.3f}) | "
-                "refuses it in one line | {suite2/oracle/rig/mean_return:.3f} ± "
-                "{suite2/oracle/rig/standard_error:.3f} (1) |")  # fmt: skip
     yield Claim(benchmark, "| **mean normalised** | {summary/do-nothing:.3f} | "
                 "{summary/random:.3f} | **{summary/identify-and-plan:.3f}** | "
                 "{summary/oracle:.3f} |")  # fmt: skip

@@ -15,6 +15,7 @@ from spikectl.neuron.extensions import Extensions
 from spikectl.planning import Composition, IdentifyAndPlan, composition_name, named_composition
 from spikectl.planning.named import (
     COMPOSITIONS,
+    FAST_AS_EXACT_SPIKES,
     FAST_AS_PAPER,
     KNOWN_SD_BACKGROUND,
     KNOWN_SD_FAST_LARGE,
@@ -64,7 +65,12 @@ CHR2 = Extensions(actuator="chr2")
         (CHR2, 8, True, "paper"),  # the teacher keeps the paper's composition
         (CHR2, 16, True, "paper-16-fast"),
         (Extensions(actuator="chr2", observation_noise_mV=1.0), 8, False, "noise"),
-        (Extensions(actuator="chr2", sensing="spikes"), 8, False, "spikes"),
+        (Extensions(actuator="chr2", sensing="spikes"), 8, False, "rig"),
+        (Extensions(sensing="spikes", background_rate=0.005), 8, False, "rig"),
+        (Extensions(actuator="chr2", sensing="spikes", latency_steps=2,
+                    background_rate=0.005), 8, False, "rig"),
+        (Extensions(actuator="chr2", sensing="spikes"), 8, True, "spikes"),  # refuses: slow
+        (Extensions(actuator="chr2", sensing="spikes"), 16, False, "rig-16"),
     ],
 )
 def test_each_environment_gets_its_situations_composition(extensions, n, fast, name):
@@ -93,11 +99,15 @@ def test_the_declared_compositions_hold_what_was_chosen():
     assert fast.estimator == noise.estimator.__class__("bayes", KNOWN_SD_FAST_LARGE)
     assert fast.decision.gamble is None
     assert set(COMPOSITIONS) == {"paper", "noise", "stochastic", "background",
-                                 "heterogeneous", "hidden", "spikes", "chr2"}  # fmt: skip
+                                 "heterogeneous", "hidden", "spikes", "chr2", "rig"}  # fmt: skip
     assert composition("spikes").estimator.kind == "spikes"
     chr2 = composition("chr2")
     assert chr2 == Composition("chr2", chr2.estimator.__class__("bayes"))  # the rest: paper's
     assert FAST_AS_PAPER == ("chr2",)
+    rig = composition("rig")
+    assert rig == Composition("rig", rig.estimator.__class__("spike-likelihood"),
+                              rig.observation.__class__(task_model=True))  # fmt: skip
+    assert FAST_AS_EXACT_SPIKES == ("rig",)
 
 
 @pytest.mark.parametrize(

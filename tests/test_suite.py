@@ -329,15 +329,37 @@ def test_a_benchmark_of_the_oracle_plays_it_once_and_reads_its_reference(
     assert float(row["cpu_seconds"]) > 0
 
 
-def test_a_task_the_controller_cannot_play_is_refused_before_any_episode(capsys, tmp_path):
-    """Named, a task the controller refuses (identify-and-plan on the rig's spikes with
-    ChR2 and background input) is one line, exit 2, before anything is played or written."""
+def test_a_task_the_controller_cannot_play_is_refused_before_any_episode(
+    capsys, tmp_path, monkeypatch
+):
+    """Named, a task the controller refuses is one line, exit 2, before anything is played
+    or written. (Identify-and-plan now plays every v2 task: the refusal is stood in.)"""
+    benchmark = importlib.import_module("spikectl.cli.benchmark")
+
+    def refuse_rig(make, name, split, version):
+        return "it cannot read background_rate" if name == "rig" else None
+
+    monkeypatch.setattr(benchmark, "task_refusal", refuse_rig)
     out = tmp_path / "rows.csv"
     code, stdout, stderr = run_main(["benchmark", "identify-and-plan", "--suite", "2", "--task",
                                      "paper", "rig", "--out", str(out)], capsys)  # fmt: skip
     assert code == 2 and not out.exists()
     (line,) = stderr.strip().splitlines()
     assert "cannot play task 'rig'" in line and "background_rate" in line
+
+
+def test_identify_and_plan_plays_the_rig_task():
+    """The named controller plays v2's ``rig`` (its ``rig`` composition): no refusal."""
+    from spikectl.cli.benchmark import task_refusal
+    from spikectl.envs.env import NeuronControlEnv
+    from spikectl.training.loaders import load_controller
+
+    def make(name):
+        env = NeuronControlEnv(contexts=suite.load_split(name, "validation", 2),
+                               extensions=suite.task(name, 2).extensions)  # fmt: skip
+        return lambda seed: load_controller("identify-and-plan", env=env, seed=seed)
+
+    assert task_refusal(make, "rig", "validation", 2) is None
 
 
 def test_all_tasks_skips_those_the_controller_cannot_play(capsys, tmp_path, monkeypatch):

@@ -18,6 +18,7 @@ released together; under noise that mean is noisy and unknown entries are planne
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
@@ -31,6 +32,7 @@ from spikectl.planning.identify import ConnectivityEstimate
 from spikectl.planning.particles import ParticleConnectivityEstimate
 from spikectl.planning.relays import RelayConnectivityEstimate, relay_weights
 from spikectl.planning.spike_filter import SpikeFilter
+from spikectl.planning.spike_likelihood import SpikeLikelihoodFilter
 from spikectl.registry import Registry
 
 PLANNED_MEAN_RESOLUTION = 2
@@ -101,6 +103,15 @@ def spikes(n: int, residual_sd: float, model: ObservationModel, params: NeuronPa
     return SpikeFilter(n, params)
 
 
+def spike_likelihood(n: int, residual_sd: float, model: ObservationModel,
+                     params: NeuronParams):  # fmt: skip
+    """:class:`~spikectl.planning.spike_likelihood.SpikeLikelihoodFilter`: the posterior
+    from spikes under the task's background input (``model``) and the ChR2 light, each
+    column weighed by the likelihood of the spikes, n <= 8."""
+    rate = -math.log1p(-model.background_probability)
+    return SpikeLikelihoodFilter(n, params, rate, model.background_step * params.synaptic_step_mV)
+
+
 ESTIMATORS: Registry[EstimateFactory] = Registry("estimator")
 """The estimates identify-and-plan can keep, by name (:class:`EstimatorSettings.kind`)."""
 ESTIMATORS.register("gaussian", gaussian)
@@ -108,11 +119,17 @@ ESTIMATORS.register("bayes", bayes)
 ESTIMATORS.register("particles", particles)
 ESTIMATORS.register("relays", relays)
 ESTIMATORS.register("spikes", spikes)
+ESTIMATORS.register("spike-likelihood", spike_likelihood)
 
-SPIKE_ESTIMATORS = {"spikes"}
+SPIKE_ESTIMATORS = {"spikes", "spike-likelihood"}
 """The estimators that identify from spikes alone (their evidence is what
 :class:`~spikectl.planning.spike_filter.SpikeState` reads) and set the tracked potentials;
 they play spikes-only sensing, the others potentials."""
+
+RIG_SPIKE_ESTIMATORS = {"spike-likelihood"}
+"""The spike estimators that read the task's model (``task_model=True``: background input
+and the ChR2 light, :class:`~spikectl.planning.spike_likelihood.SpikeLikelihoodState`'s
+evidence); a plug-in that does adds its name."""
 
 RELAY_ESTIMATORS = {"relays"}
 """The estimators whose estimate answers ``relay_signs`` and is planned with virtual relay
@@ -129,7 +146,9 @@ class EstimatorSettings:
             under the task's observation model, n <= 11, else Gaussian),
             ``"particles"`` (the discrete posterior at any n), ``"relays"`` (the Gaussian
             one with relays through hidden neurons), ``"spikes"`` (the exact posterior
-            from spikes alone, spikes-only sensing, n <= 8), or a registered plug-in.
+            from spikes alone, spikes-only sensing, n <= 8), ``"spike-likelihood"``
+            (from spikes under background input and the ChR2 light, n <= 8), or a
+            registered plug-in.
         known_sd: an entry counts as known below this posterior standard deviation
             (units of w_in).
     """

@@ -20,6 +20,12 @@ research record docs/research/identify-and-plan.md):
   at each step than the Gaussian estimate, with fewer probes (the research record
   docs/results/iap-chr2). Its fast form stays the paper's composition
   (:data:`FAST_AS_PAPER`).
+- ``rig``: under spikes-only sensing with the ChR2 light or background input (suite
+  v2's ``rig`` task), the posterior from spikes weighed by their likelihood under the
+  task's background input, with the light's drive in each column's potential
+  (:mod:`~spikectl.planning.spike_likelihood`, the task's model read, n <= 8; hidden or
+  heterogeneous neurons, stochastic release and recorded subsets are refused in one
+  line). It comes first (the research record docs/results/iap-rig).
 - ``spikes``: under spikes-only sensing, the exact posterior from spikes alone and the
   potentials it implies (:mod:`~spikectl.planning.spike_filter`, n <= 8; larger
   networks are refused in one line). It comes first: the filter refuses in one line the
@@ -75,6 +81,12 @@ FAST_AS_PAPER = ("chr2",)
 the ``chr2`` teacher's labels stay those its learners were trained on, at the Gaussian
 estimate's CPU time."""
 
+FAST_AS_EXACT_SPIKES = ("rig",)
+"""Situations whose fast form is the exact spike filter's ``spikes`` composition, which
+refuses them in one line: the ``rig`` composition costs about 1 CPU second an episode
+(docs/results/iap-rig), too slow to label every step of training, so the guided
+learner's identify teacher stays refused there (train with ``--teacher oracle``)."""
+
 _TASK_MODEL = ObservationSettings(task_model=True)
 
 COMPOSITIONS: dict[str, Composition] = {
@@ -90,11 +102,13 @@ COMPOSITIONS: dict[str, Composition] = {
         Composition("hidden", EstimatorSettings("relays")),
         Composition("spikes", EstimatorSettings("spikes")),
         Composition("chr2", EstimatorSettings("bayes")),
+        Composition("rig", EstimatorSettings("spike-likelihood"), _TASK_MODEL),
     )
 }  # fmt: skip
 """The situations' compositions by name (before a size's overlay)."""
 
-SITUATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
+SITUATIONS: tuple[tuple[str, tuple[str | tuple[str, ...], ...]], ...] = (
+    ("rig", (("spikes_only", "lit"), ("spikes_only", "background_rate"))),
     ("spikes", ("spikes_only",)),
     ("noise", ("observation_noise_mV",)),
     ("stochastic", ("stochastic_release",)),
@@ -104,7 +118,8 @@ SITUATIONS: tuple[tuple[str, tuple[str, ...]], ...] = (
     ("chr2", ("lit",)),
 )
 """(composition, the extension fields (or properties) that ask for it): an environment
-plays the first situation one of whose fields is set (true or nonzero); none: ``paper``."""
+plays the first situation one of whose fields is set (true or nonzero; a tuple of fields:
+all of them set); none: ``paper``."""
 
 LARGE = {"known_sd": KNOWN_SD_LARGE, "gamble": QMDPSettings(networks=GAMBLE_NETWORKS)}
 """The overlay from :data:`LARGE_FROM_NEURONS` neurons on (suffix ``-16``)."""
@@ -118,9 +133,15 @@ def situation(extensions: Extensions | None) -> str:
     """The situation of an environment with ``extensions`` (:data:`SITUATIONS`)."""
     if extensions is not None:
         for name, fields in SITUATIONS:
-            if any(getattr(extensions, field) for field in fields):
+            if any(_all_set(extensions, field) for field in fields):
                 return name
     return "paper"
+
+
+def _all_set(extensions: Extensions, fields: str | tuple[str, ...]) -> bool:
+    """Whether the field, or every field of a tuple, is set (true or nonzero)."""
+    names = (fields,) if isinstance(fields, str) else fields
+    return all(getattr(extensions, name) for name in names)
 
 
 def composition_name(extensions: Extensions | None, n_neurons: int | None = None,
@@ -131,6 +152,8 @@ def composition_name(extensions: Extensions | None, n_neurons: int | None = None
     name = situation(extensions)
     if fast and name in FAST_AS_PAPER:
         name = "paper"
+    if fast and name in FAST_AS_EXACT_SPIKES:
+        name = "spikes"
     if n_neurons is None or n_neurons < LARGE_FROM_NEURONS:
         return name
     if fast:

@@ -14,7 +14,10 @@ settled_releases`), else it enters at its release chance; with a synaptic spread
 synapses are planned at their estimated strength. Under loop latency each step is read
 with the stimulation that landed at it (:class:`~spikectl.planning.in_flight.InFlight`).
 Under spikes-only sensing the spikes are read by :class:`~spikectl.planning.spike_filter.
-SpikeState`, whose potentials are the spike filter's (the ``"spikes"`` estimator).
+SpikeState`, whose potentials are the spike filter's (the ``"spikes"`` estimator); where
+the composition reads the task's model, by :class:`~spikectl.planning.spike_likelihood.
+SpikeLikelihoodState`, under background input and the ChR2 light (the
+``"spike-likelihood"`` estimator).
 """
 
 from __future__ import annotations
@@ -35,6 +38,7 @@ from spikectl.planning.in_flight import InFlight
 from spikectl.planning.lit_search import planned_light
 from spikectl.planning.release import exact_residuals, settled_releases
 from spikectl.planning.spike_filter import SpikeState
+from spikectl.planning.spike_likelihood import SpikeLikelihoodState
 
 
 @dataclass(frozen=True)
@@ -108,7 +112,9 @@ class Observation:
         self.light_mW_per_mm2 = planned_light(extensions)
         self.spikes_only = extensions is not None and extensions.spikes_only
         if self.spikes_only:
-            _check_spike_sensing(extensions)
+            # Reading the task's model, the spikes are weighed under its background input
+            # and light (:mod:`~spikectl.planning.spike_likelihood`).
+            _check_spike_sensing(extensions, under_rig=settings.task_model)
 
     @property
     def plan_mean(self) -> bool:
@@ -120,6 +126,12 @@ class Observation:
         """A fresh reader for an episode on ``n`` observed neurons in a loop of
         ``latency_steps`` steps of latency."""
         settings, params, noise = self.settings, self.params, self.noise_mV
+        if self.spikes_only and self.extensions is not None:
+            reader = Reader(self, SpikeLikelihoodState(n, params, 0.0), InFlight(latency_steps, n))
+            if self.light_mW_per_mm2 is not None:
+                reader.opsin = OpsinActuator(1, n, self.light_mW_per_mm2, params.dt_ms,
+                                             params.capacitance_pF)  # fmt: skip
+            return reader
         if self.spikes_only:
             return Reader(self, SpikeState(n, params, 0.0), InFlight(latency_steps, n))
         if tracks_neurons(self.extensions, noise, params):
@@ -175,6 +187,8 @@ class Reader:
         since = tracker.state.steps_since_release[0].copy()
         if isinstance(tracker, FilteredState):
             evidence = tracker.observe(voltage, action, estimate.posterior())
+        elif isinstance(tracker, SpikeLikelihoodState):  # the light's occupancies advance
+            evidence = tracker.observe(voltage, action, self.opsin)
         elif self.opsin is not None:  # the light's current, as the environment drew it
             drive = np.empty((1, 1, tracker.spiked.shape[0]))
             self.opsin.illuminate(tracker.state.voltage_mV, np.array([[action]]), drive)
@@ -226,13 +240,23 @@ potentials of the paper's deterministic model of the observed neurons alone, eve
 of them recorded."""
 
 
-def _check_spike_sensing(extensions: Extensions) -> None:
-    """Refuse, in one line, what spikes-only identification cannot read."""
-    on = [name for name in _SPIKE_FILTER_OFF if getattr(extensions, name)]
-    if extensions.lit:
+_SPIKE_LIKELIHOOD_READS = ("background_rate",)
+"""What the spike likelihood (the task's model read, :mod:`~spikectl.planning.
+spike_likelihood`) reads beyond the exact filter: background input (and the ChR2 light)."""
+
+
+def _check_spike_sensing(extensions: Extensions, under_rig: bool = False) -> None:
+    """Refuse, in one line, what spikes-only identification cannot read (``under_rig``:
+    the spike likelihood's, which reads background input and the ChR2 light)."""
+    reads = _SPIKE_LIKELIHOOD_READS if under_rig else ()
+    on = [name for name in _SPIKE_FILTER_OFF if getattr(extensions, name) and name not in reads]
+    if extensions.lit and not under_rig:
         on.append(f"actuator={extensions.actuator!r}")
+    if under_rig and extensions.background_rate and extensions.background_current_pA < 0:
+        on.append("a hyperpolarising background_current_pA")
     if on:
+        model = ("under background input and the ChR2 light" if under_rig else
+                 "on the paper's deterministic model with the current pulse")  # fmt: skip
         raise ValueError(
-            "identify-and-plan reads spikes-only sensing on the paper's deterministic model "
-            f"with the current pulse; it cannot with {', '.join(on)}"
+            f"identify-and-plan reads spikes-only sensing {model}; it cannot with {', '.join(on)}"
         )

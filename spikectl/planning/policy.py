@@ -35,7 +35,7 @@ from spikectl.neuron.simulator import DO_NOTHING, advance, uniform_neuron_parame
 from spikectl.planning.beam import Plan, PlanningModel, beam_search
 from spikectl.planning.composition import Composition
 from spikectl.planning.deciding import Situation
-from spikectl.planning.estimators import SPIKE_ESTIMATORS
+from spikectl.planning.estimators import RIG_SPIKE_ESTIMATORS, SPIKE_ESTIMATORS
 from spikectl.planning.identify import KnownConnectivity
 from spikectl.planning.in_flight import first_neurons, latency_of
 from spikectl.planning.lit_search import (
@@ -108,6 +108,16 @@ class IdentifyAndPlan:
         self.extensions, self.told_weights = extensions, told_weights
         self.observation = composition.observation.bind(params, extensions)
         spike_filter = composition.estimator.kind in SPIKE_ESTIMATORS
+        if spike_filter and self.observation.spikes_only and (
+            (composition.estimator.kind in RIG_SPIKE_ESTIMATORS)
+            != composition.observation.task_model
+        ):
+            raise ValueError(
+                "identify-and-plan reads spikes with the 'spike-likelihood' estimator under "
+                "the task's model (task_model=True), and with 'spikes' without it; composition "
+                f"{composition.name!r} keeps {composition.estimator.kind!r} with "
+                f"task_model={composition.observation.task_model}"
+            )
         if self.observation.spikes_only != spike_filter or (
             spike_filter and told_weights is not None
         ):

@@ -1,0 +1,17 @@
+#!/usr/bin/env bash
+# The commands of this folder, from the repository root with the package installed
+# (2026-11-29; one thread, nice -n 5, on a 2-core host shared with two trainings).
+set -euo pipefail
+here=lab/results/iap-rig data=docs/results/iap-rig
+export OMP_NUM_THREADS=1 OPENBLAS_NUM_THREADS=1 MKL_NUM_THREADS=1
+# The rig composition, validation networks 0-199 (validation200.csv).
+python $here/variants.py $data/validation200.csv 200 named
+# The screen, first 100 validation networks (screen100.csv).
+python $here/variants.py $data/screen100.csv 100 named miss=0.01 scale=4 scale=0.2 \
+    known_sd=0.15 known_sd=0.35
+# Diagnosis, first 100 validation networks: told the true columns, without background.
+python $here/diagnose.py $data 100 > $data/diagnose.txt
+# The second look: validation networks 200-399.
+python $here/variants.py $data/validation200.csv 200:400 named
+# The test set, played once with the rig composition (the named controller now).
+python $here/test_row.py $data/test > $data/test.txt
