@@ -8,8 +8,8 @@ and the light; ``random`` is seeded per network) and play the paper task's first
 the mean return in each, the largest difference of one episode's returns, and in how
 many episodes the two chose the same actions; writes one row per episode to --out
 (if given).
-A controller that refuses a setting (identify-and-plan identifies from spikes without
-ChR2 only) is reported with its one line. Runs in the Cleo virtualenv:
+A controller that refuses a setting (one made for a loop it cannot read) is reported
+with its one line. Runs in the Cleo virtualenv:
 
     PYTHONPATH=$PWD /tmp/venv-cleo/bin/python benchmarks/cleo_agreement.py \
         --settings latency1 latency2 chr2 spikes-only --networks 100
