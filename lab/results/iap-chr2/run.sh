@@ -17,4 +17,4 @@ python $here/variants.py $data/screen50.csv 50 named known_sd=0.35 known_sd=0.45
 python $here/variants.py $data/validation200.csv 200 named kind=bayes
 python $here/variants.py $data/validation200.csv 200:400 named kind=bayes
 # The test set, played once with the chr2 composition (the named controller now).
-python $here/test_row.py $data/test
+python $here/play_test_row.py $data/test

@@ -14,4 +14,4 @@ python $here/diagnose.py $data 100 > $data/diagnose.txt
 # The second look: validation networks 200-399.
 python $here/variants.py $data/validation200.csv 200:400 named
 # The test set, played once with the rig composition (the named controller now).
-python $here/test_row.py $data/test > $data/test.txt
+python $here/play_test_row.py $data/test > $data/test.txt

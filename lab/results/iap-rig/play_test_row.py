@@ -6,7 +6,7 @@ episodes again, ~1 200 CPU s, for the same numbers), and the paired differences 
 the per-network returns there (doing nothing and the oracle on ``rig``, identify-and-plan
 on ``spikes-only`` and ``chr2``).
 
-    python lab/results/iap-rig/test_row.py OUT_DIR
+    python lab/results/iap-rig/play_test_row.py OUT_DIR
 """
 
 from __future__ import annotations

@@ -5,7 +5,7 @@ oracle references already in docs/results/suite-v2/identify-and-plan.csv (the CL
 plan the oracle's 1 000 episodes again, ~1 300 CPU s, for the same numbers), and the
 paired difference against the per-network returns there.
 
-    python lab/results/iap-chr2/test_row.py OUT_DIR
+    python lab/results/iap-chr2/play_test_row.py OUT_DIR
 """
 
 from __future__ import annotations
