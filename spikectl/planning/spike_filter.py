@@ -113,7 +113,7 @@ class SpikeFilter(DiscreteConnectivityEstimate):
         if n_neurons not in self._PRIORS:
             self._column_mass = np.empty((n_neurons, self._signs.shape[0]))  # Z_j(s)
             for j in range(n_neurons):
-                _column_mass(self._agreement[j], self._surviving[j], self._column_prior[j],
+                _column_mass(self._agreement[j], self._surviving[j], self._weighted_prior(j),
                              self._column_mass[j])  # fmt: skip
             self._update_posterior()
             self._PRIORS[n_neurons] = (self._column_mass, self.log_weights)
@@ -127,16 +127,10 @@ class SpikeFilter(DiscreteConnectivityEstimate):
         spiked now, ``observed`` [n] which were not refractory (integrated this step)."""
         params = self.params
         spiked = np.asarray(spiked, dtype=bool)
-        rows = np.flatnonzero(observed)
-        held = np.flatnonzero(~np.asarray(observed, dtype=bool))
-        self.potentials[held] = params.v_rest_mV
+        rows = self._integrated_rows(observed)
         if not rows.size:
             return
-        # The kernel's arithmetic: the summed weights times w_in, plus the stimulus.
-        counts = portable.matmul(self._values[rows], np.asarray(released, dtype=np.float64))
-        drive = params.synaptic_step_mV * counts + np.asarray(drive_mV)[rows, None]
-        potential = integrate(self.potentials[rows], params.v_rest_mV, params.leak_per_step,
-                              drive)  # fmt: skip
+        potential = self._column_potentials(rows, released, drive_mV)
         fires = potential >= params.v_spike_mV  # [k, M]
         agrees = fires == spiked[rows, None]
         alive = self.alive[rows] & agrees
@@ -153,13 +147,42 @@ class SpikeFilter(DiscreteConnectivityEstimate):
         self.alive[rows] = alive
         self.observations += int(rows.size)
         if changed.size:
-            for j in changed:
-                self._surviving[j] = np.flatnonzero(self.alive[j])
-                _column_mass(self._agreement[j], self._surviving[j], self._column_prior[j],
-                             self._column_mass[j])  # fmt: skip
-            self._update_posterior()
-            self.version += 1
-            self._cache = None
+            self._columns_changed(changed)
+
+    def _columns_changed(self, changed: np.ndarray) -> None:
+        """The posterior again after neurons ``changed`` kept other columns."""
+        for j in changed:
+            self._surviving[j] = np.flatnonzero(self.alive[j])
+            _column_mass(self._agreement[j], self._surviving[j], self._weighted_prior(j),
+                         self._column_mass[j])  # fmt: skip
+        self._update_posterior()
+        self.version += 1
+        self._cache = None
+
+    def _integrated_rows(self, observed: np.ndarray) -> np.ndarray:
+        """The neurons integrated this step (not refractory); the others rest."""
+        held = np.flatnonzero(~np.asarray(observed, dtype=bool))
+        self.potentials[held] = self.params.v_rest_mV
+        return np.flatnonzero(observed)
+
+    def _column_potentials(self, rows: np.ndarray, released: np.ndarray,
+                           drive_mV: np.ndarray,
+                           extra_mV: np.ndarray | None = None) -> np.ndarray:  # fmt: skip
+        """[k, M] each kept column's potential of neurons ``rows`` after the step: the
+        kernel's arithmetic, the summed weights times w_in plus the stimulus (plus
+        ``extra_mV`` [k, M], a drive that depends on the column's potential)."""
+        params = self.params
+        counts = portable.matmul(self._values[rows], np.asarray(released, dtype=np.float64))
+        drive = params.synaptic_step_mV * counts + np.asarray(drive_mV)[rows, None]
+        if extra_mV is not None:
+            drive = drive + extra_mV
+        return integrate(self.potentials[rows], params.v_rest_mV, params.leak_per_step,
+                         drive)  # fmt: skip
+
+    def _weighted_prior(self, j: int) -> np.ndarray:
+        """[M] column j's prior weights as the posterior reads them (the likelihood
+        filter weighs them by the spikes)."""
+        return self._column_prior[j]
 
     def _update_posterior(self) -> None:
         """Each column's posterior weight (``log_weights``, what the marginals and the
@@ -175,7 +198,7 @@ class SpikeFilter(DiscreteConnectivityEstimate):
                           where=self._column_mass > 0)  # fmt: skip  # [n, S]: P(s) / Z_j(s)
         weights = np.empty(self.log_weights.shape)
         for j in range(self.n_neurons):
-            _column_weights(self._agreement[j], self._surviving[j], self._column_prior[j],
+            _column_weights(self._agreement[j], self._surviving[j], self._weighted_prior(j),
                             share[j], weights[j])  # fmt: skip
         self.log_weights = portable.log(weights / weights.sum(axis=1, keepdims=True))
 

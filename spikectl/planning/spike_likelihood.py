@@ -43,7 +43,6 @@ import math
 import numba
 import numpy as np
 
-from spikectl.neuron.kernel import integrate
 from spikectl.neuron.opsin import OpsinActuator, current_pA
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import DO_NOTHING
@@ -53,7 +52,6 @@ from spikectl.planning.spike_filter import (
     SpikesInconsistent,
     SpikeState,
     _column_mass,
-    _column_weights,
 )
 
 MISS_PROBABILITY = 1e-3
@@ -110,20 +108,15 @@ class SpikeLikelihoodFilter(SpikeFilter):
         [2, n] at the step's start, or None)."""
         params = self.params
         spiked = np.asarray(spiked, dtype=bool)
-        rows = np.flatnonzero(observed)
-        held = np.flatnonzero(~np.asarray(observed, dtype=bool))
-        self.potentials[held] = params.v_rest_mV
+        rows = self._integrated_rows(observed)
         if not rows.size:
             return
-        counts = portable.matmul(self._values[rows], np.asarray(released, dtype=np.float64))
-        drive = params.synaptic_step_mV * counts + np.asarray(drive_mV)[rows, None]
+        light = None
         if open_fractions is not None:  # the light's current at each column's potential
-            light = np.empty(drive.shape)
+            light = np.empty(self.potentials[rows].shape)
             _opsin_drive(open_fractions[0][rows], open_fractions[1][rows],
                          self.potentials[rows], self.mV_per_pA, light)  # fmt: skip
-            drive = drive + light
-        potential = integrate(self.potentials[rows], params.v_rest_mV, params.leak_per_step,
-                              drive)  # fmt: skip
+        potential = self._column_potentials(rows, released, drive_mV, light)
         fires = potential >= params.v_spike_mV  # [k, M]
         # The spontaneous inputs a silent column needs to reach the threshold (>= 1).
         needed = np.ceil((params.v_spike_mV - potential) / self._background_step)
@@ -155,13 +148,7 @@ class SpikeLikelihoodFilter(SpikeFilter):
             self.log_likelihood[changed] = new
             self.alive[changed] = new > -np.inf
         if changed.size:
-            for j in changed:
-                self._surviving[j] = np.flatnonzero(self.alive[j])
-                _column_mass(self._agreement[j], self._surviving[j], self._weighted_prior(j),
-                             self._column_mass[j])  # fmt: skip
-            self._update_posterior()
-            self.version += 1
-            self._cache = None
+            self._columns_changed(changed)
 
     def keep_only(self, weights: np.ndarray) -> None:
         """Keep each neuron's true input column alone, column j of ``weights`` [n, n] in
@@ -186,29 +173,11 @@ class SpikeLikelihoodFilter(SpikeFilter):
         self._cache = None
 
     def _weighted_prior(self, j: int) -> np.ndarray:
-        """Column j's prior times its likelihood (relative to its best column)."""
+        """Column j's prior times its likelihood (relative to its best column); the prior
+        alone while :class:`SpikeFilter`'s constructor builds the posterior."""
+        if not hasattr(self, "log_likelihood"):
+            return self._column_prior[j]
         return self._column_prior[j] * portable.exp(self.log_likelihood[j])
-
-    def _update_posterior(self) -> None:
-        """:meth:`SpikeFilter._update_posterior` with each column's prior weighted by its
-        likelihood."""
-        if not hasattr(self, "log_likelihood"):  # the prior, built by SpikeFilter.__init__
-            super()._update_posterior()
-            return
-        log_mass = portable.log(self._column_mass)  # [n, S]
-        log_signs = self._sign_log_prior.copy()
-        for j in range(self.n_neurons):  # summed in index order: the same bits everywhere
-            log_signs += log_mass[j]
-        signs = portable.exp(log_signs - log_signs.max())
-        signs /= signs.sum()
-        share = np.divide(signs[None, :], self._column_mass,
-                          out=np.zeros_like(self._column_mass),
-                          where=self._column_mass > 0)  # fmt: skip
-        weights = np.empty(self.log_weights.shape)
-        for j in range(self.n_neurons):
-            _column_weights(self._agreement[j], self._surviving[j], self._weighted_prior(j),
-                            share[j], weights[j])  # fmt: skip
-        self.log_weights = portable.log(weights / weights.sum(axis=1, keepdims=True))
 
 
 def _log(probability: float) -> float:
