@@ -13,20 +13,13 @@ and prints the paired table of every variant in OUT_CSV against ``named``.
 
 from __future__ import annotations
 
-import csv
 import dataclasses
 import math
 import sys
-import time
 from pathlib import Path
 
-import numpy as np
-
-from spikectl.contexts import ContextSet
-from spikectl.envs.rollout import evaluate_policy
-from spikectl.experiments import suite
-from spikectl.experiments.stats import paired_difference_cells
-from spikectl.planning import IdentifyAndPlan
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
+from lab.planners.screen import screen
 from spikectl.planning.estimators import ESTIMATORS, RIG_SPIKE_ESTIMATORS, SPIKE_ESTIMATORS
 from spikectl.planning.named import composition
 from spikectl.planning.spike_likelihood import MISS_PROBABILITY, PRUNE_NATS, SpikeLikelihoodFilter
@@ -79,62 +72,7 @@ def variants() -> dict:
     return table
 
 
-def subset(networks: range) -> ContextSet:
-    full = suite.load_split(TASK, SPLIT, VERSION)
-    return ContextSet([full[i] for i in networks], full.params, full.seed,
-                      full.extensions)  # fmt: skip
-
-
-def play(contexts: ContextSet, composition) -> tuple[np.ndarray, float]:
-    extensions = suite.task(TASK, VERSION).extensions
-    started = time.process_time()
-    episodes = evaluate_policy(contexts, IdentifyAndPlan(composition=composition,
-                                                         extensions=extensions),
-                               extensions=extensions,
-                               seed=suite.suite_version(VERSION).env_seed)  # fmt: skip
-    return np.asarray(episodes.returns), time.process_time() - started
-
-
-def main(out: Path, networks: range, names: list[str]) -> None:
-    table = variants()
-    contexts = subset(networks)
-    new = not out.exists()
-    with open(out, "a", newline="") as handle:
-        writer = csv.writer(handle)
-        if new:
-            writer.writerow(["variant", "context", "return", "cpu_s"])
-        for name in names:
-            values, cpu = play(contexts, table[name])
-            writer.writerows([name, i, f"{v:.6f}", f"{cpu / len(networks):.4f}"]
-                             for i, v in zip(networks, values, strict=True))  # fmt: skip
-            handle.flush()
-            print(f"{name}: {values.mean():.4f} ({cpu:.1f} CPU s)", flush=True)
-    report(out)
-
-
-def report(out: Path) -> None:
-    rows: dict[str, dict[int, float]] = {}
-    cpu: dict[str, float] = {}
-    with open(out) as handle:
-        for row in csv.DictReader(handle):
-            rows.setdefault(row["variant"], {})[int(row["context"])] = float(row["return"])
-            cpu[row["variant"]] = float(row["cpu_s"])
-    base = rows["named"]
-    print(
-        "\n| variant | networks | mean return | − named [95% CI] | better / worse "
-        "| CPU s a network |"
-    )
-    print("|---|---:|---:|---|---|---:|")
-    for name, values in rows.items():
-        common = sorted(set(values) & set(base))
-        mine = np.array([values[i] for i in common])
-        theirs = np.array([base[i] for i in common])
-        print(
-            f"| {name} | {len(common)} | {mine.mean():.4f} | "
-            f"{paired_difference_cells(mine - theirs)} | {cpu[name]:.3f} |"
-        )
-
-
 if __name__ == "__main__":
     first, _, last = sys.argv[2].rpartition(":")
-    main(Path(sys.argv[1]), range(int(first or 0), int(last)), sys.argv[3:])
+    screen(Path(sys.argv[1]), TASK, range(int(first or 0), int(last)), variants(),
+           sys.argv[3:])

@@ -1,0 +1,80 @@
+"""A validation screen of identify-and-plan compositions on one suite task: each variant
+played on a range of the task's networks, one row per network appended to a CSV, and
+the paired table of every variant in it against ``named`` (the research record's
+``variants.py`` scripts of iap-chr2 and iap-rig). Never on the test set."""
+
+from __future__ import annotations
+
+import csv
+import time
+from pathlib import Path
+
+import numpy as np
+
+from spikectl.contexts import ContextSet
+from spikectl.envs.rollout import evaluate_policy
+from spikectl.experiments import suite
+from spikectl.experiments.stats import paired_difference_cells
+from spikectl.planning import IdentifyAndPlan
+
+SPLIT, VERSION = "validation", 2
+
+
+def subset(task: str, networks: range) -> ContextSet:
+    """Networks ``networks`` of ``task``'s validation set (suite v2)."""
+    full = suite.load_split(task, SPLIT, VERSION)
+    return ContextSet([full[i] for i in networks], full.params, full.seed,
+                      full.extensions)  # fmt: skip
+
+
+def play(task: str, contexts: ContextSet, composition) -> tuple[np.ndarray, float]:
+    """(returns [S], CPU seconds): ``composition`` on every network of ``contexts``."""
+    extensions = suite.task(task, VERSION).extensions
+    started = time.process_time()
+    episodes = evaluate_policy(contexts, IdentifyAndPlan(composition=composition,
+                                                         extensions=extensions),
+                               extensions=extensions,
+                               seed=suite.suite_version(VERSION).env_seed)  # fmt: skip
+    return np.asarray(episodes.returns), time.process_time() - started
+
+
+def screen(out: Path, task: str, networks: range, table: dict, names: list[str]) -> None:
+    """Play each of ``names`` (keys of ``table``, name -> composition) on ``networks``,
+    append their rows to ``out`` and print the paired table of everything in it."""
+    contexts = subset(task, networks)
+    new = not out.exists()
+    with open(out, "a", newline="") as handle:
+        writer = csv.writer(handle)
+        if new:
+            writer.writerow(["variant", "context", "return", "cpu_s"])
+        for name in names:
+            values, cpu = play(task, contexts, table[name])
+            writer.writerows([name, i, f"{v:.6f}", f"{cpu / len(networks):.4f}"]
+                             for i, v in zip(networks, values, strict=True))  # fmt: skip
+            handle.flush()
+            print(f"{name}: {values.mean():.4f} ({cpu:.1f} CPU s)", flush=True)
+    report(out)
+
+
+def report(out: Path) -> None:
+    """The paired table of every variant in ``out`` against ``named``."""
+    rows: dict[str, dict[int, float]] = {}
+    cpu: dict[str, float] = {}
+    with open(out) as handle:
+        for row in csv.DictReader(handle):
+            rows.setdefault(row["variant"], {})[int(row["context"])] = float(row["return"])
+            cpu[row["variant"]] = float(row["cpu_s"])
+    base = rows["named"]
+    print(
+        "\n| variant | networks | mean return | − named [95% CI] | better / worse "
+        "| CPU s a network |"
+    )
+    print("|---|---:|---:|---|---|---:|")
+    for name, values in rows.items():
+        common = sorted(set(values) & set(base))
+        mine = np.array([values[i] for i in common])
+        theirs = np.array([base[i] for i in common])
+        print(
+            f"| {name} | {len(common)} | {mine.mean():.4f} | "
+            f"{paired_difference_cells(mine - theirs)} | {cpu[name]:.3f} |"
+        )
