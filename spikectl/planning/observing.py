@@ -126,14 +126,14 @@ class Observation:
         """A fresh reader for an episode on ``n`` observed neurons in a loop of
         ``latency_steps`` steps of latency."""
         settings, params, noise = self.settings, self.params, self.noise_mV
-        if self.spikes_only and self.extensions is not None:
+        if self.spikes_only and not settings.task_model:  # the exact filter's spikes
+            return Reader(self, SpikeState(n, params, 0.0), InFlight(latency_steps, n))
+        if self.spikes_only:  # weighed under the task's background input and light
             reader = Reader(self, SpikeLikelihoodState(n, params, 0.0), InFlight(latency_steps, n))
             if self.light_mW_per_mm2 is not None:
                 reader.opsin = OpsinActuator(1, n, self.light_mW_per_mm2, params.dt_ms,
                                              params.capacitance_pF)  # fmt: skip
             return reader
-        if self.spikes_only:
-            return Reader(self, SpikeState(n, params, 0.0), InFlight(latency_steps, n))
         if tracks_neurons(self.extensions, noise, params):
             tracker = NeuronTracker(n, params, self.extensions)
         elif settings.filter_voltage and noise > 0:
