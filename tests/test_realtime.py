@@ -111,7 +111,8 @@ def test_decision_times_play_the_episodes_the_rig_plays(env):
     """Unpaced, the same actions and resets as the rig's episodes on the same contexts."""
     timed, paced = Recorder(), Recorder()
     decision_times(env, timed, [2, 0], seed=7)
-    run_realtime(env, paced, [2, 0], rate_hz=200.0, seed=7)
+    # "late": a deadline missed on a loaded machine must not turn an action into nothing.
+    run_realtime(env, paced, [2, 0], rate_hz=200.0, on_miss="late", seed=7)
     assert timed.seen == paced.seen and timed.resets == paced.resets == 2
     with pytest.raises(ValueError, match="contexts must name at least one context index"):
         decision_times(env, Recorder(), [])
