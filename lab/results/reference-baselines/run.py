@@ -4,7 +4,8 @@ a suite task's flat id and scored on the task's test networks as the suite score
     python lab/results/reference-baselines/run.py ALGORITHM TASK SEED [--steps 1000000]
 
 ALGORITHM is one of :data:`ALGORITHMS`; TASK one of :data:`TASK_IDS`. CleanRL's scripts
-(tests/clients, unmodified) run as published through ``runpy`` with only the id, the
+(``ppo.py`` and ``dqn.py`` in tests/clients; ``pqn.py`` downloaded from :data:`PQN_URL`
+into the folder ``--cleanrl-dir`` names) run unmodified through ``runpy`` with only the id, the
 step budget and the seed on their command line, and the trained network is read from
 the script's globals afterwards (the scripts save nothing by default). SB3 and
 sb3-contrib run with their defaults on the batched simulator (``sb3_vec_env``).
@@ -76,9 +77,15 @@ def cpu_model() -> str:
     return platform.processor()
 
 
-def _cleanrl(script: str, env_id: str, steps: int, seed: int, work: Path):
+PQN_COMMIT = "fe8d8a03c41a7ef5b523e2e354bd01c363e786bb"
+PQN_URL = f"https://raw.githubusercontent.com/vwxyzjn/cleanrl/{PQN_COMMIT}/cleanrl/pqn.py"
+"""CleanRL's ``pqn.py`` (its classic-control PQN, on Gymnasium ids) as published at that
+commit. It is not kept in the tree: ``--cleanrl-dir`` names the folder it was downloaded to."""
+
+
+def _cleanrl(script: Path, env_id: str, steps: int, seed: int, work: Path):
     """Run CleanRL's ``script`` unmodified; (its globals, episode (step, return) pairs)."""
-    argv = [str(CLIENTS / script), "--env-id", final_info_id(flat_twin(env_id)),
+    argv = [str(script), "--env-id", final_info_id(flat_twin(env_id)),
             "--total-timesteps", str(steps), "--seed", str(seed)]  # fmt: skip
     saved_argv, saved_cwd = sys.argv, os.getcwd()
     sys.argv = argv
@@ -112,13 +119,18 @@ def _greedy_torch(network) -> callable:
     return policy
 
 
-def train_cleanrl_ppo(env_id, steps, seed, work):
-    scope, episodes = _cleanrl("ppo.py", env_id, steps, seed, work)
+def train_cleanrl_ppo(env_id, steps, seed, work, cleanrl_dir=CLIENTS):
+    scope, episodes = _cleanrl(CLIENTS / "ppo.py", env_id, steps, seed, work)
     return _greedy_torch(scope["agent"].actor), None, episodes
 
 
-def train_cleanrl_dqn(env_id, steps, seed, work):
-    scope, episodes = _cleanrl("dqn.py", env_id, steps, seed, work)
+def train_cleanrl_dqn(env_id, steps, seed, work, cleanrl_dir=CLIENTS):
+    scope, episodes = _cleanrl(CLIENTS / "dqn.py", env_id, steps, seed, work)
+    return _greedy_torch(scope["q_network"]), None, episodes
+
+
+def train_cleanrl_pqn(env_id, steps, seed, work, cleanrl_dir=CLIENTS):
+    scope, episodes = _cleanrl(cleanrl_dir / "pqn.py", env_id, steps, seed, work)
     return _greedy_torch(scope["q_network"]), None, episodes
 
 
@@ -142,7 +154,7 @@ def _sb3_greedy(model):
     return lambda observations, mask: model.predict(observations, deterministic=True)[0]
 
 
-def train_sb3_maskable_ppo(env_id, steps, seed, work):
+def train_sb3_maskable_ppo(env_id, steps, seed, work, cleanrl_dir=CLIENTS):
     from sb3_contrib import MaskablePPO
 
     model, episodes = _sb3(MaskablePPO, "MlpPolicy", env_id, steps, seed, work)
@@ -155,14 +167,14 @@ def train_sb3_maskable_ppo(env_id, steps, seed, work):
     return policy, None, episodes
 
 
-def train_sb3_ppo(env_id, steps, seed, work):
+def train_sb3_ppo(env_id, steps, seed, work, cleanrl_dir=CLIENTS):
     from stable_baselines3 import PPO
 
     model, episodes = _sb3(PPO, "MlpPolicy", env_id, steps, seed, work)
     return _sb3_greedy(model), None, episodes
 
 
-def train_sb3_recurrent_ppo(env_id, steps, seed, work):
+def train_sb3_recurrent_ppo(env_id, steps, seed, work, cleanrl_dir=CLIENTS):
     from sb3_contrib import RecurrentPPO
 
     model, episodes = _sb3(RecurrentPPO, "MlpLstmPolicy", env_id, steps, seed, work)
@@ -181,7 +193,7 @@ def train_sb3_recurrent_ppo(env_id, steps, seed, work):
     return policy, reset, episodes
 
 
-def train_sb3_dqn(env_id, steps, seed, work):
+def train_sb3_dqn(env_id, steps, seed, work, cleanrl_dir=CLIENTS):
     from stable_baselines3 import DQN
 
     model, episodes = _sb3(DQN, "MlpPolicy", env_id, steps, seed, work)
@@ -191,6 +203,7 @@ def train_sb3_dqn(env_id, steps, seed, work):
 ALGORITHMS = {
     "cleanrl-ppo": train_cleanrl_ppo,
     "cleanrl-dqn": train_cleanrl_dqn,
+    "cleanrl-pqn": train_cleanrl_pqn,
     "sb3-ppo": train_sb3_ppo,
     "sb3-maskable-ppo": train_sb3_maskable_ppo,
     "sb3-recurrent-ppo": train_sb3_recurrent_ppo,
@@ -223,7 +236,12 @@ def main() -> None:
     parser.add_argument("seed", type=int)
     parser.add_argument("--steps", type=int, default=1_000_000)
     parser.add_argument("--out", type=Path, default=OUT)
+    parser.add_argument("--cleanrl-dir", type=Path, default=CLIENTS,
+                        help=f"the folder holding CleanRL's pqn.py ({PQN_URL})")  # fmt: skip
     args = parser.parse_args()
+    if args.algorithm == "cleanrl-pqn" and not (args.cleanrl_dir / "pqn.py").is_file():
+        parser.error(f"no pqn.py in {args.cleanrl_dir}: download {PQN_URL} there "
+                     "and name the folder with --cleanrl-dir")  # fmt: skip
     torch.set_num_threads(1)
     run_dir = args.out / args.task / args.algorithm / f"seed{args.seed}"
     if (run_dir / "result.json").exists():
@@ -234,7 +252,7 @@ def main() -> None:
     started = time.time()
     with tempfile.TemporaryDirectory() as work:
         policy, reset, episodes = ALGORITHMS[args.algorithm](
-            TASK_IDS[args.task], args.steps, args.seed, Path(work)
+            TASK_IDS[args.task], args.steps, args.seed, Path(work), args.cleanrl_dir
         )
     usage = resource.getrusage(resource.RUSAGE_SELF)
     train_cpu = usage.ru_utime + usage.ru_stime
@@ -267,7 +285,8 @@ def main() -> None:
             ["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True
         ).stdout.strip(),  # fmt: skip
         "command": "python lab/results/reference-baselines/run.py "
-        f"{args.algorithm} {args.task} {args.seed} --steps {args.steps}",
+        f"{args.algorithm} {args.task} {args.seed} --steps {args.steps}"
+        + (" --cleanrl-dir DIR" if args.algorithm == "cleanrl-pqn" else ""),
     }
     temporary = run_dir / "result.tmp"
     temporary.write_text(json.dumps(result, indent=1) + "\n")
