@@ -16,10 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from spikectl import NeuronControlEnv
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
+from lab.planners.named_row import play_named
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
-from spikectl.training.loaders import load_controller
 
 TASK, SPLIT, VERSION = "chr2", "test", 2
 OLD = Path("docs/results/suite-v2")
@@ -36,18 +36,7 @@ def old_rows() -> tuple[dict, np.ndarray]:
 def main(out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
     old, old_returns = old_rows()
-    contexts = suite.load_split(TASK, SPLIT, VERSION)
-    extensions = suite.task(TASK, VERSION).extensions
-    env = NeuronControlEnv(contexts=contexts, extensions=extensions)
-    played = []
-
-    def make(seed: int):
-        controller = load_controller("identify-and-plan", env=env, seed=seed)
-        played.append(controller)
-        return controller
-
-    result = suite.score(TASK, SPLIT, make, 1, VERSION)
-    composition = played[0].composition.name
+    result, composition, n_networks = play_named(TASK, SPLIT, VERSION)
     nothing, oracle = float(old["do_nothing"]), float(old["oracle"])
     row = dict(
         old,

@@ -17,10 +17,10 @@ from pathlib import Path
 
 import numpy as np
 
-from spikectl import NeuronControlEnv
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
+from lab.planners.named_row import play_named
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
-from spikectl.training.loaders import load_controller
 
 TASK, SPLIT, VERSION = "rig", "test", 2
 OLD = Path("docs/results/suite-v2")
@@ -42,24 +42,13 @@ def per_network(controller: str, task: str) -> np.ndarray:
 
 def main(out: Path) -> None:
     out.mkdir(parents=True, exist_ok=True)
-    contexts = suite.load_split(TASK, SPLIT, VERSION)
-    extensions = suite.task(TASK, VERSION).extensions
-    env = NeuronControlEnv(contexts=contexts, extensions=extensions)
-    played = []
-
-    def make(seed: int):
-        controller = load_controller("identify-and-plan", env=env, seed=seed)
-        played.append(controller)
-        return controller
-
-    result = suite.score(TASK, SPLIT, make, 1, VERSION)
-    composition = played[0].composition.name
+    result, composition, n_networks = play_named(TASK, SPLIT, VERSION)
     nothing, oracle = reference("do-nothing"), reference("oracle")
     row = dict(zip(COLUMNS, [
         VERSION, TASK, SPLIT, "identify-and-plan", "", 1, f"{result.mean_return:.6f}",
         f"{result.standard_error:.6f}", "",
         f"{suite.normalise(result.mean_return, nothing, oracle):.6f}", f"{nothing:.6f}",
-        f"{oracle:.6f}", f"{result.cpu_seconds:.3f}", len(contexts), "", composition,
+        f"{oracle:.6f}", f"{result.cpu_seconds:.3f}", n_networks, "", composition,
     ], strict=True))  # fmt: skip
     with open(out / "identify-and-plan-rig.csv", "w", newline="") as handle:
         writer = csv.DictWriter(handle, fieldnames=COLUMNS)

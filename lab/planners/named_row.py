@@ -1,0 +1,26 @@
+"""The named identify-and-plan played once on a suite task's set, as ``spikectl
+benchmark identify-and-plan --suite 2 --task TASK`` plays it (the research record's
+``play_test_row.py`` scripts of iap-chr2 and iap-rig, which write the row themselves
+against the reference rows already committed)."""
+
+from __future__ import annotations
+
+from spikectl import NeuronControlEnv
+from spikectl.experiments import suite
+from spikectl.training.loaders import load_controller
+
+
+def play_named(task: str, split: str = "test", version: int = 2):
+    """(the suite's score, the composition's name, the number of networks): the named
+    identify-and-plan on every network of ``task``'s ``split``, one seed."""
+    contexts = suite.load_split(task, split, version)
+    env = NeuronControlEnv(contexts=contexts, extensions=suite.task(task, version).extensions)
+    played = []
+
+    def make(seed: int):
+        controller = load_controller("identify-and-plan", env=env, seed=seed)
+        played.append(controller)
+        return controller
+
+    result = suite.score(task, split, make, 1, version)
+    return result, played[0].composition.name, len(contexts)
