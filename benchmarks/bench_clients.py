@@ -10,7 +10,7 @@ starts Ray and the remote env runner, is not timed.
 
     OMP_NUM_THREADS=1 python benchmarks/bench_clients.py CLIENT [--steps 8192]
 
-CLIENT: cleanrl-ppo, cleanrl-dqn (tests/clients, as published), sb3-ppo, maskable-ppo
+CLIENT: cleanrl-ppo, cleanrl-dqn (tests/third_party/cleanrl, as published), sb3-ppo, maskable-ppo
 (the ``sb3`` extra), skrl-dqn (skrl), rllib-ppo (the ``rllib`` extra, in its own
 virtual environment). Each needs its client installed.
 """
@@ -31,7 +31,7 @@ import spikectl  # noqa: F401  (registers the environment ids)
 from spikectl.envs.registration import FLAT_ENV_ID
 from spikectl.wrappers import final_info_id
 
-CLIENTS = Path(__file__).resolve().parent.parent / "tests" / "clients"
+CLIENTS = Path(__file__).resolve().parent.parent / "tests" / "third_party" / "cleanrl"
 
 
 def cleanrl(script: str, steps: int, *flags: str) -> float:

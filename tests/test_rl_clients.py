@@ -1,5 +1,5 @@
 """Real RL clients, as they are, on the flat ids: CleanRL's ppo.py and dqn.py (unmodified
-copies in tests/clients, given only the env id and their own size flags), TorchRL's
+copies in tests/third_party/cleanrl, given only the env id and their own size flags), TorchRL's
 GymEnv / GymWrapper with check_env_specs, Stable-Baselines3's check_env and learn(),
 skrl's wrap_env and DQN, and RLlib's PPO with a remote env runner.
 
@@ -30,7 +30,7 @@ from spikectl.envs.registration import FLAT_ENV_ID
 from spikectl.envs.vector_env import NeuronControlVectorEnv
 from spikectl.wrappers import FlatNeuronControlVectorEnv, final_info_id
 
-CLIENTS = Path(__file__).resolve().parent / "clients"
+CLIENTS = Path(__file__).resolve().parent / "third_party" / "cleanrl"
 MISSING = [name for name in ("torchrl", "stable_baselines3") if not importlib.util.find_spec(name)]
 needs_clients = pytest.mark.skipif(
     bool(MISSING),

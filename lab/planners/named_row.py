@@ -5,6 +5,9 @@ against the reference rows already committed)."""
 
 from __future__ import annotations
 
+import csv
+from pathlib import Path
+
 from spikectl import NeuronControlEnv
 from spikectl.experiments import suite
 from spikectl.training.loaders import load_controller
@@ -24,3 +27,19 @@ def play_named(task: str, split: str = "test", version: int = 2):
 
     result = suite.score(task, split, make, 1, version)
     return result, played[0].composition.name, len(contexts)
+
+
+def write_rows(out: Path, task: str, row: dict, result, composition: str, version: int = 2):
+    """``identify-and-plan-TASK.csv`` (``row``) and ``...-per-network.csv`` (one row per
+    test network, as ``spikectl benchmark --per-network`` writes it) in ``out``."""
+    with open(out / f"identify-and-plan-{task}.csv", "w", newline="") as handle:
+        writer = csv.DictWriter(handle, fieldnames=list(row))
+        writer.writeheader()
+        writer.writerow(row)
+    with open(out / f"identify-and-plan-{task}-per-network.csv", "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["suite_version", "task", "split", "controller", "model", "context",
+                         "return", "composition"])  # fmt: skip
+        writer.writerows([version, task, "test", "identify-and-plan", "", index,
+                          repr(float(value)), composition]
+                         for index, value in enumerate(result.returns))  # fmt: skip

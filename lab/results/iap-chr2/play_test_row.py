@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
-from lab.planners.named_row import play_named
+from lab.planners.named_row import play_named, write_rows
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
 
@@ -46,17 +46,7 @@ def main(out: Path) -> None:
         cpu_seconds=f"{result.cpu_seconds:.3f}",
         composition=composition,
     )
-    with open(out / "identify-and-plan-chr2.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(row))
-        writer.writeheader()
-        writer.writerow(row)
-    with open(out / "identify-and-plan-chr2-per-network.csv", "w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(["suite_version", "task", "split", "controller", "model", "context",
-                         "return", "composition"])  # fmt: skip
-        writer.writerows([VERSION, TASK, SPLIT, "identify-and-plan", "", index,
-                          repr(float(value)), composition]
-                         for index, value in enumerate(result.returns))  # fmt: skip
+    write_rows(out, TASK, row, result, composition, VERSION)
     print(
         f"chr2 test: {result.mean_return:.4f} ± {result.standard_error:.4f} "
         f"(before {old_returns.mean():.4f}); {result.cpu_seconds:.1f} CPU s; {composition}"

@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
-from lab.planners.named_row import play_named
+from lab.planners.named_row import play_named, write_rows
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
 
@@ -50,17 +50,7 @@ def main(out: Path) -> None:
         f"{suite.normalise(result.mean_return, nothing, oracle):.6f}", f"{nothing:.6f}",
         f"{oracle:.6f}", f"{result.cpu_seconds:.3f}", n_networks, "", composition,
     ], strict=True))  # fmt: skip
-    with open(out / "identify-and-plan-rig.csv", "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=COLUMNS)
-        writer.writeheader()
-        writer.writerow(row)
-    with open(out / "identify-and-plan-rig-per-network.csv", "w", newline="") as handle:
-        writer = csv.writer(handle)
-        writer.writerow(["suite_version", "task", "split", "controller", "model", "context",
-                         "return", "composition"])  # fmt: skip
-        writer.writerows([VERSION, TASK, SPLIT, "identify-and-plan", "", index,
-                          repr(float(value)), composition]
-                         for index, value in enumerate(result.returns))  # fmt: skip
+    write_rows(out, TASK, row, result, composition, VERSION)
     print(f"rig test: {result.mean_return:.4f} ± {result.standard_error:.4f} (normalised "
           f"{row['normalised']}); {result.cpu_seconds:.1f} CPU s; {composition}")  # fmt: skip
     for controller, task in (("do-nothing", "rig"), ("oracle", "rig"),

@@ -4,10 +4,10 @@ a suite task's flat id and scored on the task's test networks as the suite score
     python lab/results/reference-baselines/run.py ALGORITHM TASK SEED [--steps 1000000]
 
 ALGORITHM is one of :data:`ALGORITHMS`; TASK one of :data:`TASK_IDS`. CleanRL's scripts
-(``ppo.py`` and ``dqn.py`` in tests/clients; ``pqn.py`` downloaded from :data:`PQN_URL`
-into the folder ``--cleanrl-dir`` names) run unmodified through ``runpy`` with only the id, the
-step budget and the seed on their command line, and the trained network is read from
-the script's globals afterwards (the scripts save nothing by default). SB3 and
+(``ppo.py`` and ``dqn.py`` in tests/third_party/cleanrl; ``pqn.py`` downloaded from
+:data:`PQN_URL` into the folder ``--cleanrl-dir`` names) run unmodified through ``runpy``
+with only the id, the step budget and the seed on their command line, and the trained
+network is read from the script's globals afterwards (the scripts save nothing by default). SB3 and
 sb3-contrib run with their defaults on the batched simulator (``sb3_vec_env``).
 
 The trained policy is then played greedily (argmax; ``deterministic=True``) on the
@@ -48,7 +48,7 @@ from spikectl.wrappers import FlatPolicyController, final_info_id, sb3_vec_env
 
 ROOT = Path(__file__).resolve().parents[3]
 OUT = ROOT / "docs" / "results" / "reference-baselines"
-CLIENTS = ROOT / "tests" / "clients"
+CLIENTS = ROOT / "tests" / "third_party" / "cleanrl"
 
 TASK_IDS = {
     "paper": "spikectl/NeuronControl-v0",
@@ -89,7 +89,7 @@ def _cleanrl(script: Path, env_id: str, steps: int, seed: int, work: Path):
             "--total-timesteps", str(steps), "--seed", str(seed)]  # fmt: skip
     saved_argv, saved_cwd = sys.argv, os.getcwd()
     sys.argv = argv
-    sys.path.insert(0, str(CLIENTS))  # as `python tests/clients/dqn.py` would: cleanrl_utils
+    sys.path.insert(0, str(CLIENTS))  # as running the script from its folder would: cleanrl_utils
     os.chdir(work)  # the script's TensorBoard runs/ folder goes here
     try:
         with contextlib.redirect_stdout(io.StringIO()):  # one line per episode
