@@ -67,6 +67,24 @@ def test_reference_baselines_table_is_what_the_committed_runs_say(capsys):
     assert not missing, f"reference-baselines/README.md lacks printed rows: {missing[:3]}"
 
 
+def test_realtime_tradeoff_table_is_what_the_committed_rows_say(capsys):
+    """docs/results/realtime-tradeoff/README.md's tables are table.py's output from the
+    committed rows (the suite's, the amortised controller's and the folder's own)."""
+    import sys
+
+    script = LAB / "realtime-tradeoff" / "table.py"
+    saved = sys.argv
+    sys.argv = [str(script)]
+    try:
+        printed = printed_rows(script, capsys)
+    finally:
+        sys.argv = saved
+    readme = (DATA / "realtime-tradeoff" / "README.md").read_text().splitlines()
+    assert len(printed) >= 2 + 4 * 6  # header, rule and at least six controllers a size
+    missing = [line for line in printed if line not in readme]
+    assert not missing, f"realtime-tradeoff/README.md lacks printed rows: {missing[:3]}"
+
+
 def test_decision_times_fill_only_the_two_columns(tmp_path):
     """lab/results/suite/decision_times.py on a CSV written before the columns existed:
     a registered controller's row and a run's row (timed with the architecture of the

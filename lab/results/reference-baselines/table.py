@@ -11,7 +11,7 @@ test network minus the reference's: mean with its 95% bootstrap interval over th
 networks, and how many networks each way) to identify-and-plan
 (docs/results/suite/identify-and-plan-per-network.csv) and to the suite's TDRQN
 ``guided`` trained on the task (the mean of its seeds' per_network.csv under
-TASK/tdrqn-guided/, where run). ``--figure`` also draws
+TASK/tdrqn-guided/ where run here, else those of the suite's committed row). ``--figure`` also draws
 ``curves.png`` (training return per 20 000 steps, mean over seeds, the seeds' range
 shaded).
 """
@@ -30,7 +30,8 @@ from spikectl.experiments.stats import paired_difference_cells, summarise
 RESULTS = Path(__file__).resolve().parents[3] / "docs" / "results"
 HERE = RESULTS / "reference-baselines"
 PLANNER = RESULTS / "suite" / "identify-and-plan-per-network.csv"
-ORDER = ("cleanrl-ppo", "cleanrl-dqn", "sb3-ppo", "sb3-maskable-ppo", "sb3-dqn",
+SUITE_TDRQN = RESULTS / "suite" / "trained" / "guided-upr24"
+ORDER = ("cleanrl-ppo", "cleanrl-dqn", "cleanrl-pqn", "sb3-ppo", "sb3-maskable-ppo", "sb3-dqn",
          "sb3-recurrent-ppo")  # fmt: skip
 
 
@@ -50,9 +51,16 @@ def planner_returns(task: str) -> np.ndarray:
     return np.array([float(row["return"]) for row in rows])
 
 
+def tdrqn_files(task: str) -> list[Path]:
+    """The TDRQN ``guided`` seeds' per_network.csv: those retrained here, else the ones the
+    suite's committed row has (docs/results/suite/trained/guided-upr24/TASK)."""
+    files = sorted((HERE / task / "tdrqn-guided").glob("seed*/per_network.csv"))
+    return files or sorted((SUITE_TDRQN / task).glob("seed=*/per_network.csv"))
+
+
 def tdrqn_returns(task: str) -> np.ndarray | None:
     """[networks] the TDRQN ``guided`` seeds' mean test return per network, if run."""
-    files = sorted((HERE / task / "tdrqn-guided").glob("seed*/per_network.csv"))
+    files = tdrqn_files(task)
     if not files:
         return None
     per_seed = []
@@ -136,7 +144,9 @@ def main() -> None:
     for task in tasks:
         tdrqn = tdrqn_returns(task)
         if tdrqn is not None:
-            print(f"\n{task}: TDRQN guided (the reference), mean test return {tdrqn.mean():.3f}")
+            where = tdrqn_files(task)[0].parents[1].relative_to(RESULTS)
+            print(f"\n{task}: TDRQN guided (the reference), mean test return {tdrqn.mean():.3f} "
+                  f"({len(tdrqn_files(task))} seeds, docs/results/{where})")  # fmt: skip
     if args.figure:
         figure(tasks)
 
