@@ -56,7 +56,7 @@ class DirectRule:
 
 
 def main(networks: int) -> None:
-    for task, lead in (("chr2", 2), ("chr2", 1), ("chr2", 3), ("paper", 1)):
+    for task, lead in (("chr2", 2), ("chr2", 1), ("chr2", 3), ("paper", 1), ("paper", 2)):
         full = suite.load_split(task, SPLIT, VERSION)
         contexts = ContextSet([full[i] for i in range(networks)], full.params, full.seed,
                               full.extensions)  # fmt: skip
