@@ -34,7 +34,7 @@ CLAIMS = {
     "posterior chosen on 400 validation networks (+0.020 [+0.009, +0.032]), test 0.740 -> "
     "0.761 (+0.021 [+0.013, +0.029])",
     "chr2-learners": "the guided preset on suite v2's chr2 and rig stays near doing nothing "
-    "(validation <= 0.531, seven variants): its student learns when to light, not which neuron; "
+    "(validation <= 0.551, seven variants): its student learns when to light, not which neuron; "
     "its teachers light the target's inputs 35 % of the time",
     "amortised-belief": "an amortised belief over the target's inputs (neurons as tokens, "
     "trained 18 CPU-minutes on generated episodes, sizes 8-32): at n = 32 it removes 51 % "
