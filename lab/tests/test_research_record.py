@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import re
 import runpy
+import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[2]
@@ -14,8 +15,14 @@ DATA = ROOT / "docs" / "results"
 
 
 def printed_rows(script: Path, capsys) -> list[str]:
-    """The Markdown table rows a script prints when run as ``python SCRIPT``."""
-    runpy.run_path(str(script), run_name="__main__")
+    """The Markdown table rows a script prints when run as ``python SCRIPT`` (no arguments:
+    pytest's own are not the script's)."""
+    saved = sys.argv
+    sys.argv = [str(script)]
+    try:
+        runpy.run_path(str(script), run_name="__main__")
+    finally:
+        sys.argv = saved
     return [line for line in capsys.readouterr().out.splitlines() if line.startswith("|")]
 
 
@@ -52,15 +59,7 @@ def test_the_research_index_names_where_each_folders_scripts_live():
 def test_reference_baselines_table_is_what_the_committed_runs_say(capsys):
     """docs/results/reference-baselines/README.md's table is table.py's output from the
     committed runs (result.json, per-network CSVs), not edited by hand."""
-    import sys
-
-    script = LAB / "reference-baselines" / "table.py"
-    saved = sys.argv
-    sys.argv = [str(script)]
-    try:
-        printed = printed_rows(script, capsys)
-    finally:
-        sys.argv = saved
+    printed = printed_rows(LAB / "reference-baselines" / "table.py", capsys)
     readme = (DATA / "reference-baselines" / "README.md").read_text().splitlines()
     assert len(printed) >= 7  # header, rule and five algorithms
     missing = [line for line in printed if line not in readme]
@@ -70,15 +69,7 @@ def test_reference_baselines_table_is_what_the_committed_runs_say(capsys):
 def test_realtime_tradeoff_table_is_what_the_committed_rows_say(capsys):
     """docs/results/realtime-tradeoff/README.md's tables are table.py's output from the
     committed rows (the suite's, the amortised controller's and the folder's own)."""
-    import sys
-
-    script = LAB / "realtime-tradeoff" / "table.py"
-    saved = sys.argv
-    sys.argv = [str(script)]
-    try:
-        printed = printed_rows(script, capsys)
-    finally:
-        sys.argv = saved
+    printed = printed_rows(LAB / "realtime-tradeoff" / "table.py", capsys)
     readme = (DATA / "realtime-tradeoff" / "README.md").read_text().splitlines()
     assert len(printed) >= 2 + 4 * 6  # header, rule and at least six controllers a size
     missing = [line for line in printed if line not in readme]

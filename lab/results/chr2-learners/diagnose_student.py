@@ -15,36 +15,21 @@ neuron; and the share of each one's lit neurons that are excitatory inputs of th
 
 from __future__ import annotations
 
-import copy
 import sys
+from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
+from lab.planners.told import Told
 from spikectl.contexts import ContextSet
 from spikectl.envs.controller import Copies
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
-from spikectl.planning import Composition, IdentifyAndPlan
+from spikectl.planning import Composition
 from spikectl.training.loaders import load_controller
 
 TASK, VERSION, SPLIT, WIDTH = "chr2", 2, "validation", 32
-
-
-class Told(IdentifyAndPlan):
-    """The told-weights teacher of each played network (its weights read from the set by
-    the environment's context index at the episode's start)."""
-
-    def __init__(self, contexts, **settings) -> None:
-        super().__init__(**settings)
-        self.contexts = contexts
-
-    def spawn(self, index: int) -> IdentifyAndPlan:
-        return copy.copy(self)
-
-    def act(self, observation, info) -> int:
-        if int(observation["step"]) == 0:
-            self.told_weights = np.asarray(self.contexts[int(info["context_index"])].weights)
-        return super().act(observation, info)
 
 
 class Beside:

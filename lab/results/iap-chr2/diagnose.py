@@ -11,7 +11,6 @@ each estimate knows, and how rightly, at steps 10, 30 and 59.
 
 from __future__ import annotations
 
-import copy
 import csv
 import sys
 import time
@@ -21,6 +20,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
 from lab.planners.recording import RecordingIdentifyAndPlan
+from lab.planners.told import Told
 from spikectl.contexts import ContextSet
 from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
@@ -28,7 +28,6 @@ from spikectl.experiments.stats import paired_difference_cells
 from spikectl.planning import (
     DEFAULT_ORACLE_WIDTH,
     EstimatorSettings,
-    IdentifyAndPlan,
     OraclePlanner,
 )
 from spikectl.planning.named import composition
@@ -124,23 +123,6 @@ def main(out: Path, networks: int) -> None:
         writer.writerow(["controller", "split", "context", "return"])
         for label, (values, _) in results.items():
             writer.writerows([label, SPLIT, i, f"{v:.6f}"] for i, v in enumerate(values))
-
-
-class Told(IdentifyAndPlan):
-    """The same loop told each network's true weights (read from the set by the
-    environment's context index at the episode's start)."""
-
-    def __init__(self, contexts, **settings) -> None:
-        super().__init__(**settings)
-        self.contexts = contexts
-
-    def spawn(self, index: int) -> IdentifyAndPlan:
-        return copy.copy(self)
-
-    def act(self, observation, info) -> int:
-        if int(observation["step"]) == 0:
-            self.told_weights = np.asarray(self.contexts[int(info["context_index"])].weights)
-        return super().act(observation, info)
 
 
 if __name__ == "__main__":

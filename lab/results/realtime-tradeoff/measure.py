@@ -22,14 +22,16 @@ for each size: a forward pass costs the same whatever the weights.
 from __future__ import annotations
 
 import argparse
-import csv
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
+from lab.records import write_csv
 from spikectl import NeuronControlEnv, load_controller, make_splits
 from spikectl.envs.realtime import decision_times
 from spikectl.envs.rollout import evaluate_policy
@@ -74,15 +76,6 @@ def played(contexts, extensions, controller) -> tuple[np.ndarray, float]:
     return np.asarray(episodes.returns), time.process_time() - started
 
 
-def write(path: Path, rows: list[dict]) -> None:
-    temporary = path.with_suffix(".tmp")
-    with open(temporary, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    temporary.replace(path)
-
-
 def row(n: int, task: str, name: str, returns, cpu: float, references) -> dict:
     nothing, oracle = references
     mean = float(np.mean(returns))
@@ -109,8 +102,8 @@ def fast(out: Path) -> None:
         per_network += [{"task": task, "context": i, "return": repr(float(value))}
                         for i, value in enumerate(returns)]  # fmt: skip
         print(rows[-1], flush=True)
-    write(out / "fast.csv", rows)
-    write(out / "fast-per-network.csv", per_network)
+    write_csv(out / "fast.csv", rows)
+    write_csv(out / "fast-per-network.csv", per_network)
 
 
 def compiled_tdrqn(n_observed: int):
@@ -153,7 +146,7 @@ def times(out: Path, belief: Path | None) -> None:
                          "decision_p50_ms": f"{p50:.4f}", "decision_p99_ms": f"{p99:.4f}",
                          "load_average_1min": f"{os.getloadavg()[0]:.2f}"})  # fmt: skip
             print(rows[-1], flush=True)
-    write(out / "times.csv", rows)
+    write_csv(out / "times.csv", rows)
 
 
 def n64(out: Path, belief: Path | None) -> None:
@@ -167,7 +160,7 @@ def n64(out: Path, belief: Path | None) -> None:
         print(name, float(np.mean(returns)), flush=True)
     references = {name: float(np.mean(results[name][0])) for name in ("do-nothing", "oracle")}
     (out / "n64-references.json").write_text(json.dumps(references, indent=1) + "\n")
-    write(out / "n64.csv", [
+    write_csv(out / "n64.csv", [
         row(N64, "n64", "amortised controller" if name == str(belief) else name, returns, cpu,
             (references["do-nothing"], references["oracle"]))
         for name, (returns, cpu) in results.items()

@@ -43,6 +43,8 @@ import gymnasium as gym
 import numpy as np
 import torch
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
+from lab.records import write_csv
 from spikectl.experiments import suite
 from spikectl.wrappers import FlatPolicyController, final_info_id, sb3_vec_env
 
@@ -218,15 +220,6 @@ def curve(episodes: list[tuple[int, float]], steps: int) -> list[dict]:
         rows.append({"step": end, "episodes": len(returns),
                      "mean_return": f"{np.mean(returns):.6f}" if returns else ""})  # fmt: skip
     return rows
-
-
-def write_csv(path: Path, rows: list[dict]) -> None:
-    temporary = path.with_suffix(".tmp")
-    with open(temporary, "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]))
-        writer.writeheader()
-        writer.writerows(rows)
-    temporary.replace(path)
 
 
 def main() -> None:

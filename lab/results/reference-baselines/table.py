@@ -70,6 +70,10 @@ def tdrqn_returns(task: str) -> np.ndarray | None:
     return np.mean(per_seed, axis=0)
 
 
+def seed_count(count: int) -> str:
+    return f"{count} seed" + ("s" if count != 1 else "")
+
+
 def row_of(task: str, algorithm: str) -> str | None:
     seeds = runs(task, algorithm)
     if not seeds:
@@ -146,7 +150,7 @@ def main() -> None:
         if tdrqn is not None:
             where = tdrqn_files(task)[0].parents[1].relative_to(RESULTS)
             print(f"\n{task}: TDRQN guided (the reference), mean test return {tdrqn.mean():.3f} "
-                  f"({len(tdrqn_files(task))} seeds, docs/results/{where})")  # fmt: skip
+                  f"({seed_count(len(tdrqn_files(task)))}, docs/results/{where})")  # fmt: skip
     if args.figure:
         figure(tasks)
 
