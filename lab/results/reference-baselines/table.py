@@ -111,6 +111,43 @@ def table(task: str) -> str:
     return "\n".join(lines + [row for row in rows if row])
 
 
+def suite_normalised(task: str) -> dict[str, float]:
+    """The suite's committed normalised test scores on ``task``: identify-and-plan's and
+    the TDRQN ``guided`` trained on the task (mean over its seeds)."""
+    suite = RESULTS / "suite"
+    planner = next(r for r in read_csv(suite / "identify-and-plan.csv")
+                   if r["task"] == task and r["split"] == "test")  # fmt: skip
+    name = "transfer.csv" if task == "paper" else "benchmark.csv"
+    trained = [next(r for r in read_csv(path) if r["task"] == task)
+               for path in sorted((SUITE_TDRQN / task).glob(f"seed=*/{name}"))]  # fmt: skip
+    return {"identify-and-plan": float(planner["normalised"]),
+            "TDRQN guided, trained on the task": float(np.mean([float(r["normalised"])
+                                                               for r in trained]))}  # fmt: skip
+
+
+def leaderboard(tasks: list[str]) -> str:
+    """The generic baselines beside the suite's controllers on the tasks they ran: the
+    normalised test score per task (mean over seeds) and its mean over the tasks."""
+    header = "| controller | " + " | ".join(f"`{task}`" for task in tasks) + " | mean |"
+    lines = [header, "|---|" + "---:|" * (len(tasks) + 1)]
+    scores: dict[str, dict[str, float]] = {}
+    for task in tasks:
+        for name, value in suite_normalised(task).items():
+            scores.setdefault(name, {})[task] = value
+        for algorithm in ORDER:
+            seeds = runs(task, algorithm)
+            if len(seeds) == 3:
+                values = [json.loads((seed / "result.json").read_text())["test_normalised"]
+                          for seed in seeds]  # fmt: skip
+                scores.setdefault(f"{algorithm} (generic baseline)", {})[task] = np.mean(values)
+    for name, by_task in scores.items():
+        if len(by_task) == len(tasks):
+            cells = " | ".join(f"{by_task[task]:.3f}" for task in tasks)
+            lines.append(f"| {name} | {cells} | {np.mean(list(by_task.values())):.3f} |")
+    lines.append("| do nothing | " + " | ".join("0.000" for _ in tasks) + " | 0.000 |")
+    return "\n".join(lines)
+
+
 def figure(tasks: list[str]) -> None:
     import matplotlib
 
@@ -129,8 +166,11 @@ def figure(tasks: list[str]) -> None:
                 [float(row["mean_return"]) if row["mean_return"] else np.nan for row in curve]
                 for curve in curves
             ])  # [seeds, bins]
-            axis.plot(steps, np.nanmean(values, axis=0), label=f"{algorithm} ({len(seeds)})")
-            axis.fill_between(steps, np.nanmin(values, 0), np.nanmax(values, 0), alpha=0.2)
+            colour = f"C{ORDER.index(algorithm)}"  # the same in every panel
+            axis.plot(steps, np.nanmean(values, axis=0), color=colour,
+                      label=f"{algorithm} ({len(seeds)})")  # fmt: skip
+            axis.fill_between(steps, np.nanmin(values, 0), np.nanmax(values, 0), color=colour,
+                              alpha=0.2)  # fmt: skip
         axis.axhline(0.5, color="grey", linestyle=":", label="do nothing")
         axis.set(title=f"{task}: training return", xlabel="environment steps",
                  ylabel="mean episode return (training networks)")  # fmt: skip
@@ -145,6 +185,8 @@ def main() -> None:
     args = parser.parse_args()
     tasks = sorted(path.name for path in HERE.iterdir() if path.is_dir())
     print("\n\n".join(table(task) for task in tasks))
+    print("\nNormalised test score, the generic baselines with 3 seeds on every task:\n")
+    print(leaderboard(tasks))
     for task in tasks:
         tdrqn = tdrqn_returns(task)
         if tdrqn is not None:
