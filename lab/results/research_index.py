@@ -23,9 +23,9 @@ CLAIM_CHARS = 220
 # another change): their claim as the commit that reported the result stated it.
 CLAIMS = {
     "realtime-tradeoff": "return against decision CPU time for every controller at n = 8, 16, "
-    "32 and 64 (one timing run, loaded host): identify-and-plan's fast form ties the named "
-    "one at n16 (-0.001 [-0.029, +0.027]) at p99 1.2 ms against 159 ms; within 1 ms the "
-    "amortised controller",
+    "32 and 64 (one timing run, nothing else running): identify-and-plan's fast form ties "
+    "the named one at n16 (-0.001 [-0.029, +0.027]) at p99 1.7 ms against 181 ms; within "
+    "1 ms the amortised controller",
     "iap-rig": "identify-and-plan plays suite v2's rig (refused before) with a spike "
     "likelihood (background input; the light's drive per column): test 0.617, normalised "
     "0.364, short of 0.70; told the true columns 0.869 vs 0.606 (validation)",
