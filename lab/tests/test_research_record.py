@@ -96,3 +96,14 @@ def test_decision_times_fill_only_the_two_columns(tmp_path):
     assert [[row[field] for field in fields] for row in written] == rows
     for row in written:
         assert 0 < float(row["decision_p50_ms"]) <= float(row["decision_p99_ms"])
+
+
+def test_column_belief_tables_are_what_the_committed_rows_say():
+    """docs/results/column-belief/README.md's tables are measure.py's ``table`` from the
+    committed rows (its own, the suite's and the amortised controller's)."""
+    table = runpy.run_path(str(LAB / "column-belief" / "measure.py"))["table"]
+    printed = [line for line in table(DATA / "column-belief").splitlines() if line.startswith("|")]
+    readme = (DATA / "column-belief" / "README.md").read_text().splitlines()
+    assert len(printed) == 2 + 6 + 2 + 3
+    missing = [line for line in printed if line not in readme]
+    assert not missing, f"column-belief/README.md lacks printed rows: {missing[:3]}"
