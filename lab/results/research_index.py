@@ -22,6 +22,10 @@ CLAIM_CHARS = 220
 # Folders whose first commits' subjects name something else (a folder committed beside
 # another change): their claim as the commit that reported the result stated it.
 CLAIMS = {
+    "column-belief": "the amortised controller fed identify-and-plan's exact Gaussian "
+    "posterior of the target's column scores what it scores on the trained belief at n16 "
+    "/ n32 (-0.001 / -0.008 per network) and stays below identify-and-plan (test -0.041 / "
+    "-0.057): the limit is the one-column rule, not the belief",
     "realtime-tradeoff": "return against decision CPU time for every controller at n = 8, 16, "
     "32 and 64 (one timing run, nothing else running): identify-and-plan's fast form ties "
     "the named one at n16 (-0.001 [-0.029, +0.027]) at p99 1.7 ms against 181 ms; within "
