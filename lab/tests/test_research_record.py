@@ -107,3 +107,13 @@ def test_column_belief_tables_are_what_the_committed_rows_say():
     assert len(printed) == 2 + 6 + 2 + 3
     missing = [line for line in printed if line not in readme]
     assert not missing, f"column-belief/README.md lacks printed rows: {missing[:3]}"
+
+
+def test_suite_v2_learned_table_is_what_the_committed_runs_say(capsys):
+    """docs/results/suite-v2/README.md's learned rows through the latency loop are
+    learned_table.py's output from the committed per-network CSVs."""
+    printed = printed_rows(LAB / "suite-v2" / "learned_table.py", capsys)
+    readme = (DATA / "suite-v2" / "README.md").read_text().splitlines()
+    assert len(printed) >= 2 + 2  # header, rule, latency1 and latency2
+    missing = [line for line in printed if line not in readme]
+    assert not missing, f"suite-v2/README.md lacks printed rows: {missing[:3]}"
