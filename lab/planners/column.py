@@ -22,7 +22,8 @@ as identify-and-plan's ``ConnectivityEstimate.entry_probabilities`` reads it."""
 DECIMALS = 9
 """Probabilities are kept to this many decimals (ties, :meth:`GaussianColumn._probabilities`)."""
 RELEASED_BEFORE, TARGET_RESIDUAL, TARGET_OBSERVED = (
-    FEATURES.index(name) for name in ("released_before", "target_residual", "target_observed"))
+    FEATURES.index(name) for name in ("released_before", "target_residual", "target_observed")
+)
 
 
 class GaussianColumn:

@@ -43,6 +43,8 @@ ROOT = Path(__file__).resolve().parents[3]
 RESULTS = ROOT / "docs" / "results"
 TASKS = ("paper", "n16", "n32")
 TIMED_EPISODES = 10
+
+
 def column_controller(params) -> AmortisedController:
     return AmortisedController(GaussianColumn(), params)
 
