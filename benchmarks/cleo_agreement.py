@@ -7,7 +7,8 @@ and the light; ``random`` is seeded per network) and play the paper task's first
 --networks unseen test networks in both simulators. Prints, per setting and controller,
 the mean return in each, the largest difference of one episode's returns, and in how
 many episodes the two chose the same actions; writes one row per episode to --out
-(if given).
+(if given). A run directory among --controllers plays its trained network (--model
+final or best).
 A controller that refuses a setting (one made for a loop it cannot read) is reported
 with its one line. Runs in the Cleo virtualenv:
 
@@ -34,16 +35,20 @@ FIELDS = ("setting", "controller", "context", "spikectl_return", "cleo_return", 
           "cpu_seconds")  # fmt: skip
 
 
-def agreement(setting: str, name: str, networks: int, contexts) -> list[dict]:
-    """One row per network: ``name`` made for the setting's extensions, in both loops."""
+def agreement(
+    setting: str, name: str, networks: int, contexts, model: str = "final"
+) -> list[dict]:
+    """One row per network: ``name`` made for the setting's extensions, in both loops (a
+    run directory's ``model``: ``"final"`` or ``"best"``)."""
     env = NeuronControlEnv(contexts=contexts, extensions=matching_extensions(SETTINGS[setting]))
     loop = CleoLoop(contexts, SETTINGS[setting])
+    chosen = {"model": model} if Path(name).is_dir() else {}  # a named controller has one
     rows = []
     for context in range(networks):
         started = time.process_time()
-        ours = load_controller(name, env=env, seed=context)
+        ours = load_controller(name, env=env, seed=context, **chosen)
         actions, total = play_episode(env, ours, context)
-        theirs = load_controller(name, env=env, seed=context)
+        theirs = load_controller(name, env=env, seed=context, **chosen)
         episode = loop.play(theirs, context)
         rows.append({
             "setting": setting, "controller": name, "context": context,
@@ -72,6 +77,8 @@ def main() -> None:
     parser.add_argument("--controllers", nargs="+",
                         default=["oracle", "identify-and-plan", "random"])  # fmt: skip
     parser.add_argument("--networks", type=int, default=30)
+    parser.add_argument("--model", choices=("final", "best"), default="final",
+                        help="which network of a run directory named in --controllers")  # fmt: skip
     parser.add_argument("--out", type=Path, default=None, help="write one row per episode here")
     arguments = parser.parse_args()
     contexts = load_split("paper", "test")
@@ -81,7 +88,7 @@ def main() -> None:
     for setting in arguments.settings:
         for name in arguments.controllers:
             try:
-                played = agreement(setting, name, arguments.networks, contexts)
+                played = agreement(setting, name, arguments.networks, contexts, arguments.model)
             except ValueError as error:  # ControllerInputError, ConfigError among them
                 print(f"| `{setting}` | {name} | refused: {error} | | | | |", flush=True)
                 continue
