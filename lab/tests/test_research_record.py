@@ -117,3 +117,15 @@ def test_suite_v2_learned_table_is_what_the_committed_runs_say(capsys):
     assert len(printed) >= 2 + 2  # header, rule, latency1 and latency2
     missing = [line for line in printed if line not in readme]
     assert not missing, f"suite-v2/README.md lacks printed rows: {missing[:3]}"
+
+
+def test_suite_v2_paired_presets_are_what_the_committed_runs_say():
+    """The suite-v2 record's two presets against each other (with and without the
+    actions-in-flight input) are learned_table.py --paired's output."""
+    script = runpy.run_path(str(LAB / "suite-v2" / "learned_table.py"))
+    printed = [line for line in script["paired"]("guided-in-flight", "guided").splitlines()
+               if line.startswith("|")]  # fmt: skip
+    readme = (DATA / "suite-v2" / "README.md").read_text().splitlines()
+    assert len(printed) == 3  # header, rule, latency2
+    missing = [line for line in printed if line not in readme]
+    assert not missing, f"suite-v2/README.md lacks printed rows: {missing[:3]}"

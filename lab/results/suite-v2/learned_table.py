@@ -1,12 +1,15 @@
 """The learned rows of suite v2 against identify-and-plan, network by network.
 
     python lab/results/suite-v2/learned_table.py [FOLDER ...]   # default: guided-in-flight
+    python lab/results/suite-v2/learned_table.py --paired FOLDER_A FOLDER_B
 
 For each FOLDER under docs/results/suite-v2/trained/ and each task it holds, the seeds'
 test returns (their per_network.csv, written by train.sh) against identify-and-plan's on
 the same 1 000 networks (identify-and-plan-per-network.csv): mean ± sd over the seeds,
 the seeds' mean minus the planner's per network with its 95% bootstrap interval over
-the networks (10 000 resamples, seed 0), and how many networks each way.
+the networks (10 000 resamples, seed 0), and how many networks each way. ``--paired``
+sets two folders against each other the same way on every task both hold (each the mean
+over its seeds).
 """
 
 from __future__ import annotations
@@ -57,10 +60,42 @@ def table(folder: str) -> str:
     return "\n".join(lines)
 
 
+def seed_mean(folder: str, task: str) -> tuple[np.ndarray, int]:
+    """([networks] the mean over the folder's seeds of each network's return, seeds)."""
+    seeds = sorted((HERE / "trained" / folder / task).glob("seed=*/per_network.csv"))
+    return np.stack([per_network(path, task) for path in seeds]).mean(axis=0), len(seeds)
+
+
+def paired(first: str, second: str) -> str:
+    lines = [
+        f"| task | `{first}` | `{second}` | `{first}` − `{second}`, per network [95%] "
+        "| better / worse |",
+        "|---|---:|---:|---:|---:|",
+    ]
+    shared = sorted(
+        task.name
+        for task in (HERE / "trained" / first).iterdir()
+        if (HERE / "trained" / second / task.name).is_dir()
+    )
+    for task in shared:
+        (a, seeds_a), (b, seeds_b) = seed_mean(first, task), seed_mean(second, task)
+        lines.append(
+            f"| `{task}` | {a.mean():.3f} ({seeds_a} seeds) | {b.mean():.3f} ({seeds_b} seeds) "
+            f"| {paired_difference_cells(a - b)} |"
+        )
+    return "\n".join(lines)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folders", nargs="*", default=["guided-in-flight"])
-    for folder in parser.parse_args().folders:
+    parser.add_argument("--paired", nargs=2, metavar=("FOLDER_A", "FOLDER_B"),
+                        help="the two folders against each other, network by network")
+    arguments = parser.parse_args()
+    if arguments.paired:
+        print(paired(*arguments.paired))
+        return
+    for folder in arguments.folders:
         print(table(folder))
         print()
 
