@@ -24,7 +24,6 @@ from __future__ import annotations
 import argparse
 import csv
 import sys
-import time
 from pathlib import Path
 
 import numpy as np
@@ -35,7 +34,6 @@ from lab.records import write_csv
 from spikectl import NeuronControlEnv, load_controller
 from spikectl.agents.amortised_controller import AmortisedController
 from spikectl.envs.realtime import decision_times
-from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
 from spikectl.experiments.stats import paired_difference_cells
 
@@ -47,14 +45,6 @@ TIMED_EPISODES = 10
 
 def column_controller(params) -> AmortisedController:
     return AmortisedController(GaussianColumn(), params)
-
-
-def played(task: str, split: str, controller) -> tuple[np.ndarray, float]:
-    contexts = suite.load_split(task, split)
-    started = time.process_time()
-    episodes = evaluate_policy(contexts, controller, extensions=suite.task(task).extensions,
-                               seed=suite.suite_version(1).env_seed)  # fmt: skip
-    return np.asarray(episodes.returns), time.process_time() - started
 
 
 def rows_of(task, split, name, returns, cpu):
@@ -76,7 +66,8 @@ def measure(out: Path, split: str, with_named: bool) -> None:
             env = NeuronControlEnv(contexts=contexts, extensions=suite.task(task).extensions)
             controllers["identify-and-plan"] = load_controller("identify-and-plan", env=env)
         for name, controller in controllers.items():
-            returns, cpu = played(task, split, controller)
+            returns, cpu = suite.play(task, split, controller, version=1)
+            returns = np.asarray(returns)
             summary, rows = rows_of(task, split, name, returns, cpu)
             summaries.append(summary)
             per_network += rows

@@ -25,11 +25,10 @@ from lab.planners.column import DECIMALS, GaussianColumn
 from spikectl.agents import amortised_controller
 from spikectl.agents.amortised_controller import PROBE_FLOOR, AmortisedController
 from spikectl.agents.amortised_kernel import BeliefFeatureTracker
-from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
+from spikectl.neuron import DO_NOTHING
 from spikectl.planning import ConnectivityEstimate, IdentifyAndPlan, ObservedState
 
-DO_NOTHING = -1
 TASKS = ("n16", "n32")
 
 
@@ -55,7 +54,7 @@ class TwoHop(AmortisedController):
     (module docstring); ``tau`` None: never the second hop."""
 
     def __init__(self, params, tau: float | None, beta: float) -> None:
-        super().__init__(GaussianColumn(), params)
+        super().__init__(GaussianColumn(), params)  # its belief unused: act reads the estimate
         self.tau, self.beta = tau, beta
 
     def spawn(self, index: int) -> TwoHop:
@@ -101,15 +100,12 @@ class TwoHop(AmortisedController):
                                                   self.probe_below)  # fmt: skip
 
 
-def played(task: str, controller) -> float:
-    contexts = suite.load_split(task, "validation")
-    episodes = evaluate_policy(contexts, controller, extensions=suite.task(task).extensions,
-                               seed=suite.suite_version(1).env_seed)  # fmt: skip
-    return float(np.mean(episodes.returns))
-
-
 def on_both(make) -> list[float]:
-    return [played(task, make(suite.load_split(task, "validation").params)) for task in TASKS]
+    """The validation mean return on each of TASKS of ``make(params)``'s controller."""
+    return [float(np.mean(suite.play(task, "validation",
+                                     make(suite.load_split(task, "validation", 1).params),
+                                     version=1)[0]))
+            for task in TASKS]  # fmt: skip
 
 
 def main() -> None:

@@ -36,6 +36,12 @@ def per_network(path: Path, task: str) -> np.ndarray:
     return np.array([float(row["return"]) for row in rows])
 
 
+def seed_returns(folder: str, task: str) -> np.ndarray | None:
+    """[seeds, networks] each seed's test return on each network (None: no seed)."""
+    seeds = sorted((HERE / "trained" / folder / task).glob("seed=*/per_network.csv"))
+    return np.stack([per_network(path, task) for path in seeds]) if seeds else None
+
+
 def table(folder: str) -> str:
     lines = [
         f"Preset folder `{folder}`, suite v2 test sets; mean ± sd over seeds.",
@@ -45,25 +51,18 @@ def table(folder: str) -> str:
         "|---|---:|---:|---:|---:|---:|",
     ]
     for task_dir in sorted((HERE / "trained" / folder).iterdir()):
-        seeds = sorted(task_dir.glob("seed=*/per_network.csv"))
-        if not seeds:
-            continue
         task = task_dir.name
-        returns = np.stack([per_network(path, task) for path in seeds])  # [seeds, networks]
+        returns = seed_returns(folder, task)  # [seeds, networks]
+        if returns is None:
+            continue
         means = returns.mean(axis=1)
         planner = per_network(PLANNER, task)
         cells = paired_difference_cells(returns.mean(axis=0) - planner)
         lines.append(
-            f"| `{task}` | {len(seeds)} | {means.mean():.3f} ± {means.std():.3f} "
+            f"| `{task}` | {len(returns)} | {means.mean():.3f} ± {means.std():.3f} "
             f"| {planner.mean():.3f} | {cells} |"
         )
     return "\n".join(lines)
-
-
-def seed_mean(folder: str, task: str) -> tuple[np.ndarray, int]:
-    """([networks] the mean over the folder's seeds of each network's return, seeds)."""
-    seeds = sorted((HERE / "trained" / folder / task).glob("seed=*/per_network.csv"))
-    return np.stack([per_network(path, task) for path in seeds]).mean(axis=0), len(seeds)
 
 
 def paired(first: str, second: str) -> str:
@@ -78,10 +77,10 @@ def paired(first: str, second: str) -> str:
         if (HERE / "trained" / second / task.name).is_dir()
     )
     for task in shared:
-        (a, seeds_a), (b, seeds_b) = seed_mean(first, task), seed_mean(second, task)
+        a, b = seed_returns(first, task), seed_returns(second, task)  # [seeds, networks]
         lines.append(
-            f"| `{task}` | {a.mean():.3f} ({seeds_a} seeds) | {b.mean():.3f} ({seeds_b} seeds) "
-            f"| {paired_difference_cells(a - b)} |"
+            f"| `{task}` | {a.mean():.3f} ({len(a)} seeds) | {b.mean():.3f} ({len(b)} seeds) "
+            f"| {paired_difference_cells(a.mean(axis=0) - b.mean(axis=0))} |"
         )
     return "\n".join(lines)
 
@@ -89,8 +88,12 @@ def paired(first: str, second: str) -> str:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("folders", nargs="*", default=["guided-in-flight"])
-    parser.add_argument("--paired", nargs=2, metavar=("FOLDER_A", "FOLDER_B"),
-                        help="the two folders against each other, network by network")
+    parser.add_argument(
+        "--paired",
+        nargs=2,
+        metavar=("FOLDER_A", "FOLDER_B"),
+        help="the two folders against each other, network by network",
+    )
     arguments = parser.parse_args()
     if arguments.paired:
         print(paired(*arguments.paired))
