@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import os
 import subprocess
 import sys
@@ -217,6 +218,56 @@ def test_portable_spd_inverse_inverts_and_refuses_an_indefinite_matrix():
     with pytest.raises(ValueError, match="square"):
         portable.spd_inverse(np.ones((2, 3)))
 
+
+
+def _dense_spd_inverse(matrix: np.ndarray) -> np.ndarray:
+    """The dense Cholesky inverse in the index order portable.spd_inverse promises, every
+    sum over every index (plain Python floats: IEEE double, no fused operations)."""
+    size = matrix.shape[0]
+    lower = [[0.0] * size for _ in range(size)]
+    inverse_lower = [[0.0] * size for _ in range(size)]
+    for j in range(size):
+        total = float(matrix[j, j])
+        for k in range(j):
+            total -= lower[j][k] * lower[j][k]
+        lower[j][j] = math.sqrt(total)
+        for i in range(j + 1, size):
+            total = float(matrix[i, j])
+            for k in range(j):
+                total -= lower[i][k] * lower[j][k]
+            lower[i][j] = total / lower[j][j]
+    for j in range(size):
+        inverse_lower[j][j] = 1.0 / lower[j][j]
+        for i in range(j + 1, size):
+            total = 0.0
+            for k in range(j, i):
+                total -= lower[i][k] * inverse_lower[k][j]
+            inverse_lower[i][j] = total / lower[i][i]
+    out = np.empty((size, size))
+    for i in range(size):
+        for j in range(i + 1):
+            total = 0.0
+            for k in range(i, size):
+                total += inverse_lower[k][i] * inverse_lower[k][j]
+            out[i, j] = out[j, i] = total
+    return out
+
+
+def test_portable_spd_inverse_of_a_posterior_precision_is_the_dense_one_bit_for_bit():
+    """A posterior's precision is diagonal but for the neurons seen to release: the sums
+    skip the other indices' exact zeros and must still give every bit of the dense sums."""
+    rng = np.random.default_rng(5)
+    for _ in range(40):
+        n = int(rng.integers(1, 12))
+        precision = np.zeros((3, n, n))
+        precision[:, np.arange(n), np.arange(n)] = rng.uniform(1.0, 1e9, (3, n))
+        for matrix in precision:
+            releasing = rng.random(n) < rng.uniform(0.0, 0.8)
+            for _ in range(int(rng.integers(0, 8))):
+                released = (releasing & (rng.random(n) < 0.5)) * rng.choice([1.0, 0.3], n)
+                matrix += np.outer(released, released) * 1e4
+        expected = np.stack([_dense_spd_inverse(matrix) for matrix in precision])
+        assert portable.spd_inverse(precision).tobytes() == expected.tobytes()
 
 # The committed suite tables are the golden record of every CPU kind: the training-free
 # controllers' returns no longer depend on the CPU, so a few networks played again here
