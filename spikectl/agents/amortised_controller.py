@@ -65,6 +65,11 @@ def load_belief(path: str | os.PathLike, heads: int = BELIEF_HEADS) -> Amortised
     """The trained belief saved at ``path`` (``torch.save(model.state_dict())``, as
     ``lab/results/amortised-belief/train.py`` writes it), on CPU, weights only; its width
     and layer count are read from the tensors' shapes."""
+    return belief_from_state(path, read_state_dict(path), heads)
+
+
+def read_state_dict(path: str | os.PathLike) -> dict:
+    """The state dict a weights file holds (CPU tensors, weights only)."""
     import torch
 
     path = Path(path)
@@ -80,7 +85,17 @@ def load_belief(path: str | os.PathLike, heads: int = BELIEF_HEADS) -> Amortised
         raise BeliefWeightsError(
             f"{path} is not a readable PyTorch weights file: {first}"
         ) from None
-    encode = state.get("encode.0.weight") if isinstance(state, dict) else None
+    if not isinstance(state, dict):
+        raise BeliefWeightsError(f"{path} does not hold a state dict")
+    return state
+
+
+def belief_from_state(path: str | os.PathLike, state: Mapping[str, Any],
+                      heads: int = BELIEF_HEADS) -> AmortisedBelief:  # fmt: skip
+    """The belief ``state`` (read from ``path``, named in messages) holds, checked."""
+    import torch
+
+    encode = state.get("encode.0.weight")
     if not isinstance(encode, torch.Tensor) or encode.ndim != 2 or encode.shape[1] != N_FEATURES:
         raise BeliefWeightsError(f"{path} does not hold an amortised belief's weights (no "
                                  f"encode.0.weight of [width, {N_FEATURES}])")  # fmt: skip
@@ -168,7 +183,7 @@ class AmortisedController:
         self.rule, self.seed = rule, int(seed)
         self.rng = np.random.default_rng(self.seed)
         self.tracker: BeliefFeatureTracker | None = None
-        self.excitatory = np.zeros(0)
+        self.probabilities = np.zeros((0, 3))  # [n, 3] the belief this step
 
     def spawn(self, index: int) -> AmortisedController:
         """A copy for sub-environment ``index`` of a vector environment (its own seed, and
@@ -202,14 +217,26 @@ class AmortisedController:
                 raise ValueError("AmortisedController must see the episode from its first step")
             self.tracker = BeliefFeatureTracker(n, target, self.params)
             self.kernel.reset(target_prior(n, target))
-            self.excitatory = target_prior(n, target) * EXCITATORY_PROBABILITY  # the prior's P(+1)
+            prior = target_prior(n, target)  # the generator's P(i -> target), 0 for the target
+            self.probabilities = np.stack([1.0 - prior, prior * EXCITATORY_PROBABILITY,
+                                           prior * (1.0 - EXCITATORY_PROBABILITY)], axis=1)
         else:
             row = self.tracker.row(voltage, int(observation.get("last_action", DO_NOTHING)))
             logits = self.kernel.step(row).astype(np.float64)  # [n, 3]
             logits -= logits.max(axis=1, keepdims=True)
             probabilities = np.exp(logits)
-            self.excitatory = probabilities[:, 1] / probabilities.sum(axis=1)
-            self.excitatory[target] = 0.0
+            self.probabilities = probabilities / probabilities.sum(axis=1, keepdims=True)
+            self.probabilities[target] = (1.0, 0.0, 0.0)
+        return self.decide(pattern, step, mask)
+
+    @property
+    def excitatory(self) -> np.ndarray:
+        """[n] the belief's P(G[i, target] = +1) this step (0 for the target)."""
+        return self.probabilities[:, 1]
+
+    def decide(self, pattern: np.ndarray, step: int, mask: np.ndarray) -> int:
+        """The action on the belief as it stands (:func:`choose_action`); a subclass
+        replaces the rule here."""
         ahead = pattern[step + 1 : step + 1 + self.params.min_release_interval_steps]
         return choose_action(self.excitatory, self.can_land(mask[1:]), ahead.astype(bool),
                              self.rule, self.rng, self.probe_below)  # fmt: skip

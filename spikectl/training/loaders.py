@@ -122,7 +122,8 @@ def controller_sources() -> str:
     """What a controller source may be, for messages."""
     return (
         "a controller is a run directory, a compiled policy file (.npz from export_policy), "
-        "an amortised belief's weights (.pt: AmortisedController) "
+        "an amortised belief's weights (.pt: AmortisedController, or with a policy "
+        "trained on it: BeliefPolicyController) "
         f"or one of {', '.join(CONTROLLERS)}"
     )
 
@@ -206,7 +207,9 @@ def load_controller(
     the real-time rig takes on every CPU: ``GreedyController``), a
     compiled policy file (.npz from ``spikectl.agents.export_policy``), an amortised
     belief's weights (a ``.pt`` state dict: the
-    :class:`~spikectl.agents.amortised_controller.AmortisedController` on it), or one of
+    :class:`~spikectl.agents.amortised_controller.AmortisedController` on it; with a
+    policy trained on the belief, the
+    :class:`~spikectl.agents.belief_policy.BeliefPolicyController`), or one of
     :data:`CONTROLLERS` (:func:`register_controller` adds one).
 
     The named ones are made from what is played (:class:`Played`): the neuron model,
@@ -239,10 +242,18 @@ def load_controller(
         )
     refuse_other_kinds(path, (FileKind.RUN_DIR, FileKind.POLICY), controller_sources())
     if identify(path) is FileKind.TORCH_FILE:  # an amortised belief's weights (issue 61)
-        from spikectl.agents.amortised_controller import AmortisedController, load_belief
+        from spikectl.agents.amortised_controller import (
+            AmortisedController,
+            belief_from_state,
+            read_state_dict,
+        )
+        from spikectl.agents.belief_policy import is_belief_policy_state, load_belief_policy
 
-        return AmortisedController(load_belief(path), _played_on(env, contexts, params).params,
-                                   seed=seed)  # fmt: skip
+        played_params = _played_on(env, contexts, params).params
+        state = read_state_dict(path)
+        if is_belief_policy_state(state):  # the belief and a policy trained on it
+            return load_belief_policy(path, played_params, state)
+        return AmortisedController(belief_from_state(path, state), played_params, seed=seed)
     if path.is_dir():
         network = load_agent(path, model=model)
         if not compiled:
