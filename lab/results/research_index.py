@@ -47,6 +47,10 @@ CLAIMS = {
     "cleo-agreement": "controllers made for each loop (latency, ChR2, spikes only, the rig "
     "without background) in Cleo and in spikectl with the matching extensions: every "
     "action and return equal, 100 networks per setting and controller",
+    "belief-policy": "a policy on the amortised belief (DAgger on identify-and-plan, then "
+    "REINFORCE): test 0.830 / 0.737 / 0.640 on paper / n16 / n32, -0.007 [-0.033, +0.020] "
+    "against identify-and-plan at n = 8 (p99 0.67 ms), below the fixed rule at 16 and 32; "
+    "REINFORCE changed no greedy action",
     "amortised-controller": "a controller on the amortised belief (greedy on P(input), "
     "probes on quiet stretches; compiled step, CPU p99 0.6-1.2 ms at n = 16-32 on the "
     "loaded machine): test 0.806 / 0.742 / 0.675 on paper / n16 / n32, -0.032 / -0.041 / "

@@ -1,0 +1,70 @@
+"""Play controllers from weights files on suite v1 tasks, one thread, and append one row
+per network to a CSV.
+
+    python lab/results/belief-policy/evaluate.py OUT.csv --split validation \
+        --tasks paper n16 n32 --files NAME=FILE.pt [NAME=FILE.pt ...]
+
+``n64`` is the realtime-tradeoff record's set at n = 64 (suite v1's rule at that size,
+``make_splits(100, 100, 64, seed=0, n_val=100)``, its test or validation part), played
+under the suite's protocol. A belief policy's file plays the belief policy, a belief's
+file the amortised controller (its fixed rule), as ``spikectl.load_controller`` reads
+them. Rows: ``controller, task,
+split, context, return, cpu_s`` (cpu_s: the whole set's process CPU seconds, on each row).
+Prints each controller's mean per task.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from spikectl import load_controller, make_splits
+from spikectl.envs.rollout import evaluate_policy
+from spikectl.experiments import suite
+
+
+def play(task: str, split: str, path: str) -> tuple[np.ndarray, float]:
+    """(returns [S], CPU seconds) of the controller in ``path`` on a task's split."""
+    if task != "n64":
+        contexts = suite.load_split(task, split, 1)
+        return suite.play(task, split, load_controller(path, contexts=contexts), version=1)
+    _, test, validation = make_splits(100, 100, 64, seed=0, n_val=100)
+    contexts = test if split == "test" else validation
+    started = time.process_time()
+    episodes = evaluate_policy(contexts, load_controller(path, contexts=contexts),
+                               seed=suite.suite_version(1).env_seed)  # fmt: skip
+    return np.asarray(episodes.returns), time.process_time() - started
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("out", type=Path)
+    parser.add_argument("--split", default="validation", choices=("validation", "test"))
+    parser.add_argument("--tasks", nargs="+", default=["paper", "n16", "n32"])
+    parser.add_argument("--files", nargs="+", required=True, help="NAME=FILE")
+    arguments = parser.parse_args()
+    torch.set_num_threads(1)
+    new = not arguments.out.exists()
+    with open(arguments.out, "a", newline="") as handle:
+        writer = csv.writer(handle, lineterminator="\n")
+        if new:
+            writer.writerow(["controller", "task", "split", "context", "return", "cpu_s"])
+        for entry in arguments.files:
+            name, _, path = entry.partition("=")
+            for task in arguments.tasks:
+                returns, seconds = play(task, arguments.split, path)
+                for context, value in enumerate(returns):
+                    writer.writerow([name, task, arguments.split, context, f"{value:.6f}",
+                                     f"{seconds:.2f}"])  # fmt: skip
+                handle.flush()
+                print(f"{name} {task} {arguments.split}: {returns.mean():.4f} "
+                      f"({seconds:.0f} CPU s)", flush=True)  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
