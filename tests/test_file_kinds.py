@@ -115,8 +115,9 @@ def test_the_cli_names_the_kind_in_one_line(files, run_cli):
     assert result.stderr.strip().splitlines() == [
         f"spikectl: error: {files[FileKind.CONTEXT_SET]} is a context set file (.npz); a "
         "controller is a run directory, a compiled policy file (.npz from export_policy), "
-        "an amortised belief's weights (.pt: AmortisedController) or one of do-nothing, "
-        "random, identify-and-plan, oracle, witness"
+        "an amortised belief's weights (.pt: AmortisedController, or with a policy trained "
+        "on it: BeliefPolicyController) or one of do-nothing, random, identify-and-plan, "
+        "oracle, witness"
     ]
 
 
