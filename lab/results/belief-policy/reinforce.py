@@ -22,14 +22,16 @@ the size, the batch's mean return, the entropy, CPU seconds).
 from __future__ import annotations
 
 import argparse
-import csv
 import importlib.util
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 import torch
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
+from lab.records import write_csv
 from spikectl import NeuronControlEnv
 from spikectl.agents.amortised_controller import read_state_dict
 from spikectl.agents.belief_policy import (
@@ -156,10 +158,7 @@ def main() -> None:
             print(rows[-1], flush=True)
         if (update + 1) % 50 == 0 or update + 1 == arguments.updates:
             save_belief_policy(belief, net.eval(), arguments.out)
-            with open(arguments.out.with_suffix(".csv"), "w", newline="") as handle:
-                writer = csv.DictWriter(handle, fieldnames=list(rows[0]), lineterminator="\n")
-                writer.writeheader()
-                writer.writerows(rows)
+            write_csv(arguments.out.with_suffix(".csv"), rows)
     print(f"wrote {arguments.out}")
 
 

@@ -17,12 +17,14 @@ labels per epoch; writes OUT (the belief's and the policy's weights in one file,
 from __future__ import annotations
 
 import argparse
-import csv
+import sys
 from pathlib import Path
 
 import numpy as np
 import torch
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
+from lab.records import write_csv
 from spikectl.agents.amortised_controller import load_belief
 from spikectl.agents.amortised_kernel import BeliefKernel
 from spikectl.agents.belief_policy import (
@@ -133,10 +135,7 @@ def main() -> None:
     net, rows = fit(sets, arguments.epochs, arguments.seed, arguments.width,
                     smoothing=arguments.smoothing)
     save_belief_policy(model, net, arguments.out)
-    with open(arguments.out.with_suffix(".csv"), "w", newline="") as handle:
-        writer = csv.DictWriter(handle, fieldnames=list(rows[0]), lineterminator="\n")
-        writer.writeheader()
-        writer.writerows(rows)
+    write_csv(arguments.out.with_suffix(".csv"), rows)
     print(f"wrote {arguments.out}")
 
 
