@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from spikectl import NeuronParams, make_splits
-from spikectl.agents.amortised_belief import N_FEATURES
+from spikectl.agents.amortised_belief import FEATURES
 from spikectl.agents.amortised_controller import load_belief
 from spikectl.agents.amortised_kernel import BeliefFeatureTracker, target_prior
 from spikectl.planning import ConnectivityEstimate, DiscreteConnectivityEstimate
@@ -69,7 +69,7 @@ def planner_batch(path: Path, params: NeuronParams) -> BeliefBatch:
     n, contexts = int(data["n"]), data["context"]
     networks = make_splits(int(contexts.max()) + 1, 1, n, 60, seed=NETWORK_SEED + n)[0]
     episodes, steps = data["taken"].shape
-    features = np.empty((episodes, steps - 1, n, N_FEATURES), dtype=np.float32)
+    features = np.empty((episodes, steps - 1, n, len(FEATURES)), dtype=np.float32)
     weights = np.stack([networks[int(c)].weights for c in contexts]).astype(np.int8)
     for e in range(episodes):
         tracker = BeliefFeatureTracker(n, int(data["target"][e]), params)
