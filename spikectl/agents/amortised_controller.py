@@ -235,11 +235,14 @@ class AmortisedController:
         return self.probabilities[:, 1]
 
     def decide(self, pattern: np.ndarray, step: int, mask: np.ndarray) -> int:
-        """The action on the belief as it stands (:func:`choose_action`); a subclass
-        replaces the rule here."""
+        """The action on the belief as it stands; a subclass replaces the rule here."""
+        return self.rule_action(pattern, step, self.can_land(mask[1:]))
+
+    def rule_action(self, pattern: np.ndarray, step: int, can_land: np.ndarray) -> int:
+        """:func:`choose_action` on the belief, ``can_land`` [n] being :meth:`can_land`'s."""
         ahead = pattern[step + 1 : step + 1 + self.params.min_release_interval_steps]
-        return choose_action(self.excitatory, self.can_land(mask[1:]), ahead.astype(bool),
-                             self.rule, self.rng, self.probe_below)  # fmt: skip
+        return choose_action(self.excitatory, can_land, ahead.astype(bool), self.rule,
+                             self.rng, self.probe_below)  # fmt: skip
 
     def can_land(self, legal: np.ndarray) -> np.ndarray:
         """[n] bool: stimulated now, the neuron spikes and releases onto its targets at

@@ -24,6 +24,7 @@ Shapes in comments: B batch, n neurons, D features, H width.
 
 from __future__ import annotations
 
+import copy
 import os
 from collections.abc import Mapping
 from typing import Any
@@ -32,6 +33,7 @@ import numpy as np
 import torch
 from torch import nn
 
+from spikectl.agents.amortised_belief import AmortisedBelief
 from spikectl.agents.amortised_controller import (
     AmortisedController,
     BeliefWeightsError,
@@ -174,18 +176,20 @@ class BeliefPolicyController(AmortisedController):
 
     def spawn(self, index: int) -> BeliefPolicyController:
         """A copy for sub-environment ``index`` (shared weights, its own belief state)."""
-        import copy
-
         return BeliefPolicyController(copy.copy(self.kernel), self.policy, self.params)
 
-    def decide(self, pattern: np.ndarray, step: int, mask: np.ndarray) -> int:
+    def features(self, pattern: np.ndarray, step: int, mask: np.ndarray) -> np.ndarray:
+        """float32 [n, D] this step's :func:`policy_features` (kept as ``last_features``)."""
         legal = mask[1:]
-        rule_action = super().decide(pattern, step, mask)
-        self.last_features = policy_features(self.probabilities, legal, self.can_land(legal),
+        can_land = self.can_land(legal)
+        self.last_features = policy_features(self.probabilities, legal, can_land,
                                              self.tracker, pattern, step, self.params,
-                                             rule_action)  # fmt: skip
-        scores = np.where(mask, self.policy.scores(self.last_features), -np.inf)  # [n + 1]
-        return int(np.argmax(scores)) + DO_NOTHING
+                                             self.rule_action(pattern, step, can_land))  # fmt: skip
+        return self.last_features
+
+    def decide(self, pattern: np.ndarray, step: int, mask: np.ndarray) -> int:
+        scores = self.policy.scores(self.features(pattern, step, mask))  # [n + 1]
+        return int(np.argmax(np.where(mask, scores, -np.inf))) + DO_NOTHING
 
 
 def is_belief_policy_state(state: Mapping[str, Any]) -> bool:
@@ -203,22 +207,19 @@ def save_belief_policy(belief: nn.Module, net: BeliefPolicyNet, path: str | os.P
     os.replace(partial, path)
 
 
-def load_belief_policy(
-    path: str | os.PathLike, params: NeuronParams | None = None,
-    state: Mapping[str, Any] | None = None,
-) -> BeliefPolicyController:  # fmt: skip
-    """The controller a belief policy's weights file holds (``state``: the file's state
-    dict where it is already read)."""
+def read_belief_policy(
+    path: str | os.PathLike, state: Mapping[str, Any] | None = None
+) -> tuple[AmortisedBelief, BeliefPolicyNet]:
+    """(the belief, the policy net) a belief policy's weights file holds, checked
+    (``state``: the file's state dict where it is already read)."""
     state = read_state_dict(path) if state is None else state
-    if not is_belief_policy_state(state) or not any(
-        isinstance(key, str) and key.startswith("belief.") for key in state
-    ):
+    parts = {prefix: {key[len(prefix):]: value for key, value in state.items()
+                      if isinstance(key, str) and key.startswith(prefix)}
+             for prefix in ("belief.", "policy.")}  # fmt: skip
+    if not parts["belief."] or not parts["policy."]:
         raise BeliefWeightsError(f"{path} does not hold a belief policy's weights (it needs "
                                  "both belief. and policy. tensors)")  # fmt: skip
-    belief = belief_from_state(path, {key[len("belief."):]: value for key, value in state.items()
-                                      if key.startswith("belief.")})  # fmt: skip
-    policy = {key[len("policy."):]: value for key, value in state.items()
-              if key.startswith("policy.")}  # fmt: skip
+    belief, policy = belief_from_state(path, parts["belief."]), parts["policy."]
     first = policy.get("neuron.0.weight")
     if not isinstance(first, torch.Tensor) or first.ndim != 2 \
             or first.shape[1] != N_POLICY_FEATURES:  # fmt: skip
@@ -233,4 +234,12 @@ def load_belief_policy(
                                  ) from None  # fmt: skip
     if not all(bool(torch.isfinite(value).all()) for value in policy.values()):
         raise BeliefWeightsError(f"{path} holds NaN or infinite weights")
-    return BeliefPolicyController(belief, net.eval(), params)
+    return belief, net.eval()
+
+
+def load_belief_policy(
+    path: str | os.PathLike, params: NeuronParams | None = None,
+    state: Mapping[str, Any] | None = None,
+) -> BeliefPolicyController:  # fmt: skip
+    """The controller a belief policy's weights file holds (:func:`read_belief_policy`)."""
+    return BeliefPolicyController(*read_belief_policy(path, state), params)

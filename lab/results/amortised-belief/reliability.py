@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from spikectl import NeuronParams, make_splits
+from spikectl import NeuronParams
 from spikectl.agents.amortised_belief import FEATURES
 from spikectl.agents.amortised_controller import load_belief
 from spikectl.agents.amortised_kernel import BeliefFeatureTracker, target_prior
@@ -37,12 +37,20 @@ from spikectl.training.belief import belief_scores, synapse_probabilities
 from spikectl.training.belief_episodes import BehaviourMix, BeliefBatch, belief_batch
 
 HERE = Path(__file__).resolve().parent
-_spec = importlib.util.spec_from_file_location("measure", HERE / "measure.py")
-measure = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(measure)
+
+
+def script(name: str, path: Path):
+    """A research script of the lab, imported as a module."""
+    spec = importlib.util.spec_from_file_location(name, path)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+measure = script("measure", HERE / "measure.py")
+collect = script("collect", HERE.parent / "belief-policy" / "collect.py")
 
 BINS = np.linspace(0.0, 1.0, 11)
-NETWORK_SEED = 7_001  # lab/results/belief-policy/collect.py's training stream: seed 7001 + n
 
 
 def reliability_rows(probability: np.ndarray, batch: BeliefBatch) -> list[dict]:
@@ -67,7 +75,7 @@ def planner_batch(path: Path, params: NeuronParams) -> BeliefBatch:
     recorded)."""
     data = dict(np.load(path))
     n, contexts = int(data["n"]), data["context"]
-    networks = make_splits(int(contexts.max()) + 1, 1, n, 60, seed=NETWORK_SEED + n)[0]
+    networks = collect.training_networks(n, int(contexts.max()) + 1)
     episodes, steps = data["taken"].shape
     features = np.empty((episodes, steps - 1, n, len(FEATURES)), dtype=np.float32)
     weights = np.stack([networks[int(c)].weights for c in contexts]).astype(np.int8)

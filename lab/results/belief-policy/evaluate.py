@@ -4,41 +4,42 @@ per network to a CSV.
     python lab/results/belief-policy/evaluate.py OUT.csv --split validation \
         --tasks paper n16 n32 --files NAME=FILE.pt [NAME=FILE.pt ...]
 
-``n64`` is the realtime-tradeoff record's set at n = 64 (suite v1's rule at that size,
-``make_splits(100, 100, 64, seed=0, n_val=100)``, its test or validation part), played
-under the suite's protocol. A belief policy's file plays the belief policy, a belief's
-file the amortised controller (its fixed rule), as ``spikectl.load_controller`` reads
-them. Rows: ``controller, task,
-split, context, return, cpu_s`` (cpu_s: the whole set's process CPU seconds, on each row).
-Prints each controller's mean per task.
+``n64`` is the realtime-tradeoff record's test set at n = 64 (suite v1's rule at that
+size), played under the suite's protocol (that record's ``played``). A belief policy's
+file plays the belief policy, a belief's file the amortised controller (its fixed rule),
+as ``spikectl.load_controller`` reads them. Rows: ``controller, task, split, context,
+return, cpu_s`` (cpu_s: the whole set's process CPU seconds, on each row). Prints each
+controller's mean per task.
 """
 
 from __future__ import annotations
 
 import argparse
 import csv
-import time
+import importlib.util
 from pathlib import Path
 
 import numpy as np
 import torch
 
-from spikectl import load_controller, make_splits
-from spikectl.envs.rollout import evaluate_policy
+from spikectl import load_controller
 from spikectl.experiments import suite
+
+_spec = importlib.util.spec_from_file_location(
+    "tradeoff", Path(__file__).resolve().parents[1] / "realtime-tradeoff" / "measure.py")
+tradeoff = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(tradeoff)
 
 
 def play(task: str, split: str, path: str) -> tuple[np.ndarray, float]:
     """(returns [S], CPU seconds) of the controller in ``path`` on a task's split."""
-    if task != "n64":
-        contexts = suite.load_split(task, split, 1)
-        return suite.play(task, split, load_controller(path, contexts=contexts), version=1)
-    _, test, validation = make_splits(100, 100, 64, seed=0, n_val=100)
-    contexts = test if split == "test" else validation
-    started = time.process_time()
-    episodes = evaluate_policy(contexts, load_controller(path, contexts=contexts),
-                               seed=suite.suite_version(1).env_seed)  # fmt: skip
-    return np.asarray(episodes.returns), time.process_time() - started
+    if task == "n64":
+        if split != "test":
+            raise SystemExit("n64 has a test set only (realtime-tradeoff's)")
+        contexts, extensions = tradeoff.test_set(task)
+    else:
+        contexts, extensions = suite.load_split(task, split, 1), suite.task(task, 1).extensions
+    return tradeoff.played(contexts, extensions, load_controller(path, contexts=contexts))
 
 
 def main() -> None:

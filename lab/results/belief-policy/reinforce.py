@@ -33,11 +33,11 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
 from lab.records import write_csv
 from spikectl import NeuronControlEnv
-from spikectl.agents.amortised_controller import read_state_dict
+from spikectl.agents.amortised_kernel import BeliefKernel
 from spikectl.agents.belief_policy import (
     BeliefPolicyController,
     PolicyKernel,
-    load_belief_policy,
+    read_belief_policy,
     save_belief_policy,
 )
 from spikectl.neuron import DO_NOTHING
@@ -61,12 +61,12 @@ class Sampling(BeliefPolicyController):
         self.record: list[tuple[np.ndarray, np.ndarray, int]] = []
 
     def decide(self, pattern, step, mask) -> int:
-        super().decide(pattern, step, mask)  # computes self.last_features
-        scores = np.where(mask, self.policy.scores(self.last_features), -np.inf)
+        features = self.features(pattern, step, mask)
+        scores = np.where(mask, self.policy.scores(features), -np.inf)
         chance = np.exp(scores - scores.max())
         chance /= chance.sum()
         index = int(self.rng.choice(chance.shape[0], p=chance))
-        self.record.append((self.last_features, mask.copy(), index))
+        self.record.append((features, mask.copy(), index))
         return index + DO_NOTHING
 
 
@@ -106,18 +106,8 @@ def main() -> None:
     arguments = parser.parse_args()
     torch.set_num_threads(1)
     torch.manual_seed(arguments.seed)
-    start = load_belief_policy(arguments.start)
-    state = read_state_dict(arguments.start)
-    from spikectl.agents.belief_policy import BeliefPolicyNet
-
-    width = int(state["policy.neuron.0.weight"].shape[0])
-    net = BeliefPolicyNet(width)
-    net.load_state_dict({k[len("policy."):]: v for k, v in state.items()
-                         if k.startswith("policy.")})  # fmt: skip
-    from spikectl.agents.amortised_controller import belief_from_state
-
-    belief = belief_from_state(arguments.start, {k[len("belief."):]: v for k, v in state.items()
-                                                 if k.startswith("belief.")})  # fmt: skip
+    belief, net = read_belief_policy(arguments.start)
+    kernel = BeliefKernel(belief)
     envs = {n: NeuronControlEnv(contexts=collect.training_networks(n, NETWORKS_PER_SIZE))
             for n in arguments.sizes}  # fmt: skip
     optimiser = torch.optim.Adam(net.parameters(), lr=arguments.learning_rate)
@@ -127,7 +117,7 @@ def main() -> None:
         n = arguments.sizes[update % len(arguments.sizes)]
         first = ((update // len(arguments.sizes)) * (arguments.batch // arguments.group)
                  + arguments.seed * 2_000) % (NETWORKS_PER_SIZE - arguments.batch)  # fmt: skip
-        controller = Sampling(start.kernel, PolicyKernel(net.eval()), rng)
+        controller = Sampling(kernel, PolicyKernel(net.eval()), rng)
         features, masks, chosen, rewards = play_batch(envs[n], controller, first,
                                                       arguments.batch, arguments.group)  # fmt: skip
         to_go = np.cumsum(rewards[:, ::-1], axis=1)[:, ::-1]  # [B, T] reward still to come
