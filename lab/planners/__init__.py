@@ -4,6 +4,7 @@ scripts still reproduce their rows (lab/planners/README.md lists each with its
 measurement). Importing this package registers the ``"discrete"`` estimator in
 :data:`spikectl.planning.ESTIMATORS`."""
 
+from lab.planners.target_paths import TargetPathsOnly, target_ancestors
 from lab.planners.variants import (
     PlanUnderRelease,
     ReleaseChanceEvidence,
@@ -14,4 +15,11 @@ from spikectl.planning import ESTIMATORS
 
 ESTIMATORS.register("discrete", discrete)
 
-__all__ = ["PlanUnderRelease", "ReleaseChanceEvidence", "SampledHypotheses", "discrete"]
+__all__ = [
+    "PlanUnderRelease",
+    "ReleaseChanceEvidence",
+    "SampledHypotheses",
+    "TargetPathsOnly",
+    "discrete",
+    "target_ancestors",
+]

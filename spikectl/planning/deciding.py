@@ -17,11 +17,6 @@ known excitatory input with the highest release chance is stimulated even before
 vesicles are back by the paper's rule (:meth:`DecisionSettings.under_release`; +0.008
 network by network on the ``stochastic`` sets, docs/results/unrested-inputs).
 
-With ``target_paths_only`` the beam expands only the stimulations of neurons that have a
-path of planned synapses to the target (and the target itself): any other stimulation
-changes no planned reward now or later, so its children only take beam slots from states
-that can (the real-time form, :mod:`~spikectl.planning.named`).
-
 Under loop latency L (docs/extensions.md) an action chosen at step s lands at s + L,
 after the L actions already in flight: the rule decides for that step, from the state
 the estimate predicts there (:meth:`DecisionSettings.state_met`), as the oracle does with
@@ -41,20 +36,6 @@ from spikectl.planning.qmdp import QMDPSettings
 
 DEFAULT_HORIZON = 20
 """Steps each re-plan looks ahead."""
-
-
-def target_ancestors(weights: np.ndarray, target: int) -> np.ndarray:
-    """bool [m]: the neurons with a path of nonzero ``weights`` [m (pre), m (post)] to
-    ``target``, the target included: the only ones whose stimulation can change its
-    spikes in the planned network."""
-    linked = np.asarray(weights) != 0  # [pre, post]
-    reaches = np.zeros(linked.shape[0], dtype=bool)
-    reaches[target] = True
-    frontier = reaches.copy()
-    while frontier.any():  # one synapse further back each pass
-        frontier = linked[:, frontier].any(axis=1) & ~reaches
-        reaches |= frontier
-    return reaches
 
 
 @dataclass(frozen=True)
@@ -89,15 +70,11 @@ class DecisionSettings:
         horizon: steps each re-plan looks ahead; None: to the end of the episode.
         gamble: where the controller would probe, choose by expected return over
             networks drawn from the estimate (QMDP) with these settings; None: probe.
-        target_paths_only: plan only the stimulations that can reach the target
-            through the planned synapses (:func:`target_ancestors`); False: every
-            legal one.
     """
 
     width: int = 32
     horizon: int | None = DEFAULT_HORIZON
     gamble: QMDPSettings | None = None
-    target_paths_only: bool = False
 
     def __post_init__(self) -> None:
         if isinstance(self.width, bool) or not isinstance(self.width, (int, np.integer)) \
@@ -110,8 +87,6 @@ class DecisionSettings:
             raise ValueError(f"horizon must be an integer >= 1 or None, got {self.horizon!r}")
         if self.gamble is not None and not isinstance(self.gamble, QMDPSettings):
             raise TypeError(f"gamble must be a QMDPSettings or None, got {self.gamble!r}")
-        if not isinstance(self.target_paths_only, (bool, np.bool_)):
-            raise TypeError(f"target_paths_only must be a bool, got {self.target_paths_only!r}")
 
     @property
     def replan_margin(self) -> int:
@@ -126,14 +101,9 @@ class DecisionSettings:
 
     def planning_model(self, policy, weights: np.ndarray, situation: Situation) -> PlanningModel:
         """The network the beam search plans on: the planning weights (``policy``:
-        the controller, for its neuron model and planned neurons), and the actions it
-        expands (with ``target_paths_only``: doing nothing and the target's ancestors)."""
-        actions = situation.actions
-        if self.target_paths_only:
-            reaches = target_ancestors(weights, situation.target)
-            actions = actions[(actions == DO_NOTHING) | reaches[np.maximum(actions, 0)]]
-        return PlanningModel(weights[None].copy(), situation.target, actions, policy.params,
-                             policy.planned_neurons())  # fmt: skip
+        the controller, for its neuron model and planned neurons)."""
+        return PlanningModel(weights[None].copy(), situation.target, situation.actions,
+                             policy.params, policy.planned_neurons())  # fmt: skip
 
     def state_met(self, policy, weights: np.ndarray) -> SimulatorState:
         """The planning state an action chosen now meets when it lands: the present one

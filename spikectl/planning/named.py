@@ -39,13 +39,6 @@ cover every step of training, so every decision must be fast): the same but for 
 the particles, replaced from :data:`LARGE_FROM_NEURONS` on by :data:`KNOWN_SD_FAST_LARGE`
 alone (``-16-fast``). Below that size the fast form is the named composition itself
 (the paper's for the situations of :data:`FAST_AS_PAPER`).
-
-The ``realtime`` forms (``NAME-realtime``, ``NAME-16-realtime``; the registered
-controller ``identify-and-plan-realtime``) are the fast forms with :data:`REALTIME` on
-top: the beam expands only the stimulations that can reach the target, which leaves the
-plans' rewards as they were and cuts a re-plan's work where few neurons can (chosen on
-the ``paper``, ``n16`` and ``n32`` validation sets, the research record
-docs/results/realtime-iap).
 """
 
 from __future__ import annotations
@@ -134,8 +127,6 @@ LARGEST = {**LARGE, "kind": "particles"}
 """The overlay of the paper's situation from :data:`PARTICLES_FROM_NEURONS` on (``-32``)."""
 FAST_LARGE = {"known_sd": KNOWN_SD_FAST_LARGE}
 """The fast forms' overlay from :data:`LARGE_FROM_NEURONS` neurons on (``-16-fast``)."""
-REALTIME = {"target_paths_only": True}
-"""The real-time forms' overlay on the fast forms (``-realtime``, ``-16-realtime``)."""
 
 
 def situation(extensions: Extensions | None) -> str:
@@ -154,21 +145,19 @@ def _all_set(extensions: Extensions, fields: str | tuple[str, ...]) -> bool:
 
 
 def composition_name(extensions: Extensions | None, n_neurons: int | None = None,
-                     fast: bool = False, realtime: bool = False) -> str:  # fmt: skip
+                     fast: bool = False) -> str:  # fmt: skip
     """The name of the composition the named controller plays on an environment with
-    ``extensions`` and ``n_neurons`` observed neurons (``fast``: the teacher's form;
-    ``realtime``: the fast form with :data:`REALTIME`): the situation's, with the size's
-    suffix (``-16``, ``-16-fast``, ``-32``) and ``-realtime``."""
+    ``extensions`` and ``n_neurons`` observed neurons (``fast``: the teacher's form):
+    the situation's, with the size's suffix (``-16``, ``-16-fast``, ``-32``)."""
     name = situation(extensions)
-    fast = fast or realtime
     if fast and name in FAST_AS_PAPER:
         name = "paper"
     if fast and name in FAST_AS_EXACT_SPIKES:
         name = "spikes"
     if n_neurons is None or n_neurons < LARGE_FROM_NEURONS:
-        return f"{name}-realtime" if realtime else name
+        return name
     if fast:
-        return f"{name}-16-realtime" if realtime else f"{name}-16-fast"
+        return f"{name}-16-fast"
     if name == "paper" and n_neurons >= PARTICLES_FROM_NEURONS:
         return "paper-32"
     return f"{name}-16"
@@ -176,32 +165,29 @@ def composition_name(extensions: Extensions | None, n_neurons: int | None = None
 
 def composition(name: str) -> Composition:
     """The declared composition ``name``: a situation's (:data:`COMPOSITIONS`), or one
-    with a size's overlay (``NAME-16``, ``NAME-16-fast``, ``paper-32``) or the real-time
-    one (``NAME-realtime``, ``NAME-16-realtime``)."""
+    with a size's overlay (``NAME-16``, ``NAME-16-fast``, ``paper-32``)."""
     base, _, size = name.partition("-")
-    overlays = {"": {}, "16": LARGE, "16-fast": FAST_LARGE, "32": LARGEST,
-                "realtime": REALTIME, "16-realtime": {**FAST_LARGE, **REALTIME}}  # fmt: skip
+    overlays = {"": {}, "16": LARGE, "16-fast": FAST_LARGE, "32": LARGEST}
     if base not in COMPOSITIONS or size not in overlays or (size == "32" and base != "paper"):
         raise ValueError(f"unknown composition {name!r}; the named ones are "
-                         f"{', '.join(COMPOSITIONS)}, each also -16, -16-fast, -realtime "
-                         "and -16-realtime, and paper-32")  # fmt: skip
+                         f"{', '.join(COMPOSITIONS)}, each also -16 and -16-fast, "
+                         "and paper-32")  # fmt: skip
     return _overlaid(COMPOSITIONS[base], name, overlays[size])
 
 
 def named_composition(extensions: Extensions | None, n_neurons: int | None = None,
-                      fast: bool = False, realtime: bool = False) -> Composition:  # fmt: skip
+                      fast: bool = False) -> Composition:  # fmt: skip
     """What the named controller ``identify-and-plan`` plays on an environment with
     ``extensions`` and ``n_neurons`` observed neurons (``spikectl benchmark``,
     ``spikectl realtime``, ``spikectl.load_controller``); ``fast=True``: the form the
-    guided learner's teacher plays; ``realtime=True``: what
-    ``identify-and-plan-realtime`` plays."""
-    return composition(composition_name(extensions, n_neurons, fast, realtime))
+    guided learner's teacher plays."""
+    return composition(composition_name(extensions, n_neurons, fast))
 
 
 def _overlaid(base: Composition, name: str, overlay: dict[str, Any]) -> Composition:
     """``base`` named ``name`` with an overlay's estimator (``kind``, ``known_sd``) and
-    decision (``gamble``, ``target_paths_only``) settings."""
+    decision (``gamble``) settings."""
     estimator = {key: overlay[key] for key in ("kind", "known_sd") if key in overlay}
-    decision = {key: overlay[key] for key in ("gamble", "target_paths_only") if key in overlay}
+    decision = {key: overlay[key] for key in ("gamble",) if key in overlay}
     return base.but(name, estimator=dataclasses.replace(base.estimator, **estimator),
                     decision=dataclasses.replace(base.decision, **decision))  # fmt: skip

@@ -97,12 +97,6 @@ def identify_and_plan(played: Played, seed: int) -> Controller:
     return IdentifyAndPlan(played.params, composition, extensions=played.extensions)
 
 
-def identify_and_plan_realtime(played: Played, seed: int) -> Controller:
-    n_neurons = None if played.contexts is None else played.contexts.n_observed
-    composition = named_composition(played.extensions, n_neurons, realtime=True)
-    return IdentifyAndPlan(played.params, composition, extensions=played.extensions)
-
-
 def oracle(played: Played, seed: int) -> Controller:
     return OraclePlanner(played.contexts, played.params, DEFAULT_ORACLE_WIDTH,
                          played.extensions.allow_target_action,
@@ -122,9 +116,6 @@ register_controller("oracle", oracle, "plans with the played network known (the 
                     "normalised score)", privileged=True)  # fmt: skip
 register_controller("witness", witness, "replays each context's witness sequence (return 1)",
                     privileged=True)  # fmt: skip
-register_controller("identify-and-plan-realtime", identify_and_plan_realtime,
-                    "identify-and-plan's real-time form: the fast form, planning only the "
-                    "stimulations that can reach the target")  # fmt: skip
 
 
 def controller_sources() -> str:
