@@ -220,19 +220,11 @@ def _search(
             for h in range(k):
                 total += depolarisation[h, c]
             ranking[c] += _TIE_BREAK * (total / k)
-        # The first `width` distinct states in ranking order (duplicates merged): the
-        # candidates popped from a heap, highest ranking first and ties to the lower
-        # child index (the order of a stable sort), so that only the popped ones are
-        # ordered: a step keeps `width` of `width` x A children.
-        for i in range(count // 2 - 1, -1, -1):
-            _sift_down(candidates, i, count, ranking)
+        # The first `width` distinct states in ranking order (duplicates merged).
+        order = np.argsort(-ranking[candidates[:count]], kind="mergesort")
         found = 0
-        left = count
-        while left > 0:
-            c = candidates[0]
-            left -= 1
-            candidates[0] = candidates[left]
-            _sift_down(candidates, 0, left, ranking)
+        for index in order:
+            c = candidates[index]
             e, a = c // n_actions, actions[c % n_actions]
             signature = none_hash[e]
             if a != DO_NOTHING:
@@ -309,26 +301,6 @@ def _term(position, key, multipliers):
     return (u * int(multipliers[position])) & _HASH_MASK
 
 
-def _first(a, b, ranking):
-    """Whether child a comes before child b: the higher ranking, then the lower index."""
-    return ranking[a] > ranking[b] or (ranking[a] == ranking[b] and a < b)
-
-
-def _sift_down(heap, i, size, ranking):
-    """Restore the heap order (the first child by :func:`_first` on top) of heap[:size]
-    below position i."""
-    while True:
-        top, left = i, 2 * i + 1
-        if left < size and _first(heap[left], heap[top], ranking):
-            top = left
-        if left + 1 < size and _first(heap[left + 1], heap[top], ranking):
-            top = left + 1
-        if top == i:
-            return
-        heap[i], heap[top] = heap[top], heap[i]
-        i = top
-
-
 def _same_child(c, d, actions, none_key, act_key):
     """Whether children c and d have equal :func:`state_signature_rows` rows: only the
     stimulated neurons can differ between children of one entry."""
@@ -349,7 +321,5 @@ def _same_child(c, d, actions, none_key, act_key):
 
 _signature = numba.njit(inline="always")(_signature)
 _term = numba.njit(inline="always")(_term)
-_first = numba.njit(inline="always")(_first)
-_sift_down = numba.njit(cache=True, nogil=True)(_sift_down)
 _same_child = numba.njit(cache=True, nogil=True)(_same_child)
 _search = numba.njit(cache=True, nogil=True)(_search)
