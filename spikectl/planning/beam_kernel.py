@@ -191,7 +191,10 @@ def _search(
                     if a == target:
                         spiked[h, c] = spiked_a
                         depolarisation[h, c] = min(max(v_a - resting, -20.0), 20.0)
-                    if look_ahead and (a == target or x_a != x[a]):
+                    # A new release changes the target's next input only through a
+                    # synapse onto it; without one the sum adds an exact 0 and the
+                    # do-nothing sibling's prediction stands, bit for bit.
+                    if look_ahead and (a == target or (x_a != x[a] and w[a, target] != 0)):
                         kept_a = v[a], r[a], since[a], x[a]
                         v[a], r[a], since[a], x[a] = v_a, r_a, since_a, x_a
                         committed[h, c] = predict_neuron(w, DO_NOTHING, v, r, x, model, target,
