@@ -269,6 +269,46 @@ def test_portable_spd_inverse_of_a_posterior_precision_is_the_dense_one_bit_for_
         expected = np.stack([_dense_spd_inverse(matrix) for matrix in precision])
         assert portable.spd_inverse(precision).tobytes() == expected.tobytes()
 
+def test_gaussian_posterior_is_spd_inverse_then_matmul_bit_for_bit():
+    """The fused posterior the Gaussian estimate reads gives the bits of its parts:
+    portable.spd_inverse, portable.matmul of the moments, the diagonal's square root."""
+    rng = np.random.default_rng(6)
+    for _ in range(20):
+        n = int(rng.integers(1, 12))
+        precision = np.zeros((n, n, n))
+        precision[:, np.arange(n), np.arange(n)] = rng.uniform(1.0, 10.0, (n, n))
+        released = (rng.random((5, n)) < 0.4) * 1.0
+        moment = rng.normal(size=(n, n))
+        for row in released:
+            precision += np.outer(row, row) * 1e4
+        covariance = portable.spd_inverse(precision)
+        mean, sd = portable.gaussian_posterior(precision, moment)
+        assert mean.tobytes() == portable.matmul(covariance, moment[:, :, None])[:, :, 0].tobytes()
+        assert sd.tobytes() == np.sqrt(np.diagonal(covariance, axis1=1, axis2=2)).tobytes()
+    with pytest.raises(ValueError, match="not symmetric positive definite"):
+        portable.gaussian_posterior(-np.eye(2)[None], np.zeros((1, 2)))
+    with pytest.raises(ValueError, match="precisions"):
+        portable.gaussian_posterior(np.eye(2)[None], np.zeros((1, 3)))
+
+
+def test_add_evidence_is_numpys_update_bit_for_bit():
+    from spikectl.planning.identify import add_evidence
+
+    rng = np.random.default_rng(7)
+    for _ in range(20):
+        n, m = int(rng.integers(1, 10)), int(rng.integers(1, 20))
+        precision, moment = rng.normal(size=(n, m, m)), rng.normal(size=(n, m))
+        observed = rng.random(n) < 0.6
+        regressors = rng.random(m) * (rng.random(m) < 0.5)
+        residual, weight = rng.normal(size=n), float(rng.uniform(1.0, 1e4))
+        expected_precision, expected_moment = precision.copy(), moment.copy()
+        expected_precision[observed] += np.outer(regressors, regressors) * weight
+        expected_moment[observed] += residual[observed, None] * regressors[None, :] * weight
+        add_evidence(precision, moment, observed, regressors, residual, weight)
+        assert precision.tobytes() == expected_precision.tobytes()
+        assert moment.tobytes() == expected_moment.tobytes()
+
+
 # The committed suite tables are the golden record of every CPU kind: the training-free
 # controllers' returns no longer depend on the CPU, so a few networks played again here
 # must give the committed per-network returns. Only tasks whose environment draws nothing

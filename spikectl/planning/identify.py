@@ -25,6 +25,7 @@ from __future__ import annotations
 
 from math import erfc as _erfc
 
+import numba
 import numpy as np
 
 from spikectl.contexts.generation import EXCITATORY_PROBABILITY, connection_probability
@@ -100,9 +101,8 @@ class ConnectivityEstimate:
         previous step, ``residual`` [n] in units of w_in, ``observed`` [n] bool columns."""
         if not observed.any() or not np.any(released):
             return
-        weight = self._noise_precision
-        self.precision[observed] += np.outer(released, released) * weight  # [n, n]
-        self.moment[observed] += residual[observed, None] * released[None, :] * weight
+        add_evidence(self.precision, self.moment, observed, released, residual,
+                     self._noise_precision)  # fmt: skip
         self.observations += int(observed.sum())
         self.version += 1
         self._cache = None
@@ -112,9 +112,7 @@ class ConnectivityEstimate:
     def posterior(self) -> tuple[np.ndarray, np.ndarray]:
         """(mean, standard deviation) of G, both [n (pre), n (post)]."""
         if self._cache is None:
-            covariance = portable.spd_inverse(self.precision)  # [post, pre, pre]
-            mean = portable.matmul(covariance, self.moment[:, :, None])[:, :, 0]  # [post, pre]
-            sd = np.sqrt(np.diagonal(covariance, axis1=1, axis2=2))  # [post, pre]
+            mean, sd = portable.gaussian_posterior(self.precision, self.moment)  # [post, pre]
             self._cache = (mean.T.copy(), sd.T.copy())
         return self._cache
 
@@ -192,6 +190,35 @@ class ConnectivityEstimate:
         weights, known = self.weights(known_sd)
         prior = self.prior_variance[:, target] * EXCITATORY_PROBABILITY
         return np.where(known[:, target], (weights[:, target] > 0).astype(float), prior)
+
+
+def _add_evidence(precision, moment, observed, regressors, residual, weight):
+    """precision[j] += outer(regressors, regressors) * weight and moment[j] += residual[j]
+    * regressors * weight for each observed column j, in place: NumPy's products in
+    NumPy's order (the same bits), without its temporaries (called at every step with a
+    release)."""
+    size = regressors.shape[0]
+    for j in range(precision.shape[0]):
+        if not observed[j]:
+            continue
+        for a in range(size):
+            for b in range(size):
+                precision[j, a, b] += regressors[a] * regressors[b] * weight
+            moment[j, a] += residual[j] * regressors[a] * weight
+
+
+_add_evidence = numba.njit(cache=True, nogil=True)(_add_evidence)
+
+
+def add_evidence(precision: np.ndarray, moment: np.ndarray, observed: np.ndarray,
+                 regressors: np.ndarray, residual: np.ndarray, weight: float) -> None:  # fmt: skip
+    """One step's evidence on the Gaussian columns, in place: for each ``observed`` [n]
+    column j, ``precision[j]`` [m, m] += the regressors' [m] outer product times
+    ``weight`` (the noise precision), ``moment[j]`` [m] += ``residual[j]`` times the
+    regressors times ``weight``."""
+    _add_evidence(precision, moment, np.ascontiguousarray(observed, dtype=np.bool_),
+                  np.ascontiguousarray(regressors, dtype=np.float64),
+                  np.ascontiguousarray(residual, dtype=np.float64), float(weight))  # fmt: skip
 
 
 class KnownConnectivity:

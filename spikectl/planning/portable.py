@@ -236,3 +236,39 @@ def spd_inverse(matrices) -> np.ndarray:
     if not _spd_inverse(flat, out):
         raise ValueError("spd_inverse: a matrix is not symmetric positive definite")
     return out.reshape(matrices.shape)
+
+
+@numba.njit(**_JIT)
+def _gaussian_posterior(precision: np.ndarray, moment: np.ndarray, covariance: np.ndarray,
+                        mean: np.ndarray, sd: np.ndarray) -> bool:  # fmt: skip
+    """covariance[b] = precision[b]^-1 (:func:`_spd_inverse`), mean[b] = covariance[b] @
+    moment[b] summed from k = 0 up (as :func:`matmul`), sd[b] = the square root of its
+    diagonal; False where a precision is not positive definite."""
+    if not _spd_inverse(precision, covariance):
+        return False
+    for batch in range(precision.shape[0]):
+        for row in range(precision.shape[1]):
+            total = 0.0
+            for k in range(precision.shape[2]):
+                total += covariance[batch, row, k] * moment[batch, k]
+            mean[batch, row] = total
+            sd[batch, row] = math.sqrt(covariance[batch, row, row])
+    return True
+
+
+def gaussian_posterior(precision: np.ndarray, moment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(mean, standard deviation), each [b, m], of Gaussians with precisions [b, m, m] and
+    moments (precision @ mean) [b, m]: ``matmul(spd_inverse(precision), moment)`` and the
+    square root of the inverse's diagonal in one compiled call, the same bits. A precision
+    that is not positive definite is a ValueError."""
+    precision = np.ascontiguousarray(precision, dtype=np.float64)
+    moment = np.ascontiguousarray(moment, dtype=np.float64)
+    if precision.ndim != 3 or precision.shape[1] != precision.shape[2] \
+            or moment.shape != precision.shape[:2]:  # fmt: skip
+        raise ValueError(f"gaussian_posterior needs precisions [b, m, m] and moments [b, m], "
+                         f"got {precision.shape} and {moment.shape}")  # fmt: skip
+    covariance = np.empty_like(precision)
+    mean, sd = np.empty(moment.shape), np.empty(moment.shape)
+    if not _gaussian_posterior(precision, moment, covariance, mean, sd):
+        raise ValueError("spd_inverse: a matrix is not symmetric positive definite")
+    return mean, sd

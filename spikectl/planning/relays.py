@@ -33,7 +33,7 @@ from spikectl.neuron.kernel import SINCE_RELEASE_CAP
 from spikectl.neuron.params import NeuronParams
 from spikectl.neuron.simulator import SimulatorState
 from spikectl.planning import portable
-from spikectl.planning.identify import ConnectivityEstimate
+from spikectl.planning.identify import ConnectivityEstimate, add_evidence
 
 RELAY_PRIOR_VARIANCE = 0.02
 """The prior variance of each relay weight L[i, j] (in units of w_in squared), chosen on
@@ -72,9 +72,8 @@ class RelayConnectivityEstimate(ConnectivityEstimate):
         self._released_before = np.asarray(released, dtype=np.float64).copy()
         if not observed.any() or not regressors.any():
             return
-        weight = self._noise_precision
-        self.precision[observed] += np.outer(regressors, regressors) * weight  # [2n, 2n]
-        self.moment[observed] += residual[observed, None] * regressors[None, :] * weight
+        add_evidence(self.precision, self.moment, observed, regressors, residual,
+                     self._noise_precision)  # [2n, 2n], [2n] per column
         self.observations += int(observed.sum())
         self.version += 1
         self._cache = None
