@@ -39,6 +39,10 @@ cover every step of training, so every decision must be fast): the same but for 
 the particles, replaced from :data:`LARGE_FROM_NEURONS` on by :data:`KNOWN_SD_FAST_LARGE`
 alone (``-16-fast``). Below that size the fast form is the named composition itself
 (the paper's for the situations of :data:`FAST_AS_PAPER`).
+
+The ``realtime`` forms (``NAME-realtime``, ``NAME-16-realtime``; the registered controller
+``identify-and-plan-realtime``) are the fast forms re-planning at beam width
+:data:`REALTIME_WIDTH`: what a rig stepping at 1 kHz can run at n = 8 and 16.
 """
 
 from __future__ import annotations
@@ -75,6 +79,11 @@ KNOWN_SD_STOCHASTIC_RELEASE = 0.4
 """``known_sd`` (w_in) under stochastic release (the ``stochastic`` validation set)."""
 KNOWN_SD_BACKGROUND = 0.35
 """``known_sd`` (w_in) under background input (the ``background`` validation set)."""
+
+REALTIME_WIDTH = 12
+"""Beam width of the real-time forms: on the ``paper`` and ``n16`` validation sets widths
+12 to 32 score the same within noise, and 12 is the widest whose decisions stay under
+1 ms at the 99th percentile at n = 16 (the research record docs/results/realtime-iap)."""
 
 FAST_AS_PAPER = ("chr2",)
 """Situations whose fast form (the guided learner's teacher) is the paper's composition:
@@ -127,6 +136,8 @@ LARGEST = {**LARGE, "kind": "particles"}
 """The overlay of the paper's situation from :data:`PARTICLES_FROM_NEURONS` on (``-32``)."""
 FAST_LARGE = {"known_sd": KNOWN_SD_FAST_LARGE}
 """The fast forms' overlay from :data:`LARGE_FROM_NEURONS` neurons on (``-16-fast``)."""
+REALTIME = {"width": REALTIME_WIDTH}
+"""The real-time forms' overlay on the fast forms (``-realtime``, ``-16-realtime``)."""
 
 
 def situation(extensions: Extensions | None) -> str:
@@ -145,19 +156,21 @@ def _all_set(extensions: Extensions, fields: str | tuple[str, ...]) -> bool:
 
 
 def composition_name(extensions: Extensions | None, n_neurons: int | None = None,
-                     fast: bool = False) -> str:  # fmt: skip
+                     fast: bool = False, realtime: bool = False) -> str:  # fmt: skip
     """The name of the composition the named controller plays on an environment with
-    ``extensions`` and ``n_neurons`` observed neurons (``fast``: the teacher's form):
-    the situation's, with the size's suffix (``-16``, ``-16-fast``, ``-32``)."""
+    ``extensions`` and ``n_neurons`` observed neurons (``fast``: the teacher's form;
+    ``realtime``: the fast form at :data:`REALTIME_WIDTH`): the situation's, with the
+    size's suffix (``-16``, ``-16-fast``, ``-32``) or ``-realtime``."""
     name = situation(extensions)
+    fast = fast or realtime
     if fast and name in FAST_AS_PAPER:
         name = "paper"
     if fast and name in FAST_AS_EXACT_SPIKES:
         name = "spikes"
     if n_neurons is None or n_neurons < LARGE_FROM_NEURONS:
-        return name
+        return f"{name}-realtime" if realtime else name
     if fast:
-        return f"{name}-16-fast"
+        return f"{name}-16-realtime" if realtime else f"{name}-16-fast"
     if name == "paper" and n_neurons >= PARTICLES_FROM_NEURONS:
         return "paper-32"
     return f"{name}-16"
@@ -165,29 +178,32 @@ def composition_name(extensions: Extensions | None, n_neurons: int | None = None
 
 def composition(name: str) -> Composition:
     """The declared composition ``name``: a situation's (:data:`COMPOSITIONS`), or one
-    with a size's overlay (``NAME-16``, ``NAME-16-fast``, ``paper-32``)."""
+    with a size's overlay (``NAME-16``, ``NAME-16-fast``, ``paper-32``) or a real-time
+    form's (``NAME-realtime``, ``NAME-16-realtime``)."""
     base, _, size = name.partition("-")
-    overlays = {"": {}, "16": LARGE, "16-fast": FAST_LARGE, "32": LARGEST}
+    overlays = {"": {}, "16": LARGE, "16-fast": FAST_LARGE, "32": LARGEST,
+                "realtime": REALTIME, "16-realtime": {**FAST_LARGE, **REALTIME}}  # fmt: skip
     if base not in COMPOSITIONS or size not in overlays or (size == "32" and base != "paper"):
         raise ValueError(f"unknown composition {name!r}; the named ones are "
-                         f"{', '.join(COMPOSITIONS)}, each also -16 and -16-fast, "
-                         "and paper-32")  # fmt: skip
+                         f"{', '.join(COMPOSITIONS)}, each also -16, -16-fast, -realtime "
+                         "and -16-realtime, and paper-32")  # fmt: skip
     return _overlaid(COMPOSITIONS[base], name, overlays[size])
 
 
 def named_composition(extensions: Extensions | None, n_neurons: int | None = None,
-                      fast: bool = False) -> Composition:  # fmt: skip
+                      fast: bool = False, realtime: bool = False) -> Composition:  # fmt: skip
     """What the named controller ``identify-and-plan`` plays on an environment with
     ``extensions`` and ``n_neurons`` observed neurons (``spikectl benchmark``,
     ``spikectl realtime``, ``spikectl.load_controller``); ``fast=True``: the form the
-    guided learner's teacher plays."""
-    return composition(composition_name(extensions, n_neurons, fast))
+    guided learner's teacher plays; ``realtime=True``: what
+    ``identify-and-plan-realtime`` plays."""
+    return composition(composition_name(extensions, n_neurons, fast, realtime))
 
 
 def _overlaid(base: Composition, name: str, overlay: dict[str, Any]) -> Composition:
     """``base`` named ``name`` with an overlay's estimator (``kind``, ``known_sd``) and
-    decision (``gamble``) settings."""
+    decision (``gamble``, ``width``) settings."""
     estimator = {key: overlay[key] for key in ("kind", "known_sd") if key in overlay}
-    decision = {key: overlay[key] for key in ("gamble",) if key in overlay}
+    decision = {key: overlay[key] for key in ("gamble", "width") if key in overlay}
     return base.but(name, estimator=dataclasses.replace(base.estimator, **estimator),
                     decision=dataclasses.replace(base.decision, **decision))  # fmt: skip

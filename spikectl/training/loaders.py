@@ -97,6 +97,12 @@ def identify_and_plan(played: Played, seed: int) -> Controller:
     return IdentifyAndPlan(played.params, composition, extensions=played.extensions)
 
 
+def identify_and_plan_realtime(played: Played, seed: int) -> Controller:
+    n_neurons = None if played.contexts is None else played.contexts.n_observed
+    composition = named_composition(played.extensions, n_neurons, realtime=True)
+    return IdentifyAndPlan(played.params, composition, extensions=played.extensions)
+
+
 def oracle(played: Played, seed: int) -> Controller:
     return OraclePlanner(played.contexts, played.params, DEFAULT_ORACLE_WIDTH,
                          played.extensions.allow_target_action,
@@ -116,6 +122,9 @@ register_controller("oracle", oracle, "plans with the played network known (the 
                     "normalised score)", privileged=True)  # fmt: skip
 register_controller("witness", witness, "replays each context's witness sequence (return 1)",
                     privileged=True)  # fmt: skip
+register_controller("identify-and-plan-realtime", identify_and_plan_realtime,
+                    "identify-and-plan's real-time form: its fast form re-planning at a "
+                    "narrower beam")  # fmt: skip
 
 
 def controller_sources() -> str:
