@@ -128,11 +128,9 @@ class ConnectivityEstimate:
         if cached is not None:
             return cached
         mean, sd = self.posterior()
-        known = sd < known_sd
-        signs = np.where(known, np.clip(np.rint(mean), -1, 1), 0.0)
-        row_sign = np.sign(signs.sum(axis=1, keepdims=True))  # [n, 1]
-        signs = np.where((row_sign != 0) & (signs != row_sign), 0.0, signs)
-        result = self._weights[known_sd] = (signs.astype(np.int8), known)
+        signs, known = np.empty(mean.shape, dtype=np.int8), np.empty(mean.shape, dtype=bool)
+        _planned_signs(mean, sd, float(known_sd), signs, known)
+        result = self._weights[known_sd] = (signs, known)
         return result
 
     def sample(
@@ -190,6 +188,31 @@ class ConnectivityEstimate:
         weights, known = self.weights(known_sd)
         prior = self.prior_variance[:, target] * EXCITATORY_PROBABILITY
         return np.where(known[:, target], (weights[:, target] > 0).astype(float), prior)
+
+
+def _planned_signs(mean, sd, known_sd, signs, known):
+    """:meth:`ConnectivityEstimate.weights` into ``signs`` (int8) and ``known`` (bool),
+    each [n, n]: known where sd < known_sd, there the rounded mean clipped to [-1, 1];
+    then per row (Dale's law) the entries against the sign of the row's sum dropped.
+    Every step is exact (comparisons, rounding, sums of -1, 0 and 1)."""
+    rows, columns = mean.shape
+    for i in range(rows):
+        total = 0
+        for j in range(columns):
+            known[i, j] = sd[i, j] < known_sd
+            value = 0
+            if known[i, j]:
+                value = int(min(max(np.rint(mean[i, j]), -1.0), 1.0))
+            signs[i, j] = value
+            total += value
+        row_sign = (total > 0) - (total < 0)
+        if row_sign != 0:
+            for j in range(columns):
+                if signs[i, j] != row_sign:
+                    signs[i, j] = 0
+
+
+_planned_signs = numba.njit(cache=True, nogil=True)(_planned_signs)
 
 
 def _add_evidence(precision, moment, observed, regressors, residual, weight):
