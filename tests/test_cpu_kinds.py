@@ -309,6 +309,28 @@ def test_add_evidence_is_numpys_update_bit_for_bit():
         assert moment.tobytes() == expected_moment.tobytes()
 
 
+def test_planned_signs_are_the_rounded_known_means_under_dales_law():
+    """ConnectivityEstimate.weights against its definition in NumPy, on random posteriors
+    (means at the rounding's ties included)."""
+    from spikectl.planning.identify import ConnectivityEstimate
+
+    rng = np.random.default_rng(8)
+    for _ in range(200):
+        n = int(rng.integers(1, 17))
+        mean = rng.normal(scale=rng.uniform(0.1, 2.0), size=(n, n))
+        mean[rng.random((n, n)) < 0.2] = rng.choice([-1.5, -0.5, 0.5, 1.5])
+        sd = rng.uniform(0.0, 0.5, (n, n))
+        estimate = ConnectivityEstimate(n, 0.01)
+        estimate._cache = (mean, sd)  # the posterior the weights are read from
+        known = sd < 0.3
+        expected = np.where(known, np.clip(np.rint(mean), -1, 1), 0.0)
+        row_sign = np.sign(expected.sum(axis=1, keepdims=True))
+        expected = np.where((row_sign != 0) & (expected != row_sign), 0.0, expected)
+        signs, planned_known = estimate.weights(0.3)
+        assert signs.dtype == np.int8 and np.array_equal(signs, expected)
+        assert np.array_equal(planned_known, known)
+
+
 # The committed suite tables are the golden record of every CPU kind: the training-free
 # controllers' returns no longer depend on the CPU, so a few networks played again here
 # must give the committed per-network returns. Only tasks whose environment draws nothing
