@@ -82,8 +82,9 @@ KNOWN_SD_BACKGROUND = 0.35
 
 REALTIME_WIDTH = 12
 """Beam width of the real-time forms: on the ``paper`` and ``n16`` validation sets widths
-12 to 32 score the same within noise, and 12 is the widest whose decisions stay under
-1 ms at the 99th percentile at n = 16 (the research record docs/results/realtime-iap)."""
+12 to 32 score the same within noise, and 12 is the widest that kept the 99th percentile
+of a decision's CPU time under 1 ms at n = 16 in every timing run (the research record
+docs/results/realtime-iap)."""
 
 FAST_AS_PAPER = ("chr2",)
 """Situations whose fast form (the guided learner's teacher) is the paper's composition:

@@ -7,6 +7,7 @@ tasks, and their decision times on one core.
     python lab/results/realtime-iap/measure.py play test OUT_DIR
     python lab/results/realtime-iap/measure.py times OUT_DIR
     python lab/results/realtime-iap/measure.py reach OUT_DIR
+    python lab/results/realtime-iap/measure.py widths OUT_DIR
 
 ``play``: the fast form (``named_composition(..., fast=True)``, what the guided learner's
 teacher plays), the real-time form (``realtime=True``: the same at a narrower beam,
@@ -21,6 +22,10 @@ decision's CPU time on its thread (:func:`spikectl.envs.realtime.decision_times`
 set's first :data:`TIMED_EPISODES` networks after a warm-up episode, the forms
 alternating over :data:`ROUNDS` rounds so that both meet the same load; every decision
 kept (``times-per-decision.csv``), p50 and p99 per form and size (``times.csv``).
+``widths``: the choice of the real-time form's beam width: the fast form at each of
+:data:`WIDTHS` on the validation sets of :data:`WIDTH_TASKS`, each network's return
+(``widths-per-network.csv``), and each width's decision times on the same networks, the
+widths alternating over :data:`ROUNDS` rounds (``widths.csv``).
 ``reach``: at each re-plan of the cut form on the same networks, how many stimulations
 the beam keeps of the legal ones (``reach.csv``: their quartiles per size).
 """
@@ -50,6 +55,8 @@ HERE = Path(__file__).resolve().parent
 TIMED_TASKS = ("paper", "n16", "n32", "n64")
 TIMED_EPISODES = 10
 ROUNDS = 2
+WIDTHS = (32, 24, 16, 12, 8)
+WIDTH_TASKS = ("paper", "n16", "n32")
 FORMS = ("fast", "realtime", "target-paths")
 """The fast form, the real-time form, and the fast form with
 :class:`~lab.planners.TargetPathsOnly`."""
@@ -148,6 +155,36 @@ def times(out: Path, forms: list[str]) -> None:
     write_csv(out / "times.csv", rows)
 
 
+def widths(out: Path) -> None:
+    rows, per_network = [], []
+    for task in WIDTH_TASKS:
+        contexts, extensions = split_set(task, "validation")
+        fast = named_composition(extensions, contexts.n_observed, fast=True)
+        controllers = {width: IdentifyAndPlan(composition=fast.with_width(width),
+                                              extensions=extensions)
+                       for width in WIDTHS}  # fmt: skip
+        env = NeuronControlEnv(contexts=contexts, extensions=extensions)
+        for played in controllers.values():
+            decision_times(env, played, [0])  # warm-up
+        milliseconds = {width: [] for width in WIDTHS}
+        for _ in range(ROUNDS):
+            for width, played in controllers.items():
+                milliseconds[width].append(decision_times(env, played, range(TIMED_EPISODES)))
+        for width, played in controllers.items():
+            episodes = evaluate_policy(contexts, played, extensions=extensions,
+                                       seed=suite.suite_version(1).env_seed)  # fmt: skip
+            returns = np.asarray(episodes.returns)
+            ms = np.concatenate(milliseconds[width]) * 1e3
+            rows.append({"task": task, "width": width, "mean_return": f"{returns.mean():.6f}",
+                         "decision_p50_ms": f"{np.median(ms):.4f}",
+                         "decision_p99_ms": f"{np.percentile(ms, 99):.4f}"})  # fmt: skip
+            per_network += [{"task": task, "width": width, "context": i,
+                             "return": repr(float(r))} for i, r in enumerate(returns)]  # fmt: skip
+            print(rows[-1], flush=True)
+    write_csv(out / "widths.csv", rows)
+    write_csv(out / "widths-per-network.csv", per_network)
+
+
 class _Counting(TargetPathsOnly):
     """TargetPathsOnly that records (kept, legal) stimulations at each re-plan."""
 
@@ -181,7 +218,7 @@ def reach(out: Path) -> None:
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("what", choices=("play", "times", "reach"))
+    parser.add_argument("what", choices=("play", "times", "reach", "widths"))
     parser.add_argument("split", nargs="?", choices=("validation", "test"))
     parser.add_argument("out", type=Path)
     parser.add_argument("--tasks", nargs="*", help="suite v1 tasks (default: all)")
@@ -193,8 +230,8 @@ def main() -> None:
     if args.what == "times":
         times(args.out, args.forms)
         return
-    if args.what == "reach":
-        reach(args.out)
+    if args.what in ("reach", "widths"):
+        {"reach": reach, "widths": widths}[args.what](args.out)
         return
     if args.split is None:
         parser.error("play needs a split (validation or test)")

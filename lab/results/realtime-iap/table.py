@@ -7,8 +7,9 @@ Per split (``validation.csv``, ``test.csv`` and their per-network files, from
 target-paths form, and network by network the real-time form − the fast form, on the
 test sets also − the named identify-and-plan (docs/results/suite,
 ``identify-and-plan-per-network.csv``), and the target-paths form − the fast form. Then
-the decision times of ``measure.py times`` (``times.csv``) and the stimulations the
-target-paths form keeps (``reach.csv``).
+the decision times of ``measure.py times`` (``times.csv``), the widths the real-time
+form's was chosen from (``widths.csv``, against width 32 network by network), and the
+stimulations the target-paths form keeps (``reach.csv``).
 """
 
 from __future__ import annotations
@@ -69,6 +70,20 @@ def times_table() -> str:
     return "\n".join(lines)
 
 
+def widths_table() -> str:
+    lines = ["| task | width | validation return | − width 32 [95%] | better / worse | "
+             "p50 (ms) | p99 (ms) |", "|---|---:|---:|---|---|---:|---:|"]  # fmt: skip
+    networks = read_csv(HERE / "widths-per-network.csv")
+    for r in read_csv(HERE / "widths.csv"):
+        mine = per_network(networks, r["task"], width=r["width"])
+        widest = per_network(networks, r["task"], width="32")
+        cells = paired_difference_cells(mine - widest) if r["width"] != "32" else "– | –"
+        p50, p99 = float(r["decision_p50_ms"]), float(r["decision_p99_ms"])
+        lines.append(f"| {r['task']} | {r['width']} | {float(r['mean_return']):.3f} | {cells} | "
+                     f"{p50:.2f} | {p99:.2f} |")  # fmt: skip
+    return "\n".join(lines)
+
+
 def reach_table() -> str:
     lines = ["| n | re-plans | legal stimulations (median) | kept: quartiles | kept fraction: "
              "quartiles |", "|---:|---:|---:|---|---|"]  # fmt: skip
@@ -84,6 +99,7 @@ def main() -> None:
     for split in ("validation", "test"):
         print(f"### {split}\n\n{returns_table(split)}\n")
     print(f"### decision times\n\n{times_table()}\n")
+    print(f"### the real-time form's width (validation)\n\n{widths_table()}\n")
     print(f"### target paths: stimulations kept at a re-plan\n\n{reach_table()}")
 
 
