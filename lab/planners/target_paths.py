@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from spikectl.neuron.simulator import DO_NOTHING
+from spikectl.neuron import DO_NOTHING
 from spikectl.planning import DecisionSettings, PlanningModel
 
 

@@ -4,12 +4,12 @@ controller computes while it acts, and the fit learns a labelling rule it can ex
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import torch
 
+from lab.scripts import load_script
 from spikectl import ContextSet, NeuronControlEnv
 from spikectl.agents.amortised_belief import AmortisedBelief
 from spikectl.agents.amortised_controller import AmortisedController
@@ -20,10 +20,7 @@ SCRIPTS = Path(__file__).resolve().parents[1] / "results" / "belief-policy"
 
 
 def script(name: str):
-    spec = importlib.util.spec_from_file_location(f"belief_policy_{name}", SCRIPTS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("belief-policy", name)
 
 
 def belief(seed: int) -> AmortisedBelief:

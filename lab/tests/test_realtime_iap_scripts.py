@@ -5,20 +5,14 @@ tables render from the committed files."""
 from __future__ import annotations
 
 import csv
-import importlib.util
-from pathlib import Path
 
 from lab.planners import TargetPathsOnly
+from lab.scripts import load_script
 from spikectl.planning.named import REALTIME_WIDTH
-
-SCRIPTS = Path(__file__).resolve().parents[1] / "results" / "realtime-iap"
 
 
 def script(name: str):
-    spec = importlib.util.spec_from_file_location(f"realtime_iap_{name}", SCRIPTS / f"{name}.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("realtime-iap", name)
 
 
 def test_each_form_plays_its_composition():

@@ -13,7 +13,7 @@ import pytest
 
 from lab.planners import TargetPathsOnly, target_ancestors
 from spikectl import NeuronParams, make_context, make_splits
-from spikectl.neuron.simulator import SimulatorState
+from spikectl.neuron import SimulatorState
 from spikectl.planning import DecisionSettings, beam_search, model_of_context
 from spikectl.planning.deciding import Situation
 
@@ -97,15 +97,11 @@ def test_where_every_neuron_reaches_the_target_the_plans_are_the_same():
 def test_the_record_replays(task, count):
     """measure.py's controller, network by network, as the record played it (the suite's
     protocol; these environments draw nothing, so a prefix replays)."""
-    import importlib.util
-
+    from lab.scripts import load_script
     from spikectl.envs.rollout import evaluate_policy
     from spikectl.experiments import suite
 
-    path = Path(__file__).resolve().parents[2] / "results" / "realtime-iap" / "measure.py"
-    spec = importlib.util.spec_from_file_location("realtime_iap_measure", path)
-    measure = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(measure)
+    measure = load_script("realtime-iap", "measure")
     contexts = suite.load_split(task, "test")[:count]
     extensions = suite.task(task).extensions
     controller = measure.controller("target-paths", contexts, extensions)

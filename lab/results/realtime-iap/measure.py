@@ -34,7 +34,6 @@ from __future__ import annotations
 
 import argparse
 import csv
-import importlib.util
 import os
 import sys
 import time
@@ -45,6 +44,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
 from lab.planners import TargetPathsOnly
 from lab.records import write_csv
+from lab.scripts import load_script
 from spikectl import NeuronControlEnv
 from spikectl.envs.realtime import decision_times
 from spikectl.envs.rollout import evaluate_policy
@@ -64,11 +64,7 @@ FORMS = ("fast", "realtime", "target-paths")
 
 def _tradeoff():
     """lab/results/realtime-tradeoff/measure.py (its n = 64 set and test sets)."""
-    path = HERE.parent / "realtime-tradeoff" / "measure.py"
-    spec = importlib.util.spec_from_file_location("realtime_tradeoff_measure", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_script("realtime-tradeoff", "measure")
 
 
 def split_set(task: str, split: str):
