@@ -117,7 +117,7 @@ def test_the_cli_names_the_kind_in_one_line(files, run_cli):
         "controller is a run directory, a compiled policy file (.npz from export_policy), "
         "an amortised belief's weights (.pt: AmortisedController, or with a policy trained "
         "on it: BeliefPolicyController) or one of do-nothing, random, identify-and-plan, "
-        "oracle, witness"
+        "oracle, witness, identify-and-plan-realtime"
     ]
 
 
