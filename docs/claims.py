@@ -213,6 +213,7 @@ def claims() -> Iterator[Claim]:
                 "{summary/oracle:.3f} |")  # fmt: skip
     for controller, label in (("oracle", "oracle planner (knows the network)"),
                               ("identify-and-plan", "identify-and-plan"),
+                              ("identify-and-plan-realtime", "identify-and-plan's real-time form"),
                               ("random", "random (10 seeds)"),
                               ("do-nothing", "do nothing")):  # fmt: skip
         yield Claim(benchmark, f"| {label} | `spikectl benchmark {controller} --task all` "
