@@ -90,17 +90,15 @@ def random_legal(played: Played, seed: int) -> Controller:
     return RandomLegal(seed)
 
 
-def identify_and_plan(played: Played, seed: int) -> Controller:
+def identify_and_plan(played: Played, seed: int, realtime: bool = False) -> Controller:
     # The environment's extensions and size choose the composition (planning/named.py).
     n_neurons = None if played.contexts is None else played.contexts.n_observed
-    composition = named_composition(played.extensions, n_neurons)
+    composition = named_composition(played.extensions, n_neurons, realtime=realtime)
     return IdentifyAndPlan(played.params, composition, extensions=played.extensions)
 
 
 def identify_and_plan_realtime(played: Played, seed: int) -> Controller:
-    n_neurons = None if played.contexts is None else played.contexts.n_observed
-    composition = named_composition(played.extensions, n_neurons, realtime=True)
-    return IdentifyAndPlan(played.params, composition, extensions=played.extensions)
+    return identify_and_plan(played, seed, realtime=True)
 
 
 def oracle(played: Played, seed: int) -> Controller:

@@ -20,8 +20,9 @@ of lab/results/realtime-tradeoff (``n64_contexts``).
 ``times``: the forms on the test sets of ``paper``, ``n16``, ``n32`` and n = 64, each
 decision's CPU time on its thread (:func:`spikectl.envs.realtime.decision_times`), the
 set's first :data:`TIMED_EPISODES` networks after a warm-up episode, the forms
-alternating over :data:`ROUNDS` rounds so that both meet the same load; every decision
-kept (``times-per-decision.csv``), p50 and p99 per form and size (``times.csv``).
+alternating over :data:`ROUNDS` rounds so that all meet the same load
+(:func:`timed_rounds`); every decision kept (``times-per-decision.csv``), p50 and p99
+per form and size (``times.csv``).
 ``widths``: the choice of the real-time form's beam width: the fast form at each of
 :data:`WIDTHS` on the validation sets of :data:`WIDTH_TASKS`, each network's return
 (``widths-per-network.csv``), and each width's decision times on the same networks, the
@@ -75,10 +76,8 @@ def split_set(task: str, split: str):
 
 
 def controller(form: str, contexts, extensions) -> IdentifyAndPlan:
-    if form == "realtime":
-        composition = named_composition(extensions, contexts.n_observed, realtime=True)
-        return IdentifyAndPlan(composition=composition, extensions=extensions)
-    composition = named_composition(extensions, contexts.n_observed, fast=True)
+    composition = named_composition(extensions, contexts.n_observed, fast=True,
+                                     realtime=form == "realtime")  # fmt: skip
     if form == "target-paths":
         decision = TargetPathsOnly(**vars(composition.decision))
         composition = composition.but(f"{composition.name}-target-paths", decision=decision)
@@ -112,13 +111,27 @@ def play(split: str, out: Path, tasks: list[str], forms: list[str]) -> None:
             per_network += [{"task": task, "form": form, "context": i, "return": repr(float(r))}
                             for i, r in enumerate(returns)]  # fmt: skip
             print(rows[-1], flush=True)
-    played = {(task, form) for task in tasks for form in forms}
+    replaced = {(task, form) for task in tasks for form in forms}
     for name, new in ((f"{split}.csv", rows), (f"{split}-per-network.csv", per_network)):
-        merged = _kept(out / name, played) + new
+        merged = _kept(out / name, replaced) + new
         order = list(dict.fromkeys(r["task"] for r in merged))
         # Stable: each form's networks stay in order.
         merged.sort(key=lambda r: (order.index(r["task"]), FORMS.index(r["form"])))
         write_csv(out / name, merged)
+
+
+def timed_rounds(env, controllers: dict) -> dict:
+    """Each controller's decision CPU times in ms, one array per round: after a warm-up
+    episode each (compilation, caches), the controllers alternate over :data:`ROUNDS`
+    rounds of the set's first :data:`TIMED_EPISODES` networks, so that all meet the same
+    load."""
+    for played in controllers.values():
+        decision_times(env, played, [0])
+    rounds = {key: [] for key in controllers}
+    for _ in range(ROUNDS):
+        for key, played in controllers.items():
+            rounds[key].append(decision_times(env, played, range(TIMED_EPISODES)) * 1e3)
+    return rounds
 
 
 def times(out: Path, forms: list[str]) -> None:
@@ -126,15 +139,13 @@ def times(out: Path, forms: list[str]) -> None:
     for task in TIMED_TASKS:
         contexts, extensions = split_set(task, "test")
         env = NeuronControlEnv(contexts=contexts, extensions=extensions)
-        controllers = {form: controller(form, contexts, extensions) for form in forms}
-        for played in controllers.values():
-            decision_times(env, played, [0])  # warm-up (compilation, caches)
+        rounds = timed_rounds(env, {form: controller(form, contexts, extensions)
+                                    for form in forms})  # fmt: skip
         for round_ in range(ROUNDS):
-            for form, played in controllers.items():
-                milliseconds = decision_times(env, played, range(TIMED_EPISODES)) * 1e3
+            for form in forms:
                 decisions += [{"task": task, "n_neurons": contexts.n_neurons, "form": form,
                                "round": round_, "decision": i, "ms": f"{value:.5f}"}
-                              for i, value in enumerate(milliseconds)]  # fmt: skip
+                              for i, value in enumerate(rounds[form][round_])]  # fmt: skip
         print(task, flush=True)
     write_csv(out / "times-per-decision.csv", decisions)
     rows = []
@@ -159,18 +170,13 @@ def widths(out: Path) -> None:
         controllers = {width: IdentifyAndPlan(composition=fast.with_width(width),
                                               extensions=extensions)
                        for width in WIDTHS}  # fmt: skip
-        env = NeuronControlEnv(contexts=contexts, extensions=extensions)
-        for played in controllers.values():
-            decision_times(env, played, [0])  # warm-up
-        milliseconds = {width: [] for width in WIDTHS}
-        for _ in range(ROUNDS):
-            for width, played in controllers.items():
-                milliseconds[width].append(decision_times(env, played, range(TIMED_EPISODES)))
+        rounds = timed_rounds(NeuronControlEnv(contexts=contexts, extensions=extensions),
+                              controllers)  # fmt: skip
         for width, played in controllers.items():
             episodes = evaluate_policy(contexts, played, extensions=extensions,
                                        seed=suite.suite_version(1).env_seed)  # fmt: skip
             returns = np.asarray(episodes.returns)
-            ms = np.concatenate(milliseconds[width]) * 1e3
+            ms = np.concatenate(rounds[width])
             rows.append({"task": task, "width": width, "mean_return": f"{returns.mean():.6f}",
                          "decision_p50_ms": f"{np.median(ms):.4f}",
                          "decision_p99_ms": f"{np.percentile(ms, 99):.4f}"})  # fmt: skip
@@ -181,6 +187,10 @@ def widths(out: Path) -> None:
     write_csv(out / "widths-per-network.csv", per_network)
 
 
+REPLANS: list[tuple[int, int]] = []
+"""(kept, legal) stimulations at each re-plan of :class:`_Counting`."""
+
+
 class _Counting(TargetPathsOnly):
     """TargetPathsOnly that records (kept, legal) stimulations at each re-plan."""
 
@@ -188,9 +198,6 @@ class _Counting(TargetPathsOnly):
         model = super().planning_model(policy, weights, situation)
         REPLANS.append((model.actions.size - 1, situation.actions.size - 1))
         return model
-
-
-REPLANS: list[tuple[int, int]] = []
 
 
 def reach(out: Path) -> None:
@@ -223,11 +230,9 @@ def main() -> None:
     args = parser.parse_args()
     os.environ.setdefault("OMP_NUM_THREADS", "1")
     args.out.mkdir(parents=True, exist_ok=True)
-    if args.what == "times":
-        times(args.out, args.forms)
-        return
-    if args.what in ("reach", "widths"):
-        {"reach": reach, "widths": widths}[args.what](args.out)
+    if args.what != "play":
+        {"times": lambda: times(args.out, args.forms), "reach": lambda: reach(args.out),
+         "widths": lambda: widths(args.out)}[args.what]()  # fmt: skip
         return
     if args.split is None:
         parser.error("play needs a split (validation or test)")
