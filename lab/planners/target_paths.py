@@ -5,10 +5,9 @@ to doing nothing and the target's ancestors in the planned network
 (:func:`target_ancestors`): any other stimulation changes no planned reward, now or
 later, so its children only take beam slots from states that can. It was meant to make
 re-planning cheap enough for a 1 ms step at n = 16 and 32; in the suite's topologies
-nearly every neuron is an ancestor of the target once a few synapses are planned (at a
-re-plan, a median of 14 of the 15 legal stimulations at n = 16, all 31 at n = 32), so
-it saved no decision time, and its returns differ from the fast form's by a few
-thousandths either way (docs/results/realtime-iap).
+nearly every neuron is an ancestor of the target once a few synapses are planned, so it
+saved no decision time (the measurements: lab/planners/README.md and
+docs/results/realtime-iap).
 """
 
 from __future__ import annotations

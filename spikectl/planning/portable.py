@@ -270,5 +270,5 @@ def gaussian_posterior(precision: np.ndarray, moment: np.ndarray) -> tuple[np.nd
     covariance = np.empty_like(precision)
     mean, sd = np.empty(moment.shape), np.empty(moment.shape)
     if not _gaussian_posterior(precision, moment, covariance, mean, sd):
-        raise ValueError("spd_inverse: a matrix is not symmetric positive definite")
+        raise ValueError("gaussian_posterior: a precision is not symmetric positive definite")
     return mean, sd
