@@ -17,6 +17,7 @@ from spikectl.planning.named import (
     COMPOSITIONS,
     FAST_AS_EXACT_SPIKES,
     FAST_AS_PAPER,
+    GAMBLE,
     KNOWN_SD_BACKGROUND,
     KNOWN_SD_FAST_LARGE,
     KNOWN_SD_LARGE,
@@ -56,7 +57,7 @@ CHR2 = Extensions(actuator="chr2")
         (Extensions(hidden_neurons=1), 8, False, "hidden"),
         (HIDDEN, 32, False, "hidden-16"),
         (Extensions(sensing="spikes"), 8, False, "spikes"),
-        (Extensions(sensing="spikes", latency_steps=1), 8, True, "spikes"),
+        (Extensions(sensing="spikes", latency_steps=1), 8, True, "spikes-fast"),  # no QMDP
         (Extensions(sensing="spikes", stochastic_release=True), 8, False, "spikes"),
         (Extensions(sensing="spikes"), 16, False, "spikes-16"),
         (CHR2, 8, False, "chr2"),
@@ -69,7 +70,7 @@ CHR2 = Extensions(actuator="chr2")
         (Extensions(sensing="spikes", background_rate=0.005), 8, False, "rig"),
         (Extensions(actuator="chr2", sensing="spikes", latency_steps=2,
                     background_rate=0.005), 8, False, "rig"),
-        (Extensions(actuator="chr2", sensing="spikes"), 8, True, "spikes"),  # refuses: slow
+        (Extensions(actuator="chr2", sensing="spikes"), 8, True, "spikes-fast"),  # refuses: slow
         (Extensions(actuator="chr2", sensing="spikes"), 16, False, "rig-16"),
     ],
 )
@@ -100,7 +101,15 @@ def test_the_declared_compositions_hold_what_was_chosen():
     assert fast.decision.gamble is None
     assert set(COMPOSITIONS) == {"paper", "noise", "stochastic", "background",
                                  "heterogeneous", "hidden", "spikes", "chr2", "rig"}  # fmt: skip
-    assert composition("spikes").estimator.kind == "spikes"
+    spikes = composition("spikes")
+    assert spikes == Composition("spikes", spikes.estimator.__class__("spikes"),
+                                 decision=spikes.decision.__class__(gamble=GAMBLE))  # fmt: skip
+    assert GAMBLE.networks == 16
+    # Its fast and real-time forms (the teacher's, identify-and-plan-realtime's) drop QMDP.
+    assert composition("spikes-fast") == spikes.but("spikes-fast", decision=Composition().decision)
+    assert composition("spikes-realtime").decision.gamble is None
+    # The paper's situation has no QMDP below 16 neurons: its fast form is itself.
+    assert composition("paper-fast") == composition("paper").but("paper-fast")
     chr2 = composition("chr2")
     assert chr2 == Composition("chr2", chr2.estimator.__class__("bayes"))  # the rest: paper's
     assert FAST_AS_PAPER == ("chr2",)

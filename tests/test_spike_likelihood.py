@@ -200,3 +200,10 @@ def test_kept_to_the_true_columns_the_posterior_is_the_network():
     assert known.all() and estimate.alive.sum() == 5
     with pytest.raises(ValueError, match="column 0 of weights is no hypothesis"):
         estimate.keep_only(np.eye(5, dtype=np.int8))
+    # Told one column: that column alone is the truth; the others keep every hypothesis.
+    one = SpikeLikelihoodFilter(5, PARAMS, 0.005)
+    one.keep_only(weights, columns=[2])
+    signs, known = one.weights(0.25)
+    np.testing.assert_array_equal(signs[:, 2], weights[:, 2])
+    assert known[:, 2].all() and one.alive[2].sum() == 1
+    assert (one.alive[[0, 1, 3, 4]]).all()

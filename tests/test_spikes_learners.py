@@ -288,7 +288,7 @@ def test_the_teachers_labels_and_its_own_episodes_on_spikes_are_its_actions():
     contexts = ContextSet.generate(3, n_neurons=6, seed=4)
     extensions = Extensions(sensing="spikes")
     composition = named_composition(extensions, 6, fast=True)
-    assert composition.name == "spikes"
+    assert composition.name == "spikes-fast" and composition.decision.gamble is None
 
     def make():
         return IdentifyAndPlan(contexts.params, composition, extensions=extensions)

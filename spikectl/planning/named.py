@@ -28,8 +28,11 @@ research record docs/research/identify-and-plan.md):
   line). It comes first (the research record docs/results/iap-rig).
 - ``spikes``: under spikes-only sensing, the exact posterior from spikes alone and the
   potentials it implies (:mod:`~spikectl.planning.spike_filter`, n <= 8; larger
-  networks are refused in one line). It comes first: the filter refuses in one line the
-  extensions it cannot read spikes under.
+  networks are refused in one line), with QMDP where it would probe (:data:`GAMBLE`):
+  from spikes alone the estimate knows little for long, and valuing the gamble over
+  networks drawn from it scores more (the research record docs/results/iap-spikes). It
+  comes first: the filter refuses in one line the extensions it cannot read spikes
+  under.
 
 From :data:`LARGE_FROM_NEURONS` neurons on, each is played with :data:`LARGE` on top
 (``-16``: QMDP where it would probe, ``known_sd`` :data:`KNOWN_SD_LARGE`); the paper's
@@ -37,8 +40,9 @@ situation from :data:`PARTICLES_FROM_NEURONS` on with the particle posterior as 
 (``paper-32``). ``fast`` forms are what the guided learner's teacher plays (its labels
 cover every step of training, so every decision must be fast): the same but for QMDP and
 the particles, replaced from :data:`LARGE_FROM_NEURONS` on by :data:`KNOWN_SD_FAST_LARGE`
-alone (``-16-fast``). Below that size the fast form is the named composition itself
-(the paper's for the situations of :data:`FAST_AS_PAPER`).
+alone (``-16-fast``). Below that size the fast form is the named composition itself (the
+paper's for the situations of :data:`FAST_AS_PAPER`), without QMDP where it has it
+(``NAME-fast``: ``spikes-fast``).
 
 The ``realtime`` forms (``NAME-realtime``, ``NAME-16-realtime``; the registered controller
 ``identify-and-plan-realtime``) are the fast forms re-planning at beam width
@@ -52,6 +56,7 @@ from typing import Any
 
 from spikectl.neuron.extensions import Extensions
 from spikectl.planning.composition import Composition
+from spikectl.planning.deciding import DecisionSettings
 from spikectl.planning.estimators import EstimatorSettings
 from spikectl.planning.observing import ObservationSettings
 from spikectl.planning.qmdp import QMDPSettings
@@ -66,7 +71,10 @@ the named controller (not its fast form) keeps the particle posterior: chosen on
 ``n32`` validation set with QMDP, where it also takes less CPU time; on ``n16`` it did not
 score more (docs/results/particles)."""
 GAMBLE_NETWORKS = 16
-"""K, the networks QMDP draws from the estimate from :data:`LARGE_FROM_NEURONS` on."""
+"""K, the networks QMDP draws from the estimate (:data:`GAMBLE`)."""
+GAMBLE = QMDPSettings(networks=GAMBLE_NETWORKS)
+"""QMDP where the plan would probe: from :data:`LARGE_FROM_NEURONS` neurons on, and in the
+``spikes`` composition at every size."""
 KNOWN_SD_LARGE = 0.35
 """``known_sd`` (w_in) from :data:`LARGE_FROM_NEURONS` neurons on: the generator's prior
 already puts the synapses of pairs more than 8 neurons apart below it, so the planner
@@ -92,7 +100,7 @@ the ``chr2`` teacher's labels stay those its learners were trained on, at the Ga
 estimate's CPU time."""
 
 FAST_AS_EXACT_SPIKES = ("rig",)
-"""Situations whose fast form is the exact spike filter's ``spikes`` composition, which
+"""Situations whose fast form is the exact spike filter's ``spikes-fast`` composition, which
 refuses them in one line: the ``rig`` composition costs about 1 CPU second an episode
 (docs/results/iap-rig), too slow to label every step of training, so the guided
 learner's identify teacher stays refused there (train with ``--teacher oracle``)."""
@@ -110,7 +118,8 @@ COMPOSITIONS: dict[str, Composition] = {
         Composition("background", EstimatorSettings(known_sd=KNOWN_SD_BACKGROUND)),
         Composition("heterogeneous", observation=_TASK_MODEL),
         Composition("hidden", EstimatorSettings("relays")),
-        Composition("spikes", EstimatorSettings("spikes")),
+        Composition("spikes", EstimatorSettings("spikes"),
+                    decision=DecisionSettings(gamble=GAMBLE)),
         Composition("chr2", EstimatorSettings("bayes")),
         Composition("rig", EstimatorSettings("spike-likelihood"), _TASK_MODEL),
     )
@@ -131,13 +140,16 @@ SITUATIONS: tuple[tuple[str, tuple[str | tuple[str, ...], ...]], ...] = (
 plays the first situation one of whose fields is set (true or nonzero; a tuple of fields:
 all of them set); none: ``paper``."""
 
-LARGE = {"known_sd": KNOWN_SD_LARGE, "gamble": QMDPSettings(networks=GAMBLE_NETWORKS)}
+LARGE = {"known_sd": KNOWN_SD_LARGE, "gamble": GAMBLE}
 """The overlay from :data:`LARGE_FROM_NEURONS` neurons on (suffix ``-16``)."""
 LARGEST = {**LARGE, "kind": "particles"}
 """The overlay of the paper's situation from :data:`PARTICLES_FROM_NEURONS` on (``-32``)."""
-FAST_LARGE = {"known_sd": KNOWN_SD_FAST_LARGE}
+FAST = {"gamble": None}
+"""The fast forms' overlay below :data:`LARGE_FROM_NEURONS` neurons where the situation's
+composition has QMDP (``-fast``)."""
+FAST_LARGE = {**FAST, "known_sd": KNOWN_SD_FAST_LARGE}
 """The fast forms' overlay from :data:`LARGE_FROM_NEURONS` neurons on (``-16-fast``)."""
-REALTIME = {"width": REALTIME_WIDTH}
+REALTIME = {**FAST, "width": REALTIME_WIDTH}
 """The real-time forms' overlay on the fast forms (``-realtime``, ``-16-realtime``)."""
 
 
@@ -161,7 +173,8 @@ def composition_name(extensions: Extensions | None, n_neurons: int | None = None
     """The name of the composition the named controller plays on an environment with
     ``extensions`` and ``n_neurons`` observed neurons (``fast``: the teacher's form;
     ``realtime``: the fast form at :data:`REALTIME_WIDTH`): the situation's, with the
-    size's suffix (``-16``, ``-16-fast``, ``-32``) or ``-realtime``."""
+    size's suffix (``-16``, ``-16-fast``, ``-32``), ``-fast`` (a fast form below
+    :data:`LARGE_FROM_NEURONS` without its situation's QMDP) or ``-realtime``."""
     name = situation(extensions)
     fast = fast or realtime
     if fast and name in FAST_AS_PAPER:
@@ -169,7 +182,9 @@ def composition_name(extensions: Extensions | None, n_neurons: int | None = None
     if fast and name in FAST_AS_EXACT_SPIKES:
         name = "spikes"
     if n_neurons is None or n_neurons < LARGE_FROM_NEURONS:
-        return f"{name}-realtime" if realtime else name
+        if realtime:
+            return f"{name}-realtime"
+        return f"{name}-fast" if fast and COMPOSITIONS[name].decision.gamble else name
     if fast:
         return f"{name}-16-realtime" if realtime else f"{name}-16-fast"
     if name == "paper" and n_neurons >= PARTICLES_FROM_NEURONS:
@@ -179,14 +194,14 @@ def composition_name(extensions: Extensions | None, n_neurons: int | None = None
 
 def composition(name: str) -> Composition:
     """The declared composition ``name``: a situation's (:data:`COMPOSITIONS`), or one
-    with a size's overlay (``NAME-16``, ``NAME-16-fast``, ``paper-32``) or a real-time
-    form's (``NAME-realtime``, ``NAME-16-realtime``)."""
+    with a size's overlay (``NAME-16``, ``NAME-16-fast``, ``paper-32``), a fast form's
+    (``NAME-fast``) or a real-time form's (``NAME-realtime``, ``NAME-16-realtime``)."""
     base, _, size = name.partition("-")
-    overlays = {"": {}, "16": LARGE, "16-fast": FAST_LARGE, "32": LARGEST,
+    overlays = {"": {}, "fast": FAST, "16": LARGE, "16-fast": FAST_LARGE, "32": LARGEST,
                 "realtime": REALTIME, "16-realtime": {**FAST_LARGE, **REALTIME}}  # fmt: skip
     if base not in COMPOSITIONS or size not in overlays or (size == "32" and base != "paper"):
         raise ValueError(f"unknown composition {name!r}; the named ones are "
-                         f"{', '.join(COMPOSITIONS)}, each also -16, -16-fast, -realtime "
+                         f"{', '.join(COMPOSITIONS)}, each also -fast, -16, -16-fast, -realtime "
                          "and -16-realtime, and paper-32")  # fmt: skip
     return _overlaid(COMPOSITIONS[base], name, overlays[size])
 

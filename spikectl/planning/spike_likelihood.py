@@ -150,15 +150,18 @@ class SpikeLikelihoodFilter(SpikeFilter):
         if changed.size:
             self._columns_changed(changed)
 
-    def keep_only(self, weights: np.ndarray) -> None:
+    def keep_only(self, weights: np.ndarray, columns: np.ndarray | None = None) -> None:
         """Keep each neuron's true input column alone, column j of ``weights`` [n, n] in
         {-1, 0, +1}: the posterior is then that network, and the potentials are still read
-        from spikes (a diagnostic: the loop told the weights, docs/results/iap-rig)."""
+        from spikes (a diagnostic: the loop told the weights, docs/results/iap-rig).
+        ``columns``: the neurons whose column is told (every neuron when None; the
+        target's alone in docs/results/iap-spikes)."""
         weights = np.asarray(weights)
         if weights.shape != (self.n_neurons, self.n_neurons):
             raise ValueError(f"weights must be [{self.n_neurons}, {self.n_neurons}], got "
                              f"shape {weights.shape}")  # fmt: skip
-        for j in range(self.n_neurons):
+        told = range(self.n_neurons) if columns is None else np.asarray(columns).reshape(-1)
+        for j in told:
             truth = (self.hypotheses[j] == weights[:, j]).all(axis=1)
             if not truth.any():
                 raise ValueError(f"column {j} of weights is no hypothesis (a self-connection "
