@@ -7,6 +7,7 @@ measurement). Importing this package registers the ``"discrete"`` estimator in
 from lab.planners.target_paths import TargetPathsOnly, target_ancestors
 from lab.planners.variants import (
     PlanUnderRelease,
+    PosteriorSample,
     ReleaseChanceEvidence,
     SampledHypotheses,
     discrete,
@@ -17,6 +18,7 @@ ESTIMATORS.register("discrete", discrete)
 
 __all__ = [
     "PlanUnderRelease",
+    "PosteriorSample",
     "ReleaseChanceEvidence",
     "SampledHypotheses",
     "TargetPathsOnly",

@@ -27,20 +27,23 @@ def subset(task: str, networks: range) -> ContextSet:
                       full.extensions)  # fmt: skip
 
 
-def play(task: str, contexts: ContextSet, composition) -> tuple[np.ndarray, float]:
-    """(returns [S], CPU seconds): ``composition`` on every network of ``contexts``."""
+def play(task: str, contexts: ContextSet, composition, seed: int = 0) -> tuple[np.ndarray, float]:
+    """(returns [S], CPU seconds): ``composition`` on every network of ``contexts``, the
+    controller seeded ``seed`` (what QMDP's draws read)."""
     extensions = suite.task(task, VERSION).extensions
     started = time.process_time()
     episodes = evaluate_policy(contexts, IdentifyAndPlan(composition=composition,
-                                                         extensions=extensions),
+                                                         extensions=extensions, seed=seed),
                                extensions=extensions,
                                seed=suite.suite_version(VERSION).env_seed)  # fmt: skip
     return np.asarray(episodes.returns), time.process_time() - started
 
 
-def screen(out: Path, task: str, networks: range, table: dict, names: list[str]) -> None:
-    """Play each of ``names`` (keys of ``table``, name -> composition) on ``networks``,
-    append their rows to ``out`` and print the paired table of everything in it."""
+def screen(out: Path, task: str, networks: range, table: dict, names: list[str],
+           base: str = "named") -> None:  # fmt: skip
+    """Play each of ``names`` (keys of ``table``, name -> composition, or (composition,
+    the controller's seed)) on ``networks``, append their rows to ``out`` and print the
+    paired table of everything in it against ``base``."""
     contexts = subset(task, networks)
     new = not out.exists()
     with open(out, "a", newline="") as handle:
@@ -48,32 +51,33 @@ def screen(out: Path, task: str, networks: range, table: dict, names: list[str])
         if new:
             writer.writerow(["variant", "context", "return", "cpu_s"])
         for name in names:
-            values, cpu = play(task, contexts, table[name])
+            entry = table[name]
+            values, cpu = play(task, contexts, *(entry if isinstance(entry, tuple) else (entry,)))
             writer.writerows([name, i, f"{v:.6f}", f"{cpu / len(networks):.4f}"]
                              for i, v in zip(networks, values, strict=True))  # fmt: skip
             handle.flush()
             print(f"{name}: {values.mean():.4f} ({cpu:.1f} CPU s)", flush=True)
-    report(out)
+    report(out, base)
 
 
-def report(out: Path) -> None:
-    """The paired table of every variant in ``out`` against ``named``."""
+def report(out: Path, base: str = "named") -> None:
+    """The paired table of every variant in ``out`` against ``base``."""
     rows: dict[str, dict[int, float]] = {}
     cpu: dict[str, float] = {}
     with open(out) as handle:
         for row in csv.DictReader(handle):
             rows.setdefault(row["variant"], {})[int(row["context"])] = float(row["return"])
             cpu[row["variant"]] = float(row["cpu_s"])
-    base = rows["named"]
+    reference = rows[base]
     print(
-        "\n| variant | networks | mean return | − named [95% CI] | better / worse "
+        f"\n| variant | networks | mean return | − {base} [95% CI] | better / worse "
         "| CPU s a network |"
     )
     print("|---|---:|---:|---|---|---:|")
     for name, values in rows.items():
-        common = sorted(set(values) & set(base))
+        common = sorted(set(values) & set(reference))
         mine = np.array([values[i] for i in common])
-        theirs = np.array([base[i] for i in common])
+        theirs = np.array([reference[i] for i in common])
         print(
             f"| {name} | {len(common)} | {mine.mean():.4f} | "
             f"{paired_difference_cells(mine - theirs)} | {cpu[name]:.3f} |"

@@ -72,6 +72,34 @@ class SampledHypotheses(DecisionSettings):
 
 
 @dataclass(frozen=True)
+class PosteriorSample(DecisionSettings):
+    """Thompson sampling: each re-plan plans on one network drawn from the estimate (the
+    re-plan's own draw of the episode's uniforms, the i-th re-plan the i-th draw modulo
+    ``samples``), so that a plan sometimes stimulates what the estimate doubts. Under
+    spikes-only sensing it was within noise of the ``spikes`` composition without QMDP
+    on two sets of validation networks (docs/results/iap-spikes)."""
+
+    samples: int = 64
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if (isinstance(self.samples, bool) or not isinstance(self.samples, (int, np.integer))
+                or self.samples < 1):  # fmt: skip
+            raise ValueError(f"samples must be an integer >= 1, got {self.samples!r}")
+
+    @property
+    def draws(self) -> int:
+        return max(self.samples, super().draws)
+
+    def planning_model(self, policy, weights: np.ndarray, situation: Situation) -> PlanningModel:
+        k = policy.replans % self.samples
+        uniforms = (policy.uniforms[0][k : k + 1], policy.uniforms[1][k : k + 1])
+        drawn = policy.estimate.sample(policy.known_sd, *uniforms)  # [1, n, n]
+        return PlanningModel(drawn, situation.target, situation.actions, policy.params,
+                             policy.planned_neurons())  # fmt: skip
+
+
+@dataclass(frozen=True)
 class ReleaseChanceEvidence(ObservationSettings):
     """Under stochastic release, each spike enters the Gaussian estimate at its release
     chance, never settled from the residuals: what the named controller played before
