@@ -34,6 +34,10 @@ CLAIMS = {
     "32 and 64 (one timing run, nothing else running): identify-and-plan's fast form ties "
     "the named one at n16 (-0.001 [-0.029, +0.027]) at p99 1.7 ms against 181 ms; within "
     "1 ms the amortised controller",
+    "iap-spikes": "identify-and-plan from spikes alone (suite v2 spikes-only): the loss is "
+    "identification, almost all of it the target's column (told it +0.204 on 200 validation "
+    "networks); QMDP where it would probe chosen on 600 (+0.013, +0.016), test 0.765 -> "
+    "0.778 (+0.013 [+0.009, +0.018])",
     "iap-rig": "identify-and-plan plays suite v2's rig (refused before) with a spike "
     "likelihood (background input; the light's drive per column): test 0.617, normalised "
     "0.364, short of 0.70; told the true columns 0.869 vs 0.606 (validation)",
