@@ -82,3 +82,29 @@ def report(out: Path, base: str = "named") -> None:
             f"| {name} | {len(common)} | {mine.mean():.4f} | "
             f"{paired_difference_cells(mine - theirs)} | {cpu[name]:.3f} |"
         )
+
+
+def diagnose(out: Path, contexts: ContextSet, runs: dict, base: str) -> dict[str, np.ndarray]:
+    """Play each of ``runs`` (name -> (extensions, controller)) on ``contexts`` under the
+    suite's protocol, write one row per network to ``out`` (``variant,context,return,
+    cpu_s``) and print the paired table against ``base``. Returns each run's returns."""
+    returns = {}
+    with open(out, "w", newline="") as handle:
+        writer = csv.writer(handle)
+        writer.writerow(["variant", "context", "return", "cpu_s"])
+        for name, (extensions, controller) in runs.items():
+            started = time.process_time()
+            episodes = evaluate_policy(contexts, controller, extensions=extensions,
+                                       seed=suite.suite_version(VERSION).env_seed)  # fmt: skip
+            cpu = time.process_time() - started
+            returns[name] = np.asarray(episodes.returns)
+            writer.writerows([name, i, f"{v:.6f}", f"{cpu / len(contexts):.4f}"]
+                             for i, v in enumerate(returns[name]))  # fmt: skip
+            handle.flush()
+            print(f"{name}: {returns[name].mean():.4f} ({cpu:.1f} CPU s)", flush=True)
+    print(f"\n| variant | mean return | − {base} [95% CI] | better / worse |")
+    print("|---|---:|---|---|")
+    for name, values in returns.items():
+        print(f"| {name} | {values.mean():.4f} | "
+              f"{paired_difference_cells(values - returns[base])} |")  # fmt: skip
+    return returns

@@ -26,3 +26,32 @@ class Told(IdentifyAndPlan):
         if int(observation["step"]) == 0:
             self.told_weights = np.asarray(self.contexts[int(info["context_index"])].weights)
         return super().act(observation, info)
+
+
+class ToldColumns(IdentifyAndPlan):
+    """The loop whose spike likelihood starts at the true input columns of ``columns``
+    (``"all"``, or ``"target"``: the episode's target alone), read from ``contexts`` by
+    the environment's context index; the potentials are still read from spikes
+    (:meth:`~spikectl.planning.spike_likelihood.SpikeLikelihoodFilter.keep_only`: the
+    iap-rig and iap-spikes diagnostics)."""
+
+    def __init__(self, contexts, columns: str = "all", **settings) -> None:
+        if columns not in ("all", "target"):
+            raise ValueError(f"columns must be 'all' or 'target', got {columns!r}")
+        super().__init__(**settings)
+        self.contexts, self.columns = contexts, columns
+        self._weights, self._target = None, None
+
+    def spawn(self, index: int) -> IdentifyAndPlan:
+        return copy.copy(self)
+
+    def act(self, observation, info) -> int:
+        if int(observation["step"]) == 0:
+            self._weights = self.contexts[int(info["context_index"])].weights
+            self._target = int(observation["target"])
+        return super().act(observation, info)
+
+    def _new_estimate(self, n: int):
+        estimate = super()._new_estimate(n)
+        estimate.keep_only(self._weights, None if self.columns == "all" else [self._target])
+        return estimate

@@ -39,6 +39,12 @@ def discrete(n: int, residual_sd: float, model, params: NeuronParams):
     return DiscreteConnectivityEstimate(n, residual_sd)
 
 
+def _check_count(name: str, value) -> None:
+    """Refuse anything but an integer >= 1 (ValueError naming ``name``)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+        raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
+
+
 @dataclass(frozen=True)
 class SampledHypotheses(DecisionSettings):
     """Plan one action sequence on K networks drawn from the estimate, for the best mean
@@ -50,9 +56,7 @@ class SampledHypotheses(DecisionSettings):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if (isinstance(self.hypotheses, bool) or not isinstance(self.hypotheses, (int, np.integer))
-                or self.hypotheses < 1):  # fmt: skip
-            raise ValueError(f"hypotheses must be an integer >= 1, got {self.hypotheses!r}")
+        _check_count("hypotheses", self.hypotheses)
 
     @property
     def draws(self) -> int:
@@ -83,9 +87,7 @@ class PosteriorSample(DecisionSettings):
 
     def __post_init__(self) -> None:
         super().__post_init__()
-        if (isinstance(self.samples, bool) or not isinstance(self.samples, (int, np.integer))
-                or self.samples < 1):  # fmt: skip
-            raise ValueError(f"samples must be an integer >= 1, got {self.samples!r}")
+        _check_count("samples", self.samples)
 
     @property
     def draws(self) -> int:
