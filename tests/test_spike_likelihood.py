@@ -207,3 +207,6 @@ def test_kept_to_the_true_columns_the_posterior_is_the_network():
     np.testing.assert_array_equal(signs[:, 2], weights[:, 2])
     assert known[:, 2].all() and one.alive[2].sum() == 1
     assert (one.alive[[0, 1, 3, 4]]).all()
+    for bad in ([5], [-1], [], [0.5]):
+        with pytest.raises(ValueError, match="columns must be neuron indices 0 to 4"):
+            one.keep_only(weights, columns=bad)

@@ -161,6 +161,10 @@ class SpikeLikelihoodFilter(SpikeFilter):
             raise ValueError(f"weights must be [{self.n_neurons}, {self.n_neurons}], got "
                              f"shape {weights.shape}")  # fmt: skip
         told = range(self.n_neurons) if columns is None else np.asarray(columns).reshape(-1)
+        if columns is not None and (told.dtype.kind not in "iu" or not told.size
+                                    or told.min() < 0 or told.max() >= self.n_neurons):
+            raise ValueError(f"columns must be neuron indices 0 to {self.n_neurons - 1}, got "
+                             f"{columns!r}")  # fmt: skip
         for j in told:
             truth = (self.hypotheses[j] == weights[:, j]).all(axis=1)
             if not truth.any():
