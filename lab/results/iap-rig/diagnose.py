@@ -3,11 +3,13 @@ networks of the VALIDATION set (never the test set), network by network, the ``r
 composition; the same told the true weights (the spike likelihood restricted to each
 neuron's true input column: the potentials are still read from spikes alone, so what
 is left is the loop's and the sensing's cost, not identification's); and both on the same
-networks without the background input (what the spontaneous inputs cost).
+networks without the background input (what the spontaneous inputs cost); with
+``target``, the same told the target's true input column alone (2026-11-30).
 
-    python lab/results/iap-rig/diagnose.py OUT_DIR [NETWORKS]
+    python lab/results/iap-rig/diagnose.py OUT_DIR [NETWORKS] [target]
 
-Writes OUT_DIR/diagnose-per-network.csv and prints the paired table.
+Writes OUT_DIR/diagnose-per-network.csv (with ``target``: the ``rig`` composition and the
+target-told loop, OUT_DIR/diagnose-target-per-network.csv) and prints the paired table.
 """
 
 from __future__ import annotations
@@ -26,7 +28,7 @@ from spikectl.planning.named import composition
 TASK, VERSION = "rig", 2
 
 
-def main(out: Path, networks: int) -> None:
+def main(out: Path, networks: int, target: bool = False) -> None:
     contexts = subset(TASK, range(networks))
     rig = suite.task(TASK, VERSION).extensions
     quiet = dataclasses.replace(rig, background_rate=0.0)
@@ -37,8 +39,14 @@ def main(out: Path, networks: int) -> None:
         "named-no-background": (quiet, IdentifyAndPlan(composition=named, extensions=quiet)),
         "told-no-background": (quiet, ToldColumns(contexts, composition=named, extensions=quiet)),
     }
-    diagnose(out / "diagnose-per-network.csv", contexts, runs, "named")
+    if target:
+        runs = {"named": runs["named"],
+                "told-target": (rig, ToldColumns(contexts, "target", composition=named,
+                                                 extensions=rig))}  # fmt: skip
+    name = "diagnose-target-per-network.csv" if target else "diagnose-per-network.csv"
+    diagnose(out / name, contexts, runs, "named")
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1]), int(sys.argv[2]) if len(sys.argv) > 2 else 100)
+    main(Path(sys.argv[1]), int(sys.argv[2]) if len(sys.argv) > 2 else 100,
+         sys.argv[3:] == ["target"])

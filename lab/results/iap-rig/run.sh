@@ -11,6 +11,8 @@ python $here/variants.py $data/screen100.csv 100 named miss=0.01 scale=4 scale=0
     known_sd=0.15 known_sd=0.35
 # Diagnosis, first 100 validation networks: told the true columns, without background.
 python $here/diagnose.py $data 100 > $data/diagnose.txt
+# The same, told the target's column alone (2026-11-30, AMD EPYC; diagnose-target.txt).
+python $here/diagnose.py $data 100 target > $data/diagnose-target.txt
 # The second look: validation networks 200-399.
 python $here/variants.py $data/validation200.csv 200:400 named
 # The test set, played once with the rig composition (the named controller now).
