@@ -30,14 +30,15 @@ class Told(IdentifyAndPlan):
 
 class ToldColumns(IdentifyAndPlan):
     """The loop whose spike likelihood starts at the true input columns of ``columns``
-    (``"all"``, or ``"target"``: the episode's target alone), read from ``contexts`` by
+    (``"all"``; ``"target"``: the episode's target alone; ``"others"``: every neuron's
+    but the target's), read from ``contexts`` by
     the environment's context index; the potentials are still read from spikes
     (:meth:`~spikectl.planning.spike_likelihood.SpikeLikelihoodFilter.keep_only`: the
     iap-rig and iap-spikes diagnostics)."""
 
     def __init__(self, contexts, columns: str = "all", **settings) -> None:
-        if columns not in ("all", "target"):
-            raise ValueError(f"columns must be 'all' or 'target', got {columns!r}")
+        if columns not in ("all", "target", "others"):
+            raise ValueError(f"columns must be 'all', 'target' or 'others', got {columns!r}")
         super().__init__(**settings)
         self.contexts, self.columns = contexts, columns
         self._weights, self._target = None, None
@@ -53,5 +54,7 @@ class ToldColumns(IdentifyAndPlan):
 
     def _new_estimate(self, n: int):
         estimate = super()._new_estimate(n)
-        estimate.keep_only(self._weights, None if self.columns == "all" else [self._target])
+        told = {"all": None, "target": [self._target],
+                "others": [j for j in range(n) if j != self._target]}[self.columns]
+        estimate.keep_only(self._weights, told)
         return estimate

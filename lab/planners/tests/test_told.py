@@ -20,7 +20,7 @@ TOLD = composition("spikes-fast").but("told", estimator=EstimatorSettings("spike
                                       observation=ObservationSettings(task_model=True))
 
 
-@pytest.mark.parametrize("columns", ["all", "target"])
+@pytest.mark.parametrize("columns", ["all", "target", "others"])
 def test_told_columns_start_at_the_truth(columns):
     contexts = make_splits(2, 1, n_neurons=6, seed=3)[1]
     env = NeuronControlEnv(contexts=contexts, extensions=SPIKES)
@@ -30,16 +30,19 @@ def test_told_columns_start_at_the_truth(columns):
     truth = np.sign(contexts[0].weights).astype(np.int8)
     target = int(observation["target"])
     signs, known = controller.estimate.weights(0.25)
-    told = range(6) if columns == "all" else [target]
+    told = {"all": range(6), "target": [target],
+            "others": [j for j in range(6) if j != target]}[columns]
     for j in told:
         np.testing.assert_array_equal(signs[:, j], truth[:, j])
         assert known[:, j].all() and controller.estimate.alive[j].sum() == 1
     if columns == "target":
         assert (controller.estimate.alive.sum(axis=1) > 1).sum() == 5
+    if columns == "others":
+        assert controller.estimate.alive[target].sum() > 1
 
 
 def test_told_columns_refuses_other_columns():
-    with pytest.raises(ValueError, match="columns must be 'all' or 'target'"):
+    with pytest.raises(ValueError, match="columns must be 'all', 'target' or 'others'"):
         ToldColumns(None, "some", composition=TOLD)
 
 

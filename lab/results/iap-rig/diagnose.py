@@ -4,12 +4,14 @@ composition; the same told the true weights (the spike likelihood restricted to 
 neuron's true input column: the potentials are still read from spikes alone, so what
 is left is the loop's and the sensing's cost, not identification's); and both on the same
 networks without the background input (what the spontaneous inputs cost); with
-``target``, the same told the target's true input column alone (2026-11-30).
+``target``, the same told the target's true input column alone, and every column but
+the target's (2026-11-30).
 
     python lab/results/iap-rig/diagnose.py OUT_DIR [NETWORKS] [target]
 
 Writes OUT_DIR/diagnose-per-network.csv (with ``target``: the ``rig`` composition and the
-target-told loop, OUT_DIR/diagnose-target-per-network.csv) and prints the paired table.
+loops told the target's column or the others', OUT_DIR/diagnose-target-per-network.csv)
+and prints the paired table.
 """
 
 from __future__ import annotations
@@ -40,9 +42,11 @@ def main(out: Path, networks: int, target: bool = False) -> None:
         "told-no-background": (quiet, ToldColumns(contexts, composition=named, extensions=quiet)),
     }
     if target:
-        runs = {"named": runs["named"],
-                "told-target": (rig, ToldColumns(contexts, "target", composition=named,
-                                                 extensions=rig))}  # fmt: skip
+        runs = {"named": runs["named"]} | {
+            f"told-{columns}": (rig, ToldColumns(contexts, columns, composition=named,
+                                                 extensions=rig))
+            for columns in ("target", "others")
+        }  # fmt: skip
     name = "diagnose-target-per-network.csv" if target else "diagnose-per-network.csv"
     diagnose(out / name, contexts, runs, "named")
 
