@@ -1,7 +1,8 @@
 """A validation screen of identify-and-plan compositions on one suite task: each variant
 played on a range of the task's networks, one row per network appended to a CSV, and
-the paired table of every variant in it against ``named`` (the research record's
-``variants.py`` scripts of iap-chr2 and iap-rig). Never on the test set."""
+the paired table of every variant in it against a base variant (the research record's
+``variants.py`` scripts of iap-chr2, iap-rig and iap-spikes); and :func:`diagnose`, the
+same for given controllers (their ``diagnose.py``). Never on the test set."""
 
 from __future__ import annotations
 
@@ -27,16 +28,28 @@ def subset(task: str, networks: range) -> ContextSet:
                       full.extensions)  # fmt: skip
 
 
+def timed_returns(contexts: ContextSet, controller, extensions) -> tuple[np.ndarray, float]:
+    """(returns [S], CPU seconds): ``controller`` on every network of ``contexts`` under the
+    suite's protocol (its environment seed)."""
+    started = time.process_time()
+    episodes = evaluate_policy(contexts, controller, extensions=extensions,
+                               seed=suite.suite_version(VERSION).env_seed)  # fmt: skip
+    return np.asarray(episodes.returns), time.process_time() - started
+
+
 def play(task: str, contexts: ContextSet, composition, seed: int = 0) -> tuple[np.ndarray, float]:
     """(returns [S], CPU seconds): ``composition`` on every network of ``contexts``, the
     controller seeded ``seed`` (what QMDP's draws read)."""
     extensions = suite.task(task, VERSION).extensions
-    started = time.process_time()
-    episodes = evaluate_policy(contexts, IdentifyAndPlan(composition=composition,
-                                                         extensions=extensions, seed=seed),
-                               extensions=extensions,
-                               seed=suite.suite_version(VERSION).env_seed)  # fmt: skip
-    return np.asarray(episodes.returns), time.process_time() - started
+    controller = IdentifyAndPlan(composition=composition, extensions=extensions, seed=seed)
+    return timed_returns(contexts, controller, extensions)
+
+
+def _write_rows(writer, name: str, networks, values: np.ndarray, cpu: float) -> None:
+    """One ``variant,context,return,cpu_s`` row per network, and the run's line."""
+    writer.writerows([name, i, f"{v:.6f}", f"{cpu / len(values):.4f}"]
+                     for i, v in zip(networks, values, strict=True))  # fmt: skip
+    print(f"{name}: {values.mean():.4f} ({cpu:.1f} CPU s)", flush=True)
 
 
 def screen(out: Path, task: str, networks: range, table: dict, names: list[str],
@@ -53,10 +66,8 @@ def screen(out: Path, task: str, networks: range, table: dict, names: list[str],
         for name in names:
             entry = table[name]
             values, cpu = play(task, contexts, *(entry if isinstance(entry, tuple) else (entry,)))
-            writer.writerows([name, i, f"{v:.6f}", f"{cpu / len(networks):.4f}"]
-                             for i, v in zip(networks, values, strict=True))  # fmt: skip
+            _write_rows(writer, name, networks, values, cpu)
             handle.flush()
-            print(f"{name}: {values.mean():.4f} ({cpu:.1f} CPU s)", flush=True)
     report(out, base)
 
 
@@ -93,15 +104,9 @@ def diagnose(out: Path, contexts: ContextSet, runs: dict, base: str) -> dict[str
         writer = csv.writer(handle)
         writer.writerow(["variant", "context", "return", "cpu_s"])
         for name, (extensions, controller) in runs.items():
-            started = time.process_time()
-            episodes = evaluate_policy(contexts, controller, extensions=extensions,
-                                       seed=suite.suite_version(VERSION).env_seed)  # fmt: skip
-            cpu = time.process_time() - started
-            returns[name] = np.asarray(episodes.returns)
-            writer.writerows([name, i, f"{v:.6f}", f"{cpu / len(contexts):.4f}"]
-                             for i, v in enumerate(returns[name]))  # fmt: skip
+            returns[name], cpu = timed_returns(contexts, controller, extensions)
+            _write_rows(writer, name, range(len(contexts)), returns[name], cpu)
             handle.flush()
-            print(f"{name}: {returns[name].mean():.4f} ({cpu:.1f} CPU s)", flush=True)
     print(f"\n| variant | mean return | − {base} [95% CI] | better / worse |")
     print("|---|---:|---|---|")
     for name, values in returns.items():

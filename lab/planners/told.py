@@ -31,10 +31,9 @@ class Told(IdentifyAndPlan):
 class ToldColumns(IdentifyAndPlan):
     """The loop whose spike likelihood starts at the true input columns of ``columns``
     (``"all"``; ``"target"``: the episode's target alone; ``"others"``: every neuron's
-    but the target's), read from ``contexts`` by
-    the environment's context index; the potentials are still read from spikes
-    (:meth:`~spikectl.planning.spike_likelihood.SpikeLikelihoodFilter.keep_only`: the
-    iap-rig and iap-spikes diagnostics)."""
+    but the target's), read from ``contexts`` by the environment's context index; the
+    potentials are still read from spikes (:meth:`~spikectl.planning.spike_likelihood.
+    SpikeLikelihoodFilter.keep_only`: the iap-rig and iap-spikes diagnostics)."""
 
     def __init__(self, contexts, columns: str = "all", **settings) -> None:
         if columns not in ("all", "target", "others"):
