@@ -193,6 +193,26 @@ def test_named_controllers_play_their_contexts_params(contexts):
             load_controller("oracle", params=other, **given)
 
 
+def test_identify_and_plan_takes_its_seed(contexts):
+    """``seed`` reaches the networks QMDP draws (the ``spikes`` composition has QMDP):
+    the same controller as built by hand with that seed, other draws than seed 0's."""
+    from spikectl.planning import IdentifyAndPlan
+
+    extensions = spikectl.Extensions(sensing="spikes")
+    env = NeuronControlEnv(contexts=contexts, extensions=extensions)
+    draws = {}
+    for seed in (0, 3):
+        controller = load_controller("identify-and-plan", env=env, seed=seed)
+        by_hand = IdentifyAndPlan(contexts.params, controller.composition,
+                                  extensions=extensions, seed=seed)  # fmt: skip
+        assert controller.seed == seed and controller.composition.decision.gamble is not None
+        played, expected = (play_episode(env, c, 0, seed=0) for c in (controller, by_hand))
+        np.testing.assert_array_equal(played[0], expected[0])
+        np.testing.assert_array_equal(controller.uniforms[0], by_hand.uniforms[0])
+        draws[seed] = controller.uniforms[0]
+    assert not np.array_equal(draws[0], draws[3])
+
+
 def test_a_compiled_policy_file_loads_without_pytorch(tmp_path):
     from spikectl.agents import export_policy
     from spikectl.training.loaders import load_agent

@@ -94,7 +94,7 @@ def identify_and_plan(played: Played, seed: int, realtime: bool = False) -> Cont
     # The environment's extensions and size choose the composition (planning/named.py).
     n_neurons = None if played.contexts is None else played.contexts.n_observed
     composition = named_composition(played.extensions, n_neurons, realtime=realtime)
-    return IdentifyAndPlan(played.params, composition, extensions=played.extensions)
+    return IdentifyAndPlan(played.params, composition, extensions=played.extensions, seed=seed)
 
 
 def identify_and_plan_realtime(played: Played, seed: int) -> Controller:
@@ -227,7 +227,8 @@ def load_controller(
     ``NeuronControlVectorEnv``) where it is given, else from ``contexts``; the neuron
     model is then the contexts' own (``contexts.params``), and ``params`` serves where
     neither is given (identify-and-plan alone; None: the paper's). ``seed`` seeds the
-    random controller.
+    random controller and the networks identify-and-plan's QMDP draws (where its
+    composition has QMDP; ``spikectl benchmark`` plays it at seed 0).
     """
     if model not in MODEL_CHOICES:
         raise ValueError(f"model must be one of {MODEL_CHOICES}, got {model!r}")
