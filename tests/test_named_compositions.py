@@ -22,6 +22,7 @@ from spikectl.planning.named import (
     KNOWN_SD_FAST_LARGE,
     KNOWN_SD_LARGE,
     KNOWN_SD_STOCHASTIC_RELEASE,
+    RIG_HYPOTHESES,
     composition,
 )
 
@@ -115,7 +116,9 @@ def test_the_declared_compositions_hold_what_was_chosen():
     assert FAST_AS_PAPER == ("chr2",)
     rig = composition("rig")
     assert rig == Composition("rig", rig.estimator.__class__("spike-likelihood"),
-                              rig.observation.__class__(task_model=True))  # fmt: skip
+                              rig.observation.__class__(task_model=True),
+                              rig.decision.__class__(hypotheses=RIG_HYPOTHESES))  # fmt: skip
+    assert RIG_HYPOTHESES == 8 and rig.decision.draws == 8
     assert FAST_AS_EXACT_SPIKES == ("rig",)
 
 

@@ -66,8 +66,7 @@ def _decision(name: str, **settings) -> dict:
 
 # name -> (what to run, n, extensions, contexts, settings); the "full_" cases are for
 # recording and the manual check of the whole test split, the test runs the others (the
-# research-only parts' cases, identify_n8_hypotheses4 and identify_n8_discrete, are
-# lab/planners/tests').
+# research-only part's case, identify_n8_discrete, is lab/planners/tests').
 CASES = {
     "identify_n8": ("identify", 8, None, range(12), {}),
     "identify_n32": ("identify", 32, None, range(2), {}),
@@ -75,6 +74,8 @@ CASES = {
                              _decision("gamble16", gamble=QMDPSettings(networks=16))),
     "identify_n8_to_the_end": ("identify", 8, None, range(3), _decision("to-end", horizon=None)),
     "identify_n8_width8": ("identify", 8, None, range(4), _decision("width8", width=8)),
+    "identify_n8_hypotheses4": ("identify", 8, None, range(4),
+                                _decision("hypotheses4", hypotheses=4)),
     "identify_n8_told": ("identify", 8, None, range(4), {"told": True}),
     # The paper's composition told the Realistic variant's measurement noise (2 mV).
     "identify_realistic": ("identify", 8, REALISTIC, range(4), {}),

@@ -9,7 +9,6 @@ from lab.planners.variants import (
     PlanUnderRelease,
     PosteriorSample,
     ReleaseChanceEvidence,
-    SampledHypotheses,
     discrete,
 )
 from spikectl.planning import ESTIMATORS
@@ -20,7 +19,6 @@ __all__ = [
     "PlanUnderRelease",
     "PosteriorSample",
     "ReleaseChanceEvidence",
-    "SampledHypotheses",
     "TargetPathsOnly",
     "discrete",
     "target_ancestors",

@@ -4,11 +4,11 @@ Each subclasses a core part's settings (:mod:`spikectl.planning`) and overrides 
 a :class:`~spikectl.planning.Composition` takes it where it takes the core part:
 
 ```python
-from lab.planners import SampledHypotheses
+from lab.planners import PosteriorSample
 from spikectl.planning import Composition, IdentifyAndPlan
 
-policy = IdentifyAndPlan(composition=Composition("hypotheses-8",
-                                                 decision=SampledHypotheses(hypotheses=8)))
+policy = IdentifyAndPlan(composition=Composition("thompson",
+                                                 decision=PosteriorSample(samples=64)))
 ```
 """
 
@@ -26,7 +26,6 @@ from spikectl.planning import (
     PlanningModel,
 )
 from spikectl.planning.deciding import Situation
-from spikectl.planning.relays import relay_weights
 
 
 def discrete(n: int, residual_sd: float, model, params: NeuronParams):
@@ -43,36 +42,6 @@ def _check_count(name: str, value) -> None:
     """Refuse anything but an integer >= 1 (ValueError naming ``name``)."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
         raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
-
-
-@dataclass(frozen=True)
-class SampledHypotheses(DecisionSettings):
-    """Plan one action sequence on K networks drawn from the estimate, for the best mean
-    return over them (K = ``hypotheses``; 1 plans on the estimate, as the core does).
-    Measured worse than planning on the estimate: -0.037 on the training networks at
-    K = 8, and 4x slower (docs/research/identify-and-plan.md)."""
-
-    hypotheses: int = 1
-
-    def __post_init__(self) -> None:
-        super().__post_init__()
-        _check_count("hypotheses", self.hypotheses)
-
-    @property
-    def draws(self) -> int:
-        return max(self.hypotheses if self.hypotheses > 1 else 0, super().draws)
-
-    def planning_model(self, policy, weights: np.ndarray, situation: Situation) -> PlanningModel:
-        if self.hypotheses <= 1:
-            return super().planning_model(policy, weights, situation)
-        k = self.hypotheses
-        uniforms = (policy.uniforms[0][:k], policy.uniforms[1][:k])
-        hypotheses = policy.estimate.sample(policy.known_sd, *uniforms)  # [K, n, n]
-        if policy.plans_relays:
-            relays = policy.estimate.relay_signs(policy.known_sd)
-            hypotheses = np.stack([relay_weights(drawn, relays) for drawn in hypotheses])
-        return PlanningModel(hypotheses, situation.target, situation.actions, policy.params,
-                             policy.planned_neurons())  # fmt: skip
 
 
 @dataclass(frozen=True)

@@ -3,11 +3,13 @@ the expected-return choice (QMDP) where the controller would probe.
 
 Each step the controller plans with the beam search (:func:`~spikectl.planning.beam.
 beam_search`, ``width`` states a step, ``horizon`` steps ahead) on the estimate's planning
-weights, and keeps the plan while it holds: the model is deterministic, so an unchanged
-estimate from an unsurprising state gives the same plan. It re-plans when the weights or
-the planned neurons change, when the network did something the last plan did not
-predict, or when less than half the horizon is left (a receding horizon, so that a wanted
-spike just past the plan's end is seen in time).
+weights (with ``hypotheses`` K > 1: one action sequence for its mean return over K
+networks drawn from the estimate, so that a light whose effect the estimate doubts is
+weighed by what it may do), and keeps the plan while it holds: the model is
+deterministic, so an unchanged estimate from an unsurprising state gives the same plan.
+It re-plans when the weights or the planned neurons change, when the network did
+something the last plan did not predict, or when less than half the horizon is left (a
+receding horizon, so that a wanted spike just past the plan's end is seen in time).
 
 Where the plan misses a wanted spike and would do nothing now, the prober's action is
 taken; with ``gamble`` set, the action of highest expected return over networks drawn
@@ -33,6 +35,7 @@ from spikectl.neuron.simulator import DO_NOTHING, SimulatorState
 from spikectl.planning.beam import PlanningModel
 from spikectl.planning.in_flight import state_after
 from spikectl.planning.qmdp import QMDPSettings
+from spikectl.planning.relays import relay_weights
 
 DEFAULT_HORIZON = 20
 """Steps each re-plan looks ahead."""
@@ -70,11 +73,15 @@ class DecisionSettings:
         horizon: steps each re-plan looks ahead; None: to the end of the episode.
         gamble: where the controller would probe, choose by expected return over
             networks drawn from the estimate (QMDP) with these settings; None: probe.
+        hypotheses: K, the networks each re-plan plans one action sequence on, drawn
+            from the estimate by the episode's uniforms (common random numbers), for
+            the best mean return over them; 1: the estimate's planning weights alone.
     """
 
     width: int = 32
     horizon: int | None = DEFAULT_HORIZON
     gamble: QMDPSettings | None = None
+    hypotheses: int = 1
 
     def __post_init__(self) -> None:
         if isinstance(self.width, bool) or not isinstance(self.width, (int, np.integer)) \
@@ -87,6 +94,9 @@ class DecisionSettings:
             raise ValueError(f"horizon must be an integer >= 1 or None, got {self.horizon!r}")
         if self.gamble is not None and not isinstance(self.gamble, QMDPSettings):
             raise TypeError(f"gamble must be a QMDPSettings or None, got {self.gamble!r}")
+        if isinstance(self.hypotheses, bool) or not isinstance(self.hypotheses, (int, np.integer)) \
+                or self.hypotheses < 1:  # fmt: skip
+            raise ValueError(f"hypotheses must be an integer >= 1, got {self.hypotheses!r}")
 
     @property
     def replan_margin(self) -> int:
@@ -96,14 +106,26 @@ class DecisionSettings:
     @property
     def draws(self) -> int:
         """Networks the episode's uniforms must draw (one draw per episode, reused by
-        every decision: common random numbers)."""
-        return 0 if self.gamble is None else self.gamble.networks
+        every decision: common random numbers; QMDP and the planned hypotheses share
+        them)."""
+        gamble = 0 if self.gamble is None else self.gamble.networks
+        return max(gamble, self.hypotheses if self.hypotheses > 1 else 0)
 
     def planning_model(self, policy, weights: np.ndarray, situation: Situation) -> PlanningModel:
-        """The network the beam search plans on: the planning weights (``policy``:
-        the controller, for its neuron model and planned neurons)."""
-        return PlanningModel(weights[None].copy(), situation.target, situation.actions,
-                             policy.params, policy.planned_neurons())  # fmt: skip
+        """The networks the beam search plans on (``policy``: the controller, for its
+        estimate, neuron model and planned neurons): the planning weights, or
+        :attr:`hypotheses` networks drawn from the estimate."""
+        if self.hypotheses == 1:
+            networks = weights[None].copy()
+        else:
+            k = self.hypotheses
+            uniforms = (policy.uniforms[0][:k], policy.uniforms[1][:k])
+            networks = policy.estimate.sample(policy.known_sd, *uniforms)  # [K, n, n]
+            if policy.plans_relays:  # [K, 2n, 2n]
+                relays = policy.estimate.relay_signs(policy.known_sd)
+                networks = np.stack([relay_weights(drawn, relays) for drawn in networks])
+        return PlanningModel(networks, situation.target, situation.actions, policy.params,
+                             policy.planned_neurons())  # fmt: skip
 
     def state_met(self, policy, weights: np.ndarray) -> SimulatorState:
         """The planning state an action chosen now meets when it lands: the present one

@@ -25,7 +25,10 @@ research record docs/research/identify-and-plan.md):
   task's background input, with the light's drive in each column's potential
   (:mod:`~spikectl.planning.spike_likelihood`, the task's model read, n <= 8; hidden or
   heterogeneous neurons, stochastic release and recorded subsets are refused in one
-  line). It comes first (the research record docs/results/iap-rig).
+  line), each re-plan one light sequence for its mean return over
+  :data:`RIG_HYPOTHESES` networks drawn from the posterior: planned on one network, the
+  light drove bursts the estimate could not foresee (the research record
+  docs/results/iap-rig). It comes first.
 - ``spikes``: under spikes-only sensing, the exact posterior from spikes alone and the
   potentials it implies (:mod:`~spikectl.planning.spike_filter`, n <= 8; larger
   networks are refused in one line), with QMDP where it would probe (:data:`GAMBLE`):
@@ -88,6 +91,11 @@ KNOWN_SD_STOCHASTIC_RELEASE = 0.4
 KNOWN_SD_BACKGROUND = 0.35
 """``known_sd`` (w_in) under background input (the ``background`` validation set)."""
 
+RIG_HYPOTHESES = 8
+"""K, the networks the ``rig`` composition plans each light sequence on (drawn from the
+spike likelihood's posterior): on the ``rig`` validation networks 8 scored above 1 and 4
+(docs/results/iap-rig); more were not tried, each doubling the CPU time of a re-plan."""
+
 REALTIME_WIDTH = 12
 """Beam width of the real-time forms: on the ``paper`` and ``n16`` validation sets widths
 12 to 32 score the same within noise, and 12 is the widest that kept the 99th percentile
@@ -121,7 +129,8 @@ COMPOSITIONS: dict[str, Composition] = {
         Composition("spikes", EstimatorSettings("spikes"),
                     decision=DecisionSettings(gamble=GAMBLE)),
         Composition("chr2", EstimatorSettings("bayes")),
-        Composition("rig", EstimatorSettings("spike-likelihood"), _TASK_MODEL),
+        Composition("rig", EstimatorSettings("spike-likelihood"), _TASK_MODEL,
+                    DecisionSettings(hypotheses=RIG_HYPOTHESES)),
     )
 }  # fmt: skip
 """The situations' compositions by name (before a size's overlay)."""

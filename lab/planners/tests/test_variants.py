@@ -8,11 +8,10 @@ import importlib.util
 import sys
 from pathlib import Path
 
-import gymnasium as gym
 import numpy as np
 import pytest
 
-from lab.planners import PlanUnderRelease, ReleaseChanceEvidence, SampledHypotheses
+from lab.planners import PlanUnderRelease, ReleaseChanceEvidence
 from spikectl import Extensions, make_splits
 from spikectl.envs.controller import batched
 from spikectl.envs.rollout import evaluate_policy
@@ -44,33 +43,13 @@ REFERENCE, play = _reference.REFERENCE, _reference.play
 
 pytestmark = pytest.mark.lab  # the lab's tier (pyproject.toml's markers)
 
-HYPOTHESES4 = Composition("hypotheses4", decision=SampledHypotheses(hypotheses=4))
 DISCRETE = Composition("discrete", EstimatorSettings("discrete"))
 
 
-@pytest.mark.parametrize(
-    ("name", "composition"),
-    [("identify_n8_hypotheses4", HYPOTHESES4), ("identify_n8_discrete", DISCRETE)],
-)
-def test_the_lab_parts_choose_the_recorded_actions(name, composition):
+def test_the_discrete_estimator_chooses_the_recorded_actions():
     test = make_splits(100, 100, 8, seed=0, n_val=100)[1]
-    np.testing.assert_array_equal(play(test, range(4), composition=composition),
-                                  np.load(REFERENCE)[name])  # fmt: skip
-
-
-def test_sampled_hypotheses_are_legal_deterministic_and_checked():
-    env = gym.make("spikectl/NeuronControl-v0", contexts={"n_train": 4, "n_test": 4})
-    play_legally(env, IdentifyAndPlan(composition=HYPOTHESES4), range(3))
-    train = make_splits(6, 1, 8, seed=0)[0]
-    first = evaluate_policy(train, batched(IdentifyAndPlan(composition=HYPOTHESES4)))
-    second = evaluate_policy(train, batched(IdentifyAndPlan(composition=HYPOTHESES4)))
-    assert np.array_equal(first.actions, second.actions)
-    with pytest.raises(ValueError, match="hypotheses must be an integer >= 1"):
-        SampledHypotheses(hypotheses=0)
-    one = Composition("one", decision=SampledHypotheses(hypotheses=1))
-    plain = evaluate_policy(train, batched(IdentifyAndPlan()))
-    assert np.array_equal(evaluate_policy(train, batched(IdentifyAndPlan(composition=one))).actions,
-                          plain.actions)  # fmt: skip
+    np.testing.assert_array_equal(play(test, range(4), composition=DISCRETE),
+                                  np.load(REFERENCE)["identify_n8_discrete"])  # fmt: skip
 
 
 def test_the_discrete_estimate_knows_more_and_is_rarely_wrong():

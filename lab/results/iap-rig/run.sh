@@ -17,3 +17,15 @@ python $here/diagnose.py $data 100 target > $data/diagnose-target.txt
 python $here/variants.py $data/validation200.csv 200:400 named
 # The test set, played once with the rig composition (the named controller now).
 python $here/play_test_row.py $data/test > $data/test.txt
+# Planning on K networks drawn from the posterior (2026-11-30, AMD EPYC; the rows of
+# screen100.csv; "named" is the composition planning on the estimate alone).
+python $here/variants.py $data/screen100.csv 100 hypotheses=4 hypotheses=8 \
+    hypotheses=8,seed=1 known-only
+# The second look at hypotheses=8: validation networks 200-399, in two parts (one a core).
+python $here/variants.py $data/validation200.csv 200:300 hypotheses=8
+python $here/variants.py $data/validation200.csv 300:400 hypotheses=8
+# The test set, played once with the rig composition planning on 8 networks, in two
+# parts (one a core; the same returns as one run), then the rows.
+python $here/play_test_row.py $data/test-hypotheses 0:500
+python $here/play_test_row.py $data/test-hypotheses 500:1000
+python $here/play_test_row.py $data/test-hypotheses --merge > $data/test-hypotheses.txt

@@ -20,7 +20,12 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[3]))  # the repository root: lab
 from lab.planners.screen import screen
-from spikectl.planning.estimators import ESTIMATORS, RIG_SPIKE_ESTIMATORS, SPIKE_ESTIMATORS
+from spikectl.planning.estimators import (
+    ESTIMATORS,
+    RIG_SPIKE_ESTIMATORS,
+    SPIKE_ESTIMATORS,
+    EstimatorSettings,
+)
 from spikectl.planning.named import composition
 from spikectl.planning.spike_likelihood import MISS_PROBABILITY, PRUNE_NATS, SpikeLikelihoodFilter
 
@@ -43,9 +48,22 @@ def likelihood(miss: float = MISS_PROBABILITY, prune: float = PRUNE_NATS, scale:
     return new
 
 
+@dataclasses.dataclass(frozen=True)
+class PlanKnownOnly(EstimatorSettings):
+    """Unknown entries planned as 0, not at their posterior mean (the plan lights only
+    what the estimate knows drives the target)."""
+
+    def planning_weights(self, estimate, plan_mean, strengths, relayed):
+        return super().planning_weights(estimate, False, strengths, relayed)
+
+
 def variants() -> dict:
-    """The candidates by name: the ``rig`` composition with other settings."""
-    named = composition("rig")
+    """The candidates by name: the ``rig`` composition with other settings. ``named`` is
+    the composition as first committed, planning on the estimate alone (the rows of
+    screen100.csv and validation200.csv); the ``rig`` composition now plans on
+    ``hypotheses=8`` (``RIG_HYPOTHESES``)."""
+    chosen = composition("rig")
+    named = chosen.but("rig", decision=dataclasses.replace(chosen.decision, hypotheses=1))
 
     def estimator(kind: str, factory=None, **settings):
         if factory is not None and kind not in ESTIMATORS:
@@ -69,6 +87,13 @@ def variants() -> dict:
     for width in (16, 64):
         table[f"width={width}"] = named.but(
             "x", decision=dataclasses.replace(named.decision, width=width))
+    for k in (4, 8, 16):
+        table[f"hypotheses={k}"] = named.but(
+            "x", decision=dataclasses.replace(named.decision, hypotheses=k))
+    for seed in (1, 2):  # the draws of other controller seeds
+        table[f"hypotheses=8,seed={seed}"] = (table["hypotheses=8"], seed)
+    table["known-only"] = named.but("x", estimator=PlanKnownOnly(
+        named.estimator.kind, named.estimator.known_sd))
     return table
 
 
