@@ -21,6 +21,16 @@ training seed, main                s        the loop's generator: context choice
                                             same at every evaluation)
 =================================  =======  ==============================================
 
+A controller has a seed of its own (``spikectl.load_controller(..., seed=s)``; where a
+vector environment plays copies of one, copy i gets ``s + i``):
+
+=================================  =======  ==============================================
+``RandomLegal(seed)``              s        its uniform legal actions
+``AmortisedController(seed=s)``    s        its ``"thompson"`` rule's draws
+``IdentifyAndPlan(seed=s)``        [s, e]   the networks episode ``e`` draws from the
+                                            estimate (QMDP's, the planned hypotheses')
+=================================  =======  ==============================================
+
 Under one seed a number names one stream: ``AUX_HEAD_STREAM`` and ``VALIDATION_STREAM``
 are both 1 but under different seeds, and ``[s, 2]`` (a Torch seed, 32 bits) and
 ``[s, 2, e]`` (an environment seed, 63 bits) are different entropy, so no two consumers
