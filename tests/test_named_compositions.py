@@ -66,7 +66,10 @@ CHR2 = Extensions(actuator="chr2")
         (CHR2, 16, False, "chr2-16"),
         (CHR2, 8, True, "paper"),  # the teacher keeps the paper's composition
         (CHR2, 16, True, "paper-16-fast"),
-        (Extensions(actuator="chr2", observation_noise_mV=1.0), 8, False, "noise"),
+        # The light is read by the paper's tracker alone: it comes before noise and the rest.
+        (Extensions(actuator="chr2", observation_noise_mV=1.0), 8, False, "chr2"),
+        (Extensions(actuator="chr2", threshold_spread=0.1), 8, False, "chr2"),
+        (Extensions(actuator="chr2", observation_noise_mV=1.0), 8, True, "paper"),
         (Extensions(actuator="chr2", sensing="spikes"), 8, False, "rig"),
         (Extensions(sensing="spikes", background_rate=0.005), 8, False, "rig"),
         (Extensions(actuator="chr2", sensing="spikes", latency_steps=2,
@@ -78,6 +81,34 @@ CHR2 = Extensions(actuator="chr2")
 def test_each_environment_gets_its_situations_composition(extensions, n, fast, name):
     assert composition_name(extensions, n, fast) == name
     assert named_composition(extensions, n, fast).name == name
+
+
+@pytest.mark.parametrize("extensions", [
+    {"observation_noise_mV": 1.0}, {"latency_steps": 2, "observation_noise_mV": 1.0},
+    {"stochastic_release": True}, {"background_rate": 0.005}, {"threshold_spread": 0.1},
+    {"time_constant_spread": 0.1}, {"synaptic_spread": 0.1}, {"hidden_neurons": 2},
+])  # fmt: skip
+@pytest.mark.parametrize("fast", [False, True])
+def test_the_named_controller_plays_the_light_with_any_other_extension(extensions, fast):
+    """Under the ChR2 light with another extension the named controller and its fast
+    form (the guided teacher) play whole episodes legally: none picks a composition whose
+    tracker cannot take the light (noise and heterogeneity once did, refused at the first
+    step)."""
+    from spikectl import NeuronControlEnv
+    from spikectl.planning import IdentifyAndPlan
+
+    env = NeuronControlEnv(contexts={"n_train": 2, "n_test": 2},
+                           extensions={"actuator": "chr2", **extensions})  # fmt: skip
+    controller = IdentifyAndPlan(env.params, named_composition(env.extensions, 8, fast),
+                                 extensions=env.extensions)  # fmt: skip
+    observation, info = env.reset(seed=0)
+    controller.reset()
+    done = False
+    while not done:
+        action = controller.act(observation, info)
+        assert info["action_mask"][action + 1]
+        observation, _, terminated, truncated, info = env.step(action)
+        done = terminated or truncated
 
 
 def test_the_declared_compositions_hold_what_was_chosen():
@@ -198,15 +229,16 @@ def test_the_oracle_replays_its_committed_mean_return(task):
 
 
 SUITE_V2 = SUITE.parent / "suite-v2"
-REPLAYED_V2 = {"paper": 50, "latency2": 50, "spikes-only": 10, "chr2": 20}
+REPLAYED_V2 = {"paper": 50, "latency2": 50, "spikes-only": 10, "chr2": 20, "rig": 4}
 
 
 @pytest.mark.slow
 @pytest.mark.parametrize(("task", "count"), list(REPLAYED_V2.items()))
 def test_the_named_controller_replays_suite_v2s_committed_returns(task, count):
     """Suite v2's committed identify-and-plan returns, network by network, on the first
-    test networks (the environments draw nothing on these tasks): the ``chr2`` row is
-    the ``chr2`` composition's, the others unchanged by it."""
+    test networks (network i is sub-environment i, seeded ``env_seed + i`` as in the
+    whole set's batch, so ``rig``'s background input draws the same), each row its
+    composition's."""
     from spikectl.envs.env import NeuronControlEnv
     from spikectl.envs.rollout import evaluate_policy
     from spikectl.experiments import suite

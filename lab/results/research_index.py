@@ -39,8 +39,8 @@ CLAIMS = {
     "networks); QMDP where it would probe chosen on 600 (+0.013, +0.016), test 0.765 -> "
     "0.778 (+0.013 [+0.009, +0.018])",
     "iap-rig": "identify-and-plan plays suite v2's rig (refused before) with a spike "
-    "likelihood (background input; the light's drive per column): test 0.617, normalised "
-    "0.364, short of 0.70; told the true columns 0.869 vs 0.606 (validation)",
+    "likelihood, each light sequence planned over 8 networks drawn from it: test 0.617 -> "
+    "0.691 (+0.074 [+0.066, +0.082]), short of 0.70; told the true columns 0.869 vs 0.606",
     "iap-chr2": "identify-and-plan under ChR2 light (suite v2 chr2): the loss is in "
     "identification (told the weights +0.159 on 50 validation networks); the exact "
     "posterior chosen on 400 validation networks (+0.020 [+0.009, +0.032]), test 0.740 -> "
