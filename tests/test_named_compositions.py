@@ -94,6 +94,8 @@ def test_the_named_controller_plays_the_light_with_any_other_extension(extension
     form (the guided teacher) play whole episodes legally: none picks a composition whose
     tracker cannot take the light (noise and heterogeneity once did, refused at the first
     step)."""
+    from conftest import play_legally
+
     from spikectl import NeuronControlEnv
     from spikectl.planning import IdentifyAndPlan
 
@@ -101,14 +103,7 @@ def test_the_named_controller_plays_the_light_with_any_other_extension(extension
                            extensions={"actuator": "chr2", **extensions})  # fmt: skip
     controller = IdentifyAndPlan(env.params, named_composition(env.extensions, 8, fast),
                                  extensions=env.extensions)  # fmt: skip
-    observation, info = env.reset(seed=0)
-    controller.reset()
-    done = False
-    while not done:
-        action = controller.act(observation, info)
-        assert info["action_mask"][action + 1]
-        observation, _, terminated, truncated, info = env.step(action)
-        done = terminated or truncated
+    play_legally(env, controller, [0])
 
 
 def test_the_declared_compositions_hold_what_was_chosen():

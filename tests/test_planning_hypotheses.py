@@ -8,6 +8,7 @@ from __future__ import annotations
 import gymnasium as gym
 import numpy as np
 import pytest
+from conftest import play_legally
 
 from spikectl import make_splits
 from spikectl.envs.controller import batched
@@ -56,14 +57,7 @@ def test_the_plan_is_made_on_k_networks_drawn_from_the_estimate():
 
 def test_hypotheses_play_legally_deterministically_and_one_is_the_estimate():
     env = gym.make("spikectl/NeuronControl-v0", contexts={"n_train": 4, "n_test": 4})
-    for seed in range(2):
-        observation, info = env.reset(seed=seed)
-        policy = IdentifyAndPlan(composition=HYPOTHESES4)
-        terminated = False
-        while not terminated:
-            action = policy.act(observation, info)
-            assert info["action_mask"][action + 1]
-            observation, _, terminated, _, info = env.step(action)
+    play_legally(env, IdentifyAndPlan(composition=HYPOTHESES4), range(2))
     train = make_splits(6, 1, 8, seed=0)[0]
     first = evaluate_policy(train, batched(IdentifyAndPlan(composition=HYPOTHESES4)))
     second = evaluate_policy(train, batched(IdentifyAndPlan(composition=HYPOTHESES4)))
