@@ -96,8 +96,8 @@ KNOWN_SD_BACKGROUND = 0.35
 
 RIG_HYPOTHESES = 8
 """K, the networks the ``rig`` composition plans each light sequence on (drawn from the
-spike likelihood's posterior): on the ``rig`` validation networks 8 scored above 1 and 4
-(docs/results/iap-rig); more were not tried, each doubling the CPU time of a re-plan."""
+spike likelihood's posterior): on the ``rig`` validation networks 8 scored above 1 and 4,
+and 16 within noise of 8 at about twice the CPU time (docs/results/iap-rig)."""
 
 REALTIME_WIDTH = 12
 """Beam width of the real-time forms: on the ``paper`` and ``n16`` validation sets widths

@@ -18,3 +18,7 @@ python $here/variants.py $data/validation200.csv 200 named kind=bayes
 python $here/variants.py $data/validation200.csv 200:400 named kind=bayes
 # The test set, played once with the chr2 composition (the named controller now).
 python $here/play_test_row.py $data/test
+# A lead (2026-11-30, AMD EPYC): the chr2 composition planning on 8 networks drawn from
+# its posterior, as the rig composition does (screen50.csv, then validation200.csv 0-199).
+python $here/variants.py $data/screen50.csv 50 kind=bayes,hypotheses=8
+python $here/variants.py $data/validation200.csv 200 kind=bayes,hypotheses=8

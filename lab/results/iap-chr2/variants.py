@@ -109,6 +109,10 @@ def variants() -> dict:
     )
     for k in (4, 8, 16):
         table[f"sampled-inputs={k}"] = named.but("x", decision=SampledInputs(hypotheses=k))
+    # The chosen composition (now ``chr2``) planning on K networks drawn from the exact
+    # posterior, as the ``rig`` composition does (2026-11-30, docs/results/iap-rig).
+    table["kind=bayes,hypotheses=8"] = table["kind=bayes"].but(
+        "x", decision=dataclasses.replace(named.decision, hypotheses=8))
     table["never-probe"] = named.but("x", prober=NeverProbe())
     table["least-likely-first"] = named.but("x", prober=LeastLikelyFirst())
     for horizon in (10, 30, None):

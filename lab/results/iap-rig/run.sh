@@ -29,3 +29,5 @@ python $here/variants.py $data/validation200.csv 300:400 hypotheses=8
 python $here/play_test_row.py $data/test-hypotheses 0:500
 python $here/play_test_row.py $data/test-hypotheses 500:1000
 python $here/play_test_row.py $data/test-hypotheses --merge > $data/test-hypotheses.txt
+# After the test run: 16 networks on the first 100 validation networks (screen100.csv).
+python $here/variants.py $data/screen100.csv 100 hypotheses=16
