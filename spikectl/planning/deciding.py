@@ -84,9 +84,10 @@ class DecisionSettings:
     hypotheses: int = 1
 
     def __post_init__(self) -> None:
-        if isinstance(self.width, bool) or not isinstance(self.width, (int, np.integer)) \
-                or self.width < 1:  # fmt: skip
-            raise ValueError(f"width must be an integer >= 1, got {self.width!r}")
+        for name in ("width", "hypotheses"):
+            value = getattr(self, name)
+            if isinstance(value, bool) or not isinstance(value, (int, np.integer)) or value < 1:
+                raise ValueError(f"{name} must be an integer >= 1, got {value!r}")
         if self.horizon is not None and (
             isinstance(self.horizon, bool) or not isinstance(self.horizon, (int, np.integer))
             or self.horizon < 1
@@ -94,9 +95,6 @@ class DecisionSettings:
             raise ValueError(f"horizon must be an integer >= 1 or None, got {self.horizon!r}")
         if self.gamble is not None and not isinstance(self.gamble, QMDPSettings):
             raise TypeError(f"gamble must be a QMDPSettings or None, got {self.gamble!r}")
-        if isinstance(self.hypotheses, bool) or not isinstance(self.hypotheses, (int, np.integer)) \
-                or self.hypotheses < 1:  # fmt: skip
-            raise ValueError(f"hypotheses must be an integer >= 1, got {self.hypotheses!r}")
 
     @property
     def replan_margin(self) -> int:
