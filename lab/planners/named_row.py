@@ -6,14 +6,12 @@ against the reference rows already committed)."""
 from __future__ import annotations
 
 import csv
-import time
 from pathlib import Path
 
 import numpy as np
 
+from lab.planners.screen import timed_returns
 from spikectl import NeuronControlEnv
-from spikectl.contexts import ContextSet
-from spikectl.envs.rollout import evaluate_policy
 from spikectl.experiments import suite
 from spikectl.training.loaders import load_controller
 
@@ -34,23 +32,20 @@ def play_named(task: str, split: str = "test", version: int = 2):
     return result, played[0].composition.name, len(contexts)
 
 
-def play_named_part(task: str, networks: range, split: str = "test",
-                    version: int = 2) -> tuple[np.ndarray, float, str]:  # fmt: skip
+def play_named_part(task: str, networks: range,
+                    split: str = "test") -> tuple[np.ndarray, float, str]:  # fmt: skip
     """(returns, CPU seconds, the composition's name): the named identify-and-plan on
-    ``networks`` of ``task``'s ``split`` with the returns :func:`play_named` gives them
-    (network i is sub-environment i of the whole set's batch: its environment seeded
-    ``env_seed + i``, its controller's copy ``i``), so that parts played apart (one a core)
-    make up the whole row."""
-    full = suite.load_split(task, split, version)
-    contexts = ContextSet([full[i] for i in networks], full.params, full.seed, full.extensions)
-    extensions = suite.task(task, version).extensions
+    ``networks`` (consecutive) of ``task``'s ``split`` (suite v2, as
+    :func:`~lab.planners.screen.timed_returns` plays) with the returns :func:`play_named`
+    gives them (network i is sub-environment i of the whole set's batch: its environment
+    seeded ``env_seed + i``, its controller's copy ``i``), so that parts played apart (one
+    a core) make up the whole row."""
+    contexts = suite.load_split(task, split, 2)[networks.start : networks.stop]
+    extensions = suite.task(task, 2).extensions
     env = NeuronControlEnv(contexts=contexts, extensions=extensions)
     controller = load_controller("identify-and-plan", env=env, seed=networks.start)
-    started = time.process_time()
-    seed = suite.suite_version(version).env_seed + networks.start
-    episodes = evaluate_policy(contexts, controller, extensions=extensions, seed=seed)
-    return (np.asarray(episodes.returns), time.process_time() - started,
-            controller.composition.name)  # fmt: skip
+    returns, cpu = timed_returns(contexts, controller, extensions, first=networks.start)
+    return returns, cpu, controller.composition.name
 
 
 def write_rows(out: Path, task: str, row: dict, result, composition: str, version: int = 2):

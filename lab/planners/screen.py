@@ -22,18 +22,18 @@ SPLIT, VERSION = "validation", 2
 
 
 def subset(task: str, networks: range) -> ContextSet:
-    """Networks ``networks`` of ``task``'s validation set (suite v2)."""
-    full = suite.load_split(task, SPLIT, VERSION)
-    return ContextSet([full[i] for i in networks], full.params, full.seed,
-                      full.extensions)  # fmt: skip
+    """Networks ``networks`` (consecutive) of ``task``'s validation set (suite v2)."""
+    return suite.load_split(task, SPLIT, VERSION)[networks.start : networks.stop]
 
 
-def timed_returns(contexts: ContextSet, controller, extensions) -> tuple[np.ndarray, float]:
+def timed_returns(contexts: ContextSet, controller, extensions,
+                  first: int = 0) -> tuple[np.ndarray, float]:  # fmt: skip
     """(returns [S], CPU seconds): ``controller`` on every network of ``contexts`` under the
-    suite's protocol (its environment seed)."""
+    suite's protocol (its environment seed; ``first``: the index of ``contexts``' first
+    network in the whole set's batch, whose sub-environment i is seeded ``env_seed + i``)."""
     started = time.process_time()
     episodes = evaluate_policy(contexts, controller, extensions=extensions,
-                               seed=suite.suite_version(VERSION).env_seed)  # fmt: skip
+                               seed=suite.suite_version(VERSION).env_seed + first)  # fmt: skip
     return np.asarray(episodes.returns), time.process_time() - started
 
 

@@ -52,7 +52,7 @@ def play_part(out: Path, networks: range) -> None:
     """Networks ``networks`` of the test set: ``out/part-FIRST-END.csv`` (``context,
     return,cpu_s,composition``; the part's CPU seconds on its first row)."""
     out.mkdir(parents=True, exist_ok=True)
-    returns, cpu, composition = play_named_part(TASK, networks, SPLIT, VERSION)
+    returns, cpu, composition = play_named_part(TASK, networks, SPLIT)
     with open(out / f"part-{networks.start}-{networks.stop}.csv", "w", newline="") as handle:
         writer = csv.writer(handle)
         writer.writerow(["context", "return", "cpu_s", "composition"])
