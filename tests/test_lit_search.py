@@ -179,9 +179,21 @@ def test_identify_and_plan_plans_the_light_and_the_pulse_is_unchanged():
 
 
 def test_the_light_is_read_by_the_papers_tracker_alone():
+    """A composition whose tracker is another (potentials filtered under noise, each
+    neuron's threshold and leak learned) is refused under the light when it is built, in
+    one line; the paper's tracker takes the light with noise or heterogeneity."""
+    from spikectl.planning import Composition, IdentifyAndPlan
     from spikectl.planning.observing import ObservationSettings
 
     noisy = Extensions(actuator="chr2", observation_noise_mV=1.0)
-    observation = ObservationSettings(task_model=True, filter_voltage=True).bind(PARAMS, noisy)
-    with pytest.raises(ValueError, match="ChR2 actuator is read by the paper's tracker alone"):
-        observation.reader(8)
+    uneven = Extensions(actuator="chr2", threshold_spread=0.1)
+    filtering = ObservationSettings(task_model=True, filter_voltage=True)
+    learning = ObservationSettings(task_model=True)  # each neuron's threshold and leak
+    for settings, extensions in ((filtering, noisy), (learning, uneven)):
+        with pytest.raises(ValueError, match="ChR2 actuator is read by the paper's tracker alone"):
+            settings.bind(PARAMS, extensions)
+        with pytest.raises(ValueError, match="ChR2 actuator is read by the paper's tracker alone"):
+            IdentifyAndPlan(PARAMS, Composition("x", observation=settings), extensions=extensions)
+    for extensions in (noisy, uneven):
+        reader = ObservationSettings().bind(PARAMS, extensions).reader(8)
+        assert reader.opsin is not None

@@ -115,6 +115,19 @@ class Observation:
             # Reading the task's model, the spikes are weighed under its background input
             # and light (:mod:`~spikectl.planning.spike_likelihood`).
             _check_spike_sensing(extensions, under_rig=settings.task_model)
+        elif self.light_mW_per_mm2 is not None and self._filters_or_tracks_neurons:
+            raise ValueError(
+                "the ChR2 actuator is read by the paper's tracker alone "
+                "(no noise, heterogeneous neurons or filtering)"
+            )
+
+    @property
+    def _filters_or_tracks_neurons(self) -> bool:
+        """Whether the reader's tracker is another than the paper's (each neuron's
+        threshold and leak learned, or potentials filtered under noise)."""
+        noise = self.noise_mV
+        return (tracks_neurons(self.extensions, noise, self.params)
+                or (self.settings.filter_voltage and noise > 0))  # fmt: skip
 
     @property
     def plan_mean(self) -> bool:
@@ -142,12 +155,7 @@ class Observation:
         else:
             tracker = ObservedState(n, params, settings.spike_margin_sd * noise)
         reader = Reader(self, tracker, InFlight(latency_steps, n))
-        if self.light_mW_per_mm2 is not None:
-            if type(tracker) is not ObservedState:
-                raise ValueError(
-                    "the ChR2 actuator is read by the paper's tracker alone "
-                    "(no noise, heterogeneous neurons or filtering)"
-                )
+        if self.light_mW_per_mm2 is not None:  # the paper's tracker (checked when bound)
             reader.opsin = OpsinActuator(1, n, self.light_mW_per_mm2, params.dt_ms,
                                          params.capacitance_pF)  # fmt: skip
         return reader
