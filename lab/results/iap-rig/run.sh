@@ -31,3 +31,6 @@ python $here/play_test_row.py $data/test-hypotheses 500:1000
 python $here/play_test_row.py $data/test-hypotheses --merge > $data/test-hypotheses.txt
 # After the test run: 16 networks on the first 100 validation networks (screen100.csv).
 python $here/variants.py $data/screen100.csv 100 hypotheses=16
+# After the test run: the draws of seed 2, in two parts of 50 (one a core).
+python $here/variants.py $data/screen100.csv 0:50 hypotheses=8,seed=2
+python $here/variants.py $data/screen100.csv 50:100 hypotheses=8,seed=2
